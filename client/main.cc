@@ -1,0 +1,32 @@
+// swarf: the command-line client.
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "client/commands.h"
+
+namespace {
+
+constexpr char kUsage[] =
+    "usage: swarf <command> [options]\n"
+    "commands:\n"
+    "  table   the paper's Tables 1 and 2: error and time of both schemes\n"
+    "Run 'swarf <command> --help' for a command's options.\n";
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2) {
+    std::cerr << kUsage;
+    return 2;
+  }
+  const std::string cmd = argv[1];
+  const std::vector<std::string> args(argv + 2, argv + argc);
+  if (cmd == "table") return swarf::cli::TableCommand(args);
+  if (cmd == "--help" || cmd == "-h" || cmd == "help") {
+    std::cout << kUsage;
+    return 0;
+  }
+  std::cerr << "swarf: unknown command \"" << cmd << "\"\n" << kUsage;
+  return 2;
+}

@@ -1,0 +1,189 @@
+// swarf table: the paper's Tables 1 and 2 (both instances, both schemes).
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "client/args.h"
+#include "client/commands.h"
+#include "client/json_writer.h"
+#include "core/instances.h"
+#include "core/valuation.h"
+#include "core/workpiece.h"
+
+namespace swarf::cli {
+namespace {
+
+constexpr char kUsage[] =
+    "usage: swarf table [--instance five-balls|five-cylinders] [--mesh N]\n"
+    "                   [--runs N] [--json]\n"
+    "Prints the paper's Tables 1 and 2: for each instance, mesh (default 100\n"
+    "and 1000) and scheme, the nodes, parameters, error against the exact\n"
+    "surface (21 samples per element) and the time to apply the moves\n"
+    "(median of --runs runs; default 11 for meshes up to 200, else 5).\n";
+
+struct Row {
+  std::string instance;
+  int mesh;
+  SchemeKind scheme;
+  int64_t nodes, parameters;
+  ErrorStats err;
+  double seconds;
+};
+
+absl::StatusOr<Row> MeasureRow(const Instance& inst, int mesh,
+                               SchemeKind scheme, int runs) {
+  std::vector<double> times;
+  std::unique_ptr<Workpiece> wp;
+  for (int k = 0; k < runs; ++k) {
+    auto created = Workpiece::Create(inst.stock, scheme);
+    if (!created.ok()) return created.status();
+    wp = *std::move(created);
+    const auto t0 = std::chrono::steady_clock::now();
+    auto applied = wp->Apply(inst.moves);
+    const auto t1 = std::chrono::steady_clock::now();
+    if (!applied.ok()) return applied.status();
+    times.push_back(std::chrono::duration<double>(t1 - t0).count());
+  }
+  std::sort(times.begin(), times.end());
+  auto err = MeasureError(*wp);
+  if (!err.ok()) return err.status();
+  Row row;
+  row.instance = inst.name;
+  row.mesh = mesh;
+  row.scheme = scheme;
+  row.nodes = wp->grid().node_count();
+  row.parameters = row.nodes * wp->scheme().parameters_per_node();
+  row.err = *err;
+  row.seconds = times[times.size() / 2];
+  return row;
+}
+
+void PrintJson(const std::vector<Row>& rows) {
+  JsonWriter j;
+  j.BeginObject().Key("rows").BeginArray();
+  for (const Row& r : rows) {
+    j.BeginObject()
+        .Key("instance").String(r.instance)
+        .Key("mesh").Int(r.mesh)
+        .Key("scheme").String(GetScheme(r.scheme).name())
+        .Key("nodes").Int(r.nodes)
+        .Key("parameters").Int(r.parameters)
+        .Key("max_error").Double(r.err.max_error)
+        .Key("mean_error").Double(r.err.mean_error)
+        .Key("rms_error").Double(r.err.rms_error)
+        .Key("max_error_at").BeginArray()
+        .Double(r.err.max_x).Double(r.err.max_y).EndArray()
+        .Key("seconds").Double(r.seconds)
+        .EndObject();
+  }
+  j.EndArray().EndObject();
+  std::cout << j.str() << "\n";
+}
+
+void PrintText(const std::vector<Row>& rows) {
+  std::string last;
+  for (size_t start = 0; start < rows.size();) {
+    size_t end = start;
+    while (end < rows.size() && rows[end].instance == rows[start].instance) {
+      ++end;
+    }
+    const bool balls = rows[start].instance == "five-balls";
+    std::cout << rows[start].instance << " (paper Table " << (balls ? 1 : 2)
+              << ")\n";
+    auto line = [&](const std::string& label, auto cell) {
+      std::cout << absl::StrFormat("  %-20s", label);
+      for (size_t k = start; k < end; ++k) {
+        std::cout << absl::StrFormat("%20s", cell(rows[k]));
+      }
+      std::cout << "\n";
+    };
+    line("", [](const Row& r) {
+      return absl::StrCat(std::string(GetScheme(r.scheme).name()), " ", r.mesh, "x",
+                          r.mesh);
+    });
+    line("nodes", [](const Row& r) { return absl::StrCat(r.nodes); });
+    line("parameters", [](const Row& r) { return absl::StrCat(r.parameters); });
+    line("max error (mm)",
+         [](const Row& r) { return absl::StrFormat("%.3g", r.err.max_error); });
+    line("mean error (mm)",
+         [](const Row& r) { return absl::StrFormat("%.3g", r.err.mean_error); });
+    line("rms error (mm)",
+         [](const Row& r) { return absl::StrFormat("%.3g", r.err.rms_error); });
+    line("max error at", [](const Row& r) {
+      return absl::StrFormat("(%.2f, %.2f)", r.err.max_x, r.err.max_y);
+    });
+    line("time to apply (s)",
+         [](const Row& r) { return absl::StrFormat("%.3g", r.seconds); });
+    std::cout << "\n";
+    start = end;
+  }
+}
+
+}  // namespace
+
+int TableCommand(const std::vector<std::string>& argv) {
+  auto args = Args::Parse(argv, {"instance", "mesh", "runs"}, {"json", "help"});
+  if (!args.ok()) {
+    std::cerr << "swarf table: " << args.status().message() << "\n" << kUsage;
+    return 2;
+  }
+  if (args->Has("help")) {
+    std::cout << kUsage;
+    return 0;
+  }
+  if (!args->positional().empty()) {
+    std::cerr << "swarf table: unexpected argument \"" << args->positional()[0]
+              << "\"\n" << kUsage;
+    return 2;
+  }
+  std::vector<std::string> instances(std::begin(kPaperInstances),
+                                     std::end(kPaperInstances));
+  if (auto i = args->Get("instance")) instances = {*i};
+  std::vector<int> meshes = {100, 1000};
+  auto mesh = args->GetInt("mesh");
+  auto runs = args->GetInt("runs");
+  for (const auto* s : {&mesh, &runs}) {
+    if (!s->ok()) {
+      std::cerr << "swarf table: " << s->status().message() << "\n";
+      return 2;
+    }
+  }
+  if (mesh->has_value()) meshes = {**mesh};
+  if (runs->has_value() && **runs < 1) {
+    std::cerr << "swarf table: --runs must be at least 1\n";
+    return 2;
+  }
+
+  std::vector<Row> rows;
+  for (const std::string& name : instances) {
+    for (SchemeKind scheme : {SchemeKind::kZmap, SchemeKind::kTaylor}) {
+      for (int m : meshes) {
+        auto inst = PaperInstance(name, m);
+        if (!inst.ok()) {
+          std::cerr << "swarf table: " << inst.status().message() << "\n";
+          return 2;
+        }
+        const int n = runs->value_or(m <= 200 ? 11 : 5);
+        auto row = MeasureRow(*inst, m, scheme, n);
+        if (!row.ok()) {
+          std::cerr << "swarf table: " << row.status().message() << "\n";
+          return 1;
+        }
+        rows.push_back(*std::move(row));
+      }
+    }
+  }
+  if (args->Has("json")) {
+    PrintJson(rows);
+  } else {
+    PrintText(rows);
+  }
+  return 0;
+}
+
+}  // namespace swarf::cli

@@ -1,0 +1,84 @@
+#include "core/thread_pool.h"
+
+#include <algorithm>
+#include <atomic>
+
+namespace swarf {
+
+struct ThreadPool::Job {
+  const std::function<void(int64_t)>* fn;
+  int64_t n;
+  std::atomic<int64_t> next{0};
+  int active = 0;  // workers inside Run(); guarded by the pool's mu_
+
+  // Claims and runs indices until none are left.
+  void Run() {
+    for (int64_t i; (i = next.fetch_add(1)) < n;) (*fn)(i);
+  }
+};
+
+ThreadPool::ThreadPool(int threads) {
+  if (threads <= 0) {
+    threads = std::max(1u, std::thread::hardware_concurrency());
+  }
+  for (int i = 1; i < threads; ++i) {
+    workers_.emplace_back([this] { WorkerLoop(); });
+  }
+}
+
+ThreadPool::~ThreadPool() {
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    stop_ = true;
+  }
+  cv_.notify_all();
+  for (auto& t : workers_) t.join();
+}
+
+void ThreadPool::WorkerLoop() {
+  std::unique_lock<std::mutex> l(mu_);
+  for (;;) {
+    cv_.wait(l, [this] { return stop_ || !jobs_.empty(); });
+    if (stop_) return;
+    Job* job = jobs_.front();
+    // A job leaves the queue once all its indices are claimed.
+    if (job->next.load() >= job->n) {
+      jobs_.erase(jobs_.begin());
+      continue;
+    }
+    ++job->active;
+    l.unlock();
+    job->Run();
+    l.lock();
+    if (--job->active == 0) job_cv_.notify_all();
+  }
+}
+
+void ThreadPool::ParallelFor(int64_t n, const std::function<void(int64_t)>& fn) {
+  if (n <= 0) return;
+  if (n == 1 || workers_.empty()) {
+    for (int64_t i = 0; i < n; ++i) fn(i);
+    return;
+  }
+  Job job;
+  job.fn = &fn;
+  job.n = n;
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    jobs_.push_back(&job);
+  }
+  cv_.notify_all();
+  job.Run();
+  // Every index is claimed; once no worker is inside the job, every index
+  // has also finished and the job can leave the stack.
+  std::unique_lock<std::mutex> l(mu_);
+  jobs_.erase(std::remove(jobs_.begin(), jobs_.end(), &job), jobs_.end());
+  job_cv_.wait(l, [&] { return job.active == 0; });
+}
+
+ThreadPool& ThreadPool::Default() {
+  static ThreadPool* const pool = new ThreadPool(0);
+  return *pool;
+}
+
+}  // namespace swarf

@@ -1,0 +1,46 @@
+// A fixed pool of worker threads running data-parallel loops.
+#ifndef SWARF_CORE_THREAD_POOL_H_
+#define SWARF_CORE_THREAD_POOL_H_
+
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+namespace swarf {
+
+// ParallelFor may be called from several threads at once; each call blocks
+// until its loop is done, and the calling thread works on it too.
+class ThreadPool {
+ public:
+  // threads <= 0: one per hardware thread.
+  explicit ThreadPool(int threads = 0);
+  ~ThreadPool();
+  ThreadPool(const ThreadPool&) = delete;
+  ThreadPool& operator=(const ThreadPool&) = delete;
+
+  int size() const { return static_cast<int>(workers_.size()) + 1; }
+
+  // Runs fn(i) for every i in [0, n), in any order and on any thread.
+  void ParallelFor(int64_t n, const std::function<void(int64_t)>& fn);
+
+  // A process-wide pool with one thread per hardware thread.
+  static ThreadPool& Default();
+
+ private:
+  struct Job;
+  void WorkerLoop();
+
+  std::mutex mu_;
+  std::condition_variable cv_;       // work arrived, or stop
+  std::condition_variable job_cv_;   // a worker left a job
+  std::vector<Job*> jobs_;  // guarded by mu_
+  bool stop_ = false;       // guarded by mu_
+  std::vector<std::thread> workers_;
+};
+
+}  // namespace swarf
+
+#endif  // SWARF_CORE_THREAD_POOL_H_

@@ -1,0 +1,117 @@
+#include "core/valuation.h"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+
+namespace swarf {
+namespace {
+
+struct Partial {
+  double sum = 0, sum_sq = 0, max = -1, max_x = 0, max_y = 0;
+  int64_t n = 0;
+};
+
+}  // namespace
+
+absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
+                                        const ValuationOptions& options) {
+  const int n = options.samples_per_edge;
+  if (n < 2 || n > 64) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("samples_per_edge must be in [2, 64], got ", n));
+  }
+  const GridGeometry& grid = wp.grid();
+  Rect region = grid.bounds();
+  if (options.region.has_value()) {
+    const Rect& r = *options.region;
+    if (!std::isfinite(r.x0) || !std::isfinite(r.y0) ||
+        !std::isfinite(r.x1) || !std::isfinite(r.y1)) {
+      return absl::InvalidArgumentError("region must be finite");
+    }
+    if (r.x1 < r.x0 || r.y1 < r.y0) {
+      return absl::InvalidArgumentError(
+          "region must have x0 <= x1 and y0 <= y1");
+    }
+    region = r;
+  }
+  const MoveIndex& index = wp.index();
+  const int32_t bins = index.bins_x() * index.bins_y();
+  std::vector<Partial> partials(bins);
+
+  wp.pool().ParallelFor(bins, [&](int64_t b) {
+    const int32_t bx = static_cast<int32_t>(b % index.bins_x());
+    const int32_t by = static_cast<int32_t>(b / index.bins_x());
+    const int32_t ei0 = bx * MoveIndex::kBinElements;
+    const int32_t ej0 = by * MoveIndex::kBinElements;
+    const int32_t ei1 = std::min(ei0 + MoveIndex::kBinElements, grid.nx());
+    const int32_t ej1 = std::min(ej0 + MoveIndex::kBinElements, grid.ny());
+    // Skip bins outside the region.
+    if (grid.NodeX(ei0) > region.x1 || grid.NodeX(ei1) < region.x0 ||
+        grid.NodeY(ej0) > region.y1 || grid.NodeY(ej1) < region.y0) {
+      return;
+    }
+    std::vector<BallSweep> sweeps;
+    for (uint32_t id : index.Bin(static_cast<int32_t>(b))) {
+      const Move& m = wp.move(id);
+      sweeps.emplace_back(m.from, m.to, m.radius);
+    }
+    const double z_top = wp.spec().z_top;
+    Partial& p = partials[b];
+    for (int32_t ej = ej0; ej < ej1; ++ej) {
+      for (int32_t ei = ei0; ei < ei1; ++ei) {
+        const ElementCorners e = wp.Corners(ei, ej);
+        if (e.x0 > region.x1 || e.x1 < region.x0 || e.y0 > region.y1 ||
+            e.y1 < region.y0) {
+          continue;
+        }
+        for (int sj = 0; sj < n; ++sj) {
+          for (int si = 0; si < n; ++si) {
+            const bool corner = (si == 0 || si == n - 1) &&
+                                (sj == 0 || sj == n - 1);
+            if (corner) continue;
+            const double x = e.x0 + (e.x1 - e.x0) * si / (n - 1);
+            const double y = e.y0 + (e.y1 - e.y0) * sj / (n - 1);
+            if (!region.Contains(x, y)) continue;
+            double exact = z_top;
+            for (const BallSweep& s : sweeps) {
+              exact = std::fmin(exact, s.Height(x, y));
+            }
+            const double err =
+                SampleError(wp.scheme().Reconstruct(e, x, y), exact);
+            p.sum += err;
+            p.sum_sq += err * err;
+            ++p.n;
+            if (err > p.max) {
+              p.max = err;
+              p.max_x = x;
+              p.max_y = y;
+            }
+          }
+        }
+      }
+    }
+  });
+
+  ErrorStats stats;
+  double sum = 0, sum_sq = 0;
+  for (const Partial& p : partials) {
+    sum += p.sum;
+    sum_sq += p.sum_sq;
+    stats.samples += p.n;
+    if (p.n > 0 && p.max > stats.max_error) {
+      stats.max_error = p.max;
+      stats.max_x = p.max_x;
+      stats.max_y = p.max_y;
+    }
+  }
+  if (stats.samples > 0) {
+    stats.mean_error = sum / stats.samples;
+    stats.rms_error = std::sqrt(sum_sq / stats.samples);
+  }
+  return stats;
+}
+
+}  // namespace swarf

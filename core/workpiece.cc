@@ -1,0 +1,313 @@
+#include "core/workpiece.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "core/status_macros.h"
+
+namespace swarf {
+
+// Nodal parameters of one tile, structure-of-arrays, row-major (j, i).
+struct Workpiece::Tile {
+  std::vector<double> w;
+  std::vector<int32_t> owner;
+  std::vector<float> d[5];  // wx, wy, wxx, wxy, wyy; empty for zmap
+  double zmax = 0;          // upper bound on w over the tile's grid nodes
+};
+
+namespace {
+
+// Node index range [lo, hi] within [0, max] of the nodes origin + k*step that
+// lie in [a, b]; lo > hi if none.
+std::pair<int32_t, int32_t> NodeRange(double a, double b, double origin,
+                                      double step, int32_t max) {
+  const double lo = std::ceil((a - origin) / step);
+  const double hi = std::floor((b - origin) / step);
+  if (!(hi >= 0) || !(lo <= max) || !(lo <= hi)) return {1, 0};
+  return {static_cast<int32_t>(std::fmax(lo, 0.0)),
+          static_cast<int32_t>(std::fmin(hi, static_cast<double>(max)))};
+}
+
+}  // namespace
+
+Workpiece::Workpiece(const StockSpec& spec, const Scheme& scheme,
+                     ThreadPool* pool)
+    : grid_(spec),
+      scheme_(&scheme),
+      pool_(pool != nullptr ? pool : &ThreadPool::Default()),
+      tiles_x_((grid_.nodes_x() + kTileSize - 1) / kTileSize),
+      tiles_y_((grid_.nodes_y() + kTileSize - 1) / kTileSize),
+      tiles_(static_cast<size_t>(tiles_x_) * tiles_y_),
+      tile_version_(tiles_.size(), 0),
+      index_(grid_) {}
+
+Workpiece::~Workpiece() = default;
+
+absl::StatusOr<std::unique_ptr<Workpiece>> Workpiece::Create(
+    const StockSpec& spec, SchemeKind scheme, ThreadPool* pool) {
+  SWARF_RETURN_IF_ERROR(ValidateStock(spec));
+  return std::unique_ptr<Workpiece>(
+      new Workpiece(spec, GetScheme(scheme), pool));
+}
+
+absl::Status Workpiece::ValidateMoves(std::span<const Move> moves) {
+  for (size_t k = 0; k < moves.size(); ++k) {
+    const Move& m = moves[k];
+    const struct {
+      const char* name;
+      double v;
+    } fields[] = {{"from.x", m.from.x}, {"from.y", m.from.y},
+                  {"from.z", m.from.z}, {"to.x", m.to.x},
+                  {"to.y", m.to.y},     {"to.z", m.to.z},
+                  {"radius", m.radius}};
+    for (const auto& f : fields) {
+      if (!std::isfinite(f.v)) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "moves[", k, "].", f.name, " must be finite, got ", f.v));
+      }
+    }
+    if (!(m.radius > 0)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "moves[", k, "].radius must be positive, got ", m.radius));
+    }
+  }
+  return absl::OkStatus();
+}
+
+std::unique_ptr<Workpiece::Tile> Workpiece::NewTile() const {
+  auto tile = std::make_unique<Tile>();
+  tile->w.assign(kTileNodes, spec().z_top);
+  tile->owner.assign(kTileNodes, -1);
+  if (scheme_->stores_derivatives()) {
+    for (auto& d : tile->d) d.assign(kTileNodes, 0.0f);
+  }
+  tile->zmax = spec().z_top;
+  return tile;
+}
+
+template <bool kDerivatives>
+int64_t Workpiece::CutTile(int32_t t, Tile* tile,
+                           std::span<const BallSweep> sweeps,
+                           std::span<const uint32_t> batch_moves,
+                           int64_t first_id) const {
+  const int32_t ti = t % tiles_x_, tj = t / tiles_x_;
+  const int32_t i_base = ti * kTileSize, j_base = tj * kTileSize;
+  const int32_t i_max = std::min(i_base + kTileSize - 1, grid_.nx());
+  const int32_t j_max = std::min(j_base + kTileSize - 1, grid_.ny());
+  const double x0 = spec().x0, y0 = spec().y0;
+  const double dx = grid_.dx(), dy = grid_.dy();
+  double* const w = tile->w.data();
+  int32_t* const owner = tile->owner.data();
+  int64_t lowered = 0;
+
+  for (uint32_t m : batch_moves) {
+    const BallSweep& sweep = sweeps[m];
+    // Nodes only go down: the tile's highest node caps what can be cut.
+    if (!(sweep.lowest() < tile->zmax)) continue;
+    const BallSweep::Capsule cap = sweep.Footprint(tile->zmax);
+    if (cap.empty) continue;
+    const int32_t id = static_cast<int32_t>(first_id + m);
+    const Rect b = cap.Bounds();
+    auto [j_lo, j_hi] = NodeRange(b.y0, b.y1, y0, dy, j_max);
+    j_lo = std::max(j_lo, j_base);
+    for (int32_t j = j_lo; j <= j_hi; ++j) {
+      const double y = grid_.NodeY(j);
+      const Interval span = cap.RowSpan(y);
+      if (span.empty()) continue;
+      auto [i_lo, i_hi] = NodeRange(span.lo, span.hi, x0, dx, i_max);
+      i_lo = std::max(i_lo, i_base);
+      int32_t k = (j - j_base) * kTileSize + (i_lo - i_base);
+      for (int32_t i = i_lo; i <= i_hi; ++i, ++k) {
+        const SweepPoint p = sweep.Locate(grid_.NodeX(i), y);
+        if (p.w < w[k] || (p.w == w[k] && id < owner[k])) {
+          w[k] = p.w;
+          owner[k] = id;
+          ++lowered;
+          if constexpr (kDerivatives) {
+            const SurfaceJet jet = sweep.Jet(p);
+            tile->d[0][k] = static_cast<float>(jet.wx);
+            tile->d[1][k] = static_cast<float>(jet.wy);
+            tile->d[2][k] = static_cast<float>(jet.wxx);
+            tile->d[3][k] = static_cast<float>(jet.wxy);
+            tile->d[4][k] = static_cast<float>(jet.wyy);
+          }
+        }
+      }
+    }
+  }
+  if (lowered > 0) {
+    // Tighten the cap for later batches.
+    double zmax = -kInf;
+    for (int32_t j = j_base; j <= j_max; ++j) {
+      const double* row = w + (j - j_base) * kTileSize;
+      for (int32_t i = 0; i <= i_max - i_base; ++i) {
+        zmax = std::fmax(zmax, row[i]);
+      }
+    }
+    tile->zmax = zmax;
+  }
+  return lowered;
+}
+
+absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
+  SWARF_RETURN_IF_ERROR(ValidateMoves(moves));
+  if (move_count() + static_cast<int64_t>(moves.size()) > kMaxMoves) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "a workpiece holds at most ", kMaxMoves, " moves; it has ",
+        move_count(), " and the batch adds ", moves.size()));
+  }
+  ApplyResult result;
+  result.first_move_id = move_count();
+  result.moves = static_cast<int64_t>(moves.size());
+
+  std::vector<BallSweep> sweeps;
+  sweeps.reserve(moves.size());
+  // (tile, move) pairs for every tile a move's footprint may touch.
+  std::vector<std::pair<int32_t, uint32_t>> pairs;
+  const double z_top = spec().z_top;
+  for (size_t m = 0; m < moves.size(); ++m) {
+    sweeps.emplace_back(moves[m].from, moves[m].to, moves[m].radius);
+    const BallSweep::Capsule cap = sweeps.back().Footprint(z_top);
+    if (cap.empty) continue;
+    const Rect b = cap.Bounds();
+    const auto [i_lo, i_hi] =
+        NodeRange(b.x0, b.x1, spec().x0, grid_.dx(), grid_.nx());
+    const auto [j_lo, j_hi] =
+        NodeRange(b.y0, b.y1, spec().y0, grid_.dy(), grid_.ny());
+    if (i_lo > i_hi || j_lo > j_hi) continue;  // misses the stock
+    index_.Add(static_cast<uint32_t>(result.first_move_id + m), cap);
+    for (int32_t tj = j_lo >> kTileBits; tj <= j_hi >> kTileBits; ++tj) {
+      for (int32_t ti = i_lo >> kTileBits; ti <= i_hi >> kTileBits; ++ti) {
+        pairs.emplace_back(tj * tiles_x_ + ti, static_cast<uint32_t>(m));
+      }
+    }
+  }
+  moves_.insert(moves_.end(), moves.begin(), moves.end());
+
+  // Group by tile, keeping move order within a tile.
+  std::stable_sort(pairs.begin(), pairs.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::vector<uint32_t> tile_moves(pairs.size());
+  std::vector<std::pair<int32_t, size_t>> touched;  // tile, start offset
+  for (size_t k = 0; k < pairs.size(); ++k) {
+    tile_moves[k] = pairs[k].second;
+    if (k == 0 || pairs[k].first != pairs[k - 1].first) {
+      touched.emplace_back(pairs[k].first, k);
+    }
+  }
+  touched.emplace_back(-1, pairs.size());  // sentinel end
+  const int64_t n_touched = static_cast<int64_t>(touched.size()) - 1;
+
+  std::vector<int64_t> lowered(n_touched, 0);
+  const bool derivs = scheme_->stores_derivatives();
+  pool_->ParallelFor(n_touched, [&](int64_t k) {
+    const int32_t t = touched[k].first;
+    std::span<const uint32_t> list(tile_moves.data() + touched[k].second,
+                                   touched[k + 1].second - touched[k].second);
+    std::unique_ptr<Tile> fresh;
+    Tile* tile = tiles_[t].get();
+    if (tile == nullptr) {
+      fresh = NewTile();
+      tile = fresh.get();
+    }
+    lowered[k] = derivs ? CutTile<true>(t, tile, sweeps, list,
+                                        result.first_move_id)
+                        : CutTile<false>(t, tile, sweeps, list,
+                                         result.first_move_id);
+    // Only a tile that was really cut stays allocated.
+    if (fresh != nullptr && lowered[k] > 0) tiles_[t] = std::move(fresh);
+  });
+
+  bool changed = false;
+  for (int64_t k = 0; k < n_touched; ++k) changed |= lowered[k] > 0;
+  if (changed) ++version_;
+  for (int64_t k = 0; k < n_touched; ++k) {
+    if (lowered[k] == 0) continue;
+    result.nodes_lowered += lowered[k];
+    result.changed_tiles.push_back(touched[k].first);
+    tile_version_[touched[k].first] = version_;
+  }
+  result.version = version_;
+  return result;
+}
+
+NodeValue Workpiece::Node(int32_t i, int32_t j) const {
+  NodeValue v;
+  const Tile* tile =
+      tiles_[(j >> kTileBits) * tiles_x_ + (i >> kTileBits)].get();
+  if (tile == nullptr) {
+    v.jet.w = spec().z_top;
+    return v;
+  }
+  const int32_t k = (j & (kTileSize - 1)) * kTileSize + (i & (kTileSize - 1));
+  v.jet.w = tile->w[k];
+  v.owner = tile->owner[k];
+  if (!tile->d[0].empty()) {
+    v.jet.wx = tile->d[0][k];
+    v.jet.wy = tile->d[1][k];
+    v.jet.wxx = tile->d[2][k];
+    v.jet.wxy = tile->d[3][k];
+    v.jet.wyy = tile->d[4][k];
+  }
+  return v;
+}
+
+ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
+  ElementCorners e;
+  e.x0 = grid_.NodeX(ei);
+  e.x1 = grid_.NodeX(ei + 1);
+  e.y0 = grid_.NodeY(ej);
+  e.y1 = grid_.NodeY(ej + 1);
+  e.z_top = spec().z_top;
+  e.c[0] = Node(ei, ej).jet;
+  e.c[1] = Node(ei + 1, ej).jet;
+  e.c[2] = Node(ei + 1, ej + 1).jet;
+  e.c[3] = Node(ei, ej + 1).jet;
+  return e;
+}
+
+double Workpiece::Reconstruct(double x, double y) const {
+  const Rect r = grid_.bounds();
+  x = std::clamp(x, r.x0, r.x1);
+  y = std::clamp(y, r.y0, r.y1);
+  return scheme_->Reconstruct(Corners(grid_.ElementX(x), grid_.ElementY(y)),
+                              x, y);
+}
+
+double Workpiece::ExactHeightOver(std::span<const uint32_t> ids, double x,
+                                  double y) const {
+  double w = spec().z_top;
+  for (uint32_t id : ids) {
+    const Move& m = moves_[id];
+    w = std::fmin(w, BallSweep(m.from, m.to, m.radius).Height(x, y));
+  }
+  return w;
+}
+
+double Workpiece::ExactHeight(double x, double y) const {
+  const Rect r = grid_.bounds();
+  if (!r.Contains(x, y)) {
+    // Outside the stock the index has no bins; look at every move.
+    double w = spec().z_top;
+    for (const Move& m : moves_) {
+      w = std::fmin(w, BallSweep(m.from, m.to, m.radius).Height(x, y));
+    }
+    return w;
+  }
+  return ExactHeightOver(
+      index_.Bin(index_.BinOfElement(grid_.ElementX(x), grid_.ElementY(y))),
+      x, y);
+}
+
+int64_t Workpiece::allocated_tiles() const {
+  return std::count_if(tiles_.begin(), tiles_.end(),
+                       [](const auto& t) { return t != nullptr; });
+}
+
+int64_t Workpiece::allocated_node_bytes() const {
+  return allocated_tiles() * kTileNodes * scheme_->bytes_per_node();
+}
+
+}  // namespace swarf

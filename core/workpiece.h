@@ -1,0 +1,133 @@
+// A workpiece: stock, the aligned-line grid with one scheme's nodal
+// parameters, and the moves applied to it.
+//
+// Nodes live in kTileSize x kTileSize tiles allocated on first cut; an
+// unallocated tile is untouched stock (height z_top, flat, owner -1). Every
+// tile has a version: the workpiece version of the last batch that changed
+// one of its nodes (0: never changed).
+//
+// A node is lowered only where a sweep is strictly below it (on an exact tie
+// the lower move id wins); it then takes all its parameters from that sweep
+// and records the move id as its owner. The state is therefore a function of
+// the set of moves, bit-identical whatever their order and batching.
+//
+// Thread safety: Apply must not run concurrently with anything else on the
+// same workpiece; const methods may run concurrently with each other.
+#ifndef SWARF_CORE_WORKPIECE_H_
+#define SWARF_CORE_WORKPIECE_H_
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/ball_sweep.h"
+#include "core/geometry.h"
+#include "core/move_index.h"
+#include "core/scheme.h"
+#include "core/stock.h"
+#include "core/thread_pool.h"
+
+namespace swarf {
+
+inline constexpr int32_t kTileBits = 6;
+inline constexpr int32_t kTileSize = 1 << kTileBits;  // nodes per tile side
+inline constexpr int32_t kTileNodes = kTileSize * kTileSize;
+
+// A straight move of a ball-end cutter between two tool-tip positions (mm).
+struct Move {
+  Vec3 from, to;
+  double radius = 0;
+};
+
+// Moves per workpiece are numbered from 0; ids are stored in int32.
+inline constexpr int64_t kMaxMoves = (int64_t{1} << 31) - 1;
+
+struct NodeValue {
+  SurfaceJet jet;      // w and, for schemes that store them, derivatives
+  int32_t owner = -1;  // id of the move that set the node, -1: stock top
+};
+
+struct ApplyResult {
+  int64_t first_move_id = 0;  // id of the batch's first move
+  int64_t moves = 0;          // moves in the batch
+  int64_t nodes_lowered = 0;  // node updates (a node lowered twice counts 2)
+  uint64_t version = 0;       // workpiece version after the batch
+  std::vector<int32_t> changed_tiles;  // ascending tile indices
+};
+
+class Workpiece {
+ public:
+  // `pool` (not owned, may be null for ThreadPool::Default()) must outlive
+  // the workpiece.
+  static absl::StatusOr<std::unique_ptr<Workpiece>> Create(
+      const StockSpec& spec, SchemeKind scheme, ThreadPool* pool = nullptr);
+
+  // InvalidArgument naming the move index and field for non-finite
+  // coordinates or a radius that is not positive and finite.
+  static absl::Status ValidateMoves(std::span<const Move> moves);
+
+  // Applies a batch whole, or nothing on error. Move ids continue from the
+  // previous batch.
+  absl::StatusOr<ApplyResult> Apply(std::span<const Move> moves);
+
+  const GridGeometry& grid() const { return grid_; }
+  const StockSpec& spec() const { return grid_.spec(); }
+  const Scheme& scheme() const { return *scheme_; }
+
+  int64_t move_count() const { return static_cast<int64_t>(moves_.size()); }
+  const Move& move(int64_t id) const { return moves_[id]; }
+  uint64_t version() const { return version_; }
+
+  // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
+  NodeValue Node(int32_t i, int32_t j) const;
+  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny.
+  ElementCorners Corners(int32_t ei, int32_t ej) const;
+  // The scheme's reconstructed surface at a point of the stock (clamped to
+  // the stock rectangle).
+  double Reconstruct(double x, double y) const;
+  // The true machined surface: the minimum of the stock top and of every
+  // sweep at (x, y).
+  double ExactHeight(double x, double y) const;
+  // Minimum of the top and the sweeps of the given move ids at (x, y).
+  double ExactHeightOver(std::span<const uint32_t> ids, double x,
+                         double y) const;
+
+  int32_t tiles_x() const { return tiles_x_; }
+  int32_t tiles_y() const { return tiles_y_; }
+  int32_t tile_count() const { return tiles_x_ * tiles_y_; }
+  bool TileAllocated(int32_t t) const { return tiles_[t] != nullptr; }
+  uint64_t TileVersion(int32_t t) const { return tile_version_[t]; }
+  int64_t allocated_tiles() const;
+  // Bytes held by allocated tiles' nodal parameters.
+  int64_t allocated_node_bytes() const;
+
+  const MoveIndex& index() const { return index_; }
+  ThreadPool& pool() const { return *pool_; }
+
+  ~Workpiece();
+
+ private:
+  struct Tile;
+  Workpiece(const StockSpec& spec, const Scheme& scheme, ThreadPool* pool);
+  std::unique_ptr<Tile> NewTile() const;
+  template <bool kDerivatives>
+  int64_t CutTile(int32_t t, Tile* tile, std::span<const BallSweep> sweeps,
+                  std::span<const uint32_t> batch_moves,
+                  int64_t first_id) const;
+
+  const GridGeometry grid_;
+  const Scheme* scheme_;
+  ThreadPool* pool_;
+  int32_t tiles_x_, tiles_y_;
+  std::vector<std::unique_ptr<Tile>> tiles_;
+  std::vector<uint64_t> tile_version_;
+  uint64_t version_ = 0;
+  std::vector<Move> moves_;
+  MoveIndex index_;
+};
+
+}  // namespace swarf
+
+#endif  // SWARF_CORE_WORKPIECE_H_
