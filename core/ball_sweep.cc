@@ -16,19 +16,6 @@ constexpr double kVerticalFraction = 1e-12;
 // evaluated, whatever the cap, which keeps results independent of batching.
 constexpr double kFootprintMargin = 1e-9;
 
-double ClampDerivative(double v) {
-  return std::clamp(v, -kMaxDerivative, kMaxDerivative);
-}
-
-SurfaceJet Clamped(const SurfaceJet& j) {
-  return {j.w,
-          ClampDerivative(j.wx),
-          ClampDerivative(j.wy),
-          ClampDerivative(j.wxx),
-          ClampDerivative(j.wxy),
-          ClampDerivative(j.wyy)};
-}
-
 // Restricts `iv` to the x where lo <= a x + b <= hi.
 void ClipLinear(double a, double b, double lo, double hi, Interval* iv) {
   if (a == 0) {
@@ -47,18 +34,6 @@ double SphereHeight(const Vec3& c, double r, double x, double y) {
   const double d2 = r * r - (dx * dx + dy * dy);
   if (!(d2 >= 0)) return kInf;
   return c.z - std::sqrt(d2);
-}
-
-SurfaceJet SphereJet(double z, double dx, double dy, double depth) {
-  // Eq. (8)/(9) with z - zc = -depth.
-  SurfaceJet j;
-  j.w = z;
-  j.wx = dx / depth;
-  j.wy = dy / depth;
-  j.wxx = (1 + j.wx * j.wx) / depth;
-  j.wxy = (j.wx * j.wy) / depth;
-  j.wyy = (1 + j.wy * j.wy) / depth;
-  return Clamped(j);
 }
 
 BallSweep::BallSweep(const Vec3& tip_from, const Vec3& tip_to, double radius)
@@ -90,16 +65,54 @@ BallSweep::BallSweep(const Vec3& tip_from, const Vec3& tip_to, double radius)
   h2_ = dy / dxy;
 }
 
+void BallSweep::RowHeights(double y, double x0, double dx, int32_t i0,
+                           int32_t n, double* out) const {
+  // x is computed exactly as GridGeometry::NodeX computes it.
+  if (kind_ == kGeneral) {
+#pragma omp simd
+    for (int32_t k = 0; k < n; ++k) {
+      out[k] = LocateGeneral(x0 + (i0 + k) * dx, y).w;
+    }
+    return;
+  }
+  const Vec3& c = LowestCentre();
+#pragma omp simd
+  for (int32_t k = 0; k < n; ++k) {
+    out[k] = LocateSphere(c, x0 + (i0 + k) * dx, y).w;
+  }
+}
+
 SurfaceJet BallSweep::CylinderJet(const SweepPoint& p) const {
+  // Eq. (14) in the move's frame. There the cylinder is
+  // z = za + (k3 along - R) / g with R = sqrt(r^2 - n^2): its slope along
+  // the move is k3 / g, across it dz/dn = n / (g R) and d2z/dn2 =
+  // r^2 / (g R^3). With d along = h . d(x, y) and dn = (-h2, h1) . d(x, y)
+  // that gives the gradient and Hessian below. R is clamped at the rim like
+  // the spheres' depth.
+  const double n = h1_ * p.py - h2_ * p.px;
+  const double inv_r = 1 / std::max(p.depth, kRimDepthFraction * r_);
+  const double slope_along = k3_ * inv_g_;
+  const double slope_across = n * inv_r * inv_g_;
+  const double kappa = r2_ * inv_r * inv_r * inv_r * inv_g_;
+  SurfaceJet j;
+  j.w = p.w;
+  j.wx = slope_along * h1_ - slope_across * h2_;
+  j.wy = slope_along * h2_ + slope_across * h1_;
+  j.wxx = kappa * h2_ * h2_;
+  j.wxy = -kappa * h1_ * h2_;
+  j.wyy = kappa * h1_ * h1_;
+  return ClampedJet(j);
+}
+
+SurfaceJet BallSweep::CylinderJetEq14(const SweepPoint& p) const {
   // Eq. (14). At the lower root of eq. (12), C1 = A s - k3 (k1 px + k2 py)
-  // simplifies to -g sqrt(r^2 - n^2); using that form avoids its
-  // cancellation for near-vertical moves, and clamping the root bounds the
-  // slope at the rim like the spheres'.
+  // simplifies to -g sqrt(r^2 - n^2); that form avoids its cancellation for
+  // near-vertical moves.
   const double s = p.w - a_.z;
   const double px = p.px, py = p.py;
   const double k1 = k1_, k2 = k2_, k3 = k3_;
   const double A = g_ * g_;
-  const double c1 = -g_ * std::fmax(p.depth, kRimDepthFraction * r_);
+  const double c1 = -g_ * std::max(p.depth, kRimDepthFraction * r_);
   const double c2 = -k1 * k3 * s + (k2 * k2 + k3 * k3) * px - k1 * k2 * py;
   const double c3 = -k2 * k3 * s + (k1 * k1 + k3 * k3) * py - k1 * k2 * px;
   SurfaceJet j;
@@ -114,21 +127,7 @@ SurfaceJet BallSweep::CylinderJet(const SweepPoint& p) const {
   j.wxx = -(c2x + j.wx * c1x) / c1;
   j.wxy = -(c2y + j.wx * c1y) / c1;
   j.wyy = -(c3y + j.wy * c1y) / c1;
-  return Clamped(j);
-}
-
-SurfaceJet BallSweep::Jet(const SweepPoint& p) const {
-  switch (p.piece) {
-    case SweepPoint::kCylinder:
-      return CylinderJet(p);
-    case SweepPoint::kStartSphere:
-    case SweepPoint::kEndSphere:
-      return SphereJet(p.w, p.px, p.py,
-                       std::fmax(p.depth, kRimDepthFraction * r_));
-    case SweepPoint::kNone:
-      break;
-  }
-  return SurfaceJet{kInf, 0, 0, 0, 0, 0};
+  return ClampedJet(j);
 }
 
 BallSweep::Capsule BallSweep::Footprint(double cap) const {
@@ -140,18 +139,18 @@ BallSweep::Capsule BallSweep::Footprint(double cap) const {
   if (a_.z >= z_lim || b_.z >= z_lim) {
     const double t = (z_lim - a_.z) / (b_.z - a_.z);
     if (a_.z < z_lim) {
-      t1 = std::fmin(1.0, t + 1e-12);
+      t1 = std::min(1.0, t + 1e-12);
     } else {
-      t0 = std::fmax(0.0, t - 1e-12);
+      t0 = std::max(0.0, t - 1e-12);
     }
   }
   // Over the kept part, a ball at height zc reaches below cap within a
   // horizontal radius sqrt(r^2 - (zc - cap)^2), largest at the lowest centre.
-  const double z_min = std::fmin(a_.z, b_.z);
+  const double z_min = std::min(a_.z, b_.z);
   double rho = r_;
   if (z_min > cap) {
     const double h = z_min - cap;
-    rho = std::sqrt(std::fmax(0.0, r2_ - h * h));
+    rho = std::sqrt(std::max(0.0, r2_ - h * h));
   }
   c.empty = false;
   c.x0 = a_.x + t0 * (b_.x - a_.x);
@@ -159,6 +158,11 @@ BallSweep::Capsule BallSweep::Footprint(double cap) const {
   c.x1 = a_.x + t1 * (b_.x - a_.x);
   c.y1 = a_.y + t1 * (b_.y - a_.y);
   c.radius = rho * (1 + 1e-12) + kFootprintMargin;
+  c.length = std::hypot(c.x1 - c.x0, c.y1 - c.y0);
+  if (c.length > 0) {
+    c.ux = (c.x1 - c.x0) / c.length;
+    c.uy = (c.y1 - c.y0) / c.length;
+  }
   return c;
 }
 
@@ -174,13 +178,10 @@ Interval BallSweep::Capsule::RowSpan(double y) const {
       out.Hull({cx - w, cx + w});
     }
   }
-  const double ex = x1 - x0, ey = y1 - y0;
-  const double l = std::hypot(ex, ey);
-  if (l > 0) {
-    const double ux = ex / l, uy = ey / l;
+  if (length > 0) {
     Interval strip{-kInf, kInf};
-    // 0 <= (p - p0) . u <= l  and  |(p - p0) . (-uy, ux)| <= radius.
-    ClipLinear(ux, (y - y0) * uy - x0 * ux, 0, l, &strip);
+    // 0 <= (p - p0) . u <= length  and  |(p - p0) . (-uy, ux)| <= radius.
+    ClipLinear(ux, (y - y0) * uy - x0 * ux, 0, length, &strip);
     ClipLinear(-uy, x0 * uy + (y - y0) * ux, -radius, radius, &strip);
     out.Hull(strip);
   }

@@ -12,6 +12,7 @@
 #ifndef SWARF_CORE_BALL_SWEEP_H_
 #define SWARF_CORE_BALL_SWEEP_H_
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -37,9 +38,28 @@ inline constexpr double kMaxDerivative = 1e30;
 // Eq. (7): lower hemisphere of radius r centred at c; +inf outside its shadow.
 double SphereHeight(const Vec3& c, double r, double x, double y);
 
+// Limits every derivative of `j` to +-kMaxDerivative.
+inline SurfaceJet ClampedJet(const SurfaceJet& j) {
+  auto c = [](double v) {
+    return std::min(std::max(v, -kMaxDerivative), kMaxDerivative);
+  };
+  return {j.w, c(j.wx), c(j.wy), c(j.wxx), c(j.wxy), c(j.wyy)};
+}
+
 // Eq. (8)-(9): derivatives of the lower hemisphere at offset (dx, dy) from the
 // centre, where `depth` = zc - z = sqrt(r^2 - dx^2 - dy^2) (already clamped).
-SurfaceJet SphereJet(double z, double dx, double dy, double depth);
+inline SurfaceJet SphereJet(double z, double dx, double dy, double depth) {
+  // With z - zc = -depth: zx = dx / depth, zxx = (1 + zx^2) / depth, ...
+  const double inv = 1 / depth;
+  SurfaceJet j;
+  j.w = z;
+  j.wx = dx * inv;
+  j.wy = dy * inv;
+  j.wxx = (1 + j.wx * j.wx) * inv;
+  j.wxy = (j.wx * j.wy) * inv;
+  j.wyy = (1 + j.wy * j.wy) * inv;
+  return ClampedJet(j);
+}
 
 // Where (x, y) lies on the swept surface, and the intermediate values needed
 // to differentiate there.
@@ -48,7 +68,8 @@ struct SweepPoint {
   Piece piece = kNone;
   double w = kInf;  // height of the swept lower surface (mm)
   double depth = 0;  // sqrt(r^2 - d^2) for spheres, sqrt(r^2 - n^2) cylinder
-  double px = 0, py = 0;  // (x, y) minus the centre used (a for the cylinder)
+  // (x, y) minus the centre of the piece (a for the cylinder).
+  double px = 0, py = 0;
 };
 
 class BallSweep {
@@ -60,14 +81,33 @@ class BallSweep {
   // passes over that point.
   double Height(double x, double y) const { return Locate(x, y).w; }
 
-  // Locates (x, y) on the swept surface (inline: the hot path).
-  inline SweepPoint Locate(double x, double y) const;
+  // Locates (x, y) on the swept surface.
+  [[gnu::always_inline]] SweepPoint Locate(double x, double y) const {
+    return kind_ == kGeneral ? LocateGeneral(x, y)
+                             : LocateSphere(LowestCentre(), x, y);
+  }
+
+  // out[k] = Height(x0 + (i0 + k) * dx, y) for k in [0, n): the heights of
+  // one row of grid nodes, bit-identical to Height() (same operations,
+  // evaluated several nodes at a time).
+  void RowHeights(double y, double x0, double dx, int32_t i0, int32_t n,
+                  double* out) const;
 
   // Height and derivatives at a located point (piece != kNone).
-  SurfaceJet Jet(const SweepPoint& p) const;
+  SurfaceJet Jet(const SweepPoint& p) const {
+    if (p.piece == SweepPoint::kCylinder) return CylinderJet(p);
+    if (p.piece == SweepPoint::kNone) return SurfaceJet{kInf, 0, 0, 0, 0, 0};
+    return SphereJet(p.w, p.px, p.py,
+                     std::max(p.depth, kRimDepthFraction * r_));
+  }
+
+  // Eq. (14) as the paper writes it (C1, C2, C3 and their derivatives), at a
+  // point on the cylinder. Jet() uses the equivalent closed form of
+  // CylinderJet(), which costs a third; tests check that they agree.
+  SurfaceJet CylinderJetEq14(const SweepPoint& p) const;
 
   // Lowest height the sweep reaches anywhere.
-  double lowest() const { return std::fmin(a_.z, b_.z) - r_; }
+  double lowest() const { return std::min(a_.z, b_.z) - r_; }
   double radius() const { return r_; }
   const Vec3& centre_from() const { return a_; }
   const Vec3& centre_to() const { return b_; }
@@ -79,9 +119,10 @@ class BallSweep {
     bool empty = true;
     double x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // segment ends (ball centres, XY)
     double radius = 0;
+    double ux = 0, uy = 0, length = 0;  // unit XY direction and length
     Rect Bounds() const {
-      return {std::fmin(x0, x1) - radius, std::fmin(y0, y1) - radius,
-              std::fmax(x0, x1) + radius, std::fmax(y0, y1) + radius};
+      return {std::min(x0, x1) - radius, std::min(y0, y1) - radius,
+              std::max(x0, x1) + radius, std::max(y0, y1) + radius};
     }
     // The x-interval of the capsule on the row y (empty if it misses).
     Interval RowSpan(double y) const;
@@ -90,11 +131,18 @@ class BallSweep {
 
  private:
   enum Kind : uint8_t { kPoint, kVertical, kGeneral };
-  // Eq. (12)-(13): lower root s = z - za of the cylinder equation, in a
-  // numerically stable form. `along`/`n`: horizontal coordinates of (x, y)
-  // relative to a, along and across the move's XY direction.
-  double CylinderRoot(double along, double root, double root2) const;
-  // Eq. (14): derivatives of the cylinder (mid-surface).
+
+  // Vertical moves and points: the lowest ball is the whole envelope.
+  const Vec3& LowestCentre() const {
+    return (kind_ == kVertical && b_.z < a_.z) ? b_ : a_;
+  }
+  // Eq. (7) at the ball centred at c (one of a_, b_).
+  [[gnu::always_inline]] SweepPoint LocateSphere(const Vec3& c, double x,
+                                                 double y) const;
+  // The general move: cylinder where its contact lies inside the move, else
+  // the sphere on the contact's side. Branch-free, so that it vectorizes.
+  [[gnu::always_inline]] SweepPoint LocateGeneral(double x, double y) const;
+  // The cylinder's derivatives (eq. 14) in the move's own frame.
   SurfaceJet CylinderJet(const SweepPoint& p) const;
 
   Vec3 a_, b_;  // ball centres at the start and end
@@ -106,58 +154,69 @@ class BallSweep {
   double h1_, h2_;         // unit XY direction of the move
 };
 
-inline SweepPoint BallSweep::Locate(double x, double y) const {
+inline SweepPoint BallSweep::LocateSphere(const Vec3& c, double x,
+                                          double y) const {
   SweepPoint p;
-  if (kind_ != kGeneral) {
-    // Vertical moves and points: the lowest ball is the whole envelope.
-    const Vec3& c = (kind_ == kVertical && b_.z < a_.z) ? b_ : a_;
-    p.px = x - c.x;
-    p.py = y - c.y;
-    const double d2 = r2_ - (p.px * p.px + p.py * p.py);
-    if (!(d2 >= 0)) return p;
-    p.depth = std::sqrt(d2);
-    p.w = c.z - p.depth;
-    p.piece = (&c == &a_) ? SweepPoint::kStartSphere : SweepPoint::kEndSphere;
-    return p;
-  }
-  const double px = x - a_.x, py = y - a_.y;
-  const double n = h1_ * py - h2_ * px;
-  const double root2 = r2_ - n * n;
-  if (!(root2 >= 0)) return p;  // the vertical line misses every ball
-  const double along = h1_ * px + h2_ * py;
-  const double root = std::sqrt(root2);
-  const double s = CylinderRoot(along, root, root2);
-  // Axial coordinate of the cylinder contact point, measured from a.
-  const double t = g_ * along + k3_ * s;
-  if (t >= 0 && t <= len_) {
-    p.piece = SweepPoint::kCylinder;
-    p.px = px;
-    p.py = py;
-    p.depth = root;
-    p.w = a_.z + s;
-    return p;
-  }
-  const Vec3& c = (t < 0) ? a_ : b_;
   p.px = x - c.x;
   p.py = y - c.y;
   const double d2 = r2_ - (p.px * p.px + p.py * p.py);
-  if (!(d2 >= 0)) return p;
-  p.depth = std::sqrt(d2);
-  p.w = c.z - p.depth;
-  p.piece = (t < 0) ? SweepPoint::kStartSphere : SweepPoint::kEndSphere;
+  const bool hit = d2 >= 0;
+  p.depth = std::sqrt(std::max(d2, 0.0));
+  const double w = c.z - p.depth;
+  p.w = hit ? w : kInf;
+  const SweepPoint::Piece piece =
+      (&c == &a_) ? SweepPoint::kStartSphere : SweepPoint::kEndSphere;
+  p.piece = hit ? piece : SweepPoint::kNone;
   return p;
 }
 
-inline double BallSweep::CylinderRoot(double along, double root,
-                                       double root2) const {
-  // With k = (g h, k3) and n the horizontal distance to the axis' XY line,
-  // eq. (12) reduces to g^2 s^2 - 2 g k3 along s + (k3^2 along^2 + n^2 - r^2)
-  // = 0, whose lower root is (k3 along - root) / g. When k3 along > 0 that
-  // difference cancels; the product of the roots gives the same root without
-  // cancellation.
+inline SweepPoint BallSweep::LocateGeneral(double x, double y) const {
+  // Horizontal coordinates of (x, y) relative to a: `along` the move's XY
+  // direction and `n` across it (the horizontal distance to the axis line,
+  // which is also the distance from the vertical line at (x, y) to it).
+  const double px = x - a_.x, py = y - a_.y;
+  const double n = h1_ * py - h2_ * px;
+  const double along = h1_ * px + h2_ * py;
+  const double root2 = r2_ - n * n;
+  const double root = std::sqrt(std::max(root2, 0.0));
+  // Eq. (12)-(13). With k = (g h, k3), eq. (12) reduces to
+  // g^2 s^2 - 2 g k3 along s + (k3^2 along^2 + n^2 - r^2) = 0 (s = z - za),
+  // whose lower root is (k3 along - root) / g. When k3 along > 0 that
+  // difference cancels; the product of the roots then gives the same root
+  // without cancellation.
   const double q = k3_ * along;
-  if (q > 0) return (q * q - root2) / (g_ * (q + root));
-  return (q - root) * inv_g_;
+  const double s_stable = (q * q - root2) / (g_ * (q + root));
+  const double s_plain = (q - root) * inv_g_;
+  const double s = q > 0 ? s_stable : s_plain;
+  // Axial coordinate of the cylinder's contact point, measured from a. The
+  // height along the move is convex, so outside [0, L] the lowest point is
+  // the end sphere on that side.
+  const double t = g_ * along + k3_ * s;
+  const bool before = t < 0, after = t > len_;
+  const bool cylinder = !before && !after;
+  const double cx = before ? a_.x : b_.x;
+  const double cy = before ? a_.y : b_.y;
+  const double cz = before ? a_.z : b_.z;
+  const double qx = x - cx, qy = y - cy;
+  const double d2 = r2_ - (qx * qx + qy * qy);
+  const double depth = std::sqrt(std::max(d2, 0.0));
+  const bool hit = root2 >= 0;  // else the vertical line misses every ball
+  const bool sphere_hit = d2 >= 0;
+  // Both candidates are computed and then selected: no branch, so that
+  // rows of nodes vectorize.
+  const double w_cylinder = a_.z + s;
+  const double w_sphere = cz - depth;
+  SweepPoint p;
+  p.w = !hit ? kInf : cylinder ? w_cylinder : sphere_hit ? w_sphere : kInf;
+  p.piece = !hit          ? SweepPoint::kNone
+            : cylinder    ? SweepPoint::kCylinder
+            : !sphere_hit ? SweepPoint::kNone
+            : before      ? SweepPoint::kStartSphere
+                          : SweepPoint::kEndSphere;
+  p.depth = cylinder ? root : depth;
+  p.px = cylinder ? px : qx;
+  p.py = cylinder ? py : qy;
+  return p;
 }
 
 }  // namespace swarf

@@ -2,6 +2,7 @@
 #ifndef SWARF_CORE_GEOMETRY_H_
 #define SWARF_CORE_GEOMETRY_H_
 
+#include <algorithm>
 #include <cmath>
 
 namespace swarf {
@@ -31,13 +32,13 @@ struct Interval {
     if (empty()) {
       *this = o;
     } else {
-      lo = std::fmin(lo, o.lo);
-      hi = std::fmax(hi, o.hi);
+      lo = std::min(lo, o.lo);
+      hi = std::max(hi, o.hi);
     }
   }
   void Intersect(double a, double b) {
-    lo = std::fmax(lo, a);
-    hi = std::fmin(hi, b);
+    lo = std::max(lo, a);
+    hi = std::min(hi, b);
   }
 };
 

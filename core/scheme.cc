@@ -24,7 +24,7 @@ double MinOfPatches(const ElementCorners& e, double x, double y) {
   const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
   double w = e.z_top;
   for (int k = 0; k < 4; ++k) {
-    w = std::fmin(w, EvaluatePatch(e.c[k], xs[k], ys[k], x, y));
+    w = std::min(w, EvaluatePatch(e.c[k], xs[k], ys[k], x, y));
   }
   return w;
 }

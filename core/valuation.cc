@@ -77,7 +77,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             if (!region.Contains(x, y)) continue;
             double exact = z_top;
             for (const BallSweep& s : sweeps) {
-              exact = std::fmin(exact, s.Height(x, y));
+              exact = std::min(exact, s.Height(x, y));
             }
             const double err =
                 SampleError(wp.scheme().Reconstruct(e, x, y), exact);

@@ -3,18 +3,35 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstddef>
 
 #include "absl/strings/str_cat.h"
 #include "core/status_macros.h"
 
 namespace swarf {
 
-// Nodal parameters of one tile, structure-of-arrays, row-major (j, i).
+// Nodal parameters of one tile, structure-of-arrays, row-major (j, i). w and
+// owner are initialised to the stock top; the derivatives (taylor only) are
+// written only where a node is cut and read only where owner >= 0. They live
+// in a second block: together they would be exactly 128 KiB, glibc's mmap
+// threshold, and every tile would then be a fresh mapping that page-faults
+// on each use instead of reusing heap memory.
 struct Workpiece::Tile {
-  std::vector<double> w;
-  std::vector<int32_t> owner;
-  std::vector<float> d[5];  // wx, wy, wxx, wxy, wyy; empty for zmap
-  double zmax = 0;          // upper bound on w over the tile's grid nodes
+  explicit Tile(bool derivatives)
+      : heights(new std::byte[kTileNodes * (sizeof(double) + sizeof(int32_t))]),
+        w(reinterpret_cast<double*>(heights.get())),
+        owner(reinterpret_cast<int32_t*>(w + kTileNodes)) {
+    if (derivatives) {
+      derivs.reset(new float[5 * kTileNodes]);
+      for (int k = 0; k < 5; ++k) d[k] = derivs.get() + k * kTileNodes;
+    }
+  }
+  std::unique_ptr<std::byte[]> heights;
+  std::unique_ptr<float[]> derivs;
+  double* w;
+  int32_t* owner;
+  float* d[5] = {};  // wx, wy, wxx, wxy, wyy; null for zmap
+  double zmax = 0;   // upper bound on w over the tile's grid nodes
 };
 
 namespace {
@@ -26,8 +43,8 @@ std::pair<int32_t, int32_t> NodeRange(double a, double b, double origin,
   const double lo = std::ceil((a - origin) / step);
   const double hi = std::floor((b - origin) / step);
   if (!(hi >= 0) || !(lo <= max) || !(lo <= hi)) return {1, 0};
-  return {static_cast<int32_t>(std::fmax(lo, 0.0)),
-          static_cast<int32_t>(std::fmin(hi, static_cast<double>(max)))};
+  return {static_cast<int32_t>(std::max(lo, 0.0)),
+          static_cast<int32_t>(std::min(hi, static_cast<double>(max)))};
 }
 
 }  // namespace
@@ -77,12 +94,9 @@ absl::Status Workpiece::ValidateMoves(std::span<const Move> moves) {
 }
 
 std::unique_ptr<Workpiece::Tile> Workpiece::NewTile() const {
-  auto tile = std::make_unique<Tile>();
-  tile->w.assign(kTileNodes, spec().z_top);
-  tile->owner.assign(kTileNodes, -1);
-  if (scheme_->stores_derivatives()) {
-    for (auto& d : tile->d) d.assign(kTileNodes, 0.0f);
-  }
+  auto tile = std::make_unique<Tile>(scheme_->stores_derivatives());
+  std::fill_n(tile->w, kTileNodes, spec().z_top);
+  std::fill_n(tile->owner, kTileNodes, -1);
   tile->zmax = spec().z_top;
   return tile;
 }
@@ -98,12 +112,21 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   const int32_t j_max = std::min(j_base + kTileSize - 1, grid_.ny());
   const double x0 = spec().x0, y0 = spec().y0;
   const double dx = grid_.dx(), dy = grid_.dy();
-  double* const w = tile->w.data();
-  int32_t* const owner = tile->owner.data();
+  // Restrict-qualified, and the sweep copied to a local below: otherwise
+  // every store to w[] could alias the sweep's and the grid's doubles, and
+  // the compiler would reload them all after each lowered node.
+  double* __restrict const w = tile->w;
+  int32_t* __restrict const owner = tile->owner;
+  float* __restrict const d0 = tile->d[0];
+  float* __restrict const d1 = tile->d[1];
+  float* __restrict const d2 = tile->d[2];
+  float* __restrict const d3 = tile->d[3];
+  float* __restrict const d4 = tile->d[4];
   int64_t lowered = 0;
+  double h[kTileSize];  // one row span's sweep heights
 
   for (uint32_t m : batch_moves) {
-    const BallSweep& sweep = sweeps[m];
+    const BallSweep sweep = sweeps[m];
     // Nodes only go down: the tile's highest node caps what can be cut.
     if (!(sweep.lowest() < tile->zmax)) continue;
     const BallSweep::Capsule cap = sweep.Footprint(tile->zmax);
@@ -113,25 +136,32 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     auto [j_lo, j_hi] = NodeRange(b.y0, b.y1, y0, dy, j_max);
     j_lo = std::max(j_lo, j_base);
     for (int32_t j = j_lo; j <= j_hi; ++j) {
-      const double y = grid_.NodeY(j);
+      const double y = y0 + j * dy;  // as GridGeometry::NodeY
       const Interval span = cap.RowSpan(y);
       if (span.empty()) continue;
       auto [i_lo, i_hi] = NodeRange(span.lo, span.hi, x0, dx, i_max);
       i_lo = std::max(i_lo, i_base);
-      int32_t k = (j - j_base) * kTileSize + (i_lo - i_base);
-      for (int32_t i = i_lo; i <= i_hi; ++i, ++k) {
-        const SweepPoint p = sweep.Locate(grid_.NodeX(i), y);
-        if (p.w < w[k] || (p.w == w[k] && id < owner[k])) {
-          w[k] = p.w;
+      if (i_lo > i_hi) continue;
+      // Phase 1, vectorized: the sweep's heights along the row span.
+      const int32_t n = i_hi - i_lo + 1;
+      sweep.RowHeights(y, x0, dx, i_lo, n, h);
+      // Phase 2: lower the nodes; derivatives only for those.
+      const int32_t k0 = (j - j_base) * kTileSize + (i_lo - i_base);
+      for (int32_t q = 0; q < n; ++q) {
+        const int32_t k = k0 + q;
+        if (h[q] < w[k] || (h[q] == w[k] && id < owner[k])) {
+          w[k] = h[q];
           owner[k] = id;
           ++lowered;
           if constexpr (kDerivatives) {
-            const SurfaceJet jet = sweep.Jet(p);
-            tile->d[0][k] = static_cast<float>(jet.wx);
-            tile->d[1][k] = static_cast<float>(jet.wy);
-            tile->d[2][k] = static_cast<float>(jet.wxx);
-            tile->d[3][k] = static_cast<float>(jet.wxy);
-            tile->d[4][k] = static_cast<float>(jet.wyy);
+            // Same operations as RowHeights, so the same point and height.
+            const SurfaceJet jet =
+                sweep.Jet(sweep.Locate(x0 + (i_lo + q) * dx, y));
+            d0[k] = static_cast<float>(jet.wx);
+            d1[k] = static_cast<float>(jet.wy);
+            d2[k] = static_cast<float>(jet.wxx);
+            d3[k] = static_cast<float>(jet.wxy);
+            d4[k] = static_cast<float>(jet.wyy);
           }
         }
       }
@@ -143,7 +173,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     for (int32_t j = j_base; j <= j_max; ++j) {
       const double* row = w + (j - j_base) * kTileSize;
       for (int32_t i = 0; i <= i_max - i_base; ++i) {
-        zmax = std::fmax(zmax, row[i]);
+        zmax = std::max(zmax, row[i]);
       }
     }
     tile->zmax = zmax;
@@ -244,7 +274,7 @@ NodeValue Workpiece::Node(int32_t i, int32_t j) const {
   const int32_t k = (j & (kTileSize - 1)) * kTileSize + (i & (kTileSize - 1));
   v.jet.w = tile->w[k];
   v.owner = tile->owner[k];
-  if (!tile->d[0].empty()) {
+  if (v.owner >= 0 && tile->d[0] != nullptr) {
     v.jet.wx = tile->d[0][k];
     v.jet.wy = tile->d[1][k];
     v.jet.wxx = tile->d[2][k];
@@ -281,7 +311,7 @@ double Workpiece::ExactHeightOver(std::span<const uint32_t> ids, double x,
   double w = spec().z_top;
   for (uint32_t id : ids) {
     const Move& m = moves_[id];
-    w = std::fmin(w, BallSweep(m.from, m.to, m.radius).Height(x, y));
+    w = std::min(w, BallSweep(m.from, m.to, m.radius).Height(x, y));
   }
   return w;
 }
@@ -292,7 +322,7 @@ double Workpiece::ExactHeight(double x, double y) const {
     // Outside the stock the index has no bins; look at every move.
     double w = spec().z_top;
     for (const Move& m : moves_) {
-      w = std::fmin(w, BallSweep(m.from, m.to, m.radius).Height(x, y));
+      w = std::min(w, BallSweep(m.from, m.to, m.radius).Height(x, y));
     }
     return w;
   }

@@ -1,0 +1,119 @@
+// Benchmarks of the core engine: node evaluations, short finishing moves and
+// the paper's two instances at 1000x1000. Run: build/bin/swarf_bench
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+#include <memory>
+#include <vector>
+
+#include "core/ball_sweep.h"
+#include "core/instances.h"
+#include "core/workpiece.h"
+
+namespace swarf {
+namespace {
+
+// Sweep evaluation alone: a sloped move evaluated over the nodes of its
+// footprint, height only (Locate) or with derivatives (Jet).
+template <bool kJet>
+void BM_NodeEvaluation(benchmark::State& state) {
+  const BallSweep sweep({0, 0, -1}, {10, 3, -2}, 3);
+  const BallSweep::Capsule cap = sweep.Footprint(0);
+  std::vector<std::pair<double, double>> pts;
+  for (double y = -4; y <= 7; y += 0.05) {
+    const Interval span = cap.RowSpan(y);
+    for (double x = std::floor(span.lo); x <= span.hi; x += 0.05) {
+      pts.emplace_back(x, y);
+    }
+  }
+  for (auto _ : state) {
+    double acc = 0;
+    for (const auto& [x, y] : pts) {
+      const SweepPoint p = sweep.Locate(x, y);
+      if constexpr (kJet) {
+        if (p.piece != SweepPoint::kNone) acc += sweep.Jet(p).wxx;
+      } else {
+        acc += p.depth;
+      }
+    }
+    benchmark::DoNotOptimize(acc);
+  }
+  state.SetItemsProcessed(state.iterations() * pts.size());
+}
+BENCHMARK(BM_NodeEvaluation<false>)->Name("NodeEvaluation/height");
+BENCHMARK(BM_NodeEvaluation<true>)->Name("NodeEvaluation/height+derivatives");
+
+// A paper instance at mesh x mesh: create the workpiece and apply its five
+// moves (the paper's "time cost for computation").
+void BM_Instance(benchmark::State& state, const char* name, SchemeKind scheme) {
+  const Instance inst = *PaperInstance(name, static_cast<int>(state.range(0)));
+  for (auto _ : state) {
+    auto wp = *Workpiece::Create(inst.stock, scheme);
+    auto r = wp->Apply(inst.moves);
+    benchmark::DoNotOptimize(r->nodes_lowered);
+    state.PauseTiming();
+    wp.reset();  // freeing is not part of the paper's figure
+    state.ResumeTiming();
+  }
+}
+BENCHMARK_CAPTURE(BM_Instance, five_balls_zmap, "five-balls", SchemeKind::kZmap)
+    ->Arg(1000)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Instance, five_balls_taylor, "five-balls",
+                  SchemeKind::kTaylor)
+    ->Arg(1000)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Instance, five_cylinders_zmap, "five-cylinders",
+                  SchemeKind::kZmap)
+    ->Arg(1000)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Instance, five_cylinders_taylor, "five-cylinders",
+                  SchemeKind::kTaylor)
+    ->Arg(1000)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Short finishing moves: a 1 mm ball (r = 0.5) zig-zag raster of 0.2 mm
+// moves, stepover 0.1 mm, over a 100 mm stock at 1000x1000, applied in
+// batches of state.range(0) moves. Reports moves per second.
+std::vector<Move> FinishingRaster(double step, double stepover, int rows) {
+  std::vector<Move> moves;
+  for (int k = 0; k < rows; ++k) {
+    const double y = 5 + k * stepover;
+    const bool fwd = k % 2 == 0;
+    for (double s = 5; s < 95; s += step) {
+      const double xa = fwd ? s : 100 - s, xb = fwd ? s + step : 100 - s - step;
+      // A gentle wave so that moves are sloped, as in relief finishing.
+      auto z = [&](double x) { return -1 + 0.3 * std::sin(x * 0.2 + y * 0.1); };
+      moves.push_back({{xa, y, z(xa)}, {xb, y, z(xb)}, 0.5});
+    }
+  }
+  return moves;
+}
+
+void BM_FinishingMoves(benchmark::State& state, SchemeKind scheme) {
+  const std::vector<Move> moves = FinishingRaster(0.2, 0.1, 100);
+  const size_t batch = static_cast<size_t>(state.range(0));
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto wp = *Workpiece::Create({0, 0, 100, 100, 0, 1000, 1000}, scheme);
+    state.ResumeTiming();
+    for (size_t k = 0; k < moves.size(); k += batch) {
+      const size_t n = std::min(batch, moves.size() - k);
+      auto r = wp->Apply(std::span<const Move>(moves.data() + k, n));
+      benchmark::DoNotOptimize(r->nodes_lowered);
+    }
+    state.PauseTiming();
+    wp.reset();
+    state.ResumeTiming();
+  }
+  state.SetItemsProcessed(state.iterations() * moves.size());
+  state.counters["ns_per_move"] = benchmark::Counter(
+      static_cast<double>(moves.size()),
+      benchmark::Counter::kIsIterationInvariantRate |
+          benchmark::Counter::kInvert);
+}
+BENCHMARK_CAPTURE(BM_FinishingMoves, zmap, SchemeKind::kZmap)
+    ->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_FinishingMoves, taylor, SchemeKind::kTaylor)
+    ->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+}  // namespace
+}  // namespace swarf
+
+BENCHMARK_MAIN();
