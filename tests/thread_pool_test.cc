@@ -1,0 +1,107 @@
+// ThreadPool::ParallelFor runs every index exactly once, also when several
+// threads call it at the same time.
+#include "core/thread_pool.h"
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <thread>
+#include <vector>
+
+#include "gtest/gtest.h"
+
+namespace swarf {
+namespace {
+
+// Runs a loop of n on the pool and checks each index ran exactly once.
+void ExpectEachIndexOnce(ThreadPool& pool, int64_t n) {
+  std::unique_ptr<std::atomic<int>[]> hits(new std::atomic<int>[n + 1]);
+  for (int64_t i = 0; i <= n; ++i) hits[i] = 0;
+  pool.ParallelFor(n, [&](int64_t i) {
+    ASSERT_GE(i, 0);
+    ASSERT_LT(i, n);
+    hits[i].fetch_add(1, std::memory_order_relaxed);
+  });
+  // ParallelFor has returned: every call has finished.
+  int64_t wrong = 0;
+  for (int64_t i = 0; i < n; ++i) wrong += hits[i].load() != 1;
+  EXPECT_EQ(wrong, 0) << "n = " << n;
+  EXPECT_EQ(hits[n].load(), 0);
+}
+
+TEST(ThreadPoolTest, EveryIndexExactlyOnce) {
+  for (int threads : {1, 2, 4, 7}) {
+    ThreadPool pool(threads);
+    EXPECT_EQ(pool.size(), threads);
+    for (int64_t n : {0, 1, 2, 3, 17, 1000, 100003}) {
+      ExpectEachIndexOnce(pool, n);
+    }
+  }
+}
+
+TEST(ThreadPoolTest, NegativeCountRunsNothing) {
+  ThreadPool pool(3);
+  std::atomic<int> calls{0};
+  pool.ParallelFor(-5, [&](int64_t) { ++calls; });
+  EXPECT_EQ(calls.load(), 0);
+}
+
+TEST(ThreadPoolTest, DefaultPoolWorks) {
+  EXPECT_GE(ThreadPool::Default().size(), 1);
+  EXPECT_EQ(&ThreadPool::Default(), &ThreadPool::Default());
+  ExpectEachIndexOnce(ThreadPool::Default(), 5000);
+}
+
+// Plain (non-atomic) writes made inside the loop are visible after it.
+TEST(ThreadPoolTest, ResultsVisibleAfterReturn) {
+  ThreadPool pool(4);
+  std::vector<int64_t> out(50000, -1);
+  pool.ParallelFor(static_cast<int64_t>(out.size()),
+                   [&](int64_t i) { out[i] = i * i; });
+  for (int64_t i = 0; i < static_cast<int64_t>(out.size()); ++i) {
+    ASSERT_EQ(out[i], i * i);
+  }
+}
+
+TEST(ThreadPoolTest, ConcurrentCallersEachGetTheirLoop) {
+  for (int threads : {1, 3}) {
+    ThreadPool pool(threads);
+    constexpr int kCallers = 6;
+    constexpr int kRounds = 40;
+    std::atomic<int64_t> failures{0};
+    std::vector<std::thread> callers;
+    for (int c = 0; c < kCallers; ++c) {
+      callers.emplace_back([&, c] {
+        for (int round = 0; round < kRounds; ++round) {
+          // Different sizes so that loops of all lengths overlap.
+          const int64_t n = 1 + (c * 977 + round * 131) % 3000;
+          std::vector<std::atomic<int>> hits(n);
+          for (auto& h : hits) h = 0;
+          pool.ParallelFor(n, [&](int64_t i) {
+            hits[i].fetch_add(1, std::memory_order_relaxed);
+          });
+          for (auto& h : hits) failures += h.load() != 1;
+        }
+      });
+    }
+    for (auto& t : callers) t.join();
+    EXPECT_EQ(failures.load(), 0) << threads << " threads";
+  }
+}
+
+// A loop body may itself call ParallelFor on the same pool (the caller
+// works on its own loop, so this cannot deadlock).
+TEST(ThreadPoolTest, NestedLoops) {
+  ThreadPool pool(3);
+  std::vector<std::atomic<int>> hits(40 * 50);
+  for (auto& h : hits) h = 0;
+  pool.ParallelFor(40, [&](int64_t i) {
+    pool.ParallelFor(50, [&](int64_t j) { hits[i * 50 + j].fetch_add(1); });
+  });
+  int wrong = 0;
+  for (auto& h : hits) wrong += h.load() != 1;
+  EXPECT_EQ(wrong, 0);
+}
+
+}  // namespace
+}  // namespace swarf

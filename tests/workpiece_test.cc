@@ -1,0 +1,627 @@
+// Workpiece: nodes against a brute force over all moves, independence of
+// order and batching, lazy tiles and versions, and rejection of bad batches.
+#include "core/workpiece.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <memory>
+#include <numeric>
+#include <random>
+#include <set>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+
+namespace swarf {
+namespace {
+
+using ::testing::HasSubstr;
+
+constexpr SchemeKind kSchemes[] = {SchemeKind::kZmap, SchemeKind::kTaylor};
+
+std::string SchemeName(SchemeKind s) {
+  return std::string(GetScheme(s).name());
+}
+
+// 98 x 72 nodes: a 2 x 2 tile grid with partial tiles on both axes.
+StockSpec MixedStock() { return StockSpec{0, 0, 40, 30, 10, 97, 71}; }
+
+std::unique_ptr<Workpiece> MakeWorkpiece(const StockSpec& spec,
+                                         SchemeKind scheme,
+                                         ThreadPool* pool = nullptr) {
+  auto wp = Workpiece::Create(spec, scheme, pool);
+  EXPECT_TRUE(wp.ok()) << wp.status();
+  return *std::move(wp);
+}
+
+bool SameMove(const Move& a, const Move& b) {
+  return std::memcmp(&a, &b, sizeof(Move)) == 0;
+}
+
+// A few hundred moves of every kind over MixedStock(): plunges, retracts,
+// sloped, horizontal and zero-length moves, moves above the stock (one
+// exactly touching its top) or beside it, and exact duplicates (exact ties).
+std::vector<Move> MixedMoves(uint64_t seed, int count) {
+  const StockSpec s = MixedStock();
+  const double top = s.z_top;
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> ux(s.x0 - 3, s.x1 + 3),
+      uy(s.y0 - 3, s.y1 + 3), unit(0, 1), rad(0.4, 3);
+  std::vector<Move> moves;
+  for (int k = 0; k < count; ++k) {
+    const double r = rad(rng);
+    const double x = ux(rng), y = uy(rng);
+    Move m;
+    m.radius = r;
+    switch (k % 9) {
+      case 0:  // plunge
+        m = {{x, y, top + 5 * unit(rng)}, {x, y, top - 0.1 - 4 * unit(rng)}, r};
+        break;
+      case 1:  // retract
+        m = {{x, y, top - 4 * unit(rng)}, {x, y, top + 2 * unit(rng)}, r};
+        break;
+      case 2:  // sloped
+        m = {{x, y, top - 5 * unit(rng) + 1},
+             {ux(rng), uy(rng), top - 5 * unit(rng) + 1}, r};
+        break;
+      case 3: {  // horizontal
+        const double z = top - 3 * unit(rng);
+        m = {{x, y, z}, {x + 20 * (unit(rng) - 0.5), y + 20 * (unit(rng) - 0.5), z}, r};
+        break;
+      }
+      case 4: {  // zero length
+        const Vec3 p{x, y, top - 2 * unit(rng)};
+        m = {p, p, r};
+        break;
+      }
+      case 5:  // above the stock; every 4th one touches the top exactly
+        m = {{x, y, (k % 4 == 1) ? top : top + 3 * unit(rng)},
+             {ux(rng), uy(rng), top + 3 * unit(rng)}, r};
+        break;
+      case 6:  // beside the stock, deep
+        m = {{s.x1 + r + 0.5 + 5 * unit(rng), y, top - 3},
+             {s.x1 + r + 0.5 + 5 * unit(rng), uy(rng), top - 2}, r};
+        break;
+      default:  // exact duplicates of earlier moves
+        m = moves.empty() ? Move{{x, y, top - 1}, {x, y, top - 1}, r}
+                          : moves[static_cast<size_t>(unit(rng) * moves.size())];
+        break;
+    }
+    moves.push_back(m);
+  }
+  return moves;
+}
+
+std::vector<NodeValue> Snapshot(const Workpiece& wp) {
+  std::vector<NodeValue> out;
+  for (int32_t j = 0; j < wp.grid().nodes_y(); ++j) {
+    for (int32_t i = 0; i < wp.grid().nodes_x(); ++i) {
+      out.push_back(wp.Node(i, j));
+    }
+  }
+  return out;
+}
+
+bool SameJet(const SurfaceJet& a, const SurfaceJet& b) {
+  return std::memcmp(&a, &b, sizeof(SurfaceJet)) == 0;
+}
+
+int32_t TileOfNode(const Workpiece& wp, int32_t i, int32_t j) {
+  return (j / kTileSize) * wp.tiles_x() + i / kTileSize;
+}
+
+// Applies moves[order[0]], moves[order[1]], ... in batches of the given
+// sizes (the last batch takes the rest).
+std::unique_ptr<Workpiece> ApplyInBatches(const std::vector<Move>& moves,
+                                          const std::vector<int>& order,
+                                          const std::vector<int>& sizes,
+                                          SchemeKind scheme, ThreadPool* pool) {
+  auto wp = MakeWorkpiece(MixedStock(), scheme, pool);
+  size_t next = 0;
+  for (size_t b = 0; next < order.size(); ++b) {
+    const size_t n = b < sizes.size() ? std::min<size_t>(sizes[b], order.size() - next)
+                                      : order.size() - next;
+    std::vector<Move> batch;
+    for (size_t k = 0; k < n; ++k) batch.push_back(moves[order[next + k]]);
+    auto res = wp->Apply(batch);
+    EXPECT_TRUE(res.ok()) << res.status();
+    EXPECT_EQ(res->first_move_id, static_cast<int64_t>(next));
+    EXPECT_EQ(res->moves, static_cast<int64_t>(n));
+    next += n;
+  }
+  EXPECT_EQ(wp->move_count(), static_cast<int64_t>(moves.size()));
+  return wp;
+}
+
+// Every node is the lowest of the stock top and every sweep at that node;
+// the owner is the lowest id reaching it; taylor nodes hold the owner's
+// derivatives in float.
+TEST(WorkpieceTest, NodesAreTheLowestSweep) {
+  const std::vector<Move> moves = MixedMoves(1, 300);
+  std::vector<BallSweep> sweeps;
+  for (const Move& m : moves) sweeps.emplace_back(m.from, m.to, m.radius);
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(SchemeName(scheme));
+    auto wp = MakeWorkpiece(MixedStock(), scheme);
+    ASSERT_TRUE(wp->Apply(moves).ok());
+    const GridGeometry& g = wp->grid();
+    int cut = 0;
+    for (int32_t j = 0; j < g.nodes_y(); ++j) {
+      for (int32_t i = 0; i < g.nodes_x(); ++i) {
+        const double x = g.NodeX(i), y = g.NodeY(j);
+        double w = MixedStock().z_top;
+        int32_t owner = -1;
+        for (size_t m = 0; m < sweeps.size(); ++m) {
+          const double h = sweeps[m].Height(x, y);
+          if (h < w) {
+            w = h;
+            owner = static_cast<int32_t>(m);
+          }
+        }
+        const NodeValue v = wp->Node(i, j);
+        ASSERT_EQ(v.jet.w, w) << "node " << i << "," << j;
+        ASSERT_EQ(v.owner, owner) << "node " << i << "," << j;
+        SurfaceJet want;  // untouched or zmap: derivatives zero
+        want.w = w;
+        if (owner >= 0 && wp->scheme().stores_derivatives()) {
+          const SurfaceJet jet = sweeps[owner].Jet(sweeps[owner].Locate(x, y));
+          want.wx = static_cast<float>(jet.wx);
+          want.wy = static_cast<float>(jet.wy);
+          want.wxx = static_cast<float>(jet.wxx);
+          want.wxy = static_cast<float>(jet.wxy);
+          want.wyy = static_cast<float>(jet.wyy);
+        }
+        ASSERT_TRUE(SameJet(v.jet, want)) << "node " << i << "," << j;
+        cut += owner >= 0;
+      }
+    }
+    EXPECT_GT(cut, 1000);  // the mix really cuts
+  }
+}
+
+// The state is a function of the set of moves: one batch, reversed one by
+// one, shuffled in random batches and in-order random batches all give
+// bit-identical nodes. Owners are compared as moves (the id differs with the
+// order); an exact duplicate maps to its first copy.
+TEST(WorkpieceTest, OrderAndBatchIndependent) {
+  const std::vector<Move> moves = MixedMoves(2, 320);
+  const int n = static_cast<int>(moves.size());
+  std::vector<int> canon(n);
+  int duplicates = 0;
+  for (int k = 0; k < n; ++k) {
+    canon[k] = k;
+    for (int e = 0; e < k; ++e) {
+      if (SameMove(moves[e], moves[k])) {
+        canon[k] = e;
+        ++duplicates;
+        break;
+      }
+    }
+  }
+  ASSERT_GT(duplicates, 20);
+  std::vector<int> in_order(n);
+  std::iota(in_order.begin(), in_order.end(), 0);
+  std::vector<int> reversed(in_order.rbegin(), in_order.rend());
+  std::vector<int> shuffled = in_order;
+  std::mt19937_64 rng(3);
+  std::shuffle(shuffled.begin(), shuffled.end(), rng);
+  std::vector<int> random_sizes;
+  for (int total = 0; total < n;) {
+    random_sizes.push_back(1 + static_cast<int>(rng() % 40));
+    total += random_sizes.back();
+  }
+  ThreadPool pool(3);
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(SchemeName(scheme));
+    auto one_batch = ApplyInBatches(moves, in_order, {n}, scheme, &pool);
+    const std::vector<NodeValue> want = Snapshot(*one_batch);
+    struct Run {
+      std::string name;
+      const std::vector<int>* order;
+      std::vector<int> sizes;
+      ThreadPool* pool;
+    };
+    const std::vector<Run> runs = {
+        {"reversed one by one", &reversed, std::vector<int>(n, 1), &pool},
+        {"shuffled random batches", &shuffled, random_sizes, &pool},
+        {"in order random batches", &in_order, random_sizes, &pool},
+        {"shuffled one batch, default pool", &shuffled, {n}, nullptr},
+    };
+    for (const Run& run : runs) {
+      SCOPED_TRACE(run.name);
+      auto wp = ApplyInBatches(moves, *run.order, run.sizes, scheme, run.pool);
+      const std::vector<NodeValue> got = Snapshot(*wp);
+      ASSERT_EQ(got.size(), want.size());
+      int mismatches = 0;
+      for (size_t k = 0; k < got.size(); ++k) {
+        const bool same_owner =
+            (got[k].owner < 0 && want[k].owner < 0) ||
+            (got[k].owner >= 0 && want[k].owner >= 0 &&
+             canon[(*run.order)[got[k].owner]] == canon[want[k].owner]);
+        if (!SameJet(got[k].jet, want[k].jet) || !same_owner) {
+          if (++mismatches <= 5) {
+            ADD_FAILURE() << "node " << k % wp->grid().nodes_x() << ","
+                          << k / wp->grid().nodes_x() << " w " << got[k].jet.w
+                          << " vs " << want[k].jet.w << " owner "
+                          << got[k].owner << " vs " << want[k].owner;
+          }
+        }
+        // In the original order ids coincide: owners must be equal.
+        if (run.order == &in_order) {
+          EXPECT_EQ(got[k].owner, want[k].owner);
+        }
+      }
+      EXPECT_EQ(mismatches, 0);
+      for (int32_t t = 0; t < wp->tile_count(); ++t) {
+        EXPECT_EQ(wp->TileAllocated(t), one_batch->TileAllocated(t));
+      }
+    }
+  }
+}
+
+// Exact ties: the same move applied twice keeps the lower id as owner,
+// whether the copies share a batch or not, and a batch that changes nothing
+// leaves versions alone.
+TEST(WorkpieceTest, ExactTieKeepsLowerId) {
+  const Move groove{{2, 3, 8.5}, {30, 20, 9}, 2};
+  const Move other{{35, 5, 9.5}, {35, 5, 9.5}, 1};
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(SchemeName(scheme));
+    auto wp = MakeWorkpiece(MixedStock(), scheme);
+    ASSERT_TRUE(wp->Apply(std::vector<Move>{groove, groove}).ok());
+    const std::vector<NodeValue> after_first = Snapshot(*wp);
+    const uint64_t version = wp->version();
+    EXPECT_EQ(version, 1u);
+    auto res = wp->Apply(std::vector<Move>{other, groove});
+    ASSERT_TRUE(res.ok());
+    int groove_nodes = 0;
+    const std::vector<NodeValue> after = Snapshot(*wp);
+    for (size_t k = 0; k < after.size(); ++k) {
+      if (after_first[k].owner == 0) {
+        ++groove_nodes;
+        EXPECT_EQ(after[k].owner, 0) << "node " << k;  // not 1, not 3
+        EXPECT_TRUE(SameJet(after[k].jet, after_first[k].jet));
+      }
+      EXPECT_NE(after[k].owner, 1);
+      EXPECT_NE(after[k].owner, 3);
+    }
+    EXPECT_GT(groove_nodes, 100);
+    // A batch of nothing but a repeat lowers nothing.
+    const uint64_t v2 = wp->version();
+    auto again = wp->Apply(std::vector<Move>{groove});
+    ASSERT_TRUE(again.ok());
+    EXPECT_EQ(again->nodes_lowered, 0);
+    EXPECT_TRUE(again->changed_tiles.empty());
+    EXPECT_EQ(again->version, v2);
+    EXPECT_EQ(wp->version(), v2);
+    EXPECT_EQ(wp->move_count(), 5);
+  }
+}
+
+// 256 x 256 nodes: 4 x 4 full tiles, unit spacing, node (i, j) at (i, j).
+StockSpec UnitStock() { return StockSpec{0, 0, 255, 255, 0, 255, 255}; }
+
+TEST(WorkpieceTilesTest, SmallCornerCutAllocatesOnlyItsTile) {
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(SchemeName(scheme));
+    auto wp = MakeWorkpiece(UnitStock(), scheme);
+    ASSERT_EQ(wp->tile_count(), 16);
+    EXPECT_EQ(wp->allocated_tiles(), 0);
+    EXPECT_EQ(wp->allocated_node_bytes(), 0);
+    auto res = wp->Apply(std::vector<Move>{{{3, 4, 1}, {3, 4, -1}, 2}});
+    ASSERT_TRUE(res.ok());
+    EXPECT_EQ(res->changed_tiles, std::vector<int32_t>{0});
+    EXPECT_EQ(wp->allocated_tiles(), 1);
+    EXPECT_TRUE(wp->TileAllocated(0));
+    EXPECT_EQ(wp->allocated_node_bytes(),
+              int64_t{kTileNodes} * wp->scheme().bytes_per_node());
+    for (int32_t t = 1; t < 16; ++t) {
+      EXPECT_FALSE(wp->TileAllocated(t)) << t;
+      EXPECT_EQ(wp->TileVersion(t), 0u) << t;
+    }
+    EXPECT_EQ(wp->TileVersion(0), 1u);
+    EXPECT_EQ(wp->Node(3, 4).jet.w, -1);
+    EXPECT_EQ(wp->Node(3, 4).owner, 0);
+  }
+}
+
+// A ball near a tile corner whose footprint's bounding box reaches nodes of
+// the next tile but whose disc does not: only the tile really cut is kept.
+TEST(WorkpieceTilesTest, BoundingBoxOverlapDoesNotAllocate) {
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(SchemeName(scheme));
+    auto wp = MakeWorkpiece(UnitStock(), scheme);
+    // r = 1, 0.29 deep: cuts within 0.704 of (63.45, 62.5): nodes (63, 62)
+    // and (63, 63) at 0.673; not (64, 62) or (64, 63) at 0.743, though the
+    // box reaches x = 64.15 (tile 1).
+    const Move m{{63.45, 62.5, -0.29}, {63.45, 62.5, -0.29}, 1};
+    auto res = wp->Apply(std::vector<Move>{m});
+    ASSERT_TRUE(res.ok());
+    EXPECT_EQ(res->changed_tiles, std::vector<int32_t>{0});
+    EXPECT_EQ(res->nodes_lowered, 2);
+    EXPECT_EQ(wp->allocated_tiles(), 1);
+    EXPECT_FALSE(wp->TileAllocated(1));
+    EXPECT_EQ(wp->Node(63, 62).owner, 0);
+    EXPECT_EQ(wp->Node(63, 63).owner, 0);
+    EXPECT_EQ(wp->Node(64, 62).owner, -1);
+    EXPECT_EQ(wp->Node(64, 63).owner, -1);
+  }
+}
+
+TEST(WorkpieceTilesTest, MovesAboveOrBesideChangeNothing) {
+  const std::vector<Move> harmless = {
+      {{10, 10, 0}, {200, 100, 0}, 5},    // tip exactly on the top
+      {{10, 10, 3}, {10, 10, 0.5}, 5},    // plunge stopping above the top
+      {{50, 50, 1}, {50, 50, 1}, 40},     // big ball above
+      {{-10, 10, -5}, {-10, 240, -5}, 9},  // beside, deep: misses by 1
+      {{300, 300, -2}, {400, -50, -9}, 3},  // far away
+      {{128, 270, -1}, {128, 270, -1}, 14.5},  // reaches y = 264.7 only
+  };
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(SchemeName(scheme));
+    auto wp = MakeWorkpiece(UnitStock(), scheme);
+    for (const Move& m : harmless) {
+      auto res = wp->Apply(std::vector<Move>{m});
+      ASSERT_TRUE(res.ok());
+      EXPECT_EQ(res->nodes_lowered, 0);
+      EXPECT_TRUE(res->changed_tiles.empty());
+      EXPECT_EQ(res->version, 0u);
+    }
+    auto all = wp->Apply(harmless);
+    ASSERT_TRUE(all.ok());
+    EXPECT_EQ(all->nodes_lowered, 0);
+    EXPECT_EQ(wp->version(), 0u);
+    EXPECT_EQ(wp->allocated_tiles(), 0);
+    EXPECT_EQ(wp->move_count(), 2 * static_cast<int64_t>(harmless.size()));
+    for (int32_t j = 0; j <= 255; j += 5) {
+      for (int32_t i = 0; i <= 255; i += 5) {
+        ASSERT_EQ(wp->Node(i, j).jet.w, 0);
+        ASSERT_EQ(wp->Node(i, j).owner, -1);
+      }
+    }
+  }
+}
+
+// After every batch of a random sequence: changed_tiles lists exactly the
+// tiles whose nodes changed, only those get the new version, the version
+// moves iff something changed, and a tile is allocated iff it holds a cut
+// node.
+TEST(WorkpieceTilesTest, VersionsAndChangedTilesFollowTheNodes) {
+  const StockSpec spec{0, 0, 40, 30, 10, 150, 140};  // 3 x 3 tiles
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> unit(0, 1);
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(SchemeName(scheme));
+    auto wp = MakeWorkpiece(spec, scheme);
+    const std::vector<Move> pool_of_moves = MixedMoves(4, 200);
+    std::vector<NodeValue> before = Snapshot(*wp);
+    std::vector<uint64_t> versions(wp->tile_count(), 0);
+    size_t next = 0;
+    int changing_batches = 0, idle_batches = 0;
+    while (next < pool_of_moves.size()) {
+      const size_t n = std::min<size_t>(1 + rng() % 6, pool_of_moves.size() - next);
+      std::vector<Move> batch(pool_of_moves.begin() + next,
+                              pool_of_moves.begin() + next + n);
+      next += n;
+      const uint64_t v0 = wp->version();
+      auto res = wp->Apply(batch);
+      ASSERT_TRUE(res.ok());
+      const std::vector<NodeValue> after = Snapshot(*wp);
+      std::set<int32_t> changed;
+      int64_t changed_nodes = 0;
+      std::vector<bool> holds_cut(wp->tile_count(), false);
+      for (int32_t j = 0; j < wp->grid().nodes_y(); ++j) {
+        for (int32_t i = 0; i < wp->grid().nodes_x(); ++i) {
+          const size_t k = static_cast<size_t>(j) * wp->grid().nodes_x() + i;
+          const int32_t t = TileOfNode(*wp, i, j);
+          if (!SameJet(before[k].jet, after[k].jet) ||
+              before[k].owner != after[k].owner) {
+            changed.insert(t);
+            ++changed_nodes;
+            // Heights only go down.
+            EXPECT_LT(after[k].jet.w, before[k].jet.w);
+          }
+          if (after[k].owner >= 0) holds_cut[t] = true;
+        }
+      }
+      EXPECT_EQ(res->changed_tiles,
+                std::vector<int32_t>(changed.begin(), changed.end()));
+      EXPECT_TRUE(std::is_sorted(res->changed_tiles.begin(),
+                                 res->changed_tiles.end()));
+      EXPECT_GE(res->nodes_lowered, changed_nodes);
+      EXPECT_EQ(res->nodes_lowered == 0, changed_nodes == 0);
+      EXPECT_EQ(wp->version(), v0 + (changed.empty() ? 0 : 1));
+      EXPECT_EQ(res->version, wp->version());
+      for (int32_t t = 0; t < wp->tile_count(); ++t) {
+        if (changed.count(t)) versions[t] = wp->version();
+        EXPECT_EQ(wp->TileVersion(t), versions[t]) << "tile " << t;
+        EXPECT_EQ(wp->TileAllocated(t), holds_cut[t]) << "tile " << t;
+      }
+      (changed.empty() ? idle_batches : changing_batches)++;
+      before = after;
+    }
+    EXPECT_GT(changing_batches, 10);
+    EXPECT_GT(idle_batches, 1);
+  }
+}
+
+// A bad move anywhere in a batch rejects the whole batch with
+// InvalidArgument naming the move's index and field, and nothing changes.
+TEST(WorkpieceValidationTest, BadBatchIsRejectedWhole) {
+  const double nan = std::nan(""), inf = kInf;
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(SchemeName(scheme));
+    auto wp = MakeWorkpiece(MixedStock(), scheme);
+    ASSERT_TRUE(wp->Apply(MixedMoves(5, 40)).ok());
+    const std::vector<NodeValue> before = Snapshot(*wp);
+    const uint64_t version = wp->version();
+    const int64_t count = wp->move_count();
+    std::vector<uint64_t> tile_versions;
+    for (int32_t t = 0; t < wp->tile_count(); ++t) {
+      tile_versions.push_back(wp->TileVersion(t));
+    }
+    const std::vector<Move> good = MixedMoves(6, 6);  // all valid, cutting
+    const char* names[] = {"from.x", "from.y", "from.z",
+                           "to.x",   "to.y",   "to.z"};
+    auto expect_rejected = [&](std::vector<Move> batch, int index,
+                               const std::string& field) {
+      SCOPED_TRACE("moves[" + std::to_string(index) + "]." + field);
+      const absl::Status st = Workpiece::ValidateMoves(batch);
+      EXPECT_EQ(st.code(), absl::StatusCode::kInvalidArgument);
+      auto res = wp->Apply(batch);
+      ASSERT_FALSE(res.ok());
+      EXPECT_EQ(res.status().code(), absl::StatusCode::kInvalidArgument);
+      EXPECT_THAT(res.status().message(),
+                  HasSubstr("moves[" + std::to_string(index) + "]"));
+      EXPECT_THAT(res.status().message(), HasSubstr(field));
+      EXPECT_EQ(wp->move_count(), count);
+      EXPECT_EQ(wp->version(), version);
+      const std::vector<NodeValue> after = Snapshot(*wp);
+      for (size_t k = 0; k < after.size(); ++k) {
+        ASSERT_TRUE(SameJet(after[k].jet, before[k].jet) &&
+                    after[k].owner == before[k].owner)
+            << "node " << k;
+      }
+      for (int32_t t = 0; t < wp->tile_count(); ++t) {
+        EXPECT_EQ(wp->TileVersion(t), tile_versions[t]);
+      }
+    };
+    for (int f = 0; f < 6; ++f) {
+      for (double bad : {nan, inf, -inf}) {
+        for (int index : {0, 3, 5}) {
+          std::vector<Move> batch = good;
+          Vec3& v = f < 3 ? batch[index].from : batch[index].to;
+          (f % 3 == 0 ? v.x : f % 3 == 1 ? v.y : v.z) = bad;
+          expect_rejected(batch, index, names[f]);
+        }
+      }
+    }
+    for (double bad : {0.0, -0.0, -1.0, -1e-300, nan, inf, -inf}) {
+      std::vector<Move> batch = good;
+      batch[4].radius = bad;
+      expect_rejected(batch, 4, "radius");
+    }
+    // The first bad move is the one named.
+    std::vector<Move> two_bad = good;
+    two_bad[2].to.y = nan;
+    two_bad[4].radius = 0;
+    expect_rejected(two_bad, 2, "to.y");
+    // And a clean batch still applies afterwards.
+    auto ok = wp->Apply(good);
+    ASSERT_TRUE(ok.ok()) << ok.status();
+    EXPECT_EQ(ok->first_move_id, count);
+    EXPECT_TRUE(Workpiece::ValidateMoves(good).ok());
+    EXPECT_TRUE(Workpiece::ValidateMoves({}).ok());
+  }
+}
+
+// Radii at the ends of the double range: r^2 and 1 / (1e-4 r) overflow or
+// underflow. Either the batch is refused (InvalidArgument naming the radius)
+// or every stored parameter stays finite; a NaN or infinite node is never
+// acceptable (derivatives are stored as float, heights feed every scheme).
+StockSpec UnitStockForRadii() { return StockSpec{0, 0, 8, 8, 0, 8, 8}; }
+
+void ExpectRejectedOrFinite(double r, SchemeKind scheme) {
+  std::ostringstream what;
+  what << "r " << r << " " << SchemeName(scheme);
+  SCOPED_TRACE(what.str());
+  auto wp = MakeWorkpiece(UnitStockForRadii(), scheme);
+  // A plunge and a sloped move with a ball centre right over a node.
+  const std::vector<Move> batch = {
+      {{4, 4, 3}, {4, 4, -1}, r},
+      {{2, 6, -1}, {6, 6, -2}, r},
+  };
+  auto res = wp->Apply(batch);
+  if (!res.ok()) {
+    EXPECT_EQ(res.status().code(), absl::StatusCode::kInvalidArgument);
+    EXPECT_THAT(res.status().message(), HasSubstr("radius"));
+    return;
+  }
+  for (int32_t j = 0; j < wp->grid().nodes_y(); ++j) {
+    for (int32_t i = 0; i < wp->grid().nodes_x(); ++i) {
+      const SurfaceJet v = wp->Node(i, j).jet;
+      const double d[6] = {v.w, v.wx, v.wy, v.wxx, v.wxy, v.wyy};
+      for (double x : d) {
+        ASSERT_TRUE(std::isfinite(x))
+            << "node " << i << "," << j << ": w " << v.w << " wx " << v.wx
+            << " wy " << v.wy << " wxx " << v.wxx << " wxy " << v.wxy
+            << " wyy " << v.wyy;
+      }
+    }
+  }
+}
+
+TEST(WorkpieceValidationTest, AbsurdRadiiAreRejectedOrStayFinite) {
+  for (double r : {5e-324, 1e-310, 1e160}) {
+    for (SchemeKind scheme : kSchemes) ExpectRejectedOrFinite(r, scheme);
+  }
+}
+
+TEST(WorkpieceValidationTest, CreateRejectsBadStock) {
+  auto wp = Workpiece::Create(StockSpec{0, 0, 0, 1, 0, 4, 4}, SchemeKind::kZmap);
+  EXPECT_EQ(wp.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(wp.status().message(), HasSubstr("x1"));
+}
+
+TEST(WorkpieceTest, UntouchedNodesAreTheStockTop) {
+  for (SchemeKind scheme : kSchemes) {
+    auto wp = MakeWorkpiece(StockSpec{-5, 2, 7, 9, 3.25, 13, 11}, scheme);
+    EXPECT_EQ(wp->move_count(), 0);
+    EXPECT_EQ(wp->version(), 0u);
+    for (int32_t j = 0; j <= 11; ++j) {
+      for (int32_t i = 0; i <= 13; ++i) {
+        const NodeValue v = wp->Node(i, j);
+        SurfaceJet flat;
+        flat.w = 3.25;
+        EXPECT_TRUE(SameJet(v.jet, flat));
+        EXPECT_EQ(v.owner, -1);
+      }
+    }
+    const ElementCorners e = wp->Corners(2, 3);
+    EXPECT_EQ(e.x0, wp->grid().NodeX(2));
+    EXPECT_EQ(e.x1, wp->grid().NodeX(3));
+    EXPECT_EQ(e.y0, wp->grid().NodeY(3));
+    EXPECT_EQ(e.y1, wp->grid().NodeY(4));
+    EXPECT_EQ(e.z_top, 3.25);
+  }
+}
+
+// ExactHeight is the minimum of the top and of every sweep, wherever the
+// point lies relative to the nodes.
+TEST(WorkpieceExactHeightTest, MatchesAllSweepsAtRandomPoints) {
+  const std::vector<Move> moves = MixedMoves(7, 300);
+  auto wp = MakeWorkpiece(MixedStock(), SchemeKind::kTaylor);
+  ASSERT_TRUE(wp->Apply(moves).ok());
+  std::mt19937_64 rng(8);
+  std::uniform_real_distribution<double> ux(-4, 44), uy(-4, 34);
+  for (int k = 0; k < 5000; ++k) {
+    const double x = ux(rng), y = uy(rng);
+    double w = MixedStock().z_top;
+    for (const Move& m : moves) {
+      w = std::min(w, BallSweep(m.from, m.to, m.radius).Height(x, y));
+    }
+    ASSERT_EQ(wp->ExactHeight(x, y), w) << "at " << x << "," << y;
+  }
+}
+
+// A cut that reaches no node still belongs to the machined surface.
+TEST(WorkpieceExactHeightTest, SeesCutsBetweenNodes) {
+  // Nodes every 5 mm; a small ball dips 1 mm between them.
+  const StockSpec spec{0, 0, 10, 10, 0, 2, 2};
+  const Move m{{2.5, 2.5, -1}, {2.5, 2.5, -1}, 0.5};
+  auto wp = MakeWorkpiece(spec, SchemeKind::kZmap);
+  ASSERT_TRUE(wp->Apply(std::vector<Move>{m}).ok());
+  EXPECT_EQ(wp->allocated_tiles(), 0);  // no node is cut
+  EXPECT_EQ(wp->ExactHeight(2.5, 2.5), -1);
+  EXPECT_EQ(wp->ExactHeight(2.5, 2.8),
+            BallSweep(m.from, m.to, m.radius).Height(2.5, 2.8));
+  EXPECT_EQ(wp->ExactHeight(7.5, 7.5), 0);
+}
+
+}  // namespace
+}  // namespace swarf
