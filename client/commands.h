@@ -9,6 +9,7 @@
 namespace swarf::cli {
 
 int TableCommand(const std::vector<std::string>& args);
+int MarksCommand(const std::vector<std::string>& args);
 
 }  // namespace swarf::cli
 

@@ -11,6 +11,7 @@ constexpr char kUsage[] =
     "usage: swarf <command> [options]\n"
     "commands:\n"
     "  table   the paper's Tables 1 and 2: error and time of both schemes\n"
+    "  marks   the cutting marks (creases) of a paper instance\n"
     "Run 'swarf <command> --help' for a command's options.\n";
 
 }  // namespace
@@ -23,6 +24,7 @@ int main(int argc, char** argv) {
   const std::string cmd = argv[1];
   const std::vector<std::string> args(argv + 2, argv + argc);
   if (cmd == "table") return swarf::cli::TableCommand(args);
+  if (cmd == "marks") return swarf::cli::MarksCommand(args);
   if (cmd == "--help" || cmd == "-h" || cmd == "help") {
     std::cout << kUsage;
     return 0;

@@ -1,0 +1,1182 @@
+#include "core/cutting_marks.h"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+
+namespace swarf {
+namespace {
+
+// ---------------------------------------------------------------------------
+// Quadratics along a segment.
+
+// q(t) = a t^2 + b t + c.
+struct Quad {
+  double a = 0, b = 0, c = 0;
+  double operator()(double t) const { return (a * t + b) * t + c; }
+  Quad operator-(const Quad& o) const { return {a - o.a, b - o.b, c - o.c}; }
+};
+
+// Eq. (1) for the jet `n` of the node at (xn, yn), restricted to the segment
+// (px, py) + t (ex, ey): exactly a quadratic in t.
+Quad Restrict(const SurfaceJet& n, double xn, double yn, double px, double py,
+              double ex, double ey) {
+  double gx, gy;
+  PatchGradient(n, xn, yn, px, py, &gx, &gy);
+  return {0.5 * (n.wxx * ex * ex + 2 * n.wxy * ex * ey + n.wyy * ey * ey),
+          gx * ex + gy * ey, EvaluatePatch(n, xn, yn, px, py)};
+}
+
+Quad Constant(double c) { return {0, 0, c}; }
+
+// Real roots of q, in the numerically stable form (no cancellation between
+// -b and the square root). Returns the count (0..2).
+int QuadRoots(const Quad& q, double r[2]) {
+  if (q.a == 0) {
+    if (q.b == 0) return 0;
+    r[0] = -q.c / q.b;
+    return 1;
+  }
+  const double disc = q.b * q.b - 4 * q.a * q.c;
+  if (disc < 0) return 0;
+  const double s = q.b >= 0 ? -0.5 * (q.b + std::sqrt(disc))
+                            : -0.5 * (q.b - std::sqrt(disc));
+  if (s == 0) {  // b = 0 and c = 0: double root at 0
+    r[0] = 0;
+    return 1;
+  }
+  r[0] = s / q.a;
+  r[1] = q.c / s;
+  return 2;
+}
+
+// The root of q in [lo, hi] when q(lo) and q(hi) differ in sign (or one is
+// zero): the closed-form root, so the crossing's position error is the
+// patches' own, not a search step's. Bisection only if rounding put the
+// closed-form roots outside the bracket.
+double RootIn(const Quad& q, double lo, double hi) {
+  const double flo = q(lo), fhi = q(hi);
+  if (flo == 0) return lo;
+  if (fhi == 0) return hi;
+  double r[2];
+  const int n = QuadRoots(q, r);
+  const double slack = 1e-12 * (hi - lo);
+  double best = std::nan(""), best_gap = kInf;
+  for (int k = 0; k < n; ++k) {
+    if (!std::isfinite(r[k])) continue;
+    const double gap = std::fmax(lo - r[k], r[k] - hi);
+    if (gap <= slack && gap < best_gap) {
+      best = std::clamp(r[k], lo, hi);
+      best_gap = gap;
+    }
+  }
+  if (!std::isnan(best)) return best;
+  double a = lo, b = hi, fa = flo;
+  for (int it = 0; it < 200 && b - a > 0; ++it) {
+    const double m = 0.5 * (a + b);
+    if (m <= a || m >= b) break;
+    const double fm = q(m);
+    if ((fm < 0) == (fa < 0)) {
+      a = m;
+      fa = fm;
+    } else {
+      b = m;
+    }
+  }
+  return 0.5 * (a + b);
+}
+
+// Where a crease between the surface of the node at t = lo and the one at
+// t = hi crosses [lo, hi], with d = (surface at lo) - (surface at hi), which
+// the node owners say is <= 0 at lo and >= 0 at hi. When the patches agree
+// with the owners the crossing is the root. When they do not at one end, the
+// crease lies within the patches' truncation error of that node and the
+// crossing is placed on it (the paper assumes one mark per edge; a quadratic
+// with equal signs at both ends has no or two roots, and two would be noise).
+double CreaseRoot(const Quad& d, double lo, double hi) {
+  const double dlo = d(lo), dhi = d(hi);
+  if ((dlo <= 0 && dhi >= 0) || (dlo >= 0 && dhi <= 0)) {
+    return RootIn(d, lo, hi);
+  }
+  return dlo > 0 ? lo : hi;
+}
+
+double Lerp(double a, double b, double t) { return (1 - t) * a + t * b; }
+
+// ---------------------------------------------------------------------------
+// Vertices and segments.
+
+// Vertex keys: crossings on element edges are keyed by the edge, so that
+// both elements sharing an edge name its crossings alike; other vertices get
+// keys unique to their element or segment.
+constexpr uint64_t kInteriorKey = uint64_t{1} << 62;
+constexpr uint64_t kClipKey = uint64_t{1} << 61;
+
+struct End {
+  uint64_t key = 0;
+  double x = 0, y = 0, z = 0;
+  std::array<int32_t, 2> owners = {kStockTopOwner, kStockTopOwner};
+  double angle = 0;  // radians
+};
+
+struct Segment {
+  End e[2];
+};
+
+std::array<int32_t, 2> Sorted(int32_t a, int32_t b) {
+  return a < b ? std::array<int32_t, 2>{a, b} : std::array<int32_t, 2>{b, a};
+}
+
+struct NodeRef {
+  SurfaceJet jet;
+  int32_t owner = kStockTopOwner;
+  double x = 0, y = 0;
+};
+
+// A crossing along an edge or segment, in its own direction.
+struct Crossing {
+  double t = 0;
+  int32_t before = 0, after = 0;  // labels (owners or groups) either side
+  bool mark = false;              // eq. (5) holds
+  End end;
+};
+
+struct Settings {
+  double z_top = 0;
+  double t2 = 0;  // radians
+  double t1 = 0;
+  double threshold_h = -1, threshold_v = -1;  // eq. (3) per edge direction
+};
+
+// Eq. (5): the printed slope difference must exceed t2 (it bounds the
+// normal angle from above), and so must the angle between the normals.
+bool IsMark(double ax, double ay, double bx, double by, double t2,
+            double* angle) {
+  *angle = NormalAngle(ax, ay, bx, by);
+  return SlopeDifference(ax, ay, bx, by) > t2 && *angle > t2;
+}
+
+// The canonical crossings of the grid edge from node i (t = 0) to node j
+// (t = 1), from the two nodes' patches and the stock top only, so that both
+// elements sharing the edge find the same points. At most one crossing
+// between the two owners (the paper's assumption), or two when their patches
+// meet above the top: owner_i | top | owner_j. Returns the count.
+int EdgeCrossings(const NodeRef& ni, const NodeRef& nj, uint64_t edge_key,
+                  const Settings& s, Crossing out[2]) {
+  const int32_t a = ni.owner, b = nj.owner;
+  if (a == b) return 0;
+  const double ex = nj.x - ni.x, ey = nj.y - ni.y;
+  const Quad top = Constant(s.z_top);
+  const Quad qi = a == kStockTopOwner
+                      ? top
+                      : Restrict(ni.jet, ni.x, ni.y, ni.x, ni.y, ex, ey);
+  const Quad qj = b == kStockTopOwner
+                      ? top
+                      : Restrict(nj.jet, nj.x, nj.y, ni.x, ni.y, ex, ey);
+  auto grad = [&](int32_t owner, const NodeRef& n, double x, double y,
+                  double* gx, double* gy) {
+    if (owner == kStockTopOwner) {
+      *gx = *gy = 0;
+    } else {
+      PatchGradient(n.jet, n.x, n.y, x, y, gx, gy);
+    }
+  };
+  auto make = [&](double t, int32_t lo_owner, const NodeRef& lo_node,
+                  int32_t hi_owner, const NodeRef& hi_node, double z,
+                  int k) {
+    Crossing& c = out[k];
+    c.t = t;
+    c.before = lo_owner;
+    c.after = hi_owner;
+    c.end.key = edge_key * 2 + k;
+    c.end.x = Lerp(ni.x, nj.x, t);
+    c.end.y = Lerp(ni.y, nj.y, t);
+    c.end.z = z;
+    c.end.owners = Sorted(lo_owner, hi_owner);
+    double ax, ay, bx, by;
+    grad(lo_owner, lo_node, c.end.x, c.end.y, &ax, &ay);
+    grad(hi_owner, hi_node, c.end.x, c.end.y, &bx, &by);
+    c.mark = IsMark(ax, ay, bx, by, s.t2, &c.end.angle);
+  };
+  const double t = CreaseRoot(qi - qj, 0, 1);
+  // On a node (t clamped to 0 or 1) its own height, which is exact, so that
+  // all edges meeting there agree; elsewhere the patches agree to rounding.
+  const double z = a == kStockTopOwner   ? s.z_top
+                   : b == kStockTopOwner ? s.z_top
+                   : t == 0              ? ni.jet.w
+                   : t == 1              ? nj.jet.w
+                                         : 0.5 * (qi(t) + qj(t));
+  if (z <= s.z_top || a == kStockTopOwner || b == kStockTopOwner) {
+    make(t, a, ni, b, nj, std::fmin(z, s.z_top), 0);
+    return 1;
+  }
+  // The owners' patches meet above the top: each meets the top first.
+  const double t_a = CreaseRoot(qi - top, 0, t);
+  const double t_b = CreaseRoot(top - qj, t, 1);
+  make(t_a, a, ni, kStockTopOwner, nj, s.z_top, 0);
+  make(t_b, kStockTopOwner, ni, b, nj, s.z_top, 1);
+  return 2;
+}
+
+// ---------------------------------------------------------------------------
+// One element: its surfaces (groups of owners) and the reconstruction.
+
+constexpr int kMaxLabels = 5;  // four corners and the top
+
+// How far outside its element (in element sizes) a junction is accepted.
+constexpr double kJunctionMargin = 0.5;
+
+struct Piece {
+  const NodeRef* node = nullptr;  // null: the stock top
+  int group = 0;
+  int32_t owner = kStockTopOwner;
+};
+
+struct GroupValue {
+  double w = kInf, gx = 0, gy = 0;
+  int32_t owner = kStockTopOwner;
+};
+
+class ElementModel {
+ public:
+  ElementModel(const NodeRef* const c[4], const int group_of_corner[4],
+               int top_group, double z_top)
+      : z_top_(z_top) {
+    for (int k = 0; k < 4; ++k) {
+      if (c[k]->owner == kStockTopOwner) continue;  // its patch is the top
+      pieces_[n_++] = {c[k], group_of_corner[k], c[k]->owner};
+    }
+    pieces_[n_++] = {nullptr, top_group, kStockTopOwner};
+  }
+
+  int pieces() const { return n_; }
+  const Piece& piece(int k) const { return pieces_[k]; }
+
+  double PieceValue(int k, double x, double y) const {
+    const Piece& p = pieces_[k];
+    return p.node == nullptr
+               ? z_top_
+               : EvaluatePatch(p.node->jet, p.node->x, p.node->y, x, y);
+  }
+  void PieceGradient(int k, double x, double y, double* gx,
+                     double* gy) const {
+    const Piece& p = pieces_[k];
+    if (p.node == nullptr) {
+      *gx = *gy = 0;
+    } else {
+      PatchGradient(p.node->jet, p.node->x, p.node->y, x, y, gx, gy);
+    }
+  }
+  Quad PieceQuad(int k, double px, double py, double ex, double ey) const {
+    const Piece& p = pieces_[k];
+    return p.node == nullptr ? Constant(z_top_)
+                             : Restrict(p.node->jet, p.node->x, p.node->y, px,
+                                        py, ex, ey);
+  }
+
+  // The surface of group g at (x, y): the lowest of its pieces.
+  GroupValue Group(int g, double x, double y) const {
+    GroupValue v;
+    int best = -1;
+    for (int k = 0; k < n_; ++k) {
+      if (pieces_[k].group != g) continue;
+      const double w = PieceValue(k, x, y);
+      if (w < v.w) {
+        v.w = w;
+        best = k;
+      }
+    }
+    if (best >= 0) {
+      PieceGradient(best, x, y, &v.gx, &v.gy);
+      v.owner = pieces_[best].owner;
+    }
+    return v;
+  }
+
+  // Eq. (2): the group of the lowest piece at (x, y) (first on ties).
+  int ArgMin(double x, double y, double* w = nullptr) const {
+    int best = 0;
+    double bw = PieceValue(0, x, y);
+    for (int k = 1; k < n_; ++k) {
+      const double v = PieceValue(k, x, y);
+      if (v < bw) {
+        bw = v;
+        best = k;
+      }
+    }
+    if (w != nullptr) *w = bw;
+    return pieces_[best].group;
+  }
+
+ private:
+  Piece pieces_[kMaxLabels];
+  int n_ = 0;
+  double z_top_;
+};
+
+// A crossing on the boundary of a cell, in counter-clockwise order: s is the
+// side (0 bottom, 1 right, 2 top, 3 left) plus the fraction along it.
+struct BoundaryCrossing {
+  double s = 0;
+  int left = 0, right = 0;  // groups before and after it
+  End end;
+};
+
+struct Cell {
+  double x0, y0, x1, y1;
+};
+
+// Builds the segments of one element from its boundary crossings, resolving
+// junctions and elements with several marks (paper Fig. 3).
+class ElementResolver {
+ public:
+  ElementResolver(const ElementModel& model, const Settings& s,
+                  uint64_t element_index, std::vector<Segment>* out)
+      : m_(model),
+        s_(s),
+        key_base_(kInteriorKey | (element_index << 12)),
+        out_(out) {}
+
+  void Resolve(const Cell& cell, std::vector<BoundaryCrossing> x, int depth) {
+    const int n = static_cast<int>(x.size());
+    if (n == 0) return;
+    bool consistent = n >= 2;
+    for (int k = 0; k < n && consistent; ++k) {
+      consistent = x[k].right == x[(k + 1) % n].left &&
+                   x[k].left != x[k].right;
+    }
+    if (consistent) {
+      if (n == 2) {
+        Emit(x[0].end, x[1].end);
+        return;
+      }
+      const int g0 = x[0].right, g1 = x[1].right;
+      if (n == 3) {
+        Junction(cell, x);
+        return;
+      }
+      if (n == 4) {
+        const int g2 = x[2].right, g3 = x[3].right;
+        double cx = 0, cy = 0;
+        for (const auto& c : x) {
+          cx += 0.25 * c.end.x;
+          cy += 0.25 * c.end.y;
+        }
+        const int gc = m_.ArgMin(cx, cy);
+        // Arc k runs from crossing k to k+1. The group that connects through
+        // the middle cuts the other group's arcs off with one crease each.
+        const bool one_connects = (g1 == g3) && gc == g1;
+        const bool zero_connects = (g0 == g2) && gc == g0;
+        if (one_connects) {
+          Emit(x[0].end, x[1].end);
+          Emit(x[2].end, x[3].end);
+          return;
+        }
+        if (zero_connects) {
+          Emit(x[1].end, x[2].end);
+          Emit(x[3].end, x[0].end);
+          return;
+        }
+      }
+    }
+    if (depth < kMaxDepth && consistent) {
+      Subdivide(cell, x, depth);
+    } else {
+      Star(x);
+    }
+  }
+
+ private:
+  static constexpr int kMaxDepth = 4;
+
+  uint64_t NewKey() { return key_base_ | next_key_++; }
+
+  void Emit(const End& a, const End& b) { out_->push_back({{a, b}}); }
+
+  // The end of the crease between groups (g, h) at an interior point.
+  End InteriorEnd(uint64_t key, double x, double y, int g, int h) const {
+    const GroupValue a = m_.Group(g, x, y), b = m_.Group(h, x, y);
+    End e;
+    e.key = key;
+    e.x = x;
+    e.y = y;
+    m_.ArgMin(x, y, &e.z);
+    e.owners = Sorted(a.owner, b.owner);
+    e.angle = NormalAngle(a.gx, a.gy, b.gx, b.gy);
+    return e;
+  }
+
+  // Three surfaces meet: Newton's method on S_a - S_b = S_b - S_c = 0 over
+  // the element's patches (the active piece of each group may change between
+  // steps); the crossings' centroid if it does not converge near the cell.
+  void Junction(const Cell& cell, const std::vector<BoundaryCrossing>& x) {
+    const int g[3] = {x[0].right, x[1].right, x[2].right};
+    double px = (x[0].end.x + x[1].end.x + x[2].end.x) / 3;
+    double py = (x[0].end.y + x[1].end.y + x[2].end.y) / 3;
+    const double size = std::fmax(cell.x1 - cell.x0, cell.y1 - cell.y0);
+    bool ok = false;
+    double qx = px, qy = py;
+    for (int it = 0; it < 50; ++it) {
+      const GroupValue a = m_.Group(g[0], qx, qy), b = m_.Group(g[1], qx, qy),
+                       c = m_.Group(g[2], qx, qy);
+      const double f1 = a.w - b.w, f2 = b.w - c.w;
+      if (PatchGap(a.w, b.w) <= s_.t1 && PatchGap(b.w, c.w) <= s_.t1) {
+        ok = true;
+        break;
+      }
+      const double j11 = a.gx - b.gx, j12 = a.gy - b.gy;
+      const double j21 = b.gx - c.gx, j22 = b.gy - c.gy;
+      const double det = j11 * j22 - j12 * j21;
+      const double scale = (std::fabs(j11) + std::fabs(j12)) *
+                           (std::fabs(j21) + std::fabs(j22));
+      if (!(std::fabs(det) > 1e-12 * scale)) break;
+      double dx = -(j22 * f1 - j12 * f2) / det;
+      double dy = -(-j21 * f1 + j11 * f2) / det;
+      const double len = std::hypot(dx, dy);
+      if (len > size) {  // damp wild steps
+        dx *= size / len;
+        dy *= size / len;
+      }
+      qx += dx;
+      qy += dy;
+      if (std::hypot(dx, dy) <= 1e-14 * size) {
+        ok = PatchGap(a.w, b.w) <= 1e3 * s_.t1 && PatchGap(b.w, c.w) <= 1e3 * s_.t1;
+        break;
+      }
+    }
+    // Within half a cell of it: the boundary crossings come from the edge
+    // nodes' patches and the junction from all four; a third surface seen by
+    // this element only may put the junction just across an edge.
+    const double margin = kJunctionMargin * size;
+    if (ok && qx >= cell.x0 - margin && qx <= cell.x1 + margin &&
+        qy >= cell.y0 - margin && qy <= cell.y1 + margin) {
+      px = qx;
+      py = qy;
+    }
+    const uint64_t key = NewKey();
+    for (const auto& c : x) {
+      Emit(c.end, InteriorEnd(key, px, py, c.left, c.right));
+    }
+  }
+
+  // Last resort: every crossing to the crossings' centroid.
+  void Star(const std::vector<BoundaryCrossing>& x) {
+    if (x.size() < 2) return;
+    double px = 0, py = 0;
+    for (const auto& c : x) {
+      px += c.end.x / x.size();
+      py += c.end.y / x.size();
+    }
+    const uint64_t key = NewKey();
+    for (const auto& c : x) {
+      if (c.left == c.right) continue;
+      Emit(c.end, InteriorEnd(key, px, py, c.left, c.right));
+    }
+  }
+
+  // Group of the boundary arc containing boundary parameter s.
+  static int GroupAt(const std::vector<BoundaryCrossing>& x, double s) {
+    for (const auto& c : x) {
+      if (c.s > s) return c.left;
+    }
+    return x.front().left;
+  }
+
+  // Crossings of the element's reconstruction along p -> q (an internal cut
+  // of the element), with the groups at p and q given.
+  std::vector<Crossing> ModelCrossings(double px, double py, double qx,
+                                       double qy, int gp, int gq) {
+    const double ex = qx - px, ey = qy - py;
+    const int n = m_.pieces();
+    Quad q[kMaxLabels];
+    for (int k = 0; k < n; ++k) q[k] = m_.PieceQuad(k, px, py, ex, ey);
+    std::vector<double> cuts = {0.0, 1.0};
+    for (int f = 0; f < n; ++f) {
+      for (int g = f + 1; g < n; ++g) {
+        if (m_.piece(f).group == m_.piece(g).group) continue;
+        double r[2];
+        const int nr = QuadRoots(q[f] - q[g], r);
+        for (int k = 0; k < nr; ++k) {
+          if (r[k] > 0 && r[k] < 1) cuts.push_back(r[k]);
+        }
+      }
+    }
+    std::sort(cuts.begin(), cuts.end());
+    // The lowest piece on each interval between cuts.
+    struct Run {
+      double mid;
+      int piece;
+    };
+    std::vector<Run> runs;
+    for (size_t k = 0; k + 1 < cuts.size(); ++k) {
+      if (!(cuts[k + 1] > cuts[k])) continue;
+      const double mid = 0.5 * (cuts[k] + cuts[k + 1]);
+      int best = 0;
+      for (int f = 1; f < n; ++f) {
+        if (q[f](mid) < q[best](mid)) best = f;
+      }
+      if (!runs.empty() &&
+          m_.piece(runs.back().piece).group == m_.piece(best).group) {
+        continue;
+      }
+      runs.push_back({mid, best});
+    }
+    std::vector<Crossing> out;
+    auto add = [&](double t, int g_before, int g_after) {
+      Crossing c;
+      c.t = t;
+      c.before = g_before;
+      c.after = g_after;
+      const double x = Lerp(px, qx, t), y = Lerp(py, qy, t);
+      c.end = InteriorEnd(NewKey(), x, y, g_before, g_after);
+      c.mark = c.end.angle > s_.t2;
+      out.push_back(c);
+    };
+    if (runs.empty()) return out;
+    const int first = m_.piece(runs.front().piece).group;
+    if (first != gp) add(0, gp, first);
+    for (size_t k = 0; k + 1 < runs.size(); ++k) {
+      const int f = runs[k].piece, g = runs[k + 1].piece;
+      add(RootIn(q[f] - q[g], runs[k].mid, runs[k + 1].mid),
+          m_.piece(f).group, m_.piece(g).group);
+    }
+    const int last = m_.piece(runs.back().piece).group;
+    if (last != gq) add(1, last, gq);
+    return out;
+  }
+
+  // Splits the cell in four and resolves each quarter; the cuts are
+  // evaluated with the element's own reconstruction.
+  void Subdivide(const Cell& cell, const std::vector<BoundaryCrossing>& x,
+                 int depth) {
+    const double w = cell.x1 - cell.x0, h = cell.y1 - cell.y0;
+    // Split fractions, moved off any crossing lying on a split point.
+    double fx = 0.5, fy = 0.5;
+    auto hits = [&](double fx, double fy) {
+      const double split[4] = {fx, 1 + fy, 2 + (1 - fx), 3 + (1 - fy)};
+      for (const auto& c : x) {
+        for (double sp : split) {
+          if (std::fabs(c.s - sp) < 1e-9) return true;
+        }
+      }
+      return false;
+    };
+    for (int k = 0; k < 8 && hits(fx, fy); ++k) {
+      fx = 0.5 + 0.0137 * (k + 1);
+      fy = 0.5 - 0.0113 * (k + 1);
+    }
+    const double xm = cell.x0 + fx * w, ym = cell.y0 + fy * h;
+    const double s_m[4] = {fx, 1 + fy, 2 + (1 - fx), 3 + (1 - fy)};
+    const double mx[4] = {xm, cell.x1, xm, cell.x0};
+    const double my[4] = {cell.y0, ym, cell.y1, ym};
+    const int gc = m_.ArgMin(xm, ym);
+    // Cuts from the centre to each side's split point.
+    std::vector<Crossing> cut[4];
+    for (int k = 0; k < 4; ++k) {
+      cut[k] = ModelCrossings(xm, ym, mx[k], my[k], gc, GroupAt(x, s_m[k]));
+    }
+    const Cell sub[4] = {{cell.x0, cell.y0, xm, ym},
+                         {xm, cell.y0, cell.x1, ym},
+                         {xm, ym, cell.x1, cell.y1},
+                         {cell.x0, ym, xm, cell.y1}};
+    std::vector<BoundaryCrossing> parts[4];
+    // Parent boundary crossings go to the quarters that hold them.
+    for (const auto& c : x) {
+      const int side = std::min(3, static_cast<int>(c.s));
+      const double f = c.s - side;
+      int q;
+      BoundaryCrossing b = c;
+      switch (side) {
+        case 0:  // bottom: quarters 0 | 1
+          q = f < fx ? 0 : 1;
+          b.s = q == 0 ? f / fx : (f - fx) / (1 - fx);
+          break;
+        case 1:  // right: quarters 1 | 2
+          q = f < fy ? 1 : 2;
+          b.s = 1 + (q == 1 ? f / fy : (f - fy) / (1 - fy));
+          break;
+        case 2:  // top, right to left: quarters 2 | 3
+          q = f < 1 - fx ? 2 : 3;
+          b.s = 2 + (q == 2 ? f / (1 - fx) : (f - (1 - fx)) / fx);
+          break;
+        default:  // left, top to bottom: quarters 3 | 0
+          q = f < 1 - fy ? 3 : 0;
+          b.s = 3 + (q == 3 ? f / (1 - fy) : (f - (1 - fy)) / fy);
+          break;
+      }
+      parts[q].push_back(b);
+    }
+    // Each cut borders two quarters: cut k runs from the centre to side k's
+    // split point. Quarter q's sides in counter-clockwise order:
+    //   0: bottom = parent, right = cut 0 (inwards), top = cut 3, left = parent
+    //   1: bottom = parent, right = parent, top = cut 1 (inwards), left = cut 0
+    //   2: bottom = cut 1, right = parent, top = parent, left = cut 2 (inwards)
+    //   3: bottom = cut 3 (inwards), right = cut 2, top = parent, left = parent
+    auto add_cut = [&](int q, int k, int side, bool outwards) {
+      for (const Crossing& c : cut[k]) {
+        BoundaryCrossing b;
+        b.end = c.end;
+        const double t = outwards ? c.t : 1 - c.t;
+        b.s = side + t;
+        b.left = outwards ? c.before : c.after;
+        b.right = outwards ? c.after : c.before;
+        parts[q].push_back(b);
+      }
+    };
+    add_cut(0, 0, 1, false);
+    add_cut(0, 3, 2, true);
+    add_cut(1, 1, 2, false);
+    add_cut(1, 0, 3, true);
+    add_cut(2, 1, 0, true);
+    add_cut(2, 2, 3, false);
+    add_cut(3, 3, 0, false);
+    add_cut(3, 2, 1, true);
+    for (int q = 0; q < 4; ++q) {
+      std::stable_sort(parts[q].begin(), parts[q].end(),
+                       [](const BoundaryCrossing& a, const BoundaryCrossing& b) {
+                         return a.s < b.s;
+                       });
+      Resolve(sub[q], std::move(parts[q]), depth + 1);
+    }
+  }
+
+  const ElementModel& m_;
+  const Settings& s_;
+  uint64_t key_base_;
+  uint64_t next_key_ = 0;
+  std::vector<Segment>* out_;
+};
+
+// Small union-find over an element's labels (owners).
+struct Labels {
+  int32_t owner[kMaxLabels];
+  int parent[kMaxLabels];
+  int n = 0;
+  int Index(int32_t o) {
+    for (int k = 0; k < n; ++k) {
+      if (owner[k] == o) return k;
+    }
+    owner[n] = o;
+    parent[n] = n;
+    return n++;
+  }
+  int Find(int k) {
+    while (parent[k] != k) k = parent[k] = parent[parent[k]];
+    return k;
+  }
+  void Union(int a, int b) {
+    a = Find(a);
+    b = Find(b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  }
+};
+
+// The segments of element (ei, ej) with corners c (paper order i, j, k, m).
+void ProcessElement(const NodeRef* const c[4], int32_t ei, int32_t ej,
+                    int32_t nodes_x, const GridGeometry& grid,
+                    const Settings& s, std::vector<Segment>* out) {
+  // Canonical edges: bottom c0->c1, right c1->c2, top c3->c2, left c0->c3;
+  // the top and left ones are walked backwards counter-clockwise.
+  const uint64_t row0 = uint64_t(ej) * nodes_x, row1 = row0 + nodes_x;
+  const struct {
+    int from, to;
+    uint64_t key;
+    bool backwards;
+  } edges[4] = {{0, 1, 2 * (row0 + ei), false},
+                {1, 2, 2 * (row0 + ei + 1) + 1, false},
+                {3, 2, 2 * (row1 + ei), true},
+                {0, 3, 2 * (row0 + ei) + 1, true}};
+  Crossing cr[4][2];
+  int ncr[4];
+  for (int k = 0; k < 4; ++k) {
+    ncr[k] = EdgeCrossings(*c[edges[k].from], *c[edges[k].to], edges[k].key,
+                           s, cr[k]);
+  }
+  // Owners meeting without a crease on any edge of this element (eq. 5
+  // fails) are one surface here: consecutive moves of a pass, or the facets
+  // of an arc.
+  Labels labels;
+  for (int k = 0; k < 4; ++k) labels.Index(c[k]->owner);
+  labels.Index(kStockTopOwner);
+  bool any_mark = false;
+  for (int k = 0; k < 4; ++k) {
+    for (int m = 0; m < ncr[k]; ++m) {
+      const Crossing& x = cr[k][m];
+      if (!x.mark) {
+        labels.Union(labels.Index(x.before), labels.Index(x.after));
+      }
+    }
+  }
+  std::vector<BoundaryCrossing> bx;
+  for (int k = 0; k < 4; ++k) {
+    for (int m = 0; m < ncr[k]; ++m) {
+      const int mm = edges[k].backwards ? ncr[k] - 1 - m : m;
+      const Crossing& x = cr[k][mm];
+      const int gb = labels.Find(labels.Index(x.before));
+      const int ga = labels.Find(labels.Index(x.after));
+      if (!x.mark || gb == ga) continue;
+      any_mark = true;
+      BoundaryCrossing b;
+      b.s = k + (edges[k].backwards ? 1 - x.t : x.t);
+      b.left = edges[k].backwards ? ga : gb;
+      b.right = edges[k].backwards ? gb : ga;
+      b.end = x.end;
+      bx.push_back(b);
+    }
+  }
+  if (!any_mark) return;
+  int group_of_corner[4];
+  for (int k = 0; k < 4; ++k) {
+    group_of_corner[k] = labels.Find(labels.Index(c[k]->owner));
+  }
+  const ElementModel model(c, group_of_corner,
+                           labels.Find(labels.Index(kStockTopOwner)),
+                           s.z_top);
+  ElementResolver resolver(model, s, uint64_t(ej) * nodes_x + ei, out);
+  resolver.Resolve({grid.NodeX(ei), grid.NodeY(ej), grid.NodeX(ei + 1),
+                    grid.NodeY(ej + 1)},
+                   std::move(bx), 0);
+}
+
+// ---------------------------------------------------------------------------
+// Region clipping and chaining.
+
+// Clips segment `seg` to r (Liang-Barsky); false if nothing is left.
+bool ClipSegment(const Rect& r, uint64_t index, Segment* seg) {
+  End& a = seg->e[0];
+  End& b = seg->e[1];
+  const double dx = b.x - a.x, dy = b.y - a.y;
+  double t0 = 0, t1 = 1;
+  const double p[4] = {-dx, dx, -dy, dy};
+  const double q[4] = {a.x - r.x0, r.x1 - a.x, a.y - r.y0, r.y1 - a.y};
+  for (int k = 0; k < 4; ++k) {
+    if (p[k] == 0) {
+      if (q[k] < 0) return false;
+      continue;
+    }
+    const double t = q[k] / p[k];
+    if (p[k] < 0) {
+      t0 = std::fmax(t0, t);
+    } else {
+      t1 = std::fmin(t1, t);
+    }
+  }
+  if (t0 > t1) return false;
+  if (t0 == t1 && (t0 > 0 || t1 < 1)) return false;  // touches a corner only
+  const End a0 = a, b0 = b;
+  auto at = [&](double t, const End& near, uint64_t key) {
+    End e = near;
+    e.key = key;
+    e.x = Lerp(a0.x, b0.x, t);
+    e.y = Lerp(a0.y, b0.y, t);
+    e.z = Lerp(a0.z, b0.z, t);
+    e.angle = Lerp(a0.angle, b0.angle, t);
+    return e;
+  };
+  if (t0 > 0) a = at(t0, b0, kClipKey | (2 * index));
+  if (t1 < 1) b = at(t1, a0, kClipKey | (2 * index + 1));
+  return true;
+}
+
+// Drops vertices where the polyline doubles back (turns by more than 90
+// degrees) over a short segment:
+// - next to an end, up to `end_fold`: a junction is taken up to half an
+//   element outside its element when the third surface, seen only there,
+//   puts it in the neighbour (which does not see that surface); the
+//   neighbour's crossing on the shared edge then lies behind the junction;
+// - elsewhere up to `fold`: crossings clamped onto a node, or within the
+//   patches' error of one, may come in the wrong order.
+// The ends themselves are kept: junctions are shared with other polylines.
+void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
+  for (bool changed = true; changed;) {
+    changed = false;
+    const size_t n = p->vertices.size();
+    if (n < 3) return;
+    for (size_t k = 0; k < n; ++k) {
+      if (!p->closed && (k == 0 || k + 1 == n)) continue;
+      const Vec3& a = p->vertices[(k + n - 1) % n];
+      const Vec3& b = p->vertices[k];
+      const Vec3& c = p->vertices[(k + 1) % n];
+      const double ux = b.x - a.x, uy = b.y - a.y;
+      const double vx = c.x - b.x, vy = c.y - b.y;
+      if (ux * vx + uy * vy >= 0) continue;
+      double limit = fold;
+      if (!p->closed && k == 1) limit = std::fmax(limit, end_fold);
+      if (!p->closed && k + 2 == n) limit = std::fmax(limit, end_fold);
+      const double near_end = !p->closed && k == 1       ? std::hypot(ux, uy)
+                              : !p->closed && k + 2 == n ? std::hypot(vx, vy)
+                                                         : kInf;
+      const double shortest =
+          std::fmin(std::hypot(ux, uy), std::hypot(vx, vy));
+      if (shortest > fold && near_end > limit) continue;
+      p->vertices.erase(p->vertices.begin() + k);
+      p->angle_deg.erase(p->angle_deg.begin() + k);
+      p->vertex_owners.erase(p->vertex_owners.begin() + k);
+      changed = true;
+      break;
+    }
+  }
+}
+
+std::vector<MarkPolyline> Chain(const std::vector<Segment>& segs, double tol,
+                                double fold, double end_fold) {
+  const int64_t n = static_cast<int64_t>(segs.size());
+  // Incidences sorted by vertex key.
+  struct Inc {
+    uint64_t key;
+    int64_t seg;
+    int end;
+  };
+  std::vector<Inc> inc;
+  inc.reserve(2 * n);
+  for (int64_t k = 0; k < n; ++k) {
+    inc.push_back({segs[k].e[0].key, k, 0});
+    inc.push_back({segs[k].e[1].key, k, 1});
+  }
+  std::sort(inc.begin(), inc.end(), [](const Inc& a, const Inc& b) {
+    return a.key != b.key ? a.key < b.key
+                          : (a.seg != b.seg ? a.seg < b.seg : a.end < b.end);
+  });
+  // For each segment end: its vertex's degree and, at degree 2, the other
+  // incidence.
+  std::vector<int> degree(2 * n);
+  std::vector<int64_t> other(2 * n, -1);  // seg * 2 + end
+  for (size_t i = 0; i < inc.size();) {
+    size_t j = i;
+    while (j < inc.size() && inc[j].key == inc[i].key) ++j;
+    const int d = static_cast<int>(j - i);
+    for (size_t k = i; k < j; ++k) degree[2 * inc[k].seg + inc[k].end] = d;
+    if (d == 2) {
+      other[2 * inc[i].seg + inc[i].end] = 2 * inc[i + 1].seg + inc[i + 1].end;
+      other[2 * inc[i + 1].seg + inc[i + 1].end] = 2 * inc[i].seg + inc[i].end;
+    }
+    i = j;
+  }
+  std::vector<bool> used(n, false);
+  std::vector<MarkPolyline> out;
+  auto push_vertex = [&](MarkPolyline* p, const End& e) {
+    if (!p->vertices.empty()) {
+      const Vec3& last = p->vertices.back();
+      if (std::hypot(last.x - e.x, last.y - e.y) <= tol) return;
+    }
+    p->vertices.push_back({e.x, e.y, e.z});
+    p->angle_deg.push_back(e.angle * 180 / std::numbers::pi);
+    p->vertex_owners.push_back(e.owners);
+  };
+  for (int64_t s = 0; s < n; ++s) {
+    if (used[s]) continue;
+    // Walk back from end 0 of s to the start of its chain, or around a loop.
+    int64_t seg = s;
+    int end = 0;
+    bool closed = false;
+    for (;;) {
+      const int64_t o = other[2 * seg + end];
+      if (o < 0) break;
+      const int64_t oseg = o / 2;
+      if (oseg == s) {
+        closed = true;
+        break;
+      }
+      seg = oseg;
+      end = 1 - static_cast<int>(o % 2);
+    }
+    if (closed) {
+      seg = s;
+      end = 0;
+    }
+    // Walk forward from (seg, end).
+    MarkPolyline p;
+    p.closed = closed;
+    push_vertex(&p, segs[seg].e[end]);
+    for (;;) {
+      used[seg] = true;
+      const End& far = segs[seg].e[1 - end];
+      push_vertex(&p, far);
+      const int64_t o = other[2 * seg + (1 - end)];
+      if (o < 0 || used[o / 2]) break;
+      seg = o / 2;
+      end = static_cast<int>(o % 2);
+    }
+    if (closed && p.vertices.size() > 1) {
+      const Vec3& a = p.vertices.front();
+      const Vec3& b = p.vertices.back();
+      if (std::hypot(a.x - b.x, a.y - b.y) <= tol) {
+        p.vertices.pop_back();
+        p.angle_deg.pop_back();
+        p.vertex_owners.pop_back();
+      }
+    }
+    RemoveFolds(&p, fold, end_fold);
+    if (p.vertices.size() < (closed ? 3u : 2u)) continue;
+    p.owners = p.vertex_owners.front();
+    out.push_back(std::move(p));
+  }
+  return out;
+}
+
+absl::Status ValidateOptions(const Workpiece& wp, const MarkOptions& o,
+                             Rect* region) {
+  if (!(o.t2_deg > 0 && o.t2_deg < 90)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("t2_deg must be in (0, 90), got ", o.t2_deg));
+  }
+  if (!(std::isfinite(o.t1) && o.t1 > 0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("t1 must be positive and finite, got ", o.t1));
+  }
+  if (o.screening_threshold.has_value() &&
+      !(std::isfinite(*o.screening_threshold) &&
+        *o.screening_threshold >= 0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("screening_threshold must be finite and >= 0, got ",
+                     *o.screening_threshold));
+  }
+  const Rect b = wp.grid().bounds();
+  *region = b;
+  if (o.region.has_value()) {
+    const Rect& r = *o.region;
+    const struct {
+      const char* name;
+      double v;
+    } f[] = {{"x0", r.x0}, {"y0", r.y0}, {"x1", r.x1}, {"y1", r.y1}};
+    for (const auto& v : f) {
+      if (!std::isfinite(v.v)) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("region.", v.name, " must be finite, got ", v.v));
+      }
+    }
+    if (r.x1 < r.x0) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "region.x1 (", r.x1, ") must be >= region.x0 (", r.x0, ")"));
+    }
+    if (r.y1 < r.y0) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "region.y1 (", r.y1, ") must be >= region.y0 (", r.y0, ")"));
+    }
+    if (!r.Intersects(b)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "region [", r.x0, ", ", r.x1, "] x [", r.y0, ", ", r.y1,
+          "] does not overlap the stock [", b.x0, ", ", b.x1, "] x [", b.y0,
+          ", ", b.y1, "]"));
+    }
+    *region = {std::fmax(r.x0, b.x0), std::fmax(r.y0, b.y0),
+               std::fmin(r.x1, b.x1), std::fmin(r.y1, b.y1)};
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+double ScreeningMismatch(const SurfaceJet& ni, double xi, double yi,
+                         const SurfaceJet& nj, double xj, double yj) {
+  return std::fabs(ni.w - EvaluatePatch(nj, xj, yj, xi, yi)) +
+         std::fabs(EvaluatePatch(ni, xi, yi, xj, yj) - nj.w);
+}
+
+double DefaultScreeningThreshold(double h, double t2_rad) {
+  return 0.25 * t2_rad * h;
+}
+
+double SlopeDifference(double ax, double ay, double bx, double by) {
+  return std::fabs(ax - bx) + std::fabs(ay - by);
+}
+
+double NormalAngle(double ax, double ay, double bx, double by) {
+  // Upward normals (-g, 1); atan2 of |cross| and dot stays accurate for
+  // small angles, where acos of the dot would not.
+  const double cx = by - ay;       // (-ax,-ay,1) x (-bx,-by,1)
+  const double cy = ax - bx;
+  const double cz = ax * by - ay * bx;
+  const double dot = ax * bx + ay * by + 1;
+  return std::atan2(std::sqrt(cx * cx + cy * cy + cz * cz), dot);
+}
+
+absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
+    const Workpiece& wp, const MarkOptions& options) {
+  if (!wp.scheme().stores_derivatives()) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "cutting marks need the node derivatives of the taylor scheme; this "
+        "workpiece uses the ",
+        std::string(wp.scheme().name()), " scheme"));
+  }
+  Rect region;
+  if (absl::Status st = ValidateOptions(wp, options, &region); !st.ok()) {
+    return st;
+  }
+  const GridGeometry& grid = wp.grid();
+  Settings s;
+  s.z_top = wp.spec().z_top;
+  s.t2 = options.t2_deg * std::numbers::pi / 180;
+  s.t1 = options.t1;
+  s.threshold_h = options.screening_threshold.value_or(
+      DefaultScreeningThreshold(grid.dx(), s.t2));
+  s.threshold_v = options.screening_threshold.value_or(
+      DefaultScreeningThreshold(grid.dy(), s.t2));
+
+  const int32_t ei0 = grid.ElementX(region.x0), ei1 = grid.ElementX(region.x1);
+  const int32_t ej0 = grid.ElementY(region.y0), ej1 = grid.ElementY(region.y1);
+  const int32_t cols = ei1 - ei0 + 1;  // elements per row in the region
+  constexpr int32_t kBandRows = 16;
+  const int32_t bands = (ej1 - ej0 + kBandRows) / kBandRows;
+  std::vector<std::vector<Segment>> band_segments(bands);
+
+  wp.pool().ParallelFor(bands, [&](int64_t band) {
+    const int32_t r0 = ej0 + static_cast<int32_t>(band) * kBandRows;
+    const int32_t r1 = std::min(r0 + kBandRows, ej1 + 1);  // rows [r0, r1)
+    // Node rows r0..r1, columns ei0..ei1+1.
+    const int32_t nc = cols + 1;
+    std::vector<NodeRef> nodes(static_cast<size_t>(nc) * (r1 - r0 + 1));
+    for (int32_t j = r0; j <= r1; ++j) {
+      for (int32_t i = 0; i < nc; ++i) {
+        const NodeValue v = wp.Node(ei0 + i, j);
+        NodeRef& n = nodes[size_t(j - r0) * nc + i];
+        n.jet = v.jet;
+        n.owner = v.owner;
+        n.x = grid.NodeX(ei0 + i);
+        n.y = grid.NodeY(j);
+      }
+    }
+    auto node = [&](int32_t i, int32_t j) -> const NodeRef& {
+      return nodes[size_t(j - r0) * nc + (i - ei0)];
+    };
+    // Eq. (3) on the edges between nodes of different owners.
+    auto flagged = [&](const NodeRef& a, const NodeRef& b, double threshold) {
+      return a.owner != b.owner &&
+             ScreeningMismatch(a.jet, a.x, a.y, b.jet, b.x, b.y) > threshold;
+    };
+    std::vector<uint8_t> flag_h(size_t(cols) * (r1 - r0 + 1));
+    std::vector<uint8_t> flag_v(size_t(nc) * (r1 - r0));
+    for (int32_t j = r0; j <= r1; ++j) {
+      for (int32_t i = ei0; i <= ei1; ++i) {
+        flag_h[size_t(j - r0) * cols + (i - ei0)] =
+            flagged(node(i, j), node(i + 1, j), s.threshold_h);
+      }
+    }
+    for (int32_t j = r0; j < r1; ++j) {
+      for (int32_t i = ei0; i <= ei1 + 1; ++i) {
+        flag_v[size_t(j - r0) * nc + (i - ei0)] =
+            flagged(node(i, j), node(i, j + 1), s.threshold_v);
+      }
+    }
+    std::vector<Segment>& out = band_segments[band];
+    for (int32_t j = r0; j < r1; ++j) {
+      for (int32_t i = ei0; i <= ei1; ++i) {
+        const size_t hi = size_t(j - r0) * cols + (i - ei0);
+        const size_t vi = size_t(j - r0) * nc + (i - ei0);
+        if (!flag_h[hi] && !flag_h[hi + cols] && !flag_v[vi] &&
+            !flag_v[vi + 1]) {
+          continue;
+        }
+        const NodeRef* const c[4] = {&node(i, j), &node(i + 1, j),
+                                     &node(i + 1, j + 1), &node(i, j + 1)};
+        ProcessElement(c, i, j, grid.nodes_x(), grid, s, &out);
+      }
+    }
+  });
+
+  std::vector<Segment> segs;
+  for (auto& b : band_segments) {
+    segs.insert(segs.end(), b.begin(), b.end());
+  }
+  // Keep what lies in the region (junctions may sit a little outside their
+  // element, hence outside the stock).
+  std::vector<Segment> kept;
+  kept.reserve(segs.size());
+  for (size_t k = 0; k < segs.size(); ++k) {
+    Segment seg = segs[k];
+    if (ClipSegment(region, k, &seg)) kept.push_back(seg);
+  }
+  // Vertices closer than this are one (crossings clamped onto a node).
+  const double tol = 1e-9 * std::fmax(grid.dx(), grid.dy());
+  // Folds shorter than a tenth of an element are the patches' disagreement,
+  // not the crease's shape; next to a junction, up to the half element by
+  // which a junction may leave its element.
+  const double h = std::fmin(grid.dx(), grid.dy());
+  return Chain(kept, tol, 0.1 * h, kJunctionMargin * h);
+}
+
+double ExactCreaseDistance(const Workpiece& wp, int32_t a, int32_t b, double x,
+                           double y) {
+  auto surface = [&](int32_t id, double* w, double* gx, double* gy) {
+    if (id == kStockTopOwner) {
+      *w = wp.spec().z_top;
+      *gx = *gy = 0;
+      return true;
+    }
+    if (id < 0 || id >= wp.move_count()) return false;
+    const Move& m = wp.move(id);
+    const BallSweep sweep(m.from, m.to, m.radius);
+    const SweepPoint p = sweep.Locate(x, y);
+    if (p.piece == SweepPoint::kNone) return false;
+    const SurfaceJet j = sweep.Jet(p);
+    *w = j.w;
+    *gx = j.wx;
+    *gy = j.wy;
+    return true;
+  };
+  double wa, ax, ay, wb, bx, by;
+  if (!surface(a, &wa, &ax, &ay) || !surface(b, &wb, &bx, &by)) return kInf;
+  const double g = std::hypot(ax - bx, ay - by);
+  if (!(g > 0)) return kInf;
+  return std::fabs(wa - wb) / g;
+}
+
+double PolylineLength(const MarkPolyline& p) {
+  double len = 0;
+  const size_t n = p.vertices.size();
+  for (size_t k = 0; k + 1 < n; ++k) {
+    const Vec3& a = p.vertices[k];
+    const Vec3& b = p.vertices[k + 1];
+    len += std::sqrt((a.x - b.x) * (a.x - b.x) + (a.y - b.y) * (a.y - b.y) +
+                     (a.z - b.z) * (a.z - b.z));
+  }
+  if (p.closed && n > 2) {
+    const Vec3& a = p.vertices.back();
+    const Vec3& b = p.vertices.front();
+    len += std::sqrt((a.x - b.x) * (a.x - b.x) + (a.y - b.y) * (a.y - b.y) +
+                     (a.z - b.z) * (a.z - b.z));
+  }
+  return len;
+}
+
+MarkSummary Summarize(const std::vector<MarkPolyline>& marks) {
+  MarkSummary s;
+  s.min_angle_deg = kInf;
+  s.max_angle_deg = -kInf;
+  for (const MarkPolyline& p : marks) {
+    ++s.polylines;
+    s.closed += p.closed;
+    s.vertices += static_cast<int64_t>(p.vertices.size());
+    s.total_length += PolylineLength(p);
+    for (double a : p.angle_deg) {
+      s.min_angle_deg = std::fmin(s.min_angle_deg, a);
+      s.max_angle_deg = std::fmax(s.max_angle_deg, a);
+    }
+  }
+  if (s.vertices == 0) s.min_angle_deg = s.max_angle_deg = 0;
+  return s;
+}
+
+MarkAccuracy MeasureMarkAccuracy(const Workpiece& wp,
+                                 const std::vector<MarkPolyline>& marks) {
+  MarkAccuracy acc;
+  for (const MarkPolyline& p : marks) {
+    for (size_t k = 0; k < p.vertices.size(); ++k) {
+      const Vec3& v = p.vertices[k];
+      const double d = ExactCreaseDistance(wp, p.vertex_owners[k][0],
+                                           p.vertex_owners[k][1], v.x, v.y);
+      ++acc.vertices;
+      if (!(d <= acc.max_distance)) {
+        acc.max_distance = d;
+        acc.max_x = v.x;
+        acc.max_y = v.y;
+      }
+    }
+  }
+  return acc;
+}
+
+}  // namespace swarf

@@ -1,0 +1,160 @@
+// Cutting marks (paper section 3): the creases of the reconstructed surface,
+// where two different swept surfaces, or a swept surface and the uncut stock
+// top, meet with a jump in slope.
+//
+// Contract:
+// - Units: millimetres; angles in degrees unless a name says otherwise.
+// - Needs the taylor scheme (the patches of eq. 1); a zmap workpiece gives
+//   FailedPrecondition.
+// - A "surface" is identified by the owner of the nodes it set: a move id, or
+//   -1 for the stock top (z_top, flat). In an element the surface of owner o
+//   is the minimum of the eq. (1) patches of the corners owned by o, and the
+//   reconstruction is the minimum over all surfaces and the top (eq. 2).
+// - Mark vertices on element edges are the exact crossings of the two edge
+//   nodes' patches (closed-form roots, eq. 4); vertices where three surfaces
+//   meet inside an element come from Newton's method on the element's
+//   patches. Straight segments join the vertices of one element.
+// - Different owners that meet without a crease (consecutive moves of one
+//   pass, an arc made of short moves) are told apart from marks by eq. (5):
+//   a vertex is a mark only where the two surfaces' normals differ by more
+//   than t2_deg.
+// - Results are deterministic: the same polylines in the same order, whatever
+//   the thread count.
+// - Thread safety: FindCuttingMarks only reads the workpiece and may run
+//   concurrently with its other const methods, never with Apply. It uses the
+//   workpiece's thread pool.
+#ifndef SWARF_CORE_CUTTING_MARKS_H_
+#define SWARF_CORE_CUTTING_MARKS_H_
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/geometry.h"
+#include "core/surface_jet.h"
+#include "core/workpiece.h"
+
+namespace swarf {
+
+// Owner id of the stock top in mark results.
+inline constexpr int32_t kStockTopOwner = -1;
+
+// Default t2 of eq. (5), as the angle between the two surfaces' normals. Two
+// consecutive moves of a tool path turning by delta meet at a normal angle of
+// at most delta, while the scallop between raster passes of stepover s with a
+// ball of radius r has a normal angle of 2 asin(s / 2r). Finishing with
+// r = 1..3 mm at s = 0.1..1 mm gives >= 1.91 degrees (s = 0.1, r = 3); an arc
+// of radius 20 mm made of 0.5 mm chords turns by 1.43 degrees per move. 1.65
+// degrees lies in between with ~15% margin on each side.
+inline constexpr double kDefaultT2Deg = 1.65;
+
+struct MarkOptions {
+  // Only marks inside this rectangle (polylines are clipped to it); the
+  // whole stock when absent. Must be finite, x0 <= x1, y0 <= y1, and overlap
+  // the stock.
+  std::optional<Rect> region;
+  // Eq. (3)'s threshold r (mm) on the two patch mismatches of an edge. When
+  // absent, t2 (in radians) * h / 4 per edge of length h: see
+  // DefaultScreeningThreshold. Must be finite and >= 0.
+  std::optional<double> screening_threshold;
+  // Eq. (5)'s t2: smallest angle between the two surfaces' normals at a mark
+  // point, in (0, 90) degrees.
+  double t2_deg = kDefaultT2Deg;
+  // Eq. (4)'s t1 (mm): Newton's method stops for a point where three
+  // surfaces meet once their heights agree within t1. Edge crossings are
+  // closed-form roots and agree to rounding. Must be finite and > 0.
+  double t1 = 1e-9;
+};
+
+// A crease between junctions (points where three or more marks meet) or
+// ends. Vertices are ordered along the crease, without duplicates; a closed
+// polyline does not repeat its first vertex at the end.
+struct MarkPolyline {
+  bool closed = false;
+  // The two surfaces meeting at the first vertex, ascending (-1: stock top).
+  // Along a pass made of many moves the owners change smoothly; see
+  // vertex_owners.
+  std::array<int32_t, 2> owners = {kStockTopOwner, kStockTopOwner};
+  // x, y and the reconstructed height z where the two surfaces' patches
+  // meet.
+  std::vector<Vec3> vertices;
+  // Per vertex: the angle between the two surfaces' normals (degrees).
+  std::vector<double> angle_deg;
+  // Per vertex: the two owners meeting there, ascending.
+  std::vector<std::array<int32_t, 2>> vertex_owners;
+};
+
+// Finds the cutting marks of the workpiece (issue 3). InvalidArgument naming
+// the field for bad options; FailedPrecondition for a zmap workpiece.
+absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
+    const Workpiece& wp, const MarkOptions& options = {});
+
+// The paper's equations as used here.
+
+// Eq. (3): |w_i(x_i) - w_j(x_i)| + |w_i(x_j) - w_j(x_j)| for the patches of
+// nodes i at (xi, yi) and j at (xj, yj). Node jets with owner -1 are flat at
+// their height, so this also covers the stock top.
+double ScreeningMismatch(const SurfaceJet& ni, double xi, double yi,
+                         const SurfaceJet& nj, double xj, double yj);
+
+// Eq. (3)'s default threshold for an edge of length h given t2 in radians.
+// Across a crease whose normals differ by at least t2, the slopes differ by
+// at least t2, so the two extrapolations of eq. (3) miss by about
+// t2 * (d_i + d_j), d the nodes' distances to the crease; on every element
+// the crease crosses, one crossed edge has d_i + d_j >= h / sqrt(2), i.e. a
+// mismatch >= 0.7 t2 h. A smooth surface's patches disagree only by their own
+// truncation error, about |w'''| h^3 / 3 for the pair, plus the float storage
+// of the derivatives (~1e-7 relative): t2 h / 4 keeps a factor ~3 below the
+// smallest mark and is above the truncation error whenever
+// h < 0.85 sqrt(t2 / |w'''|), i.e. on any grid fine enough to follow the
+// surfaces. Flagged edges only select elements to examine; the eq. (5) test
+// decides what is a mark, so a coarser grid costs time, not correctness.
+double DefaultScreeningThreshold(double h, double t2_rad);
+
+// Eq. (4): |w_a(x, y) - w_b(x, y)|, the height gap of two surfaces at a point.
+inline double PatchGap(double wa, double wb) { return wa > wb ? wa - wb : wb - wa; }
+
+// Eq. (5) as printed: |dwa/dx - dwb/dx| + |dwa/dy - dwb/dy|.
+double SlopeDifference(double ax, double ay, double bx, double by);
+
+// Eq. (5) as applied: the angle (radians) between the upward normals of two
+// surfaces with gradients (ax, ay) and (bx, by). It never exceeds
+// SlopeDifference (the gnomonic projection only stretches), does not depend
+// on the crease's direction in the grid, and stays bounded on steep walls,
+// where the printed form grows without bound.
+double NormalAngle(double ax, double ay, double bx, double by);
+
+// Accuracy, for tests and `swarf marks --check`.
+
+// Distance (mm, in XY) from (x, y) to the exact crease between the surfaces
+// of moves a and b (-1: the stock top), to first order:
+// |S_a - S_b| / |grad S_a - grad S_b| from the exact sweeps. +inf if a sweep
+// does not reach (x, y) or the gradients agree.
+double ExactCreaseDistance(const Workpiece& wp, int32_t a, int32_t b, double x,
+                           double y);
+
+struct MarkSummary {
+  int64_t polylines = 0;
+  int64_t closed = 0;
+  int64_t vertices = 0;
+  double total_length = 0;  // mm, in 3D
+  double min_angle_deg = 0, max_angle_deg = 0;  // over all vertices
+};
+MarkSummary Summarize(const std::vector<MarkPolyline>& marks);
+
+// 3D length of a polyline, including the closing segment when closed.
+double PolylineLength(const MarkPolyline& p);
+
+struct MarkAccuracy {
+  double max_distance = 0;  // mm, ExactCreaseDistance over all vertices
+  double max_x = 0, max_y = 0;  // where
+  int64_t vertices = 0;
+};
+MarkAccuracy MeasureMarkAccuracy(const Workpiece& wp,
+                                 const std::vector<MarkPolyline>& marks);
+
+}  // namespace swarf
+
+#endif  // SWARF_CORE_CUTTING_MARKS_H_

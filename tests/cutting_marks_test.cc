@@ -1,0 +1,612 @@
+// Cutting marks (issue 3) against analytic creases.
+#include "core/cutting_marks.h"
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <numbers>
+#include <vector>
+
+#include "core/instances.h"
+#include "core/thread_pool.h"
+#include "core/workpiece.h"
+#include "gtest/gtest.h"
+
+namespace swarf {
+namespace {
+
+std::unique_ptr<Workpiece> Cut(const StockSpec& stock,
+                               const std::vector<Move>& moves,
+                               SchemeKind scheme = SchemeKind::kTaylor,
+                               ThreadPool* pool = nullptr) {
+  auto wp = Workpiece::Create(stock, scheme, pool);
+  EXPECT_TRUE(wp.ok()) << wp.status();
+  auto applied = (*wp)->Apply(moves);
+  EXPECT_TRUE(applied.ok()) << applied.status();
+  return *std::move(wp);
+}
+
+std::vector<MarkPolyline> Marks(const Workpiece& wp,
+                                const MarkOptions& options = {}) {
+  auto marks = FindCuttingMarks(wp, options);
+  EXPECT_TRUE(marks.ok()) << marks.status();
+  return marks.ok() ? *std::move(marks) : std::vector<MarkPolyline>{};
+}
+
+double Spacing(const Workpiece& wp) {
+  return std::fmin(wp.grid().dx(), wp.grid().dy());
+}
+
+// Well-formed polylines: consistent sizes, distinct consecutive vertices,
+// and (for smooth creases) no turn back by more than 90 degrees.
+void ExpectClean(const std::vector<MarkPolyline>& marks, bool smooth) {
+  for (size_t k = 0; k < marks.size(); ++k) {
+    const MarkPolyline& p = marks[k];
+    const size_t n = p.vertices.size();
+    ASSERT_EQ(p.angle_deg.size(), n);
+    ASSERT_EQ(p.vertex_owners.size(), n);
+    ASSERT_GE(n, p.closed ? 3u : 2u);
+    EXPECT_EQ(p.owners, p.vertex_owners[0]);
+    const size_t segs = p.closed ? n : n - 1;
+    for (size_t i = 0; i < segs; ++i) {
+      const Vec3& a = p.vertices[i];
+      const Vec3& b = p.vertices[(i + 1) % n];
+      EXPECT_GT(std::hypot(b.x - a.x, b.y - a.y), 0)
+          << "polyline " << k << " repeats vertex " << i;
+      if (smooth && (p.closed || i + 1 < segs)) {
+        const Vec3& c = p.vertices[(i + 2) % n];
+        const double dot = (b.x - a.x) * (c.x - b.x) + (b.y - a.y) * (c.y - b.y);
+        EXPECT_GT(dot, 0) << "polyline " << k << " folds back at vertex "
+                          << (i + 1) % n;
+      }
+    }
+  }
+}
+
+bool HasTop(const std::array<int32_t, 2>& o) {
+  return o[0] == kStockTopOwner || o[1] == kStockTopOwner;
+}
+
+// ---------------------------------------------------------------------------
+
+// Two equal ball plunges at equal depth: the crease is the perpendicular
+// bisector of their centres, between the points where it meets the top.
+void CheckTwoBalls(double ax, double ay, double bx, double by) {
+  const double r = 10, depth = 5;
+  const StockSpec stock{0, 0, 40, 32, 0, 200, 160};
+  auto wp = Cut(stock, {{{ax, ay, 5}, {ax, ay, -depth}, r},
+                        {{bx, by, 5}, {bx, by, -depth}, r}});
+  const double h = Spacing(*wp);
+  const auto marks = Marks(*wp);
+  ExpectClean(marks, /*smooth=*/true);
+  // Midpoint, unit direction between the centres, and along the bisector.
+  const double mx = 0.5 * (ax + bx), my = 0.5 * (ay + by);
+  const double d = std::hypot(bx - ax, by - ay);
+  const double ux = (bx - ax) / d, uy = (by - ay) / d;
+  const double rim = std::sqrt(r * r - (r - depth) * (r - depth));
+  const double half = std::sqrt(rim * rim - 0.25 * d * d);
+
+  int creases = 0, rims = 0;
+  for (const MarkPolyline& p : marks) {
+    if (p.owners == std::array<int32_t, 2>{0, 1}) {
+      ++creases;
+      EXPECT_FALSE(p.closed);
+      double lo = kInf, hi = -kInf;
+      for (size_t k = 0; k < p.vertices.size(); ++k) {
+        const Vec3& v = p.vertices[k];
+        EXPECT_EQ(p.vertex_owners[k], (std::array<int32_t, 2>{0, 1}));
+        EXPECT_LE(std::fabs((v.x - mx) * ux + (v.y - my) * uy), h / 50)
+            << "vertex " << k << " at (" << v.x << ", " << v.y << ")";
+        const double along = (v.x - mx) * -uy + (v.y - my) * ux;
+        lo = std::fmin(lo, along);
+        hi = std::fmax(hi, along);
+      }
+      EXPECT_GE(hi - lo, 0.98 * 2 * half);
+      EXPECT_LE(hi - lo, 2 * half + h / 50);
+    } else {
+      ++rims;
+      EXPECT_FALSE(p.closed);  // each rim ends where the crease meets the top
+      for (const auto& o : p.vertex_owners) EXPECT_TRUE(HasTop(o));
+    }
+  }
+  EXPECT_EQ(creases, 1);
+  EXPECT_EQ(rims, 2);
+}
+
+TEST(CuttingMarksTest, TwoBallPlungesMeetOnTheBisector) {
+  CheckTwoBalls(14.3, 13.1, 24.1, 17.9);
+}
+
+TEST(CuttingMarksTest, TwoBallPlungesMeetOnTheBisectorAlongAGridLine) {
+  // The crease is the grid line x = 20: nodes lie exactly on it and take
+  // either owner by rounding.
+  CheckTwoBalls(15, 15.7, 25, 15.7);
+}
+
+TEST(CuttingMarksTest, TwoBallPlungesMeetOnTheBisectorAlongAGridDiagonal) {
+  // The crease x + y = 35 runs through the nodes along element diagonals.
+  CheckTwoBalls(14, 13, 21, 20);
+}
+
+// ---------------------------------------------------------------------------
+
+struct RasterCase {
+  double s, r;       // stepover and ball radius (mm)
+  int32_t nx, ny;    // mesh over [0, 9.7 s] x [0, 10.3 s]
+  double piece;      // length of the moves making a pass (0: one move)
+};
+
+class RasterTest : public ::testing::TestWithParam<RasterCase> {};
+
+// Parallel horizontal passes at depth 0.5 on a flat stock: the marks are the
+// mid-lines between passes, at the scallop height.
+TEST_P(RasterTest, ScallopsLieOnTheMidLines) {
+  const RasterCase c = GetParam();
+  const double s = c.s, r = c.r, bottom = -0.5;
+  const double wx = 9.7 * s, wy = 10.3 * s;
+  const StockSpec stock{0, 0, wx, wy, 0, c.nx, c.ny};
+  // Pass k at y = (k + 0.037) s, off the grid; passes cover the stock in y
+  // and run past it in x, so there are no rims and no pass ends.
+  std::vector<Move> moves;
+  std::vector<double> mids;
+  const int k0 = -static_cast<int>(std::ceil(r / s)) - 1;
+  const int k1 = static_cast<int>(std::ceil((wy + r) / s)) + 1;
+  const double xa = -r - 1, xb = wx + r + 1;
+  for (int k = k0; k <= k1; ++k) {
+    const double y = (k + 0.037) * s;
+    if (c.piece > 0) {
+      for (double x = xa; x < xb; x += c.piece) {
+        moves.push_back({{x, y, bottom}, {std::fmin(x + c.piece, xb), y, bottom}, r});
+      }
+    } else {
+      moves.push_back({{xa, y, bottom}, {xb, y, bottom}, r});
+    }
+    const double mid = y + 0.5 * s;
+    if (mid > 0 && mid < wy) mids.push_back(mid);
+  }
+  auto wp = Cut(stock, moves);
+  const double h = Spacing(*wp);
+  const double scallop = bottom + r - std::sqrt(r * r - 0.25 * s * s);
+  const auto marks = Marks(*wp);
+  ExpectClean(marks, /*smooth=*/true);
+  ASSERT_EQ(marks.size(), mids.size());
+  std::vector<int> seen(mids.size(), 0);
+  double max_angle_error = 0;
+  for (const MarkPolyline& p : marks) {
+    EXPECT_FALSE(p.closed);
+    // The mid-line of the first vertex; every vertex must stay on it.
+    size_t m = 0;
+    for (size_t k = 1; k < mids.size(); ++k) {
+      if (std::fabs(p.vertices[0].y - mids[k]) <
+          std::fabs(p.vertices[0].y - mids[m])) {
+        m = k;
+      }
+    }
+    ++seen[m];
+    for (size_t k = 0; k < p.vertices.size(); ++k) {
+      const Vec3& v = p.vertices[k];
+      EXPECT_LE(std::fabs(v.y - mids[m]), h / 50)
+          << "vertex " << k << " at (" << v.x << ", " << v.y << ")";
+      EXPECT_LE(std::fabs(v.z - scallop), 1e-4)
+          << "vertex " << k << " at (" << v.x << ", " << v.y << ")";
+      EXPECT_NE(p.vertex_owners[k][0], kStockTopOwner);
+      max_angle_error = std::fmax(
+          max_angle_error,
+          std::fabs(p.angle_deg[k] -
+                    2 * std::asin(0.5 * s / r) * 180 / std::numbers::pi));
+    }
+    // From one side of the stock to the other.
+    const double x_first = p.vertices.front().x, x_last = p.vertices.back().x;
+    EXPECT_NEAR(std::fmin(x_first, x_last), 0, 1e-9);
+    EXPECT_NEAR(std::fmax(x_first, x_last), wx, 1e-9);
+  }
+  for (size_t k = 0; k < mids.size(); ++k) {
+    EXPECT_EQ(seen[k], 1) << "mid-line y = " << mids[k];
+  }
+  // The patches' gradients carry their own O(h^2) error.
+  EXPECT_LE(max_angle_error,
+            0.005 * 2 * std::asin(0.5 * s / r) * 180 / std::numbers::pi);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Stepovers, RasterTest,
+    ::testing::Values(RasterCase{0.5, 2, 97, 93, 0},
+                      RasterCase{1.0, 3, 97, 93, 0},
+                      RasterCase{0.3, 1, 97, 93, 0},
+                      // A 60-degree scallop: strongly curved, so a finer grid for 1e-4 mm.
+                      RasterCase{1.0, 1, 194, 186, 0},
+                      // The smallest realistic scallop: 1.91 degrees.
+                      RasterCase{0.1, 3, 97, 93, 0},
+                      // Passes made of many short collinear moves: the owners
+                      // on each side change along every mark.
+                      RasterCase{0.5, 2, 97, 93, 0.137},
+                      RasterCase{0.1, 3, 97, 93, 0.0291}));
+
+// ---------------------------------------------------------------------------
+
+TEST(CuttingMarksTest, PlungeRimIsOneClosedCircle) {
+  const double cx = 9.7, cy = 10.3, r = 6, depth = 2;
+  auto wp = Cut({0, 0, 20, 20, 0, 200, 200},
+                {{{cx, cy, 1}, {cx, cy, -depth}, r}});
+  const double h = Spacing(*wp);
+  const double rim = std::sqrt(r * r - (r - depth) * (r - depth));
+  const auto marks = Marks(*wp);
+  ExpectClean(marks, /*smooth=*/true);
+  ASSERT_EQ(marks.size(), 1u);
+  const MarkPolyline& p = marks[0];
+  EXPECT_TRUE(p.closed);
+  EXPECT_EQ(p.owners, (std::array<int32_t, 2>{kStockTopOwner, 0}));
+  for (size_t k = 0; k < p.vertices.size(); ++k) {
+    const Vec3& v = p.vertices[k];
+    EXPECT_LE(std::fabs(std::hypot(v.x - cx, v.y - cy) - rim), h / 50)
+        << "vertex " << k << " at (" << v.x << ", " << v.y << ")";
+    EXPECT_EQ(v.z, 0);
+  }
+  EXPECT_NEAR(PolylineLength(p), 2 * std::numbers::pi * rim,
+              1e-3 * 2 * std::numbers::pi * rim);
+}
+
+// Only rims: one closed polyline whose every vertex has the top on one side.
+void ExpectOnlyOneRim(const std::vector<MarkPolyline>& marks) {
+  ExpectClean(marks, /*smooth=*/true);
+  ASSERT_EQ(marks.size(), 1u);
+  EXPECT_TRUE(marks[0].closed);
+  for (const auto& o : marks[0].vertex_owners) {
+    EXPECT_TRUE(HasTop(o)) << o[0] << " | " << o[1];
+  }
+}
+
+TEST(CuttingMarksTest, LongSlopedMoveHasOnlyItsRim) {
+  auto wp = Cut({0, 0, 40, 25, 0, 160, 100},
+                {{{3, 10, 1}, {37, 14, -2.5}, 2.5}});
+  ExpectOnlyOneRim(Marks(*wp));
+}
+
+// A groove along an arc of radius 20 mm made of 0.5 mm chords. Consecutive
+// chords turn by 1.43 degrees; on the inner side their cylinders meet at a
+// real but smooth-looking crease that eq. (5) must reject with the default t2.
+std::vector<Move> ArcGroove() {
+  std::vector<Move> moves;
+  const double R = 20, step = 2 * std::asin(0.25 / R);
+  Vec3 prev{20 + R * std::cos(0.5), 1 + R * std::sin(0.5), -1};
+  for (double a = 0.5 + step; a <= 2.6; a += step) {
+    const Vec3 next{20 + R * std::cos(a), 1 + R * std::sin(a), -1};
+    moves.push_back({prev, next, 3});
+    prev = next;
+  }
+  return moves;
+}
+
+TEST(CuttingMarksTest, ArcOfShortMovesHasOnlyItsRim) {
+  auto wp = Cut({0, 0, 40, 25, 0, 200, 125}, ArcGroove());
+  ExpectOnlyOneRim(Marks(*wp));
+}
+
+TEST(CuttingMarksTest, ArcFacetCreasesAppearBelowTheirAngle) {
+  // The same arc with t2 below the facets' 1.43 degrees: the creases between
+  // consecutive moves become marks, so the test above does exercise eq. (5).
+  auto wp = Cut({0, 0, 40, 25, 0, 200, 125}, ArcGroove());
+  MarkOptions o;
+  o.t2_deg = 0.5;
+  const auto marks = Marks(*wp, o);
+  int facet_vertices = 0;
+  for (const auto& p : marks) {
+    for (const auto& ow : p.vertex_owners) facet_vertices += !HasTop(ow);
+  }
+  EXPECT_GT(facet_vertices, 100);
+}
+
+TEST(CuttingMarksTest, HumpArcOfShortMovesHasOnlyItsRim) {
+  // The tool goes over a hump: an arc of radius 20 mm in the xz plane made
+  // of 0.5 mm chords. Below the path's inner side consecutive cylinders meet
+  // at 1.43 degrees.
+  std::vector<Move> moves;
+  const double R = 20, step = 2 * std::asin(0.25 / R);
+  auto at = [&](double a) {
+    return Vec3{20 + R * std::sin(a), 12, -21 + R * std::cos(a)};
+  };
+  for (double a = -0.41; a + step <= 0.41; a += step) {
+    moves.push_back({at(a), at(a + step), 3});
+  }
+  auto wp = Cut({0, 0, 40, 25, 0, 200, 125}, moves);
+  ExpectOnlyOneRim(Marks(*wp));
+}
+
+// ---------------------------------------------------------------------------
+
+TEST(CuttingMarksTest, ThreeBallsMeetAtOneJunction) {
+  // Three equal plunges around (20, 15): three creases from the circumcentre,
+  // plus three rim arcs.
+  const double cx = 20.03, cy = 15.07, rho = 6, r = 10;
+  std::vector<Move> moves;
+  for (int k = 0; k < 3; ++k) {
+    const double a = 0.3 + k * 2 * std::numbers::pi / 3;
+    const double x = cx + rho * std::cos(a), y = cy + rho * std::sin(a);
+    moves.push_back({{x, y, 5}, {x, y, -5}, r});
+  }
+  auto wp = Cut({0, 0, 40, 30, 0, 200, 150}, moves);
+  const double h = Spacing(*wp);
+  const auto marks = Marks(*wp);
+  ExpectClean(marks, /*smooth=*/true);
+  int creases = 0;
+  for (const MarkPolyline& p : marks) {
+    if (HasTop(p.owners)) continue;
+    ++creases;
+    // One end at the junction, exactly shared by the three creases.
+    const Vec3& a = p.vertices.front();
+    const Vec3& b = p.vertices.back();
+    const double da = std::hypot(a.x - cx, a.y - cy);
+    const double db = std::hypot(b.x - cx, b.y - cy);
+    EXPECT_LE(std::fmin(da, db), h / 50);
+    for (size_t k = 0; k < p.vertices.size(); ++k) {
+      EXPECT_LE(ExactCreaseDistance(*wp, p.vertex_owners[k][0],
+                                    p.vertex_owners[k][1], p.vertices[k].x,
+                                    p.vertices[k].y),
+                h / 50);
+    }
+  }
+  EXPECT_EQ(creases, 3);
+  EXPECT_EQ(marks.size(), 6u);
+}
+
+TEST(CuttingMarksTest, SeveralMarksPerElement) {
+  // Diagonal raster with stepover 1.3 grid spacings: elements hold two
+  // parallel marks (paper Fig. 3).
+  const double s = 0.5, r = 3, bottom = -0.5;
+  const double ang = 0.5236;  // ~30 degrees
+  const double ux = std::cos(ang), uy = std::sin(ang);
+  const double nxv = -uy, nyv = ux;  // pass normal
+  const int32_t mesh = 26;           // h = 10 / 26 = 0.385 = s / 1.3
+  std::vector<Move> moves;
+  std::vector<double> mids;          // offsets along the normal
+  for (int k = -40; k <= 40; ++k) {
+    const double off = (k + 0.21) * s;
+    const double px = 5 + off * nxv, py = 5 + off * nyv;
+    moves.push_back({{px - 20 * ux, py - 20 * uy, bottom},
+                     {px + 20 * ux, py + 20 * uy, bottom}, r});
+    mids.push_back(off + 0.5 * s);
+  }
+  auto wp = Cut({0, 0, 10, 10, 0, mesh, mesh}, moves);
+  const double h = Spacing(*wp);
+  const auto marks = Marks(*wp);
+  ExpectClean(marks, /*smooth=*/true);
+  ASSERT_FALSE(marks.empty());
+  // Every vertex on a mid-line; the elements around each vertex (two for an
+  // edge point) collect the polylines passing through them.
+  std::vector<std::vector<int>> through(mesh * mesh);
+  for (size_t q = 0; q < marks.size(); ++q) {
+    for (const Vec3& v : marks[q].vertices) {
+      const double off = (v.x - 5) * nxv + (v.y - 5) * nyv;
+      double best = kInf;
+      for (double m : mids) best = std::fmin(best, std::fabs(off - m));
+      EXPECT_LE(best, h / 50) << "(" << v.x << ", " << v.y << ")";
+      const double fx = v.x / h, fy = v.y / h;
+      for (int ej = static_cast<int>(std::ceil(fy - 1 - 1e-9));
+           ej <= static_cast<int>(std::floor(fy + 1e-9)); ++ej) {
+        for (int ei = static_cast<int>(std::ceil(fx - 1 - 1e-9));
+             ei <= static_cast<int>(std::floor(fx + 1e-9)); ++ei) {
+          if (ei < 0 || ej < 0 || ei >= mesh || ej >= mesh) continue;
+          auto& t = through[ej * mesh + ei];
+          if (std::find(t.begin(), t.end(), q) == t.end()) t.push_back(q);
+        }
+      }
+    }
+  }
+  int two = 0;
+  for (const auto& t : through) two += t.size() >= 2;
+  EXPECT_GT(two, 10);
+  // One polyline per mid-line crossing the stock.
+  size_t inside = 0;
+  for (double m : mids) inside += std::fabs(m) < 5 * (std::fabs(nxv) + std::fabs(nyv));
+  EXPECT_EQ(marks.size(), inside);
+}
+
+// ---------------------------------------------------------------------------
+
+TEST(CuttingMarksTest, FiveBallsGiveFourCreasesAndTheRims) {
+  auto inst = PaperInstance("five-balls", 100);
+  ASSERT_TRUE(inst.ok());
+  auto wp = Cut(inst->stock, inst->moves);
+  const double h = Spacing(*wp);
+  const auto marks = Marks(*wp);
+  ExpectClean(marks, /*smooth=*/true);
+  int creases[5] = {0, 0, 0, 0, 0};
+  int rims = 0;
+  for (const MarkPolyline& p : marks) {
+    if (HasTop(p.owners)) {
+      ++rims;
+      for (const auto& o : p.vertex_owners) EXPECT_TRUE(HasTop(o));
+      continue;
+    }
+    // Centre ball (move 0) against a corner ball k: the bisector of their
+    // centres, 20 mm long (the rims are 17.32 mm from each centre).
+    ASSERT_EQ(p.owners[0], 0);
+    const int k = p.owners[1];
+    ASSERT_GE(k, 1);
+    ASSERT_LE(k, 4);
+    ++creases[k];
+    const Move& m = inst->moves[k];
+    const double mx = 0.5 * (50 + m.from.x), my = 0.5 * (50 + m.from.y);
+    const double ux = (m.from.x - 50) / std::sqrt(800.0);
+    const double uy = (m.from.y - 50) / std::sqrt(800.0);
+    double lo = kInf, hi = -kInf;
+    for (const Vec3& v : p.vertices) {
+      EXPECT_LE(std::fabs((v.x - mx) * ux + (v.y - my) * uy), h / 50);
+      const double along = -(v.x - mx) * uy + (v.y - my) * ux;
+      lo = std::fmin(lo, along);
+      hi = std::fmax(hi, along);
+    }
+    EXPECT_GE(hi - lo, 0.98 * 20);
+  }
+  for (int k = 1; k <= 4; ++k) EXPECT_EQ(creases[k], 1) << "ball " << k;
+  // The rim of the union of the five discs, split at the 8 junctions.
+  EXPECT_EQ(rims, 8);
+  EXPECT_EQ(marks.size(), 12u);
+}
+
+TEST(CuttingMarksTest, VerticesAreCloseToTheExactCreases) {
+  for (const char* name : {"five-balls", "five-cylinders"}) {
+    auto inst = PaperInstance(name, 400);
+    ASSERT_TRUE(inst.ok());
+    auto wp = Cut(inst->stock, inst->moves);
+    const auto marks = Marks(*wp);
+    ExpectClean(marks, /*smooth=*/false);
+    const MarkAccuracy acc = MeasureMarkAccuracy(*wp, marks);
+    EXPECT_LE(acc.max_distance, Spacing(*wp) / 50)
+        << name << " at (" << acc.max_x << ", " << acc.max_y << ")";
+  }
+}
+
+// ---------------------------------------------------------------------------
+
+double ClippedLength(const std::vector<MarkPolyline>& marks, const Rect& r) {
+  double len = 0;
+  for (const MarkPolyline& p : marks) {
+    const size_t n = p.vertices.size();
+    const size_t segs = p.closed ? n : n - 1;
+    for (size_t k = 0; k < segs; ++k) {
+      const Vec3& a = p.vertices[k];
+      const Vec3& b = p.vertices[(k + 1) % n];
+      // Liang-Barsky in XY; the length in 3D.
+      double t0 = 0, t1 = 1;
+      const double dx = b.x - a.x, dy = b.y - a.y;
+      const double pp[4] = {-dx, dx, -dy, dy};
+      const double qq[4] = {a.x - r.x0, r.x1 - a.x, a.y - r.y0, r.y1 - a.y};
+      bool out = false;
+      for (int i = 0; i < 4; ++i) {
+        if (pp[i] == 0) {
+          out |= qq[i] < 0;
+        } else if (pp[i] < 0) {
+          t0 = std::fmax(t0, qq[i] / pp[i]);
+        } else {
+          t1 = std::fmin(t1, qq[i] / pp[i]);
+        }
+      }
+      if (out || t0 >= t1) continue;
+      len += (t1 - t0) * std::sqrt(dx * dx + dy * dy +
+                                   (b.z - a.z) * (b.z - a.z));
+    }
+  }
+  return len;
+}
+
+TEST(CuttingMarksTest, RegionGivesTheMarksInsideIt) {
+  auto inst = PaperInstance("five-balls", 100);
+  ASSERT_TRUE(inst.ok());
+  auto wp = Cut(inst->stock, inst->moves);
+  const auto all = Marks(*wp);
+  for (const Rect r : {Rect{35.5, 28.25, 45.2, 61.9}, Rect{0, 0, 100, 100},
+                       Rect{60, 60, 140, 75}}) {
+    MarkOptions o;
+    o.region = r;
+    const auto part = Marks(*wp, o);
+    ExpectClean(part, /*smooth=*/true);
+    ASSERT_FALSE(part.empty());
+    for (const MarkPolyline& p : part) {
+      for (const Vec3& v : p.vertices) {
+        EXPECT_TRUE(r.Contains(v.x, v.y)) << "(" << v.x << ", " << v.y << ")";
+      }
+    }
+    const double want = ClippedLength(all, r);
+    EXPECT_NEAR(Summarize(part).total_length, want, 1e-9 * want);
+  }
+}
+
+TEST(CuttingMarksTest, SameResultWhateverTheThreads) {
+  auto inst = PaperInstance("five-cylinders", 300);
+  ASSERT_TRUE(inst.ok());
+  ThreadPool one(1), four(4);
+  auto a = Cut(inst->stock, inst->moves, SchemeKind::kTaylor, &one);
+  auto b = Cut(inst->stock, inst->moves, SchemeKind::kTaylor, &four);
+  const auto ma = Marks(*a), mb = Marks(*b), mb2 = Marks(*b);
+  for (const auto* m : {&mb, &mb2}) {
+    ASSERT_EQ(ma.size(), m->size());
+    for (size_t k = 0; k < ma.size(); ++k) {
+      const MarkPolyline& p = ma[k];
+      const MarkPolyline& q = (*m)[k];
+      EXPECT_EQ(p.closed, q.closed);
+      EXPECT_EQ(p.owners, q.owners);
+      ASSERT_EQ(p.vertices.size(), q.vertices.size());
+      for (size_t i = 0; i < p.vertices.size(); ++i) {
+        EXPECT_EQ(p.vertices[i].x, q.vertices[i].x);
+        EXPECT_EQ(p.vertices[i].y, q.vertices[i].y);
+        EXPECT_EQ(p.vertices[i].z, q.vertices[i].z);
+        EXPECT_EQ(p.angle_deg[i], q.angle_deg[i]);
+      }
+    }
+  }
+}
+
+TEST(CuttingMarksTest, UntouchedStockHasNoMarks) {
+  auto wp = Cut({0, 0, 10, 10, 0, 50, 50}, {});
+  EXPECT_TRUE(Marks(*wp).empty());
+}
+
+TEST(CuttingMarksTest, ZmapIsAFailedPrecondition) {
+  auto wp = Cut({0, 0, 10, 10, 0, 50, 50}, {{{5, 5, 1}, {5, 5, -1}, 2}},
+                SchemeKind::kZmap);
+  auto marks = FindCuttingMarks(*wp);
+  EXPECT_EQ(marks.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(marks.status().message().find("taylor"), std::string::npos);
+}
+
+TEST(CuttingMarksTest, BadOptionsNameTheField) {
+  auto wp = Cut({0, 0, 10, 10, 0, 50, 50}, {{{5, 5, 1}, {5, 5, -1}, 2}});
+  const double nan = std::nan("");
+  struct Case {
+    MarkOptions o;
+    const char* field;
+  };
+  std::vector<Case> cases;
+  auto add = [&](auto edit, const char* field) {
+    MarkOptions o;
+    edit(o);
+    cases.push_back({o, field});
+  };
+  add([](MarkOptions& o) { o.t2_deg = 0; }, "t2_deg");
+  add([](MarkOptions& o) { o.t2_deg = 90; }, "t2_deg");
+  add([&](MarkOptions& o) { o.t2_deg = nan; }, "t2_deg");
+  add([](MarkOptions& o) { o.t1 = 0; }, "t1");
+  add([](MarkOptions& o) { o.screening_threshold = -1; },
+      "screening_threshold");
+  add([&](MarkOptions& o) { o.screening_threshold = nan; },
+      "screening_threshold");
+  add([&](MarkOptions& o) { o.region = Rect{nan, 0, 1, 1}; }, "region.x0");
+  add([&](MarkOptions& o) { o.region = Rect{0, 0, 1, kInf}; }, "region.y1");
+  add([](MarkOptions& o) { o.region = Rect{5, 0, 4, 1}; }, "region.x1");
+  add([](MarkOptions& o) { o.region = Rect{0, 5, 1, 4}; }, "region.y1");
+  add([](MarkOptions& o) { o.region = Rect{20, 20, 30, 30}; }, "region");
+  for (const Case& c : cases) {
+    auto marks = FindCuttingMarks(*wp, c.o);
+    EXPECT_EQ(marks.status().code(), absl::StatusCode::kInvalidArgument)
+        << c.field;
+    EXPECT_NE(marks.status().message().find(c.field), std::string::npos)
+        << marks.status().message();
+  }
+}
+
+TEST(CuttingMarksTest, EquationHelpers) {
+  // Eq. (3): a node's own patch agrees with itself; the top and a plane of
+  // slope 0.1 through one node miss by the slope times h at the other.
+  SurfaceJet plane{1, 0.1, 0, 0, 0, 0};
+  EXPECT_EQ(ScreeningMismatch(plane, 0, 0, {1.05, 0.1, 0, 0, 0, 0}, 0.5, 0),
+            0);
+  EXPECT_NEAR(ScreeningMismatch(SurfaceJet{1, 0, 0, 0, 0, 0}, 0.5, 0, plane,
+                                0, 0),
+              0.05 + 0, 1e-15);
+  EXPECT_NEAR(DefaultScreeningThreshold(0.5, 0.04), 0.005, 1e-15);
+  // Eq. (4)-(5).
+  EXPECT_EQ(PatchGap(1, 3), 2);
+  EXPECT_EQ(SlopeDifference(1, -1, 0, 1), 3);
+  // Normals of slopes +-tan(30 deg) in x differ by 60 degrees.
+  const double t = std::tan(std::numbers::pi / 6);
+  EXPECT_NEAR(NormalAngle(t, 0, -t, 0), std::numbers::pi / 3, 1e-14);
+  EXPECT_NEAR(NormalAngle(0, 0, 0, 1e-9), 1e-9, 1e-22);
+  for (double a : {0.01, 0.3, 2.0, 50.0}) {
+    EXPECT_LE(NormalAngle(a, 0.3 * a, -0.2, 0.1),
+              SlopeDifference(a, 0.3 * a, -0.2, 0.1));
+  }
+}
+
+}  // namespace
+}  // namespace swarf
