@@ -17,7 +17,9 @@ build: $(BUILD)/build.ninja
 	cmake --build $(BUILD) -j $(JOBS)
 
 demo: deps build
-	$(BUILD)/bin/swarf table
+	@mkdir -p out
+	$(BUILD)/bin/swarf table | tee out/table.txt
+	@echo "demo: the table above is also in out/table.txt"
 
 test: deps build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)

@@ -65,6 +65,9 @@ BallSweep::BallSweep(const Vec3& tip_from, const Vec3& tip_to, double radius)
   h2_ = dy / dxy;
 }
 
+// Clones for wider vectors, picked at load time; the same IEEE operations in
+// every clone (no FMA: -ffp-contract=off), so the same bits.
+__attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
 void BallSweep::RowHeights(double y, double x0, double dx, int32_t i0,
                            int32_t n, double* out) const {
   // x is computed exactly as GridGeometry::NodeX computes it.
@@ -75,33 +78,79 @@ void BallSweep::RowHeights(double y, double x0, double dx, int32_t i0,
     }
     return;
   }
-  const Vec3& c = LowestCentre();
+  const Vec3 c = LowestCentre();
+  const SweepPoint::Piece piece = LowestPiece();
 #pragma omp simd
   for (int32_t k = 0; k < n; ++k) {
-    out[k] = LocateSphere(c, x0 + (i0 + k) * dx, y).w;
+    out[k] = LocateSphere(c, piece, x0 + (i0 + k) * dx, y).w;
   }
 }
 
-SurfaceJet BallSweep::CylinderJet(const SweepPoint& p) const {
-  // Eq. (14) in the move's frame. There the cylinder is
-  // z = za + (k3 along - R) / g with R = sqrt(r^2 - n^2): its slope along
-  // the move is k3 / g, across it dz/dn = n / (g R) and d2z/dn2 =
-  // r^2 / (g R^3). With d along = h . d(x, y) and dn = (-h2, h1) . d(x, y)
-  // that gives the gradient and Hessian below. R is clamped at the rim like
-  // the spheres' depth.
-  const double n = h1_ * p.py - h2_ * p.px;
-  const double inv_r = 1 / std::max(p.depth, kRimDepthFraction * r_);
-  const double slope_along = k3_ * inv_g_;
-  const double slope_across = n * inv_r * inv_g_;
-  const double kappa = r2_ * inv_r * inv_r * inv_r * inv_g_;
-  SurfaceJet j;
-  j.w = p.w;
-  j.wx = slope_along * h1_ - slope_across * h2_;
-  j.wy = slope_along * h2_ + slope_across * h1_;
-  j.wxx = kappa * h2_ * h2_;
-  j.wxy = -kappa * h1_ * h2_;
-  j.wyy = kappa * h1_ * h1_;
-  return ClampedJet(j);
+__attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
+void BallSweep::LocateRow(double y, double x0, double dx, int32_t i0,
+                          int32_t n, RowPoints* out) const {
+  double* __restrict ow = out->w;
+  double* __restrict opx = out->px;
+  double* __restrict opy = out->py;
+  double* __restrict odepth = out->depth;
+  int32_t* __restrict opiece = out->piece;
+  if (kind_ == kGeneral) {
+#pragma omp simd
+    for (int32_t k = 0; k < n; ++k) {
+      const SweepPoint p = LocateGeneral(x0 + (i0 + k) * dx, y);
+      ow[k] = p.w;
+      opx[k] = p.px;
+      opy[k] = p.py;
+      odepth[k] = p.depth;
+      opiece[k] = p.piece;
+    }
+    return;
+  }
+  const Vec3 c = LowestCentre();
+  const SweepPoint::Piece piece = LowestPiece();
+#pragma omp simd
+  for (int32_t k = 0; k < n; ++k) {
+    const SweepPoint p = LocateSphere(c, piece, x0 + (i0 + k) * dx, y);
+    ow[k] = p.w;
+    opx[k] = p.px;
+    opy[k] = p.py;
+    odepth[k] = p.depth;
+    opiece[k] = p.piece;
+  }
+}
+
+__attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
+void BallSweep::RowJets(const RowPoints& row, const int32_t* mask, int32_t n,
+                        float* const d[5], int32_t k0) const {
+  // Contiguous over the row with masked stores: gathering only the lowered
+  // points costs more than computing the few others.
+  const double* __restrict rw = row.w;
+  const double* __restrict rpx = row.px;
+  const double* __restrict rpy = row.py;
+  const double* __restrict rdepth = row.depth;
+  const int32_t* __restrict rpiece = row.piece;
+  float* __restrict d0 = d[0] + k0;
+  float* __restrict d1 = d[1] + k0;
+  float* __restrict d2 = d[2] + k0;
+  float* __restrict d3 = d[3] + k0;
+  float* __restrict d4 = d[4] + k0;
+#pragma omp simd
+  for (int32_t k = 0; k < n; ++k) {
+    SweepPoint p;
+    p.piece = static_cast<SweepPoint::Piece>(rpiece[k]);
+    p.w = rw[k];
+    p.px = rpx[k];
+    p.py = rpy[k];
+    p.depth = rdepth[k];
+    const SurfaceJet j = Jet(p);
+    if (mask[k] != 0) {
+      d0[k] = static_cast<float>(j.wx);
+      d1[k] = static_cast<float>(j.wy);
+      d2[k] = static_cast<float>(j.wxx);
+      d3[k] = static_cast<float>(j.wxy);
+      d4[k] = static_cast<float>(j.wyy);
+    }
+  }
 }
 
 SurfaceJet BallSweep::CylinderJetEq14(const SweepPoint& p) const {

@@ -64,7 +64,8 @@ inline SurfaceJet SphereJet(double z, double dx, double dy, double depth) {
 // Where (x, y) lies on the swept surface, and the intermediate values needed
 // to differentiate there.
 struct SweepPoint {
-  enum Piece : uint8_t { kNone, kStartSphere, kEndSphere, kCylinder };
+  // 32-bit so that it vectorizes alongside doubles.
+  enum Piece : int32_t { kNone, kStartSphere, kEndSphere, kCylinder };
   Piece piece = kNone;
   double w = kInf;  // height of the swept lower surface (mm)
   double depth = 0;  // sqrt(r^2 - d^2) for spheres, sqrt(r^2 - n^2) cylinder
@@ -84,21 +85,56 @@ class BallSweep {
   // Locates (x, y) on the swept surface.
   [[gnu::always_inline]] SweepPoint Locate(double x, double y) const {
     return kind_ == kGeneral ? LocateGeneral(x, y)
-                             : LocateSphere(LowestCentre(), x, y);
+                             : LocateSphere(LowestCentre(), LowestPiece(),
+                                            x, y);
   }
 
   // out[k] = Height(x0 + (i0 + k) * dx, y) for k in [0, n): the heights of
   // one row of grid nodes, bit-identical to Height() (same operations,
-  // evaluated several nodes at a time).
+  // evaluated several nodes at a time). n <= RowPoints::kMax.
   void RowHeights(double y, double x0, double dx, int32_t i0, int32_t n,
                   double* out) const;
 
-  // Height and derivatives at a located point (piece != kNone).
-  SurfaceJet Jet(const SweepPoint& p) const {
-    if (p.piece == SweepPoint::kCylinder) return CylinderJet(p);
-    if (p.piece == SweepPoint::kNone) return SurfaceJet{kInf, 0, 0, 0, 0, 0};
-    return SphereJet(p.w, p.px, p.py,
-                     std::max(p.depth, kRimDepthFraction * r_));
+  // A row of located points, structure-of-arrays.
+  struct RowPoints {
+    static constexpr int32_t kMax = 64;
+    double w[kMax], px[kMax], py[kMax], depth[kMax];
+    int32_t piece[kMax];  // SweepPoint::Piece
+    SweepPoint At(int32_t k) const {
+      SweepPoint p;
+      p.piece = static_cast<SweepPoint::Piece>(piece[k]);
+      p.w = w[k];
+      p.depth = depth[k];
+      p.px = px[k];
+      p.py = py[k];
+      return p;
+    }
+  };
+  // As RowHeights, keeping everything Jet() needs: out->At(k) equals
+  // Locate(x0 + (i0 + k) * dx, y).
+  void LocateRow(double y, double x0, double dx, int32_t i0, int32_t n,
+                 RowPoints* out) const;
+  // For every k in [0, n) with mask[k] != 0: d[c][k0 + k] =
+  // float(component c of Jet(row.At(k))), components wx, wy, wxx, wxy, wyy.
+  void RowJets(const RowPoints& row, const int32_t* mask, int32_t n,
+               float* const d[5], int32_t k0) const;
+
+  // Height and derivatives at a located point; for kNone, +inf and zeros.
+  // Branch-free (both forms computed, one selected) so that it vectorizes.
+  [[gnu::always_inline]] SurfaceJet Jet(const SweepPoint& p) const {
+    const double depth = std::max(p.depth, kRimDepthFraction * r_);
+    const SurfaceJet cyl = CylinderJet(p.w, p.px, p.py, depth);
+    const SurfaceJet sph = SphereJet(p.w, p.px, p.py, depth);
+    const bool c = p.piece == SweepPoint::kCylinder;
+    const bool none = p.piece == SweepPoint::kNone;
+    SurfaceJet j;
+    j.w = p.w;
+    j.wx = none ? 0 : c ? cyl.wx : sph.wx;
+    j.wy = none ? 0 : c ? cyl.wy : sph.wy;
+    j.wxx = none ? 0 : c ? cyl.wxx : sph.wxx;
+    j.wxy = none ? 0 : c ? cyl.wxy : sph.wxy;
+    j.wyy = none ? 0 : c ? cyl.wyy : sph.wyy;
+    return j;
   }
 
   // Eq. (14) as the paper writes it (C1, C2, C3 and their derivatives), at a
@@ -136,14 +172,22 @@ class BallSweep {
   const Vec3& LowestCentre() const {
     return (kind_ == kVertical && b_.z < a_.z) ? b_ : a_;
   }
-  // Eq. (7) at the ball centred at c (one of a_, b_).
-  [[gnu::always_inline]] SweepPoint LocateSphere(const Vec3& c, double x,
-                                                 double y) const;
+  // Eq. (7) at the ball centred at c (a copy of a_ or b_; `piece` says
+  // which).
+  [[gnu::always_inline]] SweepPoint LocateSphere(Vec3 c,
+                                                 SweepPoint::Piece piece,
+                                                 double x, double y) const;
+  SweepPoint::Piece LowestPiece() const {
+    return (kind_ == kVertical && b_.z < a_.z) ? SweepPoint::kEndSphere
+                                               : SweepPoint::kStartSphere;
+  }
   // The general move: cylinder where its contact lies inside the move, else
   // the sphere on the contact's side. Branch-free, so that it vectorizes.
   [[gnu::always_inline]] SweepPoint LocateGeneral(double x, double y) const;
-  // The cylinder's derivatives (eq. 14) in the move's own frame.
-  SurfaceJet CylinderJet(const SweepPoint& p) const;
+  // Eq. (14) in the move's own frame, at offset (px, py) from a with the
+  // clamped root `depth` = sqrt(r^2 - n^2).
+  [[gnu::always_inline]] SurfaceJet CylinderJet(double w, double px, double py,
+                                                double depth) const;
 
   Vec3 a_, b_;  // ball centres at the start and end
   double r_, r2_;
@@ -154,8 +198,30 @@ class BallSweep {
   double h1_, h2_;         // unit XY direction of the move
 };
 
-inline SweepPoint BallSweep::LocateSphere(const Vec3& c, double x,
-                                          double y) const {
+inline SurfaceJet BallSweep::CylinderJet(double w, double px, double py,
+                                         double depth) const {
+  // In the move's frame the cylinder is z = za + (k3 along - R) / g with
+  // R = sqrt(r^2 - n^2): its slope along the move is k3 / g, across it
+  // dz/dn = n / (g R) and d2z/dn2 = r^2 / (g R^3). With d along =
+  // h . d(x, y) and dn = (-h2, h1) . d(x, y) that gives the gradient and
+  // Hessian below: the same values as eq. (14), for a third of the work.
+  const double n = h1_ * py - h2_ * px;
+  const double inv_r = 1 / depth;
+  const double slope_along = k3_ * inv_g_;
+  const double slope_across = n * inv_r * inv_g_;
+  const double kappa = r2_ * inv_r * inv_r * inv_r * inv_g_;
+  SurfaceJet j;
+  j.w = w;
+  j.wx = slope_along * h1_ - slope_across * h2_;
+  j.wy = slope_along * h2_ + slope_across * h1_;
+  j.wxx = kappa * h2_ * h2_;
+  j.wxy = -kappa * h1_ * h2_;
+  j.wyy = kappa * h1_ * h1_;
+  return ClampedJet(j);
+}
+
+inline SweepPoint BallSweep::LocateSphere(Vec3 c, SweepPoint::Piece piece,
+                                          double x, double y) const {
   SweepPoint p;
   p.px = x - c.x;
   p.py = y - c.y;
@@ -164,8 +230,6 @@ inline SweepPoint BallSweep::LocateSphere(const Vec3& c, double x,
   p.depth = std::sqrt(std::max(d2, 0.0));
   const double w = c.z - p.depth;
   p.w = hit ? w : kInf;
-  const SweepPoint::Piece piece =
-      (&c == &a_) ? SweepPoint::kStartSphere : SweepPoint::kEndSphere;
   p.piece = hit ? piece : SweepPoint::kNone;
   return p;
 }

@@ -9,14 +9,14 @@
 namespace swarf {
 
 double BilinearHeight(const ElementCorners& e, double x, double y) {
-  // Eq. (16) in the paper's local coordinates xi, eta in [-1, 1].
-  const double xc = 0.5 * (e.x0 + e.x1), yc = 0.5 * (e.y0 + e.y1);
-  const double a = 0.5 * (e.x1 - e.x0), b = 0.5 * (e.y1 - e.y0);
-  const double xi = (x - xc) / a, eta = (y - yc) / b;
-  return 0.25 * ((1 - xi) * (1 - eta) * e.c[0].w +
-                 (1 + xi) * (1 - eta) * e.c[1].w +
-                 (1 + xi) * (1 + eta) * e.c[2].w +
-                 (1 - xi) * (1 + eta) * e.c[3].w);
+  // Eq. (16). With s = (1 + xi) / 2 and t = (1 + eta) / 2 in [0, 1] its four
+  // shape functions are the nested linear interpolation below: the same
+  // polynomial, but std::lerp is exact at s, t = 0 and 1 and for equal ends,
+  // so corners and flat (untouched) elements reconstruct exactly.
+  const double s = (x - e.x0) / (e.x1 - e.x0);
+  const double t = (y - e.y0) / (e.y1 - e.y0);
+  return std::lerp(std::lerp(e.c[0].w, e.c[1].w, s),
+                   std::lerp(e.c[3].w, e.c[2].w, s), t);
 }
 
 double MinOfPatches(const ElementCorners& e, double x, double y) {

@@ -10,24 +10,25 @@
 
 namespace swarf {
 
-// Nodal parameters of one tile, structure-of-arrays, row-major (j, i). w and
-// owner are initialised to the stock top; the derivatives (taylor only) are
-// written only where a node is cut and read only where owner >= 0. They live
-// in a second block: together they would be exactly 128 KiB, glibc's mmap
-// threshold, and every tile would then be a fresh mapping that page-faults
-// on each use instead of reusing heap memory.
+// Nodal parameters of one tile, structure-of-arrays, row-major (j, i), in
+// one arena block. w and owner are initialised to the stock top; the
+// derivatives (taylor only) are written only where a node is cut and read
+// only where owner >= 0, so the pages of uncut nodes are never touched.
 struct Workpiece::Tile {
-  explicit Tile(bool derivatives)
-      : heights(new std::byte[kTileNodes * (sizeof(double) + sizeof(int32_t))]),
-        w(reinterpret_cast<double*>(heights.get())),
+  Tile(TileArena* arena, bool derivatives)
+      : arena(arena),
+        w(static_cast<double*>(arena->Allocate())),
         owner(reinterpret_cast<int32_t*>(w + kTileNodes)) {
     if (derivatives) {
-      derivs.reset(new float[5 * kTileNodes]);
-      for (int k = 0; k < 5; ++k) d[k] = derivs.get() + k * kTileNodes;
+      float* base = reinterpret_cast<float*>(owner + kTileNodes);
+      for (int k = 0; k < 5; ++k) d[k] = base + k * kTileNodes;
     }
   }
-  std::unique_ptr<std::byte[]> heights;
-  std::unique_ptr<float[]> derivs;
+  ~Tile() { arena->Free(w); }
+  Tile(const Tile&) = delete;
+  Tile& operator=(const Tile&) = delete;
+
+  TileArena* arena;
   double* w;
   int32_t* owner;
   float* d[5] = {};  // wx, wy, wxx, wxy, wyy; null for zmap
@@ -58,9 +59,13 @@ Workpiece::Workpiece(const StockSpec& spec, const Scheme& scheme,
       tiles_y_((grid_.nodes_y() + kTileSize - 1) / kTileSize),
       tiles_(static_cast<size_t>(tiles_x_) * tiles_y_),
       tile_version_(tiles_.size(), 0),
+      arena_(std::make_unique<TileArena>(size_t{kTileNodes} *
+                                         scheme.bytes_per_node())),
       index_(grid_) {}
 
-Workpiece::~Workpiece() = default;
+Workpiece::~Workpiece() {
+  tiles_.clear();  // blocks go back to the arena before it goes
+}
 
 absl::StatusOr<std::unique_ptr<Workpiece>> Workpiece::Create(
     const StockSpec& spec, SchemeKind scheme, ThreadPool* pool) {
@@ -84,17 +89,24 @@ absl::Status Workpiece::ValidateMoves(std::span<const Move> moves) {
         return absl::InvalidArgumentError(absl::StrCat(
             "moves[", k, "].", f.name, " must be finite, got ", f.v));
       }
+      if (std::fabs(f.v) > kMaxCoordinate) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("moves[", k, "].", f.name, " must be within +-",
+                         kMaxCoordinate, " mm, got ", f.v));
+      }
     }
-    if (!(m.radius > 0)) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "moves[", k, "].radius must be positive, got ", m.radius));
+    if (!(m.radius >= kMinRadius && m.radius <= kMaxRadius)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("moves[", k, "].radius must be in [", kMinRadius, ", ",
+                       kMaxRadius, "] mm, got ", m.radius));
     }
   }
   return absl::OkStatus();
 }
 
 std::unique_ptr<Workpiece::Tile> Workpiece::NewTile() const {
-  auto tile = std::make_unique<Tile>(scheme_->stores_derivatives());
+  auto tile = std::make_unique<Tile>(arena_.get(),
+                                     scheme_->stores_derivatives());
   std::fill_n(tile->w, kTileNodes, spec().z_top);
   std::fill_n(tile->owner, kTileNodes, -1);
   tile->zmax = spec().z_top;
@@ -114,16 +126,13 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   const double dx = grid_.dx(), dy = grid_.dy();
   // Restrict-qualified, and the sweep copied to a local below: otherwise
   // every store to w[] could alias the sweep's and the grid's doubles, and
-  // the compiler would reload them all after each lowered node.
+  // the compiler would reload them after each lowered node.
   double* __restrict const w = tile->w;
   int32_t* __restrict const owner = tile->owner;
-  float* __restrict const d0 = tile->d[0];
-  float* __restrict const d1 = tile->d[1];
-  float* __restrict const d2 = tile->d[2];
-  float* __restrict const d3 = tile->d[3];
-  float* __restrict const d4 = tile->d[4];
   int64_t lowered = 0;
-  double h[kTileSize];  // one row span's sweep heights
+  BallSweep::RowPoints row;         // one row span of the sweep
+  int32_t lowered_mask[kTileSize];  // which positions of `row` were lowered
+  static_assert(BallSweep::RowPoints::kMax >= kTileSize);
 
   for (uint32_t m : batch_moves) {
     const BallSweep sweep = sweeps[m];
@@ -142,28 +151,31 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       auto [i_lo, i_hi] = NodeRange(span.lo, span.hi, x0, dx, i_max);
       i_lo = std::max(i_lo, i_base);
       if (i_lo > i_hi) continue;
-      // Phase 1, vectorized: the sweep's heights along the row span.
+      // Phase 1, vectorized: the sweep along the row span.
       const int32_t n = i_hi - i_lo + 1;
-      sweep.RowHeights(y, x0, dx, i_lo, n, h);
-      // Phase 2: lower the nodes; derivatives only for those.
+      if constexpr (kDerivatives) {
+        sweep.LocateRow(y, x0, dx, i_lo, n, &row);
+      } else {
+        sweep.RowHeights(y, x0, dx, i_lo, n, row.w);
+      }
+      // Phase 2: lower the nodes, noting which.
+      const double* h = row.w;
       const int32_t k0 = (j - j_base) * kTileSize + (i_lo - i_base);
+      int32_t m = 0;
       for (int32_t q = 0; q < n; ++q) {
         const int32_t k = k0 + q;
-        if (h[q] < w[k] || (h[q] == w[k] && id < owner[k])) {
+        const bool lower = h[q] < w[k] || (h[q] == w[k] && id < owner[k]);
+        if (lower) {
           w[k] = h[q];
           owner[k] = id;
-          ++lowered;
-          if constexpr (kDerivatives) {
-            // Same operations as RowHeights, so the same point and height.
-            const SurfaceJet jet =
-                sweep.Jet(sweep.Locate(x0 + (i_lo + q) * dx, y));
-            d0[k] = static_cast<float>(jet.wx);
-            d1[k] = static_cast<float>(jet.wy);
-            d2[k] = static_cast<float>(jet.wxx);
-            d3[k] = static_cast<float>(jet.wxy);
-            d4[k] = static_cast<float>(jet.wyy);
-          }
         }
+        lowered_mask[q] = lower;
+        m += lower;
+      }
+      lowered += m;
+      // Phase 3, vectorized: derivatives, stored for the lowered nodes only.
+      if constexpr (kDerivatives) {
+        if (m > 0) sweep.RowJets(row, lowered_mask, n, tile->d, k0);
       }
     }
   }
@@ -202,12 +214,14 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
     const BallSweep::Capsule cap = sweeps.back().Footprint(z_top);
     if (cap.empty) continue;
     const Rect b = cap.Bounds();
+    if (!b.Intersects(grid_.bounds())) continue;  // misses the stock
+    // Indexed even when it cuts no node: the exact surface still sees it.
+    index_.Add(static_cast<uint32_t>(result.first_move_id + m), cap);
     const auto [i_lo, i_hi] =
         NodeRange(b.x0, b.x1, spec().x0, grid_.dx(), grid_.nx());
     const auto [j_lo, j_hi] =
         NodeRange(b.y0, b.y1, spec().y0, grid_.dy(), grid_.ny());
-    if (i_lo > i_hi || j_lo > j_hi) continue;  // misses the stock
-    index_.Add(static_cast<uint32_t>(result.first_move_id + m), cap);
+    if (i_lo > i_hi || j_lo > j_hi) continue;  // between nodes
     for (int32_t tj = j_lo >> kTileBits; tj <= j_hi >> kTileBits; ++tj) {
       for (int32_t ti = i_lo >> kTileBits; ti <= i_hi >> kTileBits; ++ti) {
         pairs.emplace_back(tj * tiles_x_ + ti, static_cast<uint32_t>(m));

@@ -28,6 +28,7 @@
 #include "core/scheme.h"
 #include "core/stock.h"
 #include "core/thread_pool.h"
+#include "core/tile_arena.h"
 
 namespace swarf {
 
@@ -40,6 +41,12 @@ struct Move {
   Vec3 from, to;
   double radius = 0;
 };
+
+// Physical bounds on moves (mm). They keep every intermediate value of the
+// sweep finite (squares of coordinates, 1 / (1e-4 r)^3 at a rim).
+inline constexpr double kMinRadius = 1e-4;
+inline constexpr double kMaxRadius = 1e5;
+inline constexpr double kMaxCoordinate = 1e9;
 
 // Moves per workpiece are numbered from 0; ids are stored in int32.
 inline constexpr int64_t kMaxMoves = (int64_t{1} << 31) - 1;
@@ -64,8 +71,9 @@ class Workpiece {
   static absl::StatusOr<std::unique_ptr<Workpiece>> Create(
       const StockSpec& spec, SchemeKind scheme, ThreadPool* pool = nullptr);
 
-  // InvalidArgument naming the move index and field for non-finite
-  // coordinates or a radius that is not positive and finite.
+  // InvalidArgument naming the move index and field for a coordinate that
+  // is not finite or beyond kMaxCoordinate, or a radius outside
+  // [kMinRadius, kMaxRadius].
   static absl::Status ValidateMoves(std::span<const Move> moves);
 
   // Applies a batch whole, or nothing on error. Move ids continue from the
@@ -123,6 +131,7 @@ class Workpiece {
   int32_t tiles_x_, tiles_y_;
   std::vector<std::unique_ptr<Tile>> tiles_;
   std::vector<uint64_t> tile_version_;
+  std::unique_ptr<TileArena> arena_;
   uint64_t version_ = 0;
   std::vector<Move> moves_;
   MoveIndex index_;
