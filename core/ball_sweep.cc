@@ -16,13 +16,14 @@ constexpr double kVerticalFraction = 1e-12;
 // evaluated, whatever the cap, which keeps results independent of batching.
 constexpr double kFootprintMargin = 1e-9;
 
-// Restricts `iv` to the x where lo <= a x + b <= hi.
-void ClipLinear(double a, double b, double lo, double hi, Interval* iv) {
+// Restricts `iv` to the x where lo <= a x + b <= hi; inv_a = 1 / a.
+void ClipLinear(double a, double inv_a, double b, double lo, double hi,
+                Interval* iv) {
   if (a == 0) {
     if (b < lo || b > hi) *iv = Interval{};
     return;
   }
-  double x_lo = (lo - b) / a, x_hi = (hi - b) / a;
+  double x_lo = (lo - b) * inv_a, x_hi = (hi - b) * inv_a;
   if (a < 0) std::swap(x_lo, x_hi);
   iv->Intersect(x_lo, x_hi);
 }
@@ -211,6 +212,8 @@ BallSweep::Capsule BallSweep::Footprint(double cap) const {
   if (c.length > 0) {
     c.ux = (c.x1 - c.x0) / c.length;
     c.uy = (c.y1 - c.y0) / c.length;
+    c.inv_ux = c.ux != 0 ? 1 / c.ux : 0;
+    c.inv_uy = c.uy != 0 ? 1 / c.uy : 0;
   }
   return c;
 }
@@ -230,8 +233,9 @@ Interval BallSweep::Capsule::RowSpan(double y) const {
   if (length > 0) {
     Interval strip{-kInf, kInf};
     // 0 <= (p - p0) . u <= length  and  |(p - p0) . (-uy, ux)| <= radius.
-    ClipLinear(ux, (y - y0) * uy - x0 * ux, 0, length, &strip);
-    ClipLinear(-uy, x0 * uy + (y - y0) * ux, -radius, radius, &strip);
+    ClipLinear(ux, inv_ux, (y - y0) * uy - x0 * ux, 0, length, &strip);
+    ClipLinear(-uy, -inv_uy, x0 * uy + (y - y0) * ux, -radius, radius,
+               &strip);
     out.Hull(strip);
   }
   return out;

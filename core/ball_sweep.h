@@ -48,6 +48,7 @@ inline SurfaceJet ClampedJet(const SurfaceJet& j) {
 
 // Eq. (8)-(9): derivatives of the lower hemisphere at offset (dx, dy) from the
 // centre, where `depth` = zc - z = sqrt(r^2 - dx^2 - dy^2) (already clamped).
+// Unbounded: BallSweep::Jet bounds the values it returns.
 inline SurfaceJet SphereJet(double z, double dx, double dy, double depth) {
   // With z - zc = -depth: zx = dx / depth, zxx = (1 + zx^2) / depth, ...
   const double inv = 1 / depth;
@@ -58,7 +59,7 @@ inline SurfaceJet SphereJet(double z, double dx, double dy, double depth) {
   j.wxx = (1 + j.wx * j.wx) * inv;
   j.wxy = (j.wx * j.wy) * inv;
   j.wyy = (1 + j.wy * j.wy) * inv;
-  return ClampedJet(j);
+  return j;
 }
 
 // Where (x, y) lies on the swept surface, and the intermediate values needed
@@ -134,7 +135,7 @@ class BallSweep {
     j.wxx = none ? 0 : c ? cyl.wxx : sph.wxx;
     j.wxy = none ? 0 : c ? cyl.wxy : sph.wxy;
     j.wyy = none ? 0 : c ? cyl.wyy : sph.wyy;
-    return j;
+    return ClampedJet(j);
   }
 
   // Eq. (14) as the paper writes it (C1, C2, C3 and their derivatives), at a
@@ -156,6 +157,7 @@ class BallSweep {
     double x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // segment ends (ball centres, XY)
     double radius = 0;
     double ux = 0, uy = 0, length = 0;  // unit XY direction and length
+    double inv_ux = 0, inv_uy = 0;      // 1 / ux, 1 / uy (0 where those are)
     Rect Bounds() const {
       return {std::min(x0, x1) - radius, std::min(y0, y1) - radius,
               std::max(x0, x1) + radius, std::max(y0, y1) + radius};
@@ -217,7 +219,7 @@ inline SurfaceJet BallSweep::CylinderJet(double w, double px, double py,
   j.wxx = kappa * h2_ * h2_;
   j.wxy = -kappa * h1_ * h2_;
   j.wyy = kappa * h1_ * h1_;
-  return ClampedJet(j);
+  return j;  // unbounded, like SphereJet
 }
 
 inline SweepPoint BallSweep::LocateSphere(Vec3 c, SweepPoint::Piece piece,

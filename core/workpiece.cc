@@ -37,12 +37,13 @@ struct Workpiece::Tile {
 
 namespace {
 
-// Node index range [lo, hi] within [0, max] of the nodes origin + k*step that
-// lie in [a, b]; lo > hi if none.
+// Node index range [lo, hi] within [0, max] of the nodes origin + k * step
+// that lie in [a, b] (inv_step = 1 / step; the ranges only need to be
+// conservative, footprints carry a margin); lo > hi if none.
 std::pair<int32_t, int32_t> NodeRange(double a, double b, double origin,
-                                      double step, int32_t max) {
-  const double lo = std::ceil((a - origin) / step);
-  const double hi = std::floor((b - origin) / step);
+                                      double inv_step, int32_t max) {
+  const double lo = std::ceil((a - origin) * inv_step);
+  const double hi = std::floor((b - origin) * inv_step);
   if (!(hi >= 0) || !(lo <= max) || !(lo <= hi)) return {1, 0};
   return {static_cast<int32_t>(std::max(lo, 0.0)),
           static_cast<int32_t>(std::min(hi, static_cast<double>(max)))};
@@ -124,6 +125,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   const int32_t j_max = std::min(j_base + kTileSize - 1, grid_.ny());
   const double x0 = spec().x0, y0 = spec().y0;
   const double dx = grid_.dx(), dy = grid_.dy();
+  const double inv_dx = 1 / dx, inv_dy = 1 / dy;
   // Restrict-qualified, and the sweep copied to a local below: otherwise
   // every store to w[] could alias the sweep's and the grid's doubles, and
   // the compiler would reload them after each lowered node.
@@ -142,13 +144,13 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     if (cap.empty) continue;
     const int32_t id = static_cast<int32_t>(first_id + m);
     const Rect b = cap.Bounds();
-    auto [j_lo, j_hi] = NodeRange(b.y0, b.y1, y0, dy, j_max);
+    auto [j_lo, j_hi] = NodeRange(b.y0, b.y1, y0, inv_dy, j_max);
     j_lo = std::max(j_lo, j_base);
     for (int32_t j = j_lo; j <= j_hi; ++j) {
       const double y = y0 + j * dy;  // as GridGeometry::NodeY
       const Interval span = cap.RowSpan(y);
       if (span.empty()) continue;
-      auto [i_lo, i_hi] = NodeRange(span.lo, span.hi, x0, dx, i_max);
+      auto [i_lo, i_hi] = NodeRange(span.lo, span.hi, x0, inv_dx, i_max);
       i_lo = std::max(i_lo, i_base);
       if (i_lo > i_hi) continue;
       // Phase 1, vectorized: the sweep along the row span.
@@ -218,9 +220,9 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
     // Indexed even when it cuts no node: the exact surface still sees it.
     index_.Add(static_cast<uint32_t>(result.first_move_id + m), cap);
     const auto [i_lo, i_hi] =
-        NodeRange(b.x0, b.x1, spec().x0, grid_.dx(), grid_.nx());
+        NodeRange(b.x0, b.x1, spec().x0, 1 / grid_.dx(), grid_.nx());
     const auto [j_lo, j_hi] =
-        NodeRange(b.y0, b.y1, spec().y0, grid_.dy(), grid_.ny());
+        NodeRange(b.y0, b.y1, spec().y0, 1 / grid_.dy(), grid_.ny());
     if (i_lo > i_hi || j_lo > j_hi) continue;  // between nodes
     for (int32_t tj = j_lo >> kTileBits; tj <= j_hi >> kTileBits; ++tj) {
       for (int32_t ti = i_lo >> kTileBits; ti <= i_hi >> kTileBits; ++ti) {
