@@ -174,7 +174,10 @@ int MarksCommand(const std::vector<std::string>& argv) {
   const auto t1 = std::chrono::steady_clock::now();
   if (!marks.ok()) {
     if (marks.status().code() == absl::StatusCode::kInvalidArgument) {
-      return fail(marks.status());
+      // The other options are checked above; what is left is the region.
+      std::cerr << "swarf marks: --region: " << marks.status().message()
+                << "\n";
+      return 2;
     }
     std::cerr << "swarf marks: " << marks.status().message() << "\n";
     return 1;

@@ -337,7 +337,7 @@ class ElementResolver {
                   uint64_t element_index, std::vector<Segment>* out)
       : m_(model),
         s_(s),
-        key_base_(kInteriorKey | (element_index << 12)),
+        key_base_(kInteriorKey | (element_index << 16)),
         out_(out) {}
 
   void Resolve(const Cell& cell, std::vector<BoundaryCrossing> x, int depth) {
@@ -380,6 +380,7 @@ class ElementResolver {
           Emit(x[3].end, x[0].end);
           return;
         }
+        if (TwoJunctions(cell, x)) return;
       }
     }
     if (depth < kMaxDepth && consistent) {
@@ -409,30 +410,32 @@ class ElementResolver {
     return e;
   }
 
-  // Three surfaces meet: Newton's method on S_a - S_b = S_b - S_c = 0 over
-  // the element's patches (the active piece of each group may change between
-  // steps); the crossings' centroid if it does not converge near the cell.
-  void Junction(const Cell& cell, const std::vector<BoundaryCrossing>& x) {
-    const int g[3] = {x[0].right, x[1].right, x[2].right};
-    double px = (x[0].end.x + x[1].end.x + x[2].end.x) / 3;
-    double py = (x[0].end.y + x[1].end.y + x[2].end.y) / 3;
+  // Where groups g[0..2] meet: Newton's method on S_a - S_b = S_b - S_c = 0
+  // over the element's patches (the active piece of each group may change
+  // between steps), from (x, y). False if it does not converge within
+  // kJunctionMargin cells of `cell`: the boundary crossings come from the
+  // edge nodes' patches and the junction from all four, so a third surface
+  // seen by this element only may put the junction just across an edge.
+  bool SolveJunction(const int g[3], const Cell& cell, double* x,
+                     double* y) const {
     const double size = std::fmax(cell.x1 - cell.x0, cell.y1 - cell.y0);
+    double qx = *x, qy = *y;
     bool ok = false;
-    double qx = px, qy = py;
     for (int it = 0; it < 50; ++it) {
       const GroupValue a = m_.Group(g[0], qx, qy), b = m_.Group(g[1], qx, qy),
                        c = m_.Group(g[2], qx, qy);
-      const double f1 = a.w - b.w, f2 = b.w - c.w;
+      // Eq. (4) with t1 for each pair.
       if (PatchGap(a.w, b.w) <= s_.t1 && PatchGap(b.w, c.w) <= s_.t1) {
         ok = true;
         break;
       }
+      const double f1 = a.w - b.w, f2 = b.w - c.w;
       const double j11 = a.gx - b.gx, j12 = a.gy - b.gy;
       const double j21 = b.gx - c.gx, j22 = b.gy - c.gy;
       const double det = j11 * j22 - j12 * j21;
       const double scale = (std::fabs(j11) + std::fabs(j12)) *
                            (std::fabs(j21) + std::fabs(j22));
-      if (!(std::fabs(det) > 1e-12 * scale)) break;
+      if (!(std::fabs(det) > 1e-12 * scale)) break;  // parallel creases
       double dx = -(j22 * f1 - j12 * f2) / det;
       double dy = -(-j21 * f1 + j11 * f2) / det;
       const double len = std::hypot(dx, dy);
@@ -443,16 +446,30 @@ class ElementResolver {
       qx += dx;
       qy += dy;
       if (std::hypot(dx, dy) <= 1e-14 * size) {
-        ok = PatchGap(a.w, b.w) <= 1e3 * s_.t1 && PatchGap(b.w, c.w) <= 1e3 * s_.t1;
+        // Converged in position; heights as close as rounding allows.
+        ok = PatchGap(a.w, b.w) <= 1e3 * s_.t1 &&
+             PatchGap(b.w, c.w) <= 1e3 * s_.t1;
         break;
       }
     }
-    // Within half a cell of it: the boundary crossings come from the edge
-    // nodes' patches and the junction from all four; a third surface seen by
-    // this element only may put the junction just across an edge.
     const double margin = kJunctionMargin * size;
-    if (ok && qx >= cell.x0 - margin && qx <= cell.x1 + margin &&
-        qy >= cell.y0 - margin && qy <= cell.y1 + margin) {
+    if (!ok || !(qx >= cell.x0 - margin && qx <= cell.x1 + margin &&
+                 qy >= cell.y0 - margin && qy <= cell.y1 + margin)) {
+      return false;
+    }
+    *x = qx;
+    *y = qy;
+    return true;
+  }
+
+  // Three crossings: the three creases meet at a junction; at the crossings'
+  // centroid if Newton's method fails.
+  void Junction(const Cell& cell, const std::vector<BoundaryCrossing>& x) {
+    const int g[3] = {x[0].right, x[1].right, x[2].right};
+    double px = (x[0].end.x + x[1].end.x + x[2].end.x) / 3;
+    double py = (x[0].end.y + x[1].end.y + x[2].end.y) / 3;
+    double qx = px, qy = py;
+    if (SolveJunction(g, cell, &qx, &qy)) {
       px = qx;
       py = qy;
     }
@@ -460,6 +477,59 @@ class ElementResolver {
     for (const auto& c : x) {
       Emit(c.end, InteriorEnd(key, px, py, c.left, c.right));
     }
+  }
+
+  // Four crossings between which two opposite arcs' groups meet inside the
+  // cell (paper Fig. 3): two junctions joined by a short crease. Arc k (group
+  // g[k]) runs from crossing k to k+1. If groups g[t] and g[t+2] meet, one
+  // junction joins crossings t+1 and t+2 and the other t+3 and t. Tries both
+  // t and keeps the one whose junctions have the fourth group above them;
+  // false if neither converges.
+  bool TwoJunctions(const Cell& cell, const std::vector<BoundaryCrossing>& x) {
+    const int g[4] = {x[0].right, x[1].right, x[2].right, x[3].right};
+    int best_t = -1;
+    double best_margin = -kInf, jx[2][2] = {}, jy[2][2] = {};
+    for (int t = 0; t < 2; ++t) {
+      if (g[t] == g[t + 2]) continue;  // a simple pair of creases instead
+      const int ga[3] = {g[t], g[t + 1], g[t + 2]};
+      const int gb[3] = {g[t + 2], g[(t + 3) % 4], g[t]};
+      const BoundaryCrossing& a1 = x[t + 1];
+      const BoundaryCrossing& a2 = x[(t + 2) % 4];
+      const BoundaryCrossing& b1 = x[(t + 3) % 4];
+      const BoundaryCrossing& b2 = x[t];
+      double ax = 0.5 * (a1.end.x + a2.end.x), ay = 0.5 * (a1.end.y + a2.end.y);
+      double bx = 0.5 * (b1.end.x + b2.end.x), by = 0.5 * (b1.end.y + b2.end.y);
+      if (!SolveJunction(ga, cell, &ax, &ay) ||
+          !SolveJunction(gb, cell, &bx, &by)) {
+        continue;
+      }
+      // The group left out of each junction must lie above it.
+      const double margin =
+          std::fmin(m_.Group(g[(t + 3) % 4], ax, ay).w -
+                        m_.Group(g[t], ax, ay).w,
+                    m_.Group(g[t + 1], bx, by).w - m_.Group(g[t], bx, by).w);
+      if (margin > best_margin) {
+        best_margin = margin;
+        best_t = t;
+        jx[t][0] = ax;
+        jy[t][0] = ay;
+        jx[t][1] = bx;
+        jy[t][1] = by;
+      }
+    }
+    if (best_t < 0 || best_margin < -1e3 * s_.t1) return false;
+    const int t = best_t;
+    const uint64_t ka = NewKey(), kb = NewKey();
+    const double ax = jx[t][0], ay = jy[t][0], bx = jx[t][1], by = jy[t][1];
+    for (int k : {t + 1, (t + 2) % 4}) {
+      Emit(x[k].end, InteriorEnd(ka, ax, ay, x[k].left, x[k].right));
+    }
+    for (int k : {(t + 3) % 4, t}) {
+      Emit(x[k].end, InteriorEnd(kb, bx, by, x[k].left, x[k].right));
+    }
+    Emit(InteriorEnd(ka, ax, ay, g[t], g[t + 2]),
+         InteriorEnd(kb, bx, by, g[t], g[t + 2]));
+    return true;
   }
 
   // Last resort: every crossing to the crossings' centroid.
@@ -778,6 +848,11 @@ bool ClipSegment(const Rect& r, uint64_t index, Segment* seg) {
   };
   if (t0 > 0) a = at(t0, b0, kClipKey | (2 * index));
   if (t1 < 1) b = at(t1, a0, kClipKey | (2 * index + 1));
+  // Rounding in the interpolation must not leave the rectangle.
+  for (End* e : {&a, &b}) {
+    e->x = std::clamp(e->x, r.x0, r.x1);
+    e->y = std::clamp(e->y, r.y0, r.y1);
+  }
   return true;
 }
 
@@ -1169,7 +1244,7 @@ MarkAccuracy MeasureMarkAccuracy(const Workpiece& wp,
       const double d = ExactCreaseDistance(wp, p.vertex_owners[k][0],
                                            p.vertex_owners[k][1], v.x, v.y);
       ++acc.vertices;
-      if (!(d <= acc.max_distance)) {
+      if (acc.vertices == 1 || !(d <= acc.max_distance)) {
         acc.max_distance = d;
         acc.max_x = v.x;
         acc.max_y = v.y;

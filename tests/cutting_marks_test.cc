@@ -5,6 +5,9 @@
 #include <cmath>
 #include <memory>
 #include <numbers>
+#include <ostream>
+#include <random>
+#include <string>
 #include <vector>
 
 #include "core/instances.h"
@@ -136,6 +139,11 @@ struct RasterCase {
   double piece;      // length of the moves making a pass (0: one move)
 };
 
+void PrintTo(const RasterCase& c, std::ostream* os) {
+  *os << "s=" << c.s << " r=" << c.r << " mesh " << c.nx << "x" << c.ny
+      << " moves of " << c.piece;
+}
+
 class RasterTest : public ::testing::TestWithParam<RasterCase> {};
 
 // Parallel horizontal passes at depth 0.5 on a flat stock: the marks are the
@@ -220,7 +228,15 @@ INSTANTIATE_TEST_SUITE_P(
                       // Passes made of many short collinear moves: the owners
                       // on each side change along every mark.
                       RasterCase{0.5, 2, 97, 93, 0.137},
-                      RasterCase{0.1, 3, 97, 93, 0.0291}));
+                      RasterCase{0.1, 3, 97, 93, 0.0291}),
+    [](const ::testing::TestParamInfo<RasterCase>& info) {
+      const RasterCase& c = info.param;
+      std::string name = "s" + std::to_string(static_cast<int>(c.s * 1000)) +
+                         "um_r" + std::to_string(static_cast<int>(c.r)) +
+                         "mm_mesh" + std::to_string(c.nx);
+      if (c.piece > 0) name += "_short_moves";
+      return name;
+    });
 
 // ---------------------------------------------------------------------------
 
@@ -349,6 +365,59 @@ TEST(CuttingMarksTest, ThreeBallsMeetAtOneJunction) {
   EXPECT_EQ(marks.size(), 6u);
 }
 
+// The centre of the circle through three points.
+void Circumcentre(const double p[2], const double q[2], const double r[2],
+                  double* x, double* y) {
+  const double d = 2 * (p[0] * (q[1] - r[1]) + q[0] * (r[1] - p[1]) +
+                        r[0] * (p[1] - q[1]));
+  const double p2 = p[0] * p[0] + p[1] * p[1];
+  const double q2 = q[0] * q[0] + q[1] * q[1];
+  const double r2 = r[0] * r[0] + r[1] * r[1];
+  *x = (p2 * (q[1] - r[1]) + q2 * (r[1] - p[1]) + r2 * (p[1] - q[1])) / d;
+  *y = (p2 * (r[0] - q[0]) + q2 * (p[0] - r[0]) + r2 * (q[0] - p[0])) / d;
+}
+
+TEST(CuttingMarksTest, FourBallsMeetAtTwoJunctionsInOneElement) {
+  // Four plunges at the corners of a slightly distorted square: two triple
+  // junctions 0.01 mm apart, joined by a crease between balls 1 and 3, all
+  // inside one element (paper Fig. 3).
+  const double c[4][2] = {{17, 12}, {23.3, 12}, {23, 18.3}, {17, 18}};
+  std::vector<Move> moves;
+  for (const auto& p : c) moves.push_back({{p[0], p[1], 5}, {p[0], p[1], -5}, 10});
+  auto wp = Cut({0, 0, 40, 30, 0, 200, 150}, moves);
+  const double h = Spacing(*wp);
+  const auto marks = Marks(*wp);
+  ExpectClean(marks, /*smooth=*/true);
+  double jx[2], jy[2];
+  Circumcentre(c[0], c[1], c[3], &jx[0], &jy[0]);
+  Circumcentre(c[1], c[2], c[3], &jx[1], &jy[1]);
+  int creases = 0, short_ones = 0;
+  for (const MarkPolyline& p : marks) {
+    for (size_t k = 0; k < p.vertices.size(); ++k) {
+      EXPECT_LE(ExactCreaseDistance(*wp, p.vertex_owners[k][0],
+                                    p.vertex_owners[k][1], p.vertices[k].x,
+                                    p.vertices[k].y),
+                h / 50);
+    }
+    if (HasTop(p.owners)) continue;
+    ++creases;
+    if (p.owners == std::array<int32_t, 2>{1, 3}) {
+      ++short_ones;
+      // From one junction to the other.
+      const Vec3& a = p.vertices.front();
+      const Vec3& b = p.vertices.back();
+      const bool fwd = std::hypot(a.x - jx[0], a.y - jy[0]) <
+                       std::hypot(a.x - jx[1], a.y - jy[1]);
+      EXPECT_LE(std::hypot(a.x - jx[fwd ? 0 : 1], a.y - jy[fwd ? 0 : 1]),
+                h / 50);
+      EXPECT_LE(std::hypot(b.x - jx[fwd ? 1 : 0], b.y - jy[fwd ? 1 : 0]),
+                h / 50);
+    }
+  }
+  EXPECT_EQ(short_ones, 1);
+  EXPECT_EQ(creases, 5);
+}
+
 TEST(CuttingMarksTest, SeveralMarksPerElement) {
   // Diagonal raster with stepover 1.3 grid spacings: elements hold two
   // parallel marks (paper Fig. 3).
@@ -458,6 +527,58 @@ TEST(CuttingMarksTest, VerticesAreCloseToTheExactCreases) {
 }
 
 // ---------------------------------------------------------------------------
+
+// Random cuts on coarse grids: whatever the geometry, polylines are well
+// formed, inside the stock and the same on every run.
+TEST(CuttingMarksTest, RandomScenesGiveWellFormedPolylines) {
+  ThreadPool one(1), four(4);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int scene = 0; scene < 40; ++scene) {
+    const int32_t n = 20 + 10 * (scene % 5);
+    const StockSpec stock{0, 0, 30, 20, 0, n * 3 / 2 + scene % 7, n};
+    std::vector<Move> moves;
+    const int count = 1 + scene % 12;
+    for (int k = 0; k < count; ++k) {
+      const double r = 1 + 4 * u(rng);
+      Vec3 a{30 * u(rng), 20 * u(rng), 0.5 - 3 * u(rng)};
+      Vec3 b = a;
+      switch (k % 3) {
+        case 0:
+          a.z += 3;  // plunge
+          break;
+        case 1:
+          b = {30 * u(rng), 20 * u(rng), -3 * u(rng)};
+          break;
+        default: {
+          const double t = 6.28 * u(rng);
+          b = {a.x + 8 * std::cos(t), a.y + 8 * std::sin(t),
+               a.z - 1 + 2 * u(rng)};
+        }
+      }
+      moves.push_back({a, b, r});
+    }
+    auto wa = Cut(stock, moves, SchemeKind::kTaylor, &one);
+    auto wb = Cut(stock, moves, SchemeKind::kTaylor, &four);
+    const auto ma = Marks(*wa), mb = Marks(*wb);
+    ExpectClean(ma, /*smooth=*/false);
+    ASSERT_EQ(ma.size(), mb.size()) << "scene " << scene;
+    for (size_t q = 0; q < ma.size(); ++q) {
+      ASSERT_EQ(ma[q].vertices.size(), mb[q].vertices.size());
+      for (size_t k = 0; k < ma[q].vertices.size(); ++k) {
+        const Vec3& v = ma[q].vertices[k];
+        EXPECT_EQ(v.x, mb[q].vertices[k].x);
+        EXPECT_EQ(v.y, mb[q].vertices[k].y);
+        EXPECT_TRUE(std::isfinite(v.z));
+        EXPECT_TRUE(v.x >= 0 && v.x <= 30 && v.y >= 0 && v.y <= 20)
+            << "scene " << scene << " (" << v.x << ", " << v.y << ")";
+        EXPECT_LE(v.z, 0);
+        EXPECT_GE(ma[q].angle_deg[k], 0);
+        EXPECT_LE(ma[q].angle_deg[k], 180);
+      }
+    }
+  }
+}
 
 double ClippedLength(const std::vector<MarkPolyline>& marks, const Rect& r) {
   double len = 0;
