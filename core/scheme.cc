@@ -42,6 +42,14 @@ class ZmapScheme final : public Scheme {
                      double y) const override {
     return BilinearHeight(e, x, y);
   }
+  void Gradient(const ElementCorners& e, double x, double y, double* gx,
+                double* gy) const override {
+    const double lx = e.x1 - e.x0, ly = e.y1 - e.y0;
+    const double s = (x - e.x0) / lx, t = (y - e.y0) / ly;
+    const double w0 = e.c[0].w, w1 = e.c[1].w, w2 = e.c[2].w, w3 = e.c[3].w;
+    *gx = ((1 - t) * (w1 - w0) + t * (w2 - w3)) / lx;
+    *gy = ((1 - s) * (w3 - w0) + s * (w2 - w1)) / ly;
+  }
 };
 
 class TaylorScheme final : public Scheme {
@@ -55,6 +63,20 @@ class TaylorScheme final : public Scheme {
   double Reconstruct(const ElementCorners& e, double x,
                      double y) const override {
     return MinOfPatches(e, x, y);
+  }
+  void Gradient(const ElementCorners& e, double x, double y, double* gx,
+                double* gy) const override {
+    const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
+    const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
+    double w = e.z_top;
+    *gx = *gy = 0;  // the stock top
+    for (int k = 0; k < 4; ++k) {
+      const double wk = EvaluatePatch(e.c[k], xs[k], ys[k], x, y);
+      if (wk < w) {
+        w = wk;
+        PatchGradient(e.c[k], xs[k], ys[k], x, y, gx, gy);
+      }
+    }
   }
 };
 

@@ -36,6 +36,10 @@ class Scheme {
   // Height at (x, y) inside the element. Thread-safe.
   virtual double Reconstruct(const ElementCorners& e, double x,
                              double y) const = 0;
+  // Gradient of the reconstruction at (x, y) (one-sided on a crease: that of
+  // the piece Reconstruct picks).
+  virtual void Gradient(const ElementCorners& e, double x, double y,
+                        double* gx, double* gy) const = 0;
 };
 
 // Eq. (16): bilinear interpolation of the corner heights.

@@ -300,6 +300,44 @@ NodeValue Workpiece::Node(int32_t i, int32_t j) const {
   return v;
 }
 
+Workpiece::TileExtent Workpiece::Extent(int32_t t) const {
+  TileExtent e;
+  e.i0 = (t % tiles_x_) * kTileSize;
+  e.j0 = (t / tiles_x_) * kTileSize;
+  e.nx = std::min(kTileSize, grid_.nodes_x() - e.i0);
+  e.ny = std::min(kTileSize, grid_.nodes_y() - e.j0);
+  return e;
+}
+
+void Workpiece::ReadTile(int32_t t, double* w, float* const d[5],
+                         int32_t* owner) const {
+  const TileExtent e = Extent(t);
+  const Tile* tile = tiles_[t].get();
+  for (int32_t j = 0; j < e.ny; ++j) {
+    for (int32_t i = 0; i < e.nx; ++i) {
+      const int32_t out = j * e.nx + i;
+      const int32_t k = j * kTileSize + i;
+      const bool cut = tile != nullptr && tile->owner[k] >= 0;
+      if (w != nullptr) w[out] = tile != nullptr ? tile->w[k] : spec().z_top;
+      if (owner != nullptr) owner[out] = cut ? tile->owner[k] : -1;
+      if (d != nullptr) {
+        for (int c = 0; c < 5; ++c) {
+          d[c][out] = cut && tile->d[c] != nullptr ? tile->d[c][k] : 0.0f;
+        }
+      }
+    }
+  }
+}
+
+void Workpiece::ReconstructGradient(double x, double y, double* gx,
+                                    double* gy) const {
+  const Rect r = grid_.bounds();
+  x = std::clamp(x, r.x0, r.x1);
+  y = std::clamp(y, r.y0, r.y1);
+  scheme_->Gradient(Corners(grid_.ElementX(x), grid_.ElementY(y)), x, y, gx,
+                    gy);
+}
+
 ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
   ElementCorners e;
   e.x0 = grid_.NodeX(ei);

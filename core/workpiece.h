@@ -102,6 +102,22 @@ class Workpiece {
   double ExactHeightOver(std::span<const uint32_t> ids, double x,
                          double y) const;
 
+  // The nodes of tile t: columns [i0, i0 + nx), rows [j0, j0 + ny) (fewer
+  // than kTileSize at the grid's far edges).
+  struct TileExtent {
+    int32_t i0 = 0, j0 = 0, nx = 0, ny = 0;
+  };
+  TileExtent Extent(int32_t t) const;
+  // Copies tile t's nodes, row-major ((j - j0) * nx + (i - i0)), into the
+  // non-null outputs of nx * ny entries each: heights, the five
+  // derivatives (zeros for schemes without them, and for uncut nodes), and
+  // owners (-1 for uncut nodes).
+  void ReadTile(int32_t t, double* w, float* const d[5], int32_t* owner) const;
+
+  // The reconstructed surface's gradient at (x, y) (clamped to the stock):
+  // of the lowest patch for taylor, of the bilinear function for zmap.
+  void ReconstructGradient(double x, double y, double* gx, double* gy) const;
+
   int32_t tiles_x() const { return tiles_x_; }
   int32_t tiles_y() const { return tiles_y_; }
   int32_t tile_count() const { return tiles_x_ * tiles_y_; }

@@ -1,0 +1,341 @@
+#include "server/convert.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "core/cutting_marks.h"
+#include "core/valuation.h"
+
+namespace swarf::server {
+namespace {
+
+absl::Status Finite(double v, const std::string& field) {
+  if (!std::isfinite(v)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, " must be finite, got ", v));
+  }
+  return absl::OkStatus();
+}
+
+// Element count for `length` at `spacing`, or InvalidArgument.
+absl::StatusOr<int32_t> Elements(double length, double spacing,
+                                 const char* axis) {
+  const double n = std::ceil(length / spacing - 1e-9);
+  if (!(n >= 1 && n <= kMaxElementsPerAxis)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "spacing ", spacing, " gives ", n, " elements along ", axis,
+        "; at most ", kMaxElementsPerAxis));
+  }
+  return static_cast<int32_t>(n);
+}
+
+}  // namespace
+
+absl::StatusOr<SessionSpec> SpecFromRequest(
+    const pb::CreateSessionRequest& req) {
+  SessionSpec spec;
+  spec.id = req.session_id();
+  if (!req.has_stock()) return absl::InvalidArgumentError("stock is required");
+  const pb::Stock& st = req.stock();
+  spec.stock = {st.x0(), st.y0(), st.x1(), st.y1(), st.z_top(), req.nx(),
+                req.ny()};
+  if (req.nx() != 0 || req.ny() != 0) {
+    if (req.spacing() != 0) {
+      return absl::InvalidArgumentError(
+          "give either nx and ny, or spacing, not both");
+    }
+  } else {
+    if (absl::Status s = Finite(req.spacing(), "spacing"); !s.ok()) return s;
+    if (!(req.spacing() > 0)) {
+      return absl::InvalidArgumentError(
+          "nx and ny (element counts), or spacing > 0, are required");
+    }
+    // Validate the rectangle first so the counts below are meaningful.
+    StockSpec probe = spec.stock;
+    probe.nx = probe.ny = 1;
+    if (absl::Status s = ValidateStock(probe); !s.ok()) return s;
+    auto nx = Elements(st.x1() - st.x0(), req.spacing(), "x");
+    if (!nx.ok()) return nx.status();
+    auto ny = Elements(st.y1() - st.y0(), req.spacing(), "y");
+    if (!ny.ok()) return ny.status();
+    spec.stock.nx = *nx;
+    spec.stock.ny = *ny;
+  }
+  if (absl::Status s = ValidateStock(spec.stock); !s.ok()) return s;
+  switch (req.scheme()) {
+    case pb::SCHEME_ZMAP:
+      spec.scheme = SchemeKind::kZmap;
+      break;
+    case pb::SCHEME_UNSPECIFIED:
+    case pb::SCHEME_TAYLOR:
+      spec.scheme = SchemeKind::kTaylor;
+      break;
+    default:
+      return absl::InvalidArgumentError(
+          absl::StrCat("scheme ", req.scheme(), " is unknown"));
+  }
+  for (int k = 0; k < req.tools_size(); ++k) {
+    const pb::Tool& t = req.tools(k);
+    if (t.has_flat() || t.has_bull_nose()) {
+      return absl::UnimplementedError(absl::StrCat(
+          "tools[", k, "]: only ball-end cutters are simulated so far"));
+    }
+    if (!t.has_ball()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("tools[", k, "]: a shape is required (ball)"));
+    }
+    if (absl::Status s = Finite(t.ball().radius(),
+                                absl::StrCat("tools[", k, "].ball.radius"));
+        !s.ok()) {
+      return s;
+    }
+    spec.tools.push_back({t.id(), t.ball().radius()});
+  }
+  return spec;
+}
+
+void FillSession(const Session& s, const std::string& replica,
+                 pb::Session* out) {
+  const SessionSpec& spec = s.spec();
+  out->set_session_id(spec.id);
+  pb::Stock* st = out->mutable_stock();
+  st->set_x0(spec.stock.x0);
+  st->set_y0(spec.stock.y0);
+  st->set_x1(spec.stock.x1);
+  st->set_y1(spec.stock.y1);
+  st->set_z_top(spec.stock.z_top);
+  out->set_nx(spec.stock.nx);
+  out->set_ny(spec.stock.ny);
+  out->set_scheme(spec.scheme == SchemeKind::kZmap ? pb::SCHEME_ZMAP
+                                                   : pb::SCHEME_TAYLOR);
+  for (const ToolSpec& t : spec.tools) {
+    pb::Tool* tool = out->add_tools();
+    tool->set_id(t.id);
+    tool->mutable_ball()->set_radius(t.radius);
+  }
+  out->set_tile_size(kTileSize);
+  s.Read([&](const Workpiece& wp) {
+    out->set_tiles_x(wp.tiles_x());
+    out->set_tiles_y(wp.tiles_y());
+    return 0;
+  });
+  const SessionState state = s.State();
+  out->set_last_seq(state.last_seq);
+  out->set_moves_applied(state.moves_applied);
+  out->set_version(state.version);
+  out->set_allocated_tiles(state.allocated_tiles);
+  out->set_memory_bytes(state.memory_bytes);
+  if (state.last_position.has_value()) {
+    out->mutable_last_position()->set_x(state.last_position->x);
+    out->mutable_last_position()->set_y(state.last_position->y);
+    out->mutable_last_position()->set_z(state.last_position->z);
+  }
+  out->set_replica(replica);
+}
+
+absl::StatusOr<Rect> RectFromProto(const pb::Rect& r,
+                                   const std::string& field) {
+  const Rect out{r.x0(), r.y0(), r.x1(), r.y1()};
+  if (!std::isfinite(out.x0) || !std::isfinite(out.y0) ||
+      !std::isfinite(out.x1) || !std::isfinite(out.y1)) {
+    return absl::InvalidArgumentError(absl::StrCat(field, " must be finite"));
+  }
+  if (out.x1 < out.x0 || out.y1 < out.y0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(field, " must have x0 <= x1 and y0 <= y1"));
+  }
+  return out;
+}
+
+absl::StatusOr<std::vector<int32_t>> SelectTiles(
+    const Workpiece& wp, const pb::TileSelection* sel) {
+  std::vector<int32_t> out;
+  if (sel != nullptr && sel->tiles_size() > 0) {
+    for (int k = 0; k < sel->tiles_size(); ++k) {
+      const pb::TileIndex& t = sel->tiles(k);
+      if (t.tx() < 0 || t.tx() >= wp.tiles_x() || t.ty() < 0 ||
+          t.ty() >= wp.tiles_y()) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "selection.tiles[", k, "] (", t.tx(), ", ", t.ty(),
+            ") is outside the tiles [0, ", wp.tiles_x(), ") x [0, ",
+            wp.tiles_y(), ")"));
+      }
+      out.push_back(t.ty() * wp.tiles_x() + t.tx());
+    }
+  } else if (sel != nullptr && sel->has_region()) {
+    auto r = RectFromProto(sel->region(), "selection.region");
+    if (!r.ok()) return r.status();
+    const GridGeometry& g = wp.grid();
+    // Nodes within the region, clamped to the grid, then their tiles.
+    auto range = [](double a, double b, double origin, double step,
+                    int32_t max) {
+      const double lo = std::ceil((a - origin) / step);
+      const double hi = std::floor((b - origin) / step);
+      return std::pair{static_cast<int32_t>(std::clamp(lo, 0.0, 1.0 * max)),
+                       static_cast<int32_t>(std::clamp(hi, -1.0, 1.0 * max))};
+    };
+    const auto [i0, i1] = range(r->x0, r->x1, g.spec().x0, g.dx(), g.nx());
+    const auto [j0, j1] = range(r->y0, r->y1, g.spec().y0, g.dy(), g.ny());
+    if (i0 <= i1 && j0 <= j1) {
+      for (int32_t ty = j0 / kTileSize; ty <= j1 / kTileSize; ++ty) {
+        for (int32_t tx = i0 / kTileSize; tx <= i1 / kTileSize; ++tx) {
+          out.push_back(ty * wp.tiles_x() + tx);
+        }
+      }
+    }
+  } else {
+    for (int32_t t = 0; t < wp.tile_count(); ++t) out.push_back(t);
+  }
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+absl::StatusOr<TileOptions> TileOptionsFrom(const Workpiece& wp,
+                                            uint64_t request_id,
+                                            pb::Precision precision,
+                                            bool derivatives, bool owners) {
+  if (derivatives && !wp.scheme().stores_derivatives()) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "include_derivatives: the session's scheme ",
+        std::string(wp.scheme().name()),
+        " stores no derivatives (use taylor)"));
+  }
+  if (precision != pb::PRECISION_UNSPECIFIED &&
+      precision != pb::PRECISION_FLOAT && precision != pb::PRECISION_DOUBLE) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("precision ", precision, " is unknown"));
+  }
+  TileOptions o;
+  o.request_id = request_id;
+  o.doubles = precision == pb::PRECISION_DOUBLE;
+  o.derivatives = derivatives;
+  o.owners = owners;
+  return o;
+}
+
+void FillTile(const Workpiece& wp, int32_t t, const TileOptions& opt,
+              pb::Tile* out) {
+  const Workpiece::TileExtent e = wp.Extent(t);
+  const int32_t n = e.nx * e.ny;
+  out->set_request_id(opt.request_id);
+  out->set_tx(t % wp.tiles_x());
+  out->set_ty(t / wp.tiles_x());
+  out->set_version(wp.TileVersion(t));
+  out->set_i0(e.i0);
+  out->set_j0(e.j0);
+  out->set_nx(e.nx);
+  out->set_ny(e.ny);
+  std::vector<double> w(n);
+  std::vector<int32_t> owner(opt.owners ? n : 0);
+  std::vector<float> d(opt.derivatives ? 5 * n : 0);
+  float* dp[5] = {};
+  for (int c = 0; c < 5 && opt.derivatives; ++c) dp[c] = d.data() + c * n;
+  wp.ReadTile(t, w.data(), opt.derivatives ? dp : nullptr,
+              opt.owners ? owner.data() : nullptr);
+  if (opt.doubles) {
+    out->mutable_heights_d()->Assign(w.begin(), w.end());
+  } else {
+    auto* h = out->mutable_heights_f();
+    h->Reserve(n);
+    for (double v : w) h->AddAlreadyReserved(static_cast<float>(v));
+  }
+  if (opt.derivatives) {
+    out->mutable_wx()->Assign(dp[0], dp[0] + n);
+    out->mutable_wy()->Assign(dp[1], dp[1] + n);
+    out->mutable_wxx()->Assign(dp[2], dp[2] + n);
+    out->mutable_wxy()->Assign(dp[3], dp[3] + n);
+    out->mutable_wyy()->Assign(dp[4], dp[4] + n);
+  }
+  if (opt.owners) out->mutable_owners()->Assign(owner.begin(), owner.end());
+}
+
+absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,
+                                            const pb::Rect* region,
+                                            int32_t samples_per_edge) {
+  ValuationOptions opt;
+  opt.samples_per_edge = samples_per_edge == 0 ? 5 : samples_per_edge;
+  if (region != nullptr) {
+    auto r = RectFromProto(*region, "region");
+    if (!r.ok()) return r.status();
+    opt.region = *r;
+  }
+  auto stats = MeasureError(wp, opt);
+  if (!stats.ok()) return stats.status();
+  pb::ErrorStats out;
+  out.set_scheme(wp.scheme().kind() == SchemeKind::kZmap ? pb::SCHEME_ZMAP
+                                                         : pb::SCHEME_TAYLOR);
+  out.set_max_error(stats->max_error);
+  out.set_mean_error(stats->mean_error);
+  out.set_rms_error(stats->rms_error);
+  out.set_max_x(stats->max_x);
+  out.set_max_y(stats->max_y);
+  out.set_samples(stats->samples);
+  return out;
+}
+
+absl::StatusOr<std::vector<pb::Polyline>> ComputeMarks(
+    const Workpiece& wp, const pb::Rect* region, double screening_threshold,
+    double min_angle_deg) {
+  MarkOptions opt;
+  if (region != nullptr) {
+    auto r = RectFromProto(*region, "region");
+    if (!r.ok()) return r.status();
+    opt.region = *r;
+  }
+  if (screening_threshold != 0) opt.screening_threshold = screening_threshold;
+  if (min_angle_deg != 0) opt.t2_deg = min_angle_deg;
+  auto marks = FindCuttingMarks(wp, opt);
+  if (!marks.ok()) return marks.status();
+  std::vector<pb::Polyline> out;
+  out.reserve(marks->size());
+  for (const MarkPolyline& m : *marks) {
+    pb::Polyline& p = out.emplace_back();
+    p.set_closed(m.closed);
+    p.add_owners(m.owners[0]);
+    p.add_owners(m.owners[1]);
+    p.mutable_xyz()->Reserve(3 * m.vertices.size());
+    for (const Vec3& v : m.vertices) {
+      p.add_xyz(v.x);
+      p.add_xyz(v.y);
+      p.add_xyz(v.z);
+    }
+    p.mutable_angle_deg()->Assign(m.angle_deg.begin(), m.angle_deg.end());
+  }
+  return out;
+}
+
+absl::StatusOr<pb::ProbeResponse> ComputeProbe(const Workpiece& wp,
+                                               const pb::ProbeRequest& req) {
+  if (req.xy_size() % 2 != 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "xy has ", req.xy_size(), " values, not a whole number of points"));
+  }
+  pb::ProbeResponse out;
+  const GridGeometry& g = wp.grid();
+  for (int k = 0; k + 1 < req.xy_size(); k += 2) {
+    const double x = req.xy(k), y = req.xy(k + 1);
+    if (!std::isfinite(x) || !std::isfinite(y)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("xy[", k, "] (point ", k / 2, ") must be finite"));
+    }
+    double gx, gy;
+    wp.ReconstructGradient(x, y, &gx, &gy);
+    const double len = std::sqrt(gx * gx + gy * gy + 1);
+    out.add_heights(wp.Reconstruct(x, y));
+    out.add_normals(-gx / len);
+    out.add_normals(-gy / len);
+    out.add_normals(1 / len);
+    const double fi = std::round((std::clamp(x, g.spec().x0, g.spec().x1) -
+                                  g.spec().x0) / g.dx());
+    const double fj = std::round((std::clamp(y, g.spec().y0, g.spec().y1) -
+                                  g.spec().y0) / g.dy());
+    out.add_owners(wp.Node(static_cast<int32_t>(std::min(fi, 1.0 * g.nx())),
+                           static_cast<int32_t>(std::min(fj, 1.0 * g.ny())))
+                       .owner);
+  }
+  return out;
+}
+
+}  // namespace swarf::server

@@ -1,0 +1,61 @@
+// Conversions between the public API (swarf.v1 protos) and the core, with
+// the validation of every field a client sends (errors name the field).
+#ifndef SWARF_SERVER_CONVERT_H_
+#define SWARF_SERVER_CONVERT_H_
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/geometry.h"
+#include "core/workpiece.h"
+#include "server/session.h"
+#include "swarf/v1/swarf.pb.h"
+
+namespace swarf::server {
+
+namespace pb = ::swarf::v1;
+
+absl::StatusOr<SessionSpec> SpecFromRequest(
+    const pb::CreateSessionRequest& req);
+void FillSession(const Session& s, const std::string& replica,
+                 pb::Session* out);
+
+// A rectangle from the API: finite, x0 <= x1, y0 <= y1. `field` names it.
+absl::StatusOr<Rect> RectFromProto(const pb::Rect& r, const std::string& field);
+
+// Tiles selected by a region or explicit indices (all when `sel` is null or
+// empty), ascending.
+absl::StatusOr<std::vector<int32_t>> SelectTiles(const Workpiece& wp,
+                                                 const pb::TileSelection* sel);
+
+struct TileOptions {
+  uint64_t request_id = 0;
+  bool doubles = false;
+  bool derivatives = false;
+  bool owners = false;
+};
+// FAILED_PRECONDITION when derivatives are asked of a scheme without them.
+absl::StatusOr<TileOptions> TileOptionsFrom(const Workpiece& wp,
+                                            uint64_t request_id,
+                                            pb::Precision precision,
+                                            bool derivatives, bool owners);
+void FillTile(const Workpiece& wp, int32_t t, const TileOptions& opt,
+              pb::Tile* out);
+
+absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,
+                                            const pb::Rect* region,
+                                            int32_t samples_per_edge);
+
+absl::StatusOr<std::vector<pb::Polyline>> ComputeMarks(
+    const Workpiece& wp, const pb::Rect* region, double screening_threshold,
+    double min_angle_deg);
+
+absl::StatusOr<pb::ProbeResponse> ComputeProbe(const Workpiece& wp,
+                                               const pb::ProbeRequest& req);
+
+}  // namespace swarf::server
+
+#endif  // SWARF_SERVER_CONVERT_H_

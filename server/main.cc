@@ -1,0 +1,86 @@
+// swarfd: the swarf simulation server.
+#include <csignal>
+#include <cstdlib>
+#include <string>
+#include <thread>
+
+#include "absl/flags/flag.h"
+#include "absl/flags/parse.h"
+#include "absl/flags/usage.h"
+#include "server/server.h"
+#include "spdlog/spdlog.h"
+
+ABSL_FLAG(std::string, listen, "127.0.0.1:50051",
+          "host:port to listen on (port 0: any free port)");
+ABSL_FLAG(int, worker_threads, 0,
+          "threads running simulation work (0: one per hardware thread)");
+ABSL_FLAG(int, max_sessions, 256, "sessions this server holds at most");
+ABSL_FLAG(int64_t, max_nodes_per_session, int64_t{64} << 20,
+          "grid nodes per session at most");
+ABSL_FLAG(int64_t, max_total_memory_mb, 8192,
+          "worst-case memory of all sessions together (MiB)");
+ABSL_FLAG(int64_t, max_batch_points, int64_t{1} << 20,
+          "points (moves) per move batch at most");
+ABSL_FLAG(int, max_message_mb, 64, "largest gRPC message (MiB)");
+ABSL_FLAG(std::string, replica, "",
+          "name reported in x-swarf-replica (default: $POD_NAME, $HOSTNAME "
+          "or swarfd)");
+ABSL_FLAG(double, drain_seconds, 10,
+          "on SIGTERM/SIGINT, how long in-flight calls may finish");
+ABSL_FLAG(std::string, log_level, "info", "trace|debug|info|warn|error");
+
+namespace {
+
+std::string ReplicaName() {
+  std::string r = absl::GetFlag(FLAGS_replica);
+  for (const char* env : {"POD_NAME", "HOSTNAME"}) {
+    if (r.empty() && std::getenv(env) != nullptr) r = std::getenv(env);
+  }
+  return r.empty() ? "swarfd" : r;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  absl::SetProgramUsageMessage("swarfd [flags]: the swarf simulation server");
+  absl::ParseCommandLine(argc, argv);
+  spdlog::set_level(spdlog::level::from_str(absl::GetFlag(FLAGS_log_level)));
+
+  // Signals are taken by a thread of ours, never by an arbitrary one.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  swarf::server::ServerOptions options;
+  options.listen = absl::GetFlag(FLAGS_listen);
+  options.worker_threads = absl::GetFlag(FLAGS_worker_threads);
+  options.limits.max_sessions = absl::GetFlag(FLAGS_max_sessions);
+  options.limits.max_nodes_per_session =
+      absl::GetFlag(FLAGS_max_nodes_per_session);
+  options.limits.max_total_memory_bytes =
+      absl::GetFlag(FLAGS_max_total_memory_mb) << 20;
+  options.limits.max_batch_points = absl::GetFlag(FLAGS_max_batch_points);
+  options.limits.max_message_bytes = absl::GetFlag(FLAGS_max_message_mb) << 20;
+  options.replica = ReplicaName();
+  auto server = swarf::server::SwarfServer::Start(options);
+  if (!server.ok()) {
+    spdlog::error("{}", std::string(server.status().message()));
+    return 1;
+  }
+  spdlog::info("swarfd {} listening on {} (port {})", options.replica,
+               options.listen, (*server)->port());
+
+  std::thread waiter([&] {
+    int sig = 0;
+    sigwait(&signals, &sig);
+    spdlog::info("signal {}: draining for {} s", sig,
+                 absl::GetFlag(FLAGS_drain_seconds));
+    (*server)->Shutdown(absl::Seconds(absl::GetFlag(FLAGS_drain_seconds)));
+  });
+  (*server)->Wait();
+  waiter.join();
+  spdlog::info("swarfd stopped");
+  return 0;
+}

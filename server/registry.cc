@@ -1,0 +1,115 @@
+#include "server/registry.h"
+
+#include <random>
+
+#include "absl/strings/str_cat.h"
+
+namespace swarf::server {
+namespace {
+
+std::string NewId() {
+  static constexpr char kChars[] = "0123456789abcdefghijklmnopqrstuvwxyz";
+  thread_local std::mt19937_64 rng(std::random_device{}());
+  std::string id = "s-";
+  for (int k = 0; k < 16; ++k) id += kChars[rng() % 36];
+  return id;
+}
+
+}  // namespace
+
+absl::Status Registry::ValidateId(const std::string& id) {
+  if (id.empty() || id.size() > 64) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "session_id must be 1-64 characters, got ", id.size()));
+  }
+  for (char c : id) {
+    const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') ||
+                    (c >= '0' && c <= '9') || c == '_' || c == '-';
+    if (!ok) {
+      return absl::InvalidArgumentError(
+          "session_id may only contain A-Z, a-z, 0-9, '_' and '-'");
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::shared_ptr<Session>> Registry::Create(SessionSpec spec) {
+  if (spec.id.empty()) {
+    spec.id = NewId();
+  } else if (absl::Status s = ValidateId(spec.id); !s.ok()) {
+    return s;
+  }
+  if (absl::Status s = ValidateStock(spec.stock); !s.ok()) return s;
+  const int64_t nodes =
+      (int64_t{spec.stock.nx} + 1) * (int64_t{spec.stock.ny} + 1);
+  if (nodes > limits_.max_nodes_per_session) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat("the grid has ", nodes, " nodes, more than this server's ",
+                     limits_.max_nodes_per_session, " per session"));
+  }
+  const int64_t bytes = Session::EstimateMemoryBytes(spec.stock, spec.scheme);
+  {
+    absl::MutexLock l(&mu_);
+    if (sessions_.count(spec.id)) {
+      return absl::AlreadyExistsError(
+          absl::StrCat("session ", spec.id, " already exists"));
+    }
+    if (static_cast<int64_t>(sessions_.size()) >= limits_.max_sessions) {
+      return absl::ResourceExhaustedError(absl::StrCat(
+          "this server holds its limit of ", limits_.max_sessions,
+          " sessions"));
+    }
+    if (reserved_bytes_ + bytes > limits_.max_total_memory_bytes) {
+      return absl::ResourceExhaustedError(absl::StrCat(
+          "the session may need ", bytes, " bytes; this server has ",
+          limits_.max_total_memory_bytes - reserved_bytes_, " of ",
+          limits_.max_total_memory_bytes, " left"));
+    }
+    reserved_bytes_ += bytes;
+    // Reserve the id while the (cheap) workpiece is created.
+    sessions_[spec.id] = nullptr;
+  }
+  const std::string id = spec.id;
+  auto session = Session::Create(std::move(spec));
+  absl::MutexLock l(&mu_);
+  if (!session.ok()) {
+    sessions_.erase(id);
+    reserved_bytes_ -= bytes;
+    return session.status();
+  }
+  sessions_[id] = *session;
+  return *session;
+}
+
+absl::StatusOr<std::shared_ptr<Session>> Registry::Get(
+    const std::string& id) const {
+  absl::MutexLock l(&mu_);
+  auto it = sessions_.find(id);
+  if (it == sessions_.end() || it->second == nullptr) {
+    return absl::NotFoundError(absl::StrCat("no session ", id));
+  }
+  return it->second;
+}
+
+absl::Status Registry::Delete(const std::string& id) {
+  absl::MutexLock l(&mu_);
+  auto it = sessions_.find(id);
+  if (it == sessions_.end() || it->second == nullptr) {
+    return absl::NotFoundError(absl::StrCat("no session ", id));
+  }
+  reserved_bytes_ -= Session::EstimateMemoryBytes(it->second->spec().stock,
+                                                  it->second->spec().scheme);
+  sessions_.erase(it);
+  return absl::OkStatus();
+}
+
+std::vector<std::shared_ptr<Session>> Registry::List() const {
+  absl::MutexLock l(&mu_);
+  std::vector<std::shared_ptr<Session>> out;
+  for (const auto& [id, s] : sessions_) {
+    if (s != nullptr) out.push_back(s);
+  }
+  return out;
+}
+
+}  // namespace swarf::server

@@ -1,0 +1,54 @@
+// The server's sessions, with admission limits. Thread-safe.
+#ifndef SWARF_SERVER_REGISTRY_H_
+#define SWARF_SERVER_REGISTRY_H_
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
+#include "server/session.h"
+
+namespace swarf::server {
+
+struct Limits {
+  int32_t max_sessions = 256;
+  int64_t max_nodes_per_session = int64_t{64} << 20;  // 64 Mi nodes
+  // Sum over sessions of their worst-case memory (every tile cut).
+  int64_t max_total_memory_bytes = int64_t{8} << 30;
+  int64_t max_batch_points = int64_t{1} << 20;
+  int32_t max_message_bytes = 64 << 20;
+};
+
+class Registry {
+ public:
+  explicit Registry(const Limits& limits) : limits_(limits) {}
+
+  // Validates the id (1-64 of [A-Za-z0-9_-]; generated when empty) and the
+  // limits, then creates. ALREADY_EXISTS, RESOURCE_EXHAUSTED,
+  // INVALID_ARGUMENT.
+  absl::StatusOr<std::shared_ptr<Session>> Create(SessionSpec spec);
+  // NOT_FOUND when absent.
+  absl::StatusOr<std::shared_ptr<Session>> Get(const std::string& id) const;
+  absl::Status Delete(const std::string& id);
+  std::vector<std::shared_ptr<Session>> List() const;
+
+  const Limits& limits() const { return limits_; }
+
+  // INVALID_ARGUMENT unless id is 1-64 characters of [A-Za-z0-9_-].
+  static absl::Status ValidateId(const std::string& id);
+
+ private:
+  const Limits limits_;
+  mutable absl::Mutex mu_;
+  std::map<std::string, std::shared_ptr<Session>> sessions_
+      ABSL_GUARDED_BY(mu_);
+  int64_t reserved_bytes_ ABSL_GUARDED_BY(mu_) = 0;
+};
+
+}  // namespace swarf::server
+
+#endif  // SWARF_SERVER_REGISTRY_H_

@@ -1,0 +1,66 @@
+#include "server/server.h"
+
+#include <chrono>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+#include "grpcpp/ext/proto_server_reflection_plugin.h"
+#include "grpcpp/health_check_service_interface.h"
+#include "grpcpp/security/server_credentials.h"
+#include "grpcpp/server_builder.h"
+
+namespace swarf::server {
+
+absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
+    const ServerOptions& options) {
+  std::unique_ptr<SwarfServer> s(new SwarfServer);
+  s->options_ = options;
+  s->registry_ = std::make_unique<Registry>(options.limits);
+  const int threads = options.worker_threads > 0
+                          ? options.worker_threads
+                          : static_cast<int>(std::thread::hardware_concurrency());
+  s->executor_ = std::make_unique<Executor>(threads);
+  s->service_ = std::make_unique<SwarfService>(
+      s->registry_.get(), s->executor_.get(), options.replica);
+
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  if (!options.listen.empty()) {
+    builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(),
+                             &s->port_);
+  }
+  builder.RegisterService(s->service_.get());
+  builder.SetMaxReceiveMessageSize(options.limits.max_message_bytes);
+  builder.SetMaxSendMessageSize(options.limits.max_message_bytes);
+  s->server_ = builder.BuildAndStart();
+  if (s->server_ == nullptr || (!options.listen.empty() && s->port_ == 0)) {
+    return absl::UnavailableError(
+        absl::StrCat("cannot listen on ", options.listen));
+  }
+  s->server_->GetHealthCheckService()->SetServingStatus(true);
+  return s;
+}
+
+SwarfServer::~SwarfServer() { Shutdown(absl::Seconds(1)); }
+
+std::shared_ptr<grpc::Channel> SwarfServer::InProcessChannel() {
+  grpc::ChannelArguments args;
+  args.SetMaxReceiveMessageSize(options_.limits.max_message_bytes);
+  args.SetMaxSendMessageSize(options_.limits.max_message_bytes);
+  return server_->InProcessChannel(args);
+}
+
+void SwarfServer::Shutdown(absl::Duration deadline) {
+  if (shut_down_) return;
+  shut_down_ = true;
+  server_->GetHealthCheckService()->SetServingStatus(false);
+  server_->Shutdown(std::chrono::system_clock::now() +
+                    absl::ToChronoSeconds(deadline));
+  server_->Wait();
+  executor_.reset();  // runs what is queued, then joins
+}
+
+void SwarfServer::Wait() { server_->Wait(); }
+
+}  // namespace swarf::server

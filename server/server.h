@@ -1,0 +1,57 @@
+// An embeddable swarf server: the gRPC service with health checking and
+// reflection, listening on a TCP address and reachable in-process.
+#ifndef SWARF_SERVER_SERVER_H_
+#define SWARF_SERVER_SERVER_H_
+
+#include <memory>
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "absl/time/time.h"
+#include "grpcpp/channel.h"
+#include "grpcpp/server.h"
+#include "server/executor.h"
+#include "server/registry.h"
+#include "server/service.h"
+
+namespace swarf::server {
+
+struct ServerOptions {
+  // host:port; port 0 picks a free one. Empty: in-process only.
+  std::string listen = "127.0.0.1:50051";
+  int worker_threads = 0;  // 0: one per hardware thread
+  Limits limits;
+  std::string replica = "swarfd";  // reported in x-swarf-replica
+};
+
+// Thread-safe.
+class SwarfServer {
+ public:
+  static absl::StatusOr<std::unique_ptr<SwarfServer>> Start(
+      const ServerOptions& options);
+  ~SwarfServer();  // Shutdown(1 s) if not done
+
+  // The bound TCP port (0 when not listening on TCP).
+  int port() const { return port_; }
+  // A channel to this server that bypasses the network.
+  std::shared_ptr<grpc::Channel> InProcessChannel();
+  // Stops accepting calls, lets in-flight ones finish until `deadline`,
+  // cancels the rest.
+  void Shutdown(absl::Duration deadline);
+  // Blocks until Shutdown.
+  void Wait();
+
+ private:
+  SwarfServer() = default;
+  ServerOptions options_;
+  std::unique_ptr<Registry> registry_;
+  std::unique_ptr<Executor> executor_;
+  std::unique_ptr<SwarfService> service_;
+  std::unique_ptr<grpc::Server> server_;
+  int port_ = 0;
+  bool shut_down_ = false;
+};
+
+}  // namespace swarf::server
+
+#endif  // SWARF_SERVER_SERVER_H_

@@ -1,0 +1,728 @@
+#include "server/service.h"
+
+#include <algorithm>
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <set>
+#include <span>
+#include <utility>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/synchronization/mutex.h"
+#include "server/convert.h"
+#include "server/status_util.h"
+#include "spdlog/spdlog.h"
+
+namespace swarf::server {
+namespace {
+
+namespace pb = ::swarf::v1;
+
+// The session id of a call: the request's field and/or the
+// x-swarf-session metadata, which must agree when both are given.
+absl::StatusOr<std::string> SessionIdOf(grpc::CallbackServerContext* ctx,
+                                        const std::string& field) {
+  std::string meta;
+  const auto& md = ctx->client_metadata();
+  if (auto it = md.find(kSessionMetadata); it != md.end()) {
+    meta.assign(it->second.data(), it->second.size());
+  }
+  if (!field.empty() && !meta.empty() && field != meta) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("session_id \"", field, "\" differs from the ",
+                     kSessionMetadata, " metadata \"", meta, "\""));
+  }
+  std::string id = field.empty() ? meta : field;
+  if (id.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "session_id is required (field or ", kSessionMetadata, " metadata)"));
+  }
+  return id;
+}
+
+absl::StatusOr<std::shared_ptr<Session>> SessionOf(
+    Registry* registry, grpc::CallbackServerContext* ctx,
+    const std::string& field) {
+  auto id = SessionIdOf(ctx, field);
+  if (!id.ok()) return id.status();
+  return registry->Get(*id);
+}
+
+// Runs `work` on the executor and finishes the unary call with its status.
+grpc::ServerUnaryReactor* RunUnary(grpc::CallbackServerContext* ctx,
+                                   Executor* executor,
+                                   const std::string& replica,
+                                   std::function<absl::Status()> work) {
+  ctx->AddInitialMetadata(kReplicaMetadata, replica);
+  grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
+  executor->Schedule([reactor, ctx, work = std::move(work)] {
+    if (ctx->IsCancelled()) {
+      reactor->Finish(grpc::Status::CANCELLED);
+      return;
+    }
+    reactor->Finish(ToGrpcStatus(work()));
+  });
+  return reactor;
+}
+
+// A server stream whose messages are produced on the executor in chunks:
+// `produce` appends the next messages and returns false once there are no
+// more (or an error). One write in flight; the next chunk is produced when
+// the queue runs low.
+template <typename T>
+class ChunkedWriter : public grpc::ServerWriteReactor<T> {
+ public:
+  using Producer = std::function<absl::StatusOr<bool>(std::deque<T>*)>;
+
+  ChunkedWriter(grpc::CallbackServerContext* ctx, Executor* executor,
+                const std::string& replica, Producer produce)
+      : executor_(executor), produce_(std::move(produce)) {
+    ctx->AddInitialMetadata(kReplicaMetadata, replica);
+    this->StartSendInitialMetadata();
+    {
+      absl::MutexLock l(&mu_);
+      producing_ = true;
+    }
+    executor_->Schedule([this] { Produce(); });
+  }
+
+  void OnWriteDone(bool ok) override {
+    Act act;
+    {
+      absl::MutexLock l(&mu_);
+      writing_ = false;
+      queue_.pop_front();
+      if (!ok) cancelled_ = true;
+      act = NextLocked();
+    }
+    Do(act);
+  }
+
+  void OnCancel() override {
+    Act act;
+    {
+      absl::MutexLock l(&mu_);
+      cancelled_ = true;
+      act = NextLocked();
+    }
+    Do(act);
+  }
+
+  void OnDone() override { delete this; }
+
+ private:
+  static constexpr size_t kLowWater = 4;
+
+  struct Act {
+    const T* write = nullptr;
+    bool produce = false;
+    std::optional<grpc::Status> finish;
+  };
+
+  // Decides what to do next; the caller does it without holding mu_.
+  Act NextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    Act act;
+    if (finished_) return act;
+    if (cancelled_) {
+      if (!writing_ && !producing_) {
+        finished_ = true;
+        act.finish = grpc::Status::CANCELLED;
+      }
+      return act;
+    }
+    if (!writing_ && !queue_.empty()) {
+      writing_ = true;
+      act.write = &queue_.front();
+    }
+    if (!producing_ && more_ && queue_.size() <= kLowWater) {
+      producing_ = true;
+      act.produce = true;
+    }
+    if (!writing_ && !producing_ && queue_.empty() && !more_) {
+      finished_ = true;
+      act.finish = status_;
+    }
+    return act;
+  }
+
+  void Do(const Act& act) {
+    if (act.produce) executor_->Schedule([this] { Produce(); });
+    if (act.write != nullptr) this->StartWrite(act.write);
+    if (act.finish.has_value()) this->Finish(*act.finish);
+  }
+
+  void Produce() {
+    std::deque<T> chunk;
+    absl::StatusOr<bool> more = produce_(&chunk);
+    Act act;
+    {
+      absl::MutexLock l(&mu_);
+      producing_ = false;
+      if (!more.ok()) {
+        status_ = ToGrpcStatus(more.status());
+        more_ = false;
+      } else {
+        more_ = *more;
+        for (T& m : chunk) queue_.push_back(std::move(m));
+      }
+      act = NextLocked();
+    }
+    Do(act);
+  }
+
+  Executor* const executor_;
+  const Producer produce_;
+  absl::Mutex mu_;
+  std::deque<T> queue_ ABSL_GUARDED_BY(mu_);  // front is in flight if writing_
+  bool writing_ ABSL_GUARDED_BY(mu_) = false;
+  bool producing_ ABSL_GUARDED_BY(mu_) = false;
+  bool more_ ABSL_GUARDED_BY(mu_) = true;
+  bool cancelled_ ABSL_GUARDED_BY(mu_) = false;
+  bool finished_ ABSL_GUARDED_BY(mu_) = false;
+  grpc::Status status_ ABSL_GUARDED_BY(mu_);
+};
+
+// The Simulate stream of one session.
+//
+// Requests are read into `in_` and processed in order by one task at a time
+// on the executor; responses queue in `out_` and are written one at a time.
+// Reading pauses while either queue is full, which is the backpressure both
+// ways. A large tile request becomes a job that produces tiles as room frees
+// up; subscribed tiles that change are pushed coalesced (one pending push per
+// tile, materialised at its latest version when it is its turn).
+class SimulateReactor
+    : public grpc::ServerBidiReactor<pb::SimulateRequest, pb::SimulateResponse> {
+ public:
+  SimulateReactor(grpc::CallbackServerContext* ctx, Registry* registry,
+                  Executor* executor, const std::string& replica)
+      : ctx_(ctx), registry_(registry), executor_(executor) {
+    ctx->AddInitialMetadata(kReplicaMetadata, replica);
+    auto session = SessionOf(registry, ctx, "");
+    if (!session.ok()) {
+      finished_ = true;
+      Finish(ToGrpcStatus(session.status()));
+      return;
+    }
+    session_ = *session;
+    StartSendInitialMetadata();
+    spdlog::info("session {}: stream opened by {}", session_->id(),
+                 ctx->peer());
+    {
+      absl::MutexLock l(&mu_);
+      read_pending_ = true;
+    }
+    StartRead(&req_);  // never under mu_: a reaction may run inline
+  }
+
+  void OnReadDone(bool ok) override {
+    Act act;
+    {
+      absl::MutexLock l(&mu_);
+      read_pending_ = false;
+      if (!ok) {
+        reads_done_ = true;
+      } else {
+        in_.push_back(std::move(req_));
+        req_.Clear();
+      }
+      act = NextLocked();
+    }
+    Do(act);
+  }
+
+  void OnWriteDone(bool ok) override {
+    Act act;
+    {
+      absl::MutexLock l(&mu_);
+      writing_ = false;
+      out_.pop_front();
+      if (!ok) cancelled_ = true;
+      act = NextLocked();
+    }
+    Do(act);
+  }
+
+  void OnCancel() override {
+    Act act;
+    {
+      absl::MutexLock l(&mu_);
+      cancelled_ = true;
+      act = NextLocked();
+    }
+    Do(act);
+  }
+
+  void OnDone() override {
+    if (session_ != nullptr) {
+      spdlog::info("session {}: stream closed", session_->id());
+    }
+    delete this;
+  }
+
+ private:
+  static constexpr size_t kMaxIn = 4;    // requests read ahead
+  static constexpr size_t kMaxOut = 64;  // responses queued
+
+  struct Act {
+    bool read = false;
+    const pb::SimulateResponse* write = nullptr;
+    bool process = false;
+    std::optional<grpc::Status> finish;
+  };
+
+  struct TileJob {
+    std::vector<int32_t> tiles;  // still to send, in order
+    size_t next = 0;
+    TileOptions options;
+  };
+
+  struct Subscription {
+    uint64_t request_id = 0;
+    std::set<int32_t> tiles;  // selected
+    TileOptions options;
+  };
+
+  bool HasWorkLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    return !in_.empty() || job_.has_value() || !pending_push_.empty();
+  }
+  // Whether a processing turn would make progress: a tile job or pushes
+  // need room in out_ (a request is handled regardless: it yields at most
+  // one response, or becomes a job).
+  bool CanProcessLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    const bool room = out_.size() < kMaxOut;
+    if (job_.has_value()) return room;
+    if (!in_.empty()) return true;
+    return !pending_push_.empty() && room;
+  }
+
+  Act NextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    Act act;
+    if (finished_) return act;
+    if (cancelled_) {
+      if (!writing_ && !processing_) {
+        finished_ = true;
+        act.finish = grpc::Status::CANCELLED;
+      }
+      return act;
+    }
+    if (!writing_ && !out_.empty()) {
+      writing_ = true;
+      act.write = &out_.front();
+    }
+    const bool failing = fatal_.has_value();
+    if (!processing_ && !failing && CanProcessLocked()) {
+      processing_ = true;
+      act.process = true;
+    }
+    if (!read_pending_ && !reads_done_ && !failing && in_.size() < kMaxIn &&
+        out_.size() < kMaxOut) {
+      read_pending_ = true;
+      act.read = true;
+    }
+    const bool drained = !writing_ && !processing_ && out_.empty();
+    if (drained && failing) {
+      finished_ = true;
+      act.finish = *fatal_;
+    } else if (drained && reads_done_ && !HasWorkLocked()) {
+      finished_ = true;
+      act.finish = grpc::Status::OK;
+    }
+    return act;
+  }
+
+  void Do(const Act& act) {
+    if (act.process) executor_->Schedule([this] { Process(); });
+    if (act.write != nullptr) StartWrite(act.write);
+    if (act.read) StartRead(&req_);
+    if (act.finish.has_value()) Finish(*act.finish);
+  }
+
+  // One processing turn on the executor: a slice of the tile job, one
+  // request, or pending pushes, then decides what comes next.
+  void Process() {
+    std::vector<pb::SimulateResponse> responses;
+    std::optional<pb::SimulateRequest> req;
+    std::vector<int32_t> job_tiles;
+    std::vector<int32_t> push_tiles;
+    TileOptions job_options, push_options;
+    {
+      absl::MutexLock l(&mu_);
+      const size_t room = out_.size() < kMaxOut ? kMaxOut - out_.size() : 0;
+      if (job_.has_value()) {
+        // Tiles of a request come before anything after it.
+        const size_t n = std::min(room, job_->tiles.size() - job_->next);
+        job_tiles.assign(job_->tiles.begin() + job_->next,
+                         job_->tiles.begin() + job_->next + n);
+        job_->next += n;
+        job_options = job_->options;
+        if (job_->next == job_->tiles.size()) job_.reset();
+      } else if (!in_.empty()) {
+        req = std::move(in_.front());
+        in_.pop_front();
+      } else if (!pending_push_.empty() && sub_.has_value()) {
+        for (auto it = pending_push_.begin();
+             it != pending_push_.end() && push_tiles.size() < room;) {
+          push_tiles.push_back(*it);
+          it = pending_push_.erase(it);
+        }
+        push_options = sub_->options;
+      } else {
+        pending_push_.clear();
+      }
+    }
+    if (!job_tiles.empty() || !push_tiles.empty()) {
+      session_->Read([&](const Workpiece& wp) {
+        for (int32_t t : job_tiles) {
+          FillTile(wp, t, job_options, responses.emplace_back().mutable_tile());
+        }
+        for (int32_t t : push_tiles) {
+          FillTile(wp, t, push_options,
+                   responses.emplace_back().mutable_tile());
+        }
+        return 0;
+      });
+    }
+    if (req.has_value()) Handle(*req, &responses);
+    Act act;
+    {
+      absl::MutexLock l(&mu_);
+      for (size_t k = 0; k < responses.size(); ++k) {
+        out_.push_back(std::move(responses[k]));
+      }
+      processing_ = false;
+      act = NextLocked();
+    }
+    Do(act);
+  }
+
+  static void Error(uint64_t id, const absl::Status& s,
+                    std::vector<pb::SimulateResponse>* out) {
+    pb::RequestError* e = out->emplace_back().mutable_error();
+    e->set_request_id(id);
+    e->set_code(static_cast<int32_t>(s.code()));
+    e->set_message(std::string(s.message()));
+  }
+
+  void Handle(const pb::SimulateRequest& req,
+              std::vector<pb::SimulateResponse>* out) {
+    switch (req.request_case()) {
+      case pb::SimulateRequest::kMoves:
+        return HandleMoves(req.moves(), out);
+      case pb::SimulateRequest::kTiles:
+        return HandleTiles(req.tiles(), out);
+      case pb::SimulateRequest::kStats: {
+        const pb::StatsRequest& r = req.stats();
+        auto stats = session_->Read([&](const Workpiece& wp) {
+          return ComputeStats(wp, r.has_region() ? &r.region() : nullptr,
+                              r.samples_per_edge());
+        });
+        if (!stats.ok()) return Error(r.request_id(), stats.status(), out);
+        stats->set_request_id(r.request_id());
+        *out->emplace_back().mutable_stats() = *std::move(stats);
+        return;
+      }
+      case pb::SimulateRequest::kMarks: {
+        const pb::MarksRequest& r = req.marks();
+        auto marks = session_->Read([&](const Workpiece& wp) {
+          return ComputeMarks(wp, r.has_region() ? &r.region() : nullptr,
+                              r.screening_threshold(), r.min_angle_deg());
+        });
+        if (!marks.ok()) return Error(r.request_id(), marks.status(), out);
+        pb::Polylines* p = out->emplace_back().mutable_polylines();
+        p->set_request_id(r.request_id());
+        for (pb::Polyline& line : *marks) {
+          line.set_request_id(r.request_id());
+          *p->add_polylines() = std::move(line);
+        }
+        return;
+      }
+      case pb::SimulateRequest::kSubscribe:
+        return HandleSubscribe(req.subscribe(), out);
+      case pb::SimulateRequest::REQUEST_NOT_SET:
+        break;
+    }
+    Error(0, absl::InvalidArgumentError("empty SimulateRequest"), out);
+  }
+
+  void HandleMoves(const pb::MoveBatch& b,
+                   std::vector<pb::SimulateResponse>* out) {
+    auto r = session_->ApplyBatch(
+        b.seq(), b.tool_id(), std::span<const double>(b.xyz().data(), b.xyz_size()),
+        registry_->limits().max_batch_points);
+    if (!r.ok()) {
+      if (r.status().code() == absl::StatusCode::kFailedPrecondition) {
+        spdlog::warn("session {}: {}", session_->id(),
+                     std::string(r.status().message()));
+        absl::MutexLock l(&mu_);
+        fatal_ = ToGrpcStatus(r.status());
+        return;
+      }
+      return Error(b.seq(), r.status(), out);
+    }
+    pb::Ack* ack = out->emplace_back().mutable_ack();
+    ack->set_seq(r->seq);
+    ack->set_moves_applied(r->moves_applied);
+    ack->set_nodes_lowered(r->nodes_lowered);
+    ack->set_version(r->version);
+    ack->set_duplicate(r->duplicate);
+    const int32_t tiles_x = session_->spec().stock.nx / kTileSize + 1;
+    for (const auto& [t, v] : r->changed_tiles) {
+      pb::TileVersion* tv = ack->add_changed_tiles();
+      tv->set_tx(t % tiles_x);
+      tv->set_ty(t / tiles_x);
+      tv->set_version(v);
+    }
+    absl::MutexLock l(&mu_);
+    if (sub_.has_value()) {
+      for (const auto& [t, v] : r->changed_tiles) {
+        if (sub_->tiles.count(t)) pending_push_.insert(t);
+      }
+    }
+  }
+
+  void HandleTiles(const pb::TileRequest& r,
+                   std::vector<pb::SimulateResponse>* out) {
+    auto job = session_->Read([&](const Workpiece& wp) -> absl::StatusOr<TileJob> {
+      auto options = TileOptionsFrom(wp, r.request_id(), r.precision(),
+                                     r.include_derivatives(),
+                                     r.include_owners());
+      if (!options.ok()) return options.status();
+      auto tiles = SelectTiles(wp, r.has_selection() ? &r.selection() : nullptr);
+      if (!tiles.ok()) return tiles.status();
+      TileJob job;
+      job.options = *options;
+      for (int32_t t : *tiles) {
+        if (wp.TileVersion(t) > r.since_version() || r.since_version() == 0) {
+          job.tiles.push_back(t);
+        }
+      }
+      return job;
+    });
+    if (!job.ok()) return Error(r.request_id(), job.status(), out);
+    if (job->tiles.empty()) return;
+    absl::MutexLock l(&mu_);
+    job_ = *std::move(job);
+  }
+
+  void HandleSubscribe(const pb::Subscribe& r,
+                       std::vector<pb::SimulateResponse>* out) {
+    if (r.cancel()) {
+      absl::MutexLock l(&mu_);
+      sub_.reset();
+      pending_push_.clear();
+      return;
+    }
+    auto sub = session_->Read(
+        [&](const Workpiece& wp) -> absl::StatusOr<Subscription> {
+          auto options = TileOptionsFrom(wp, r.request_id(), r.precision(),
+                                         r.include_derivatives(),
+                                         r.include_owners());
+          if (!options.ok()) return options.status();
+          auto tiles =
+              SelectTiles(wp, r.has_selection() ? &r.selection() : nullptr);
+          if (!tiles.ok()) return tiles.status();
+          Subscription s;
+          s.request_id = r.request_id();
+          s.options = *options;
+          s.tiles.insert(tiles->begin(), tiles->end());
+          return s;
+        });
+    if (!sub.ok()) return Error(r.request_id(), sub.status(), out);
+    absl::MutexLock l(&mu_);
+    sub_ = *std::move(sub);
+    pending_push_.clear();
+  }
+
+  grpc::CallbackServerContext* const ctx_;
+  Registry* const registry_;
+  Executor* const executor_;
+  std::shared_ptr<Session> session_;
+
+  absl::Mutex mu_;
+  pb::SimulateRequest req_;  // target of the read in flight
+  std::deque<pb::SimulateRequest> in_ ABSL_GUARDED_BY(mu_);
+  std::deque<pb::SimulateResponse> out_ ABSL_GUARDED_BY(mu_);
+  std::optional<TileJob> job_ ABSL_GUARDED_BY(mu_);
+  std::optional<Subscription> sub_ ABSL_GUARDED_BY(mu_);
+  // Subscribed tiles changed since last pushed: one entry per tile, read at
+  // its latest version when pushed (coalescing).
+  std::set<int32_t> pending_push_ ABSL_GUARDED_BY(mu_);
+  std::optional<grpc::Status> fatal_ ABSL_GUARDED_BY(mu_);
+  bool read_pending_ ABSL_GUARDED_BY(mu_) = false;
+  bool reads_done_ ABSL_GUARDED_BY(mu_) = false;
+  bool writing_ ABSL_GUARDED_BY(mu_) = false;
+  bool processing_ ABSL_GUARDED_BY(mu_) = false;
+  bool cancelled_ ABSL_GUARDED_BY(mu_) = false;
+  bool finished_ ABSL_GUARDED_BY(mu_) = false;
+};
+
+}  // namespace
+
+grpc::ServerUnaryReactor* SwarfService::CreateSession(
+    grpc::CallbackServerContext* ctx, const pb::CreateSessionRequest* req,
+    pb::Session* resp) {
+  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+    pb::CreateSessionRequest r = *req;
+    if (r.session_id().empty()) {
+      // A client that chose its id for routing may send it only as metadata.
+      auto id = SessionIdOf(ctx, "");
+      if (id.ok()) r.set_session_id(*id);
+    } else if (auto id = SessionIdOf(ctx, r.session_id()); !id.ok()) {
+      return id.status();
+    }
+    auto spec = SpecFromRequest(r);
+    if (!spec.ok()) return spec.status();
+    auto session = registry_->Create(*std::move(spec));
+    if (!session.ok()) return session.status();
+    FillSession(**session, replica_, resp);
+    spdlog::info("session {}: created ({}x{} elements, {})", (*session)->id(),
+                 resp->nx(), resp->ny(),
+                 resp->scheme() == pb::SCHEME_ZMAP ? "zmap" : "taylor");
+    return absl::OkStatus();
+  });
+}
+
+grpc::ServerUnaryReactor* SwarfService::GetSession(
+    grpc::CallbackServerContext* ctx, const pb::GetSessionRequest* req,
+    pb::Session* resp) {
+  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+    auto session = SessionOf(registry_, ctx, req->session_id());
+    if (!session.ok()) return session.status();
+    FillSession(**session, replica_, resp);
+    return absl::OkStatus();
+  });
+}
+
+grpc::ServerUnaryReactor* SwarfService::ListSessions(
+    grpc::CallbackServerContext* ctx, const pb::ListSessionsRequest*,
+    pb::ListSessionsResponse* resp) {
+  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+    for (const auto& s : registry_->List()) {
+      FillSession(*s, replica_, resp->add_sessions());
+    }
+    return absl::OkStatus();
+  });
+}
+
+grpc::ServerUnaryReactor* SwarfService::DeleteSession(
+    grpc::CallbackServerContext* ctx, const pb::DeleteSessionRequest* req,
+    pb::DeleteSessionResponse*) {
+  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+    auto id = SessionIdOf(ctx, req->session_id());
+    if (!id.ok()) return id.status();
+    absl::Status s = registry_->Delete(*id);
+    if (s.ok()) spdlog::info("session {}: deleted", *id);
+    return s;
+  });
+}
+
+grpc::ServerBidiReactor<pb::SimulateRequest, pb::SimulateResponse>*
+SwarfService::Simulate(grpc::CallbackServerContext* ctx) {
+  return new SimulateReactor(ctx, registry_, executor_, replica_);
+}
+
+grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(
+    grpc::CallbackServerContext* ctx, const pb::GetTilesRequest* req) {
+  struct State {
+    std::shared_ptr<Session> session;
+    std::vector<int32_t> tiles;
+    size_t next = 0;
+    TileOptions options;
+    bool started = false;
+  };
+  auto state = std::make_shared<State>();
+  Registry* registry = registry_;
+  return new ChunkedWriter<pb::Tile>(
+      ctx, executor_, replica_,
+      [=](std::deque<pb::Tile>* out) -> absl::StatusOr<bool> {
+        if (!state->started) {
+          state->started = true;
+          auto session = SessionOf(registry, ctx, req->session_id());
+          if (!session.ok()) return session.status();
+          state->session = *session;
+          absl::Status st = state->session->Read([&](const Workpiece& wp) {
+            auto options = TileOptionsFrom(wp, 0, req->precision(),
+                                           req->include_derivatives(),
+                                           req->include_owners());
+            if (!options.ok()) return options.status();
+            state->options = *options;
+            auto tiles = SelectTiles(
+                wp, req->has_selection() ? &req->selection() : nullptr);
+            if (!tiles.ok()) return tiles.status();
+            for (int32_t t : *tiles) {
+              if (req->since_version() == 0 ||
+                  wp.TileVersion(t) > req->since_version()) {
+                state->tiles.push_back(t);
+              }
+            }
+            return absl::OkStatus();
+          });
+          if (!st.ok()) return st;
+        }
+        constexpr size_t kChunk = 16;
+        const size_t end = std::min(state->tiles.size(), state->next + kChunk);
+        state->session->Read([&](const Workpiece& wp) {
+          for (; state->next < end; ++state->next) {
+            FillTile(wp, state->tiles[state->next], state->options,
+                     &out->emplace_back());
+          }
+          return 0;
+        });
+        return state->next < state->tiles.size();
+      });
+}
+
+grpc::ServerUnaryReactor* SwarfService::GetErrorStats(
+    grpc::CallbackServerContext* ctx, const pb::GetErrorStatsRequest* req,
+    pb::ErrorStats* resp) {
+  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+    auto session = SessionOf(registry_, ctx, req->session_id());
+    if (!session.ok()) return session.status();
+    auto stats = (*session)->Read([&](const Workpiece& wp) {
+      return ComputeStats(wp, req->has_region() ? &req->region() : nullptr,
+                          req->samples_per_edge());
+    });
+    if (!stats.ok()) return stats.status();
+    *resp = *std::move(stats);
+    return absl::OkStatus();
+  });
+}
+
+grpc::ServerWriteReactor<pb::Polyline>* SwarfService::GetCuttingMarks(
+    grpc::CallbackServerContext* ctx, const pb::GetCuttingMarksRequest* req) {
+  Registry* registry = registry_;
+  return new ChunkedWriter<pb::Polyline>(
+      ctx, executor_, replica_,
+      [=](std::deque<pb::Polyline>* out) -> absl::StatusOr<bool> {
+        auto session = SessionOf(registry, ctx, req->session_id());
+        if (!session.ok()) return session.status();
+        auto marks = (*session)->Read([&](const Workpiece& wp) {
+          return ComputeMarks(wp, req->has_region() ? &req->region() : nullptr,
+                              req->screening_threshold(),
+                              req->min_angle_deg());
+        });
+        if (!marks.ok()) return marks.status();
+        for (pb::Polyline& p : *marks) out->push_back(std::move(p));
+        return false;
+      });
+}
+
+grpc::ServerUnaryReactor* SwarfService::Probe(
+    grpc::CallbackServerContext* ctx, const pb::ProbeRequest* req,
+    pb::ProbeResponse* resp) {
+  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+    auto session = SessionOf(registry_, ctx, req->session_id());
+    if (!session.ok()) return session.status();
+    auto probe = (*session)->Read(
+        [&](const Workpiece& wp) { return ComputeProbe(wp, *req); });
+    if (!probe.ok()) return probe.status();
+    *resp = *std::move(probe);
+    return absl::OkStatus();
+  });
+}
+
+}  // namespace swarf::server

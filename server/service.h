@@ -1,0 +1,68 @@
+// The swarf.v1.Swarf gRPC service (callback API). All simulation work runs
+// on the executor, never inside a gRPC callback; streams keep one write in
+// flight and bound their queues, so a slow reader slows the writer and a
+// slow server slows the client (flow control).
+#ifndef SWARF_SERVER_SERVICE_H_
+#define SWARF_SERVER_SERVICE_H_
+
+#include <string>
+
+#include "server/executor.h"
+#include "server/registry.h"
+#include "swarf/v1/swarf.grpc.pb.h"
+
+namespace swarf::server {
+
+// Metadata naming the session on every session call (for load balancers).
+inline constexpr char kSessionMetadata[] = "x-swarf-session";
+// Response metadata naming the replica that served the call.
+inline constexpr char kReplicaMetadata[] = "x-swarf-replica";
+
+class SwarfService final : public ::swarf::v1::Swarf::CallbackService {
+ public:
+  // registry and executor are not owned and must outlive the service.
+  SwarfService(Registry* registry, Executor* executor, std::string replica)
+      : registry_(registry), executor_(executor), replica_(std::move(replica)) {}
+
+  grpc::ServerUnaryReactor* CreateSession(
+      grpc::CallbackServerContext* ctx,
+      const ::swarf::v1::CreateSessionRequest* req,
+      ::swarf::v1::Session* resp) override;
+  grpc::ServerUnaryReactor* GetSession(
+      grpc::CallbackServerContext* ctx,
+      const ::swarf::v1::GetSessionRequest* req,
+      ::swarf::v1::Session* resp) override;
+  grpc::ServerUnaryReactor* ListSessions(
+      grpc::CallbackServerContext* ctx,
+      const ::swarf::v1::ListSessionsRequest* req,
+      ::swarf::v1::ListSessionsResponse* resp) override;
+  grpc::ServerUnaryReactor* DeleteSession(
+      grpc::CallbackServerContext* ctx,
+      const ::swarf::v1::DeleteSessionRequest* req,
+      ::swarf::v1::DeleteSessionResponse* resp) override;
+  grpc::ServerBidiReactor<::swarf::v1::SimulateRequest,
+                          ::swarf::v1::SimulateResponse>*
+  Simulate(grpc::CallbackServerContext* ctx) override;
+  grpc::ServerWriteReactor<::swarf::v1::Tile>* GetTiles(
+      grpc::CallbackServerContext* ctx,
+      const ::swarf::v1::GetTilesRequest* req) override;
+  grpc::ServerUnaryReactor* GetErrorStats(
+      grpc::CallbackServerContext* ctx,
+      const ::swarf::v1::GetErrorStatsRequest* req,
+      ::swarf::v1::ErrorStats* resp) override;
+  grpc::ServerWriteReactor<::swarf::v1::Polyline>* GetCuttingMarks(
+      grpc::CallbackServerContext* ctx,
+      const ::swarf::v1::GetCuttingMarksRequest* req) override;
+  grpc::ServerUnaryReactor* Probe(grpc::CallbackServerContext* ctx,
+                                  const ::swarf::v1::ProbeRequest* req,
+                                  ::swarf::v1::ProbeResponse* resp) override;
+
+ private:
+  Registry* const registry_;
+  Executor* const executor_;
+  const std::string replica_;
+};
+
+}  // namespace swarf::server
+
+#endif  // SWARF_SERVER_SERVICE_H_

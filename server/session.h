@@ -1,0 +1,101 @@
+// A workpiece session: the core workpiece plus what the stream protocol
+// needs (tools, the last applied seq and tip position).
+//
+// Thread-safe: batches take the session's lock exclusively, reads share it.
+#ifndef SWARF_SERVER_SESSION_H_
+#define SWARF_SERVER_SESSION_H_
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
+#include "core/geometry.h"
+#include "core/scheme.h"
+#include "core/stock.h"
+#include "core/workpiece.h"
+
+namespace swarf::server {
+
+struct ToolSpec {
+  int32_t id = 0;
+  double radius = 0;  // ball-end radius (mm)
+};
+
+struct SessionSpec {
+  std::string id;
+  StockSpec stock;
+  SchemeKind scheme = SchemeKind::kTaylor;
+  std::vector<ToolSpec> tools;
+};
+
+// What a batch did, for its Ack.
+struct BatchResult {
+  uint64_t seq = 0;
+  int64_t moves_applied = 0;  // in the session, in total
+  int64_t nodes_lowered = 0;  // by this batch
+  uint64_t version = 0;       // after the batch
+  std::vector<std::pair<int32_t, uint64_t>> changed_tiles;  // tile, version
+  bool duplicate = false;  // seq already applied: nothing done
+};
+
+// A snapshot of the session's counters.
+struct SessionState {
+  uint64_t last_seq = 0;
+  int64_t moves_applied = 0;
+  uint64_t version = 0;
+  int64_t allocated_tiles = 0;
+  int64_t memory_bytes = 0;
+  std::optional<Vec3> last_position;
+};
+
+class Session {
+ public:
+  // InvalidArgument naming the field for a bad stock or tools.
+  static absl::StatusOr<std::shared_ptr<Session>> Create(SessionSpec spec);
+
+  const SessionSpec& spec() const { return spec_; }
+  const std::string& id() const { return spec_.id; }
+
+  // Worst-case memory of the session (every tile cut), for admission.
+  static int64_t EstimateMemoryBytes(const StockSpec& stock,
+                                     SchemeKind scheme);
+
+  // Applies batch `seq`: the tip polyline xyz (x, y, z triples) continuing
+  // from the last position, cut with tool `tool_id`. seq <= last applied:
+  // a duplicate, acknowledged without applying. seq > last + 1:
+  // FailedPrecondition. Bad values: InvalidArgument naming the field, and
+  // nothing applied. Batches of more than max_points points:
+  // InvalidArgument.
+  absl::StatusOr<BatchResult> ApplyBatch(uint64_t seq, int32_t tool_id,
+                                         std::span<const double> xyz,
+                                         int64_t max_points);
+
+  SessionState State() const;
+
+  // Runs fn(const Workpiece&) under the shared lock and returns its result.
+  template <typename F>
+  auto Read(F&& fn) const {
+    absl::ReaderMutexLock l(&mu_);
+    return fn(*wp_);
+  }
+
+ private:
+  Session(SessionSpec spec, std::unique_ptr<Workpiece> wp)
+      : spec_(std::move(spec)), wp_(std::move(wp)) {}
+
+  const SessionSpec spec_;
+  mutable absl::Mutex mu_;
+  std::unique_ptr<Workpiece> wp_ ABSL_PT_GUARDED_BY(mu_);
+  uint64_t last_seq_ ABSL_GUARDED_BY(mu_) = 0;
+  std::optional<Vec3> last_position_ ABSL_GUARDED_BY(mu_);
+};
+
+}  // namespace swarf::server
+
+#endif  // SWARF_SERVER_SESSION_H_
