@@ -16,18 +16,6 @@ constexpr double kVerticalFraction = 1e-12;
 // evaluated, whatever the cap, which keeps results independent of batching.
 constexpr double kFootprintMargin = 1e-9;
 
-// Restricts `iv` to the x where lo <= a x + b <= hi; inv_a = 1 / a.
-void ClipLinear(double a, double inv_a, double b, double lo, double hi,
-                Interval* iv) {
-  if (a == 0) {
-    if (b < lo || b > hi) *iv = Interval{};
-    return;
-  }
-  double x_lo = (lo - b) * inv_a, x_hi = (hi - b) * inv_a;
-  if (a < 0) std::swap(x_lo, x_hi);
-  iv->Intersect(x_lo, x_hi);
-}
-
 }  // namespace
 
 double SphereHeight(const Vec3& c, double r, double x, double y) {
@@ -69,88 +57,49 @@ BallSweep::BallSweep(const Vec3& tip_from, const Vec3& tip_to, double radius)
 // Clones for wider vectors, picked at load time; the same IEEE operations in
 // every clone (no FMA: -ffp-contract=off), so the same bits.
 __attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
-void BallSweep::RowHeights(double y, double x0, double dx, int32_t i0,
-                           int32_t n, double* out) const {
-  // x is computed exactly as GridGeometry::NodeX computes it.
+void BallSweep::Heights(const double* x, const double* y, int32_t n,
+                        double* out) const {
   if (kind_ == kGeneral) {
 #pragma omp simd
-    for (int32_t k = 0; k < n; ++k) {
-      out[k] = LocateGeneral(x0 + (i0 + k) * dx, y).w;
+    for (int32_t q = 0; q < n; ++q) out[q] = LocateGeneral(x[q], y[q]).w;
+    return;
+  }
+  const Vec3 c = LowestCentre();
+  const SweepPoint::Piece piece = LowestPiece();
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) out[q] = LocateSphere(c, piece, x[q], y[q]).w;
+}
+
+__attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
+void BallSweep::Jets(const double* x, const double* y, int32_t n,
+                     float* const d[5]) const {
+  float* __restrict d0 = d[0];
+  float* __restrict d1 = d[1];
+  float* __restrict d2 = d[2];
+  float* __restrict d3 = d[3];
+  float* __restrict d4 = d[4];
+  if (kind_ == kGeneral) {
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) {
+      const SurfaceJet j = Jet(LocateGeneral(x[q], y[q]));
+      d0[q] = static_cast<float>(j.wx);
+      d1[q] = static_cast<float>(j.wy);
+      d2[q] = static_cast<float>(j.wxx);
+      d3[q] = static_cast<float>(j.wxy);
+      d4[q] = static_cast<float>(j.wyy);
     }
     return;
   }
   const Vec3 c = LowestCentre();
   const SweepPoint::Piece piece = LowestPiece();
 #pragma omp simd
-  for (int32_t k = 0; k < n; ++k) {
-    out[k] = LocateSphere(c, piece, x0 + (i0 + k) * dx, y).w;
-  }
-}
-
-__attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
-void BallSweep::LocateRow(double y, double x0, double dx, int32_t i0,
-                          int32_t n, RowPoints* out) const {
-  double* __restrict ow = out->w;
-  double* __restrict opx = out->px;
-  double* __restrict opy = out->py;
-  double* __restrict odepth = out->depth;
-  int32_t* __restrict opiece = out->piece;
-  if (kind_ == kGeneral) {
-#pragma omp simd
-    for (int32_t k = 0; k < n; ++k) {
-      const SweepPoint p = LocateGeneral(x0 + (i0 + k) * dx, y);
-      ow[k] = p.w;
-      opx[k] = p.px;
-      opy[k] = p.py;
-      odepth[k] = p.depth;
-      opiece[k] = p.piece;
-    }
-    return;
-  }
-  const Vec3 c = LowestCentre();
-  const SweepPoint::Piece piece = LowestPiece();
-#pragma omp simd
-  for (int32_t k = 0; k < n; ++k) {
-    const SweepPoint p = LocateSphere(c, piece, x0 + (i0 + k) * dx, y);
-    ow[k] = p.w;
-    opx[k] = p.px;
-    opy[k] = p.py;
-    odepth[k] = p.depth;
-    opiece[k] = p.piece;
-  }
-}
-
-__attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
-void BallSweep::RowJets(const RowPoints& row, const int32_t* mask, int32_t n,
-                        float* const d[5], int32_t k0) const {
-  // Contiguous over the row with masked stores: gathering only the lowered
-  // points costs more than computing the few others.
-  const double* __restrict rw = row.w;
-  const double* __restrict rpx = row.px;
-  const double* __restrict rpy = row.py;
-  const double* __restrict rdepth = row.depth;
-  const int32_t* __restrict rpiece = row.piece;
-  float* __restrict d0 = d[0] + k0;
-  float* __restrict d1 = d[1] + k0;
-  float* __restrict d2 = d[2] + k0;
-  float* __restrict d3 = d[3] + k0;
-  float* __restrict d4 = d[4] + k0;
-#pragma omp simd
-  for (int32_t k = 0; k < n; ++k) {
-    SweepPoint p;
-    p.piece = static_cast<SweepPoint::Piece>(rpiece[k]);
-    p.w = rw[k];
-    p.px = rpx[k];
-    p.py = rpy[k];
-    p.depth = rdepth[k];
-    const SurfaceJet j = Jet(p);
-    if (mask[k] != 0) {
-      d0[k] = static_cast<float>(j.wx);
-      d1[k] = static_cast<float>(j.wy);
-      d2[k] = static_cast<float>(j.wxx);
-      d3[k] = static_cast<float>(j.wxy);
-      d4[k] = static_cast<float>(j.wyy);
-    }
+  for (int32_t q = 0; q < n; ++q) {
+    const SurfaceJet j = Jet(LocateSphere(c, piece, x[q], y[q]));
+    d0[q] = static_cast<float>(j.wx);
+    d1[q] = static_cast<float>(j.wy);
+    d2[q] = static_cast<float>(j.wxx);
+    d3[q] = static_cast<float>(j.wxy);
+    d4[q] = static_cast<float>(j.wyy);
   }
 }
 
@@ -216,29 +165,6 @@ BallSweep::Capsule BallSweep::Footprint(double cap) const {
     c.inv_uy = c.uy != 0 ? 1 / c.uy : 0;
   }
   return c;
-}
-
-Interval BallSweep::Capsule::RowSpan(double y) const {
-  Interval out;
-  if (empty) return out;
-  const double r2 = radius * radius;
-  for (const auto& [cx, cy] : {std::pair{x0, y0}, std::pair{x1, y1}}) {
-    const double dy = y - cy;
-    const double q = r2 - dy * dy;
-    if (q >= 0) {
-      const double w = std::sqrt(q);
-      out.Hull({cx - w, cx + w});
-    }
-  }
-  if (length > 0) {
-    Interval strip{-kInf, kInf};
-    // 0 <= (p - p0) . u <= length  and  |(p - p0) . (-uy, ux)| <= radius.
-    ClipLinear(ux, inv_ux, (y - y0) * uy - x0 * ux, 0, length, &strip);
-    ClipLinear(-uy, -inv_uy, x0 * uy + (y - y0) * ux, -radius, radius,
-               &strip);
-    out.Hull(strip);
-  }
-  return out;
 }
 
 }  // namespace swarf

@@ -16,6 +16,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <utility>
 
 #include "core/geometry.h"
 #include "core/surface_jet.h"
@@ -90,35 +91,14 @@ class BallSweep {
                                             x, y);
   }
 
-  // out[k] = Height(x0 + (i0 + k) * dx, y) for k in [0, n): the heights of
-  // one row of grid nodes, bit-identical to Height() (same operations,
-  // evaluated several nodes at a time). n <= RowPoints::kMax.
-  void RowHeights(double y, double x0, double dx, int32_t i0, int32_t n,
-                  double* out) const;
-
-  // A row of located points, structure-of-arrays.
-  struct RowPoints {
-    static constexpr int32_t kMax = 64;
-    double w[kMax], px[kMax], py[kMax], depth[kMax];
-    int32_t piece[kMax];  // SweepPoint::Piece
-    SweepPoint At(int32_t k) const {
-      SweepPoint p;
-      p.piece = static_cast<SweepPoint::Piece>(piece[k]);
-      p.w = w[k];
-      p.depth = depth[k];
-      p.px = px[k];
-      p.py = py[k];
-      return p;
-    }
-  };
-  // As RowHeights, keeping everything Jet() needs: out->At(k) equals
-  // Locate(x0 + (i0 + k) * dx, y).
-  void LocateRow(double y, double x0, double dx, int32_t i0, int32_t n,
-                 RowPoints* out) const;
-  // For every k in [0, n) with mask[k] != 0: d[c][k0 + k] =
-  // float(component c of Jet(row.At(k))), components wx, wy, wxx, wxy, wyy.
-  void RowJets(const RowPoints& row, const int32_t* mask, int32_t n,
-               float* const d[5], int32_t k0) const;
+  // out[q] = Height(x[q], y[q]) for q in [0, n), bit-identical to Height()
+  // (the same operations, evaluated several points at a time).
+  void Heights(const double* x, const double* y, int32_t n,
+               double* out) const;
+  // d[c][q] = float(component c of Jet(Locate(x[q], y[q]))), components wx,
+  // wy, wxx, wxy, wyy, for q in [0, n). Vectorized.
+  void Jets(const double* x, const double* y, int32_t n,
+            float* const d[5]) const;
 
   // Height and derivatives at a located point; for kNone, +inf and zeros.
   // Branch-free (both forms computed, one selected) so that it vectorizes.
@@ -163,7 +143,42 @@ class BallSweep {
               std::max(x0, x1) + radius, std::max(y0, y1) + radius};
     }
     // The x-interval of the capsule on the row y (empty if it misses).
-    Interval RowSpan(double y) const;
+    // Inline: it runs for every row of every move.
+    Interval RowSpan(double y) const {
+      Interval out;
+      if (empty) return out;
+      const double r2 = radius * radius;
+      const double dy0 = y - y0, dy1 = y - y1;
+      const double q0 = r2 - dy0 * dy0, q1 = r2 - dy1 * dy1;
+      if (q0 >= 0) {
+        const double w = std::sqrt(q0);
+        out.Hull({x0 - w, x0 + w});
+      }
+      if (q1 >= 0) {
+        const double w = std::sqrt(q1);
+        out.Hull({x1 - w, x1 + w});
+      }
+      if (length > 0) {
+        // The band between the ends: 0 <= (p - p0) . u <= length and
+        // |(p - p0) . (-uy, ux)| <= radius, each linear in x on the row.
+        Interval strip{-kInf, kInf};
+        ClipLinear(ux, inv_ux, dy0 * uy - x0 * ux, 0, length, &strip);
+        ClipLinear(-uy, -inv_uy, x0 * uy + dy0 * ux, -radius, radius, &strip);
+        out.Hull(strip);
+      }
+      return out;
+    }
+    // Restricts `iv` to the x where lo <= a x + b <= hi; inv_a = 1 / a.
+    static void ClipLinear(double a, double inv_a, double b, double lo,
+                           double hi, Interval* iv) {
+      if (a == 0) {
+        if (b < lo || b > hi) *iv = Interval{};
+        return;
+      }
+      double x_lo = (lo - b) * inv_a, x_hi = (hi - b) * inv_a;
+      if (a < 0) std::swap(x_lo, x_hi);
+      iv->Intersect(x_lo, x_hi);
+    }
   };
   Capsule Footprint(double cap) const;
 
@@ -240,7 +255,11 @@ inline SweepPoint BallSweep::LocateGeneral(double x, double y) const {
   // Horizontal coordinates of (x, y) relative to a: `along` the move's XY
   // direction and `n` across it (the horizontal distance to the axis line,
   // which is also the distance from the vertical line at (x, y) to it).
-  const double px = x - a_.x, py = y - a_.y;
+  // Both centres in locals: selecting values (not addresses) below keeps
+  // the loop free of gathers.
+  const double ax = a_.x, ay = a_.y, az = a_.z;
+  const double bx = b_.x, by = b_.y, bz = b_.z;
+  const double px = x - ax, py = y - ay;
   const double n = h1_ * py - h2_ * px;
   const double along = h1_ * px + h2_ * py;
   const double root2 = r2_ - n * n;
@@ -260,9 +279,9 @@ inline SweepPoint BallSweep::LocateGeneral(double x, double y) const {
   const double t = g_ * along + k3_ * s;
   const bool before = t < 0, after = t > len_;
   const bool cylinder = !before && !after;
-  const double cx = before ? a_.x : b_.x;
-  const double cy = before ? a_.y : b_.y;
-  const double cz = before ? a_.z : b_.z;
+  const double cx = before ? ax : bx;
+  const double cy = before ? ay : by;
+  const double cz = before ? az : bz;
   const double qx = x - cx, qy = y - cy;
   const double d2 = r2_ - (qx * qx + qy * qy);
   const double depth = std::sqrt(std::max(d2, 0.0));
@@ -270,7 +289,7 @@ inline SweepPoint BallSweep::LocateGeneral(double x, double y) const {
   const bool sphere_hit = d2 >= 0;
   // Both candidates are computed and then selected: no branch, so that
   // rows of nodes vectorize.
-  const double w_cylinder = a_.z + s;
+  const double w_cylinder = az + s;
   const double w_sphere = cz - depth;
   SweepPoint p;
   p.w = !hit ? kInf : cylinder ? w_cylinder : sphere_hit ? w_sphere : kInf;

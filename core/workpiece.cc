@@ -42,11 +42,19 @@ namespace {
 // conservative, footprints carry a margin); lo > hi if none.
 std::pair<int32_t, int32_t> NodeRange(double a, double b, double origin,
                                       double inv_step, int32_t max) {
-  const double lo = std::ceil((a - origin) * inv_step);
-  const double hi = std::floor((b - origin) * inv_step);
-  if (!(hi >= 0) || !(lo <= max) || !(lo <= hi)) return {1, 0};
-  return {static_cast<int32_t>(std::max(lo, 0.0)),
-          static_cast<int32_t>(std::min(hi, static_cast<double>(max)))};
+  // Clamped to [-1, max + 1] first, so that the integer conversions below
+  // are exact ceil/floor without libm calls.
+  const double top = max + 1.0;
+  const double fa = std::min(std::max((a - origin) * inv_step, -1.0), top);
+  const double fb = std::min(std::max((b - origin) * inv_step, -1.0), top);
+  int32_t lo = static_cast<int32_t>(fa);  // truncation: ceil for fa <= 0
+  if (lo < fa) ++lo;
+  int32_t hi = static_cast<int32_t>(fb);  // floor for fb >= 0
+  if (hi > fb) --hi;
+  lo = std::max(lo, 0);
+  hi = std::min(hi, max);
+  if (!(fa == fa) || !(fb == fb) || lo > hi) return {1, 0};  // NaN: none
+  return {lo, hi};
 }
 
 }  // namespace
@@ -132,9 +140,16 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   double* __restrict const w = tile->w;
   int32_t* __restrict const owner = tile->owner;
   int64_t lowered = 0;
-  BallSweep::RowPoints row;         // one row span of the sweep
-  int32_t lowered_mask[kTileSize];  // which positions of `row` were lowered
-  static_assert(BallSweep::RowPoints::kMax >= kTileSize);
+
+  // Candidate nodes are gathered across rows into chunks, so that short
+  // moves (a few nodes per row) still fill the vector units.
+  constexpr int32_t kChunk = 256;
+  static_assert(kChunk >= kTileSize);
+  alignas(64) double cx[kChunk], cy[kChunk], h[kChunk];
+  alignas(64) double lx[kChunk], ly[kChunk];
+  alignas(64) float jets[5][kChunk];
+  int32_t ck[kChunk], lk[kChunk];
+  float* const jet_rows[5] = {jets[0], jets[1], jets[2], jets[3], jets[4]};
 
   for (uint32_t m : batch_moves) {
     const BallSweep sweep = sweeps[m];
@@ -143,6 +158,35 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     const BallSweep::Capsule cap = sweep.Footprint(tile->zmax);
     if (cap.empty) continue;
     const int32_t id = static_cast<int32_t>(first_id + m);
+    int32_t n = 0;
+    // Heights of the chunk (vectorized), lowering, then derivatives of the
+    // lowered nodes only (vectorized, contiguous).
+    auto flush = [&] {
+      sweep.Heights(cx, cy, n, h);
+      int32_t low = 0;
+      for (int32_t q = 0; q < n; ++q) {
+        const int32_t k = ck[q];
+        if (h[q] < w[k] || (h[q] == w[k] && id < owner[k])) {
+          w[k] = h[q];
+          owner[k] = id;
+          lx[low] = cx[q];
+          ly[low] = cy[q];
+          lk[low] = k;
+          ++low;
+        }
+      }
+      lowered += low;
+      if constexpr (kDerivatives) {
+        if (low > 0) {
+          // Same points, same operations as Heights: the same sweep point.
+          sweep.Jets(lx, ly, low, jet_rows);
+          for (int32_t q = 0; q < low; ++q) {
+            for (int c = 0; c < 5; ++c) tile->d[c][lk[q]] = jets[c][q];
+          }
+        }
+      }
+      n = 0;
+    };
     const Rect b = cap.Bounds();
     auto [j_lo, j_hi] = NodeRange(b.y0, b.y1, y0, inv_dy, j_max);
     j_lo = std::max(j_lo, j_base);
@@ -153,33 +197,15 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       auto [i_lo, i_hi] = NodeRange(span.lo, span.hi, x0, inv_dx, i_max);
       i_lo = std::max(i_lo, i_base);
       if (i_lo > i_hi) continue;
-      // Phase 1, vectorized: the sweep along the row span.
-      const int32_t n = i_hi - i_lo + 1;
-      if constexpr (kDerivatives) {
-        sweep.LocateRow(y, x0, dx, i_lo, n, &row);
-      } else {
-        sweep.RowHeights(y, x0, dx, i_lo, n, row.w);
-      }
-      // Phase 2: lower the nodes, noting which.
-      const double* h = row.w;
-      const int32_t k0 = (j - j_base) * kTileSize + (i_lo - i_base);
-      int32_t m = 0;
-      for (int32_t q = 0; q < n; ++q) {
-        const int32_t k = k0 + q;
-        const bool lower = h[q] < w[k] || (h[q] == w[k] && id < owner[k]);
-        if (lower) {
-          w[k] = h[q];
-          owner[k] = id;
-        }
-        lowered_mask[q] = lower;
-        m += lower;
-      }
-      lowered += m;
-      // Phase 3, vectorized: derivatives, stored for the lowered nodes only.
-      if constexpr (kDerivatives) {
-        if (m > 0) sweep.RowJets(row, lowered_mask, n, tile->d, k0);
+      if (n + (i_hi - i_lo + 1) > kChunk) flush();
+      const int32_t k0 = (j - j_base) * kTileSize - i_base;
+      for (int32_t i = i_lo; i <= i_hi; ++i, ++n) {
+        cx[n] = x0 + i * dx;  // as GridGeometry::NodeX: bit-identical
+        cy[n] = y;
+        ck[n] = k0 + i;
       }
     }
+    if (n > 0) flush();
   }
   if (lowered > 0) {
     // Tighten the cap for later batches.
