@@ -1,0 +1,169 @@
+// End-to-end throughput: a long finishing path streamed through a running
+// server on loopback TCP, against applying the same batches in-process.
+// Run: build/bin/swarf_stream_bench [--benchmark_filter=...]
+#include <benchmark/benchmark.h>
+
+#include <cmath>
+#include <thread>
+#include <vector>
+
+#include "core/workpiece.h"
+#include "grpcpp/grpcpp.h"
+#include "server/server.h"
+#include "swarf/v1/swarf.grpc.pb.h"
+
+namespace swarf {
+namespace {
+
+namespace pb = ::swarf::v1;
+
+constexpr double kBallRadius = 0.5;  // a 1 mm ball
+const StockSpec kStock{0, 0, 100, 100, 0, 1000, 1000};
+
+// A zig-zag finishing raster of 0.1 mm moves over a gentle wave: about
+// `moves` tip positions.
+std::vector<Vec3> Raster(int64_t moves) {
+  const double step = 0.1, x_min = 5, x_max = 95;
+  const int64_t per_row = static_cast<int64_t>((x_max - x_min) / step);
+  const int64_t rows = (moves + per_row - 1) / per_row;
+  const double stepover = 90.0 / rows;
+  std::vector<Vec3> pts;
+  pts.reserve(moves + 1);
+  for (int64_t r = 0; r < rows && static_cast<int64_t>(pts.size()) <= moves;
+       ++r) {
+    const double y = 5 + r * stepover;
+    for (int64_t k = 0; k < per_row && static_cast<int64_t>(pts.size()) <= moves;
+         ++k) {
+      const double s = x_min + k * step;
+      const double x = r % 2 == 0 ? s : x_max - (s - x_min);
+      pts.push_back({x, y, -1 + 0.3 * std::sin(x * 0.2 + y * 0.1)});
+    }
+  }
+  return pts;
+}
+
+// In-process: the same polyline cut through Workpiece::Apply in batches.
+void BM_InProcess(benchmark::State& state) {
+  const int64_t moves = state.range(0), batch = state.range(1);
+  const std::vector<Vec3> pts = Raster(moves);
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto wp = *Workpiece::Create(kStock, SchemeKind::kTaylor);
+    std::vector<Move> buf;
+    state.ResumeTiming();
+    for (size_t k = 1; k < pts.size(); k += batch) {
+      buf.clear();
+      for (size_t p = k; p < std::min(pts.size(), k + batch); ++p) {
+        buf.push_back({pts[p - 1], pts[p], kBallRadius});
+      }
+      benchmark::DoNotOptimize(wp->Apply(buf)->nodes_lowered);
+    }
+    state.PauseTiming();
+    wp.reset();
+    state.ResumeTiming();
+  }
+  state.counters["moves_per_s"] = benchmark::Counter(
+      static_cast<double>(pts.size() - 1),
+      benchmark::Counter::kIsIterationInvariantRate);
+}
+
+// End to end: a client streams the batches to swarfd over 127.0.0.1 (one
+// thread writing, one reading acks) until the last batch is acknowledged.
+void BM_EndToEnd(benchmark::State& state) {
+  const int64_t moves = state.range(0), batch = state.range(1);
+  const std::vector<Vec3> pts = Raster(moves);
+  server::ServerOptions opt;
+  opt.listen = "127.0.0.1:0";
+  auto srv = *server::SwarfServer::Start(opt);
+  grpc::ChannelArguments args;
+  args.SetMaxReceiveMessageSize(64 << 20);
+  auto channel = grpc::CreateCustomChannel(
+      "127.0.0.1:" + std::to_string(srv->port()),
+      grpc::InsecureChannelCredentials(), args);
+  auto stub = pb::Swarf::NewStub(channel);
+  int run = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    const std::string id = "bench-" + std::to_string(run++);
+    pb::CreateSessionRequest create;
+    create.set_session_id(id);
+    create.mutable_stock()->set_x1(kStock.x1);
+    create.mutable_stock()->set_y1(kStock.y1);
+    create.set_nx(kStock.nx);
+    create.set_ny(kStock.ny);
+    create.set_scheme(pb::SCHEME_TAYLOR);
+    pb::Tool* tool = create.add_tools();
+    tool->set_id(1);
+    tool->mutable_ball()->set_radius(kBallRadius);
+    {
+      grpc::ClientContext ctx;
+      pb::Session session;
+      grpc::Status st = stub->CreateSession(&ctx, create, &session);
+      if (!st.ok()) state.SkipWithError(st.error_message().c_str());
+    }
+    // Requests are built before timing: the client's own work is not the
+    // server's throughput.
+    std::vector<pb::SimulateRequest> reqs;
+    uint64_t seq = 0;
+    for (size_t k = 0; k < pts.size(); k += batch) {
+      pb::MoveBatch* b = reqs.emplace_back().mutable_moves();
+      b->set_seq(++seq);
+      b->set_tool_id(1);
+      // Batches continue from the last point; the first point of the first
+      // batch is only the start.
+      for (size_t p = k; p < std::min(pts.size(), k + batch); ++p) {
+        b->add_xyz(pts[p].x);
+        b->add_xyz(pts[p].y);
+        b->add_xyz(pts[p].z);
+      }
+    }
+    state.ResumeTiming();
+    grpc::ClientContext ctx;
+    ctx.AddMetadata("x-swarf-session", id);
+    auto stream = stub->Simulate(&ctx);
+    std::thread writer([&] {
+      for (const auto& r : reqs) stream->Write(r);
+      stream->WritesDone();
+    });
+    pb::SimulateResponse resp;
+    uint64_t acked = 0;
+    while (stream->Read(&resp)) {
+      if (resp.has_ack()) acked = resp.ack().seq();
+    }
+    writer.join();
+    grpc::Status st = stream->Finish();
+    if (!st.ok() || acked != seq) {
+      state.SkipWithError(("stream failed: " + st.error_message()).c_str());
+    }
+    state.PauseTiming();
+    {
+      grpc::ClientContext dctx;
+      pb::DeleteSessionRequest del;
+      del.set_session_id(id);
+      pb::DeleteSessionResponse dresp;
+      stub->DeleteSession(&dctx, del, &dresp);
+    }
+    state.ResumeTiming();
+  }
+  state.counters["moves_per_s"] = benchmark::Counter(
+      static_cast<double>(pts.size() - 1),
+      benchmark::Counter::kIsIterationInvariantRate);
+}
+
+BENCHMARK(BM_InProcess)
+    ->Args({1000000, 10000})
+    ->Args({1000000, 50000})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3);
+BENCHMARK(BM_EndToEnd)
+    ->Args({1000000, 10000})
+    ->Args({1000000, 50000})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3);
+
+}  // namespace
+}  // namespace swarf
+
+BENCHMARK_MAIN();
