@@ -71,22 +71,22 @@ void BallSweep::Heights(const double* x, const double* y, int32_t n,
 }
 
 __attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
-void BallSweep::Jets(const double* x, const double* y, int32_t n,
-                     float* const d[5]) const {
-  float* __restrict d0 = d[0];
-  float* __restrict d1 = d[1];
-  float* __restrict d2 = d[2];
-  float* __restrict d3 = d[3];
-  float* __restrict d4 = d[4];
+void BallSweep::Locate(const double* x, const double* y, int32_t n,
+                       Points* out) const {
+  double* __restrict ow = out->w;
+  double* __restrict opx = out->px;
+  double* __restrict opy = out->py;
+  double* __restrict odepth = out->depth;
+  int32_t* __restrict opiece = out->piece;
   if (kind_ == kGeneral) {
 #pragma omp simd
     for (int32_t q = 0; q < n; ++q) {
-      const SurfaceJet j = Jet(LocateGeneral(x[q], y[q]));
-      d0[q] = static_cast<float>(j.wx);
-      d1[q] = static_cast<float>(j.wy);
-      d2[q] = static_cast<float>(j.wxx);
-      d3[q] = static_cast<float>(j.wxy);
-      d4[q] = static_cast<float>(j.wyy);
+      const SweepPoint p = LocateGeneral(x[q], y[q]);
+      ow[q] = p.w;
+      opx[q] = p.px;
+      opy[q] = p.py;
+      odepth[q] = p.depth;
+      opiece[q] = p.piece;
     }
     return;
   }
@@ -94,7 +94,36 @@ void BallSweep::Jets(const double* x, const double* y, int32_t n,
   const SweepPoint::Piece piece = LowestPiece();
 #pragma omp simd
   for (int32_t q = 0; q < n; ++q) {
-    const SurfaceJet j = Jet(LocateSphere(c, piece, x[q], y[q]));
+    const SweepPoint p = LocateSphere(c, piece, x[q], y[q]);
+    ow[q] = p.w;
+    opx[q] = p.px;
+    opy[q] = p.py;
+    odepth[q] = p.depth;
+    opiece[q] = p.piece;
+  }
+}
+
+__attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
+void BallSweep::Jets(const Points& pts, int32_t n, float* const d[5]) const {
+  const double* __restrict w = pts.w;
+  const double* __restrict px = pts.px;
+  const double* __restrict py = pts.py;
+  const double* __restrict depth = pts.depth;
+  const int32_t* __restrict piece = pts.piece;
+  float* __restrict d0 = d[0];
+  float* __restrict d1 = d[1];
+  float* __restrict d2 = d[2];
+  float* __restrict d3 = d[3];
+  float* __restrict d4 = d[4];
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) {
+    SweepPoint p;
+    p.piece = static_cast<SweepPoint::Piece>(piece[q]);
+    p.w = w[q];
+    p.px = px[q];
+    p.py = py[q];
+    p.depth = depth[q];
+    const SurfaceJet j = Jet(p);
     d0[q] = static_cast<float>(j.wx);
     d1[q] = static_cast<float>(j.wy);
     d2[q] = static_cast<float>(j.wxx);

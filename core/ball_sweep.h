@@ -95,10 +95,38 @@ class BallSweep {
   // (the same operations, evaluated several points at a time).
   void Heights(const double* x, const double* y, int32_t n,
                double* out) const;
-  // d[c][q] = float(component c of Jet(Locate(x[q], y[q]))), components wx,
-  // wy, wxx, wxy, wyy, for q in [0, n). Vectorized.
-  void Jets(const double* x, const double* y, int32_t n,
-            float* const d[5]) const;
+  // Located points, structure-of-arrays.
+  struct Points {
+    static constexpr int32_t kMax = 256;
+    alignas(64) double w[kMax];
+    alignas(64) double px[kMax];
+    alignas(64) double py[kMax];
+    alignas(64) double depth[kMax];
+    alignas(64) int32_t piece[kMax];  // SweepPoint::Piece
+    SweepPoint At(int32_t q) const {
+      SweepPoint p;
+      p.piece = static_cast<SweepPoint::Piece>(piece[q]);
+      p.w = w[q];
+      p.px = px[q];
+      p.py = py[q];
+      p.depth = depth[q];
+      return p;
+    }
+    void Set(int32_t q, const SweepPoint& p) {
+      w[q] = p.w;
+      px[q] = p.px;
+      py[q] = p.py;
+      depth[q] = p.depth;
+      piece[q] = p.piece;
+    }
+  };
+  // out->At(q) = Locate(x[q], y[q]) for q in [0, n), n <= Points::kMax.
+  // Vectorized; bit-identical to Locate.
+  void Locate(const double* x, const double* y, int32_t n,
+              Points* out) const;
+  // d[c][q] = float(component c of Jet(pts.At(q))), components wx, wy, wxx,
+  // wxy, wyy, for q in [0, n). Vectorized.
+  void Jets(const Points& pts, int32_t n, float* const d[5]) const;
 
   // Height and derivatives at a located point; for kNone, +inf and zeros.
   // Branch-free (both forms computed, one selected) so that it vectorizes.

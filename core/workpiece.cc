@@ -145,11 +145,17 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   // moves (a few nodes per row) still fill the vector units.
   constexpr int32_t kChunk = 256;
   static_assert(kChunk >= kTileSize);
+  static_assert(kChunk <= BallSweep::Points::kMax);
   alignas(64) double cx[kChunk], cy[kChunk], h[kChunk];
-  alignas(64) double lx[kChunk], ly[kChunk];
   alignas(64) float jets[5][kChunk];
   int32_t ck[kChunk], lk[kChunk];
   float* const jet_rows[5] = {jets[0], jets[1], jets[2], jets[3], jets[4]};
+  // Located candidates, and the lowered ones packed (taylor only).
+  std::unique_ptr<BallSweep::Points> located, packed;
+  if constexpr (kDerivatives) {
+    located = std::make_unique<BallSweep::Points>();
+    packed = std::make_unique<BallSweep::Points>();
+  }
 
   for (uint32_t m : batch_moves) {
     const BallSweep sweep = sweeps[m];
@@ -159,27 +165,33 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     if (cap.empty) continue;
     const int32_t id = static_cast<int32_t>(first_id + m);
     int32_t n = 0;
-    // Heights of the chunk (vectorized), lowering, then derivatives of the
-    // lowered nodes only (vectorized, contiguous).
+    // The chunk's sweep heights (vectorized), lowering, then the lowered
+    // nodes' derivatives from their located points (vectorized, packed).
     auto flush = [&] {
-      sweep.Heights(cx, cy, n, h);
+      const double* hw = h;
+      if constexpr (kDerivatives) {
+        sweep.Locate(cx, cy, n, located.get());
+        hw = located->w;
+      } else {
+        sweep.Heights(cx, cy, n, h);
+      }
       int32_t low = 0;
       for (int32_t q = 0; q < n; ++q) {
         const int32_t k = ck[q];
-        if (h[q] < w[k] || (h[q] == w[k] && id < owner[k])) {
-          w[k] = h[q];
+        if (hw[q] < w[k] || (hw[q] == w[k] && id < owner[k])) {
+          w[k] = hw[q];
           owner[k] = id;
-          lx[low] = cx[q];
-          ly[low] = cy[q];
-          lk[low] = k;
+          if constexpr (kDerivatives) {
+            packed->Set(low, located->At(q));
+            lk[low] = k;
+          }
           ++low;
         }
       }
       lowered += low;
       if constexpr (kDerivatives) {
         if (low > 0) {
-          // Same points, same operations as Heights: the same sweep point.
-          sweep.Jets(lx, ly, low, jet_rows);
+          sweep.Jets(*packed, low, jet_rows);
           for (int32_t q = 0; q < low; ++q) {
             for (int c = 0; c < 5; ++c) tile->d[c][lk[q]] = jets[c][q];
           }

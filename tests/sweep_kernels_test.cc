@@ -2,6 +2,7 @@
 // points and derivatives; and the frame-form cylinder jet against eq. (14).
 #include <cmath>
 #include <cstring>
+#include <memory>
 #include <random>
 #include <vector>
 
@@ -64,19 +65,29 @@ TEST(SweepKernelsTest, HeightsMatchHeightBitForBit) {
   EXPECT_GT(points, 100000);
 }
 
-TEST(SweepKernelsTest, JetsMatchJetAsFloat) {
+TEST(SweepKernelsTest, LocateAndJetsMatchTheScalarPath) {
   std::vector<double> xs, ys;
   int checked = 0;
+  auto pts = std::make_unique<BallSweep::Points>();
   for (const BallSweep& s : RandomSweeps(60, 11)) {
     for (double y = -6; y < 6; y += 0.9) {
       RowPoints(y, &xs, &ys);
       const int32_t n = static_cast<int32_t>(xs.size());
+      s.Locate(xs.data(), ys.data(), n, pts.get());
       std::vector<float> store(5 * n);
       float* d[5];
       for (int c = 0; c < 5; ++c) d[c] = store.data() + c * n;
-      s.Jets(xs.data(), ys.data(), n, d);
+      s.Jets(*pts, n, d);
       for (int32_t q = 0; q < n; ++q) {
         const SweepPoint p = s.Locate(xs[q], ys[q]);
+        const SweepPoint v = pts->At(q);
+        ASSERT_TRUE(SameBits(v.w, p.w));
+        ASSERT_EQ(v.piece, p.piece);
+        if (p.piece != SweepPoint::kNone) {
+          ASSERT_TRUE(SameBits(v.px, p.px));
+          ASSERT_TRUE(SameBits(v.py, p.py));
+          ASSERT_TRUE(SameBits(v.depth, p.depth));
+        }
         const SurfaceJet j = s.Jet(p);
         const double want[5] = {j.wx, j.wy, j.wxx, j.wxy, j.wyy};
         for (int c = 0; c < 5; ++c) {
