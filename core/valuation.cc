@@ -1,6 +1,7 @@
 #include "core/valuation.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <vector>
 
@@ -37,6 +38,29 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     }
     region = r;
   }
+  const bool mapped = options.map_cols != 0 || options.map_rows != 0;
+  if (mapped && (options.map_cols < 1 || options.map_rows < 1 ||
+                 int64_t{options.map_cols} * options.map_rows > kMaxMapCells)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "map size must be at least 1 x 1 and at most ", kMaxMapCells,
+        " cells, got ", options.map_cols, " x ", options.map_rows));
+  }
+  std::vector<float> map(mapped ? size_t{1} * options.map_cols * options.map_rows
+                                : 0, 0.0f);
+  const double cell_x = (region.x1 - region.x0) / std::max(1, options.map_cols);
+  const double cell_y = (region.y1 - region.y0) / std::max(1, options.map_rows);
+  // Samples of different bins can share a cell: a lock-free max.
+  auto map_max = [&](double x, double y, double err) {
+    const int32_t cx = std::clamp(
+        static_cast<int32_t>((x - region.x0) / cell_x), 0, options.map_cols - 1);
+    const int32_t cy = std::clamp(
+        static_cast<int32_t>((y - region.y0) / cell_y), 0, options.map_rows - 1);
+    std::atomic_ref<float> cell(map[size_t{1} * cy * options.map_cols + cx]);
+    const float e = static_cast<float>(err);
+    float cur = cell.load(std::memory_order_relaxed);
+    while (e > cur && !cell.compare_exchange_weak(cur, e)) {
+    }
+  };
   const MoveIndex& index = wp.index();
   const int32_t bins = index.bins_x() * index.bins_y();
   std::vector<Partial> partials(bins);
@@ -81,6 +105,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             }
             const double err =
                 SampleError(wp.scheme().Reconstruct(e, x, y), exact);
+            if (mapped) map_max(x, y, err);
             p.sum += err;
             p.sum_sq += err * err;
             ++p.n;
@@ -106,6 +131,11 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       stats.max_x = p.max_x;
       stats.max_y = p.max_y;
     }
+  }
+  if (mapped) {
+    stats.map_cols = options.map_cols;
+    stats.map_rows = options.map_rows;
+    stats.map = std::move(map);
   }
   if (stats.samples > 0) {
     stats.mean_error = sum / stats.samples;

@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <vector>
 
 #include "absl/status/statusor.h"
 #include "core/geometry.h"
@@ -18,6 +19,11 @@ struct ErrorStats {
   double rms_error = 0;   // mm
   double max_x = 0, max_y = 0;  // where the max error is (first found)
   int64_t samples = 0;
+  // With ValuationOptions::map_cols/map_rows: the max error (mm) in each
+  // cell of a map_cols x map_rows raster over the region, row-major, cell
+  // (0, 0) at the region's (x0, y0); 0 where no sample fell.
+  int32_t map_cols = 0, map_rows = 0;
+  std::vector<float> map;
 };
 
 struct ValuationOptions {
@@ -26,7 +32,11 @@ struct ValuationOptions {
   int samples_per_edge = 5;
   // Only samples inside this rectangle; the whole stock when absent.
   std::optional<Rect> region;
+  // An error raster over the region (both 0: none). At most kMaxMapCells.
+  int32_t map_cols = 0, map_rows = 0;
 };
+
+inline constexpr int64_t kMaxMapCells = int64_t{1} << 24;
 
 // Eq. (15): error = |w - w_exact| over every sample. InvalidArgument for bad
 // options. Runs on the workpiece's pool; must not overlap an Apply.

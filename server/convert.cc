@@ -253,9 +253,13 @@ void FillTile(const Workpiece& wp, int32_t t, const TileOptions& opt,
 
 absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,
                                             const pb::Rect* region,
-                                            int32_t samples_per_edge) {
+                                            int32_t samples_per_edge,
+                                            int32_t map_cols,
+                                            int32_t map_rows) {
   ValuationOptions opt;
   opt.samples_per_edge = samples_per_edge == 0 ? 5 : samples_per_edge;
+  opt.map_cols = map_cols;
+  opt.map_rows = map_rows;
   if (region != nullptr) {
     auto r = RectFromProto(*region, "region");
     if (!r.ok()) return r.status();
@@ -272,6 +276,11 @@ absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,
   out.set_max_x(stats->max_x);
   out.set_max_y(stats->max_y);
   out.set_samples(stats->samples);
+  if (!stats->map.empty()) {
+    out.set_map_cols(stats->map_cols);
+    out.set_map_rows(stats->map_rows);
+    out.mutable_map_max_error()->Assign(stats->map.begin(), stats->map.end());
+  }
   return out;
 }
 

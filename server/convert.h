@@ -47,7 +47,9 @@ void FillTile(const Workpiece& wp, int32_t t, const TileOptions& opt,
 
 absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,
                                             const pb::Rect* region,
-                                            int32_t samples_per_edge);
+                                            int32_t samples_per_edge,
+                                            int32_t map_cols = 0,
+                                            int32_t map_rows = 0);
 
 absl::StatusOr<std::vector<pb::Polyline>> ComputeMarks(
     const Workpiece& wp, const pb::Rect* region, double screening_threshold,

@@ -418,7 +418,8 @@ class SimulateReactor
         const pb::StatsRequest& r = req.stats();
         auto stats = session_->Read([&](const Workpiece& wp) {
           return ComputeStats(wp, r.has_region() ? &r.region() : nullptr,
-                              r.samples_per_edge());
+                              r.samples_per_edge(), r.map_cols(),
+                              r.map_rows());
         });
         if (!stats.ok()) return Error(r.request_id(), stats.status(), out);
         stats->set_request_id(r.request_id());
@@ -684,7 +685,8 @@ grpc::ServerUnaryReactor* SwarfService::GetErrorStats(
     if (!session.ok()) return session.status();
     auto stats = (*session)->Read([&](const Workpiece& wp) {
       return ComputeStats(wp, req->has_region() ? &req->region() : nullptr,
-                          req->samples_per_edge());
+                          req->samples_per_edge(), req->map_cols(),
+                          req->map_rows());
     });
     if (!stats.ok()) return stats.status();
     *resp = *std::move(stats);

@@ -284,5 +284,48 @@ TEST(PaperInstanceTest, Definitions) {
             absl::StatusCode::kInvalidArgument);
 }
 
+TEST(MeasureErrorTest, ErrorMapHoldsEachCellsMaxAndTheOverallMax) {
+  // One plunge into a 40 x 30 stock; a 8 x 6 map of 5 mm cells.
+  auto wp = *Workpiece::Create({0, 0, 40, 30, 0, 40, 30}, SchemeKind::kZmap);
+  ASSERT_TRUE(wp->Apply(std::vector<Move>{{{12, 9, 2}, {12, 9, -2}, 4}}).ok());
+  ValuationOptions opt;
+  opt.map_cols = 8;
+  opt.map_rows = 6;
+  auto stats = MeasureError(*wp, opt);
+  ASSERT_TRUE(stats.ok()) << stats.status();
+  ASSERT_EQ(stats->map.size(), 48u);
+  // The map's max is the overall max (as float), in the cell of its place.
+  const float top = *std::max_element(stats->map.begin(), stats->map.end());
+  EXPECT_EQ(top, static_cast<float>(stats->max_error));
+  const int cx = static_cast<int>(stats->max_x / 5), cy = static_cast<int>(stats->max_y / 5);
+  EXPECT_EQ(stats->map[cy * 8 + std::min(cx, 7)], top);
+  // Cells far from the cut (|d| > r + a cell) have no error at all.
+  EXPECT_EQ(stats->map[5 * 8 + 7], 0.0f);
+  EXPECT_GT(stats->map[1 * 8 + 2], 0.0f);  // (12, 9) lies in cell (2, 1)
+  // Each cell's value is the max over the samples in it: recompute one.
+  double want = 0;
+  // Elements 9 and 4 contribute their edge samples at x = 10 and y = 5.
+  for (int32_t ej = 4; ej < 10; ++ej) {
+    for (int32_t ei = 9; ei < 15; ++ei) {
+      const ElementCorners e = wp->Corners(ei, ej);
+      for (int sj = 0; sj < 5; ++sj) {
+        for (int si = 0; si < 5; ++si) {
+          if ((si == 0 || si == 4) && (sj == 0 || sj == 4)) continue;
+          const double x = e.x0 + (e.x1 - e.x0) * si / 4;
+          const double y = e.y0 + (e.y1 - e.y0) * sj / 4;
+          if (x < 10 || x >= 15 || y < 5 || y >= 10) continue;  // not ours
+          want = std::max(want, std::fabs(wp->scheme().Reconstruct(e, x, y) -
+                                          wp->ExactHeight(x, y)));
+        }
+      }
+    }
+  }
+  EXPECT_EQ(stats->map[1 * 8 + 2], static_cast<float>(want));
+  opt.map_cols = 0;
+  opt.map_rows = 3;
+  EXPECT_EQ(MeasureError(*wp, opt).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 }  // namespace
 }  // namespace swarf
