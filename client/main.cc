@@ -12,6 +12,8 @@ constexpr char kUsage[] =
     "commands:\n"
     "  table   the paper's Tables 1 and 2: error and time of both schemes\n"
     "  marks   the cutting marks (creases) of a paper instance\n"
+    "  health  whether a running swarfd is serving\n"
+    "  sessions  the sessions of a running swarfd\n"
     "Run 'swarf <command> --help' for a command's options.\n";
 
 }  // namespace
@@ -25,6 +27,8 @@ int main(int argc, char** argv) {
   const std::vector<std::string> args(argv + 2, argv + argc);
   if (cmd == "table") return swarf::cli::TableCommand(args);
   if (cmd == "marks") return swarf::cli::MarksCommand(args);
+  if (cmd == "health") return swarf::cli::HealthCommand(args);
+  if (cmd == "sessions") return swarf::cli::SessionsCommand(args);
   if (cmd == "--help" || cmd == "-h" || cmd == "help") {
     std::cout << kUsage;
     return 0;

@@ -1,0 +1,70 @@
+// The CLI's connection to a swarf server: a remote swarfd (host:port) or an
+// embedded server in this process, reached over an in-process channel so
+// that both take the same code path.
+#ifndef SWARF_CLIENT_CONNECTION_H_
+#define SWARF_CLIENT_CONNECTION_H_
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/geometry.h"
+#include "grpcpp/grpcpp.h"
+#include "server/server.h"
+#include "swarf/v1/swarf.grpc.pb.h"
+
+namespace swarf::cli {
+
+namespace pb = ::swarf::v1;
+
+// absl::Status of a gRPC status, with the code kept.
+absl::Status FromGrpc(const grpc::Status& s);
+
+class Connection {
+ public:
+  // `server` empty: start an embedded server.
+  static absl::StatusOr<std::unique_ptr<Connection>> Open(
+      const std::string& server);
+
+  pb::Swarf::Stub& stub() { return *stub_; }
+  bool embedded() const { return embedded_ != nullptr; }
+  const std::string& target() const { return target_; }
+
+  // A context carrying the session metadata (for routing) and a deadline.
+  std::unique_ptr<grpc::ClientContext> Context(const std::string& session_id,
+                                               double timeout_s = 600) const;
+
+ private:
+  std::unique_ptr<server::SwarfServer> embedded_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<pb::Swarf::Stub> stub_;
+  std::string target_;
+};
+
+// A run of tip positions cut with one tool at one kind of feed.
+struct PathRun {
+  int32_t tool_id = 0;
+  bool rapid = false;
+  std::vector<Vec3> points;  // continues from the previous run's last point
+};
+
+struct StreamProgress {
+  int64_t moves_done = 0;   // acknowledged
+  int64_t moves_total = 0;
+  int64_t nodes_lowered = 0;
+};
+
+// Streams runs into the session as move batches of at most `batch_points`
+// points, pipelined (a writer thread; acks read here), calling `progress`
+// after every ack. The first point of the first run is the start position.
+absl::Status StreamPath(Connection& conn, const std::string& session_id,
+                        const std::vector<PathRun>& runs, int64_t batch_points,
+                        const std::function<void(const StreamProgress&)>&
+                            progress);
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_CONNECTION_H_

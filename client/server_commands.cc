@@ -1,0 +1,127 @@
+// swarf health / swarf sessions: ask a running swarfd.
+#include <future>
+#include <iostream>
+#include <string>
+#include <vector>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_format.h"
+#include "client/args.h"
+#include "client/commands.h"
+#include "client/connection.h"
+#include "grpcpp/generic/generic_stub.h"
+
+namespace swarf::cli {
+namespace {
+
+// grpc.health.v1.Health/Check through a generic stub (the health proto is
+// not part of Debian's gRPC packages): the request for the whole server is
+// empty, the response is field 1 (status, varint: 1 = SERVING).
+absl::StatusOr<int> HealthStatus(const std::string& server, double timeout_s) {
+  auto channel =
+      grpc::CreateChannel(server, grpc::InsecureChannelCredentials());
+  grpc::GenericStub stub(channel);
+  grpc::ClientContext ctx;
+  ctx.set_deadline(std::chrono::system_clock::now() +
+                   std::chrono::milliseconds(static_cast<int>(timeout_s * 1e3)));
+  grpc::Slice empty("", 0);  // an empty message, not "no message"
+  grpc::ByteBuffer request(&empty, 1), response;
+  std::promise<grpc::Status> done;
+  stub.UnaryCall(&ctx, "/grpc.health.v1.Health/Check", grpc::StubOptions(),
+                 &request, &response,
+                 [&](grpc::Status s) { done.set_value(std::move(s)); });
+  grpc::Status st = done.get_future().get();
+  if (!st.ok()) return FromGrpc(st);
+  std::vector<grpc::Slice> slices;
+  if (!response.Dump(&slices).ok()) {
+    return absl::InternalError("unreadable health response");
+  }
+  std::string bytes;
+  for (const auto& s : slices) {
+    bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+  }
+  int status = 0;  // UNKNOWN when absent
+  if (bytes.size() >= 2 && bytes[0] == 0x08) status = bytes[1];
+  return status;
+}
+
+}  // namespace
+
+int HealthCommand(const std::vector<std::string>& argv) {
+  constexpr char kUsage[] =
+      "usage: swarf health --server HOST:PORT [--timeout SECONDS]\n"
+      "Exits 0 when the server answers SERVING (for health checks).\n";
+  auto args = Args::Parse(argv, {"server", "timeout"}, {"help"});
+  if (!args.ok() || !args->Has("server") || !args->positional().empty()) {
+    std::cerr << "swarf health: "
+              << (args.ok() ? "--server is required" : args.status().message())
+              << "\n" << kUsage;
+    return 2;
+  }
+  if (args->Has("help")) {
+    std::cout << kUsage;
+    return 0;
+  }
+  double timeout = 5;
+  if (auto t = args->Get("timeout"); t && !absl::SimpleAtod(*t, &timeout)) {
+    std::cerr << "swarf health: --timeout must be a number\n";
+    return 2;
+  }
+  auto status = HealthStatus(*args->Get("server"), timeout);
+  if (!status.ok()) {
+    std::cerr << "swarf health: " << *args->Get("server") << ": "
+              << status.status().message() << "\n";
+    return 1;
+  }
+  static const char* const kNames[] = {"UNKNOWN", "SERVING", "NOT_SERVING",
+                                       "SERVICE_UNKNOWN"};
+  const int s = *status;
+  std::cout << *args->Get("server") << ": "
+            << (s >= 0 && s <= 3 ? kNames[s] : "?") << "\n";
+  return s == 1 ? 0 : 1;
+}
+
+int SessionsCommand(const std::vector<std::string>& argv) {
+  constexpr char kUsage[] =
+      "usage: swarf sessions --server HOST:PORT\n"
+      "Lists the server's sessions.\n";
+  auto args = Args::Parse(argv, {"server"}, {"help"});
+  if (!args.ok() || !args->Has("server") || !args->positional().empty()) {
+    std::cerr << "swarf sessions: "
+              << (args.ok() ? "--server is required" : args.status().message())
+              << "\n" << kUsage;
+    return 2;
+  }
+  if (args->Has("help")) {
+    std::cout << kUsage;
+    return 0;
+  }
+  auto conn = Connection::Open(*args->Get("server"));
+  if (!conn.ok()) {
+    std::cerr << "swarf sessions: " << conn.status().message() << "\n";
+    return 1;
+  }
+  auto ctx = (*conn)->Context("", 10);
+  pb::ListSessionsRequest req;
+  pb::ListSessionsResponse resp;
+  grpc::Status st = (*conn)->stub().ListSessions(ctx.get(), req, &resp);
+  if (!st.ok()) {
+    std::cerr << "swarf sessions: " << *args->Get("server") << ": "
+              << st.error_message() << "\n";
+    return 1;
+  }
+  std::cout << absl::StrFormat("%-24s %-7s %11s %10s %12s %10s\n", "session",
+                               "scheme", "grid", "last seq", "moves",
+                               "MiB");
+  for (const pb::Session& s : resp.sessions()) {
+    std::cout << absl::StrFormat(
+        "%-24s %-7s %5dx%-5d %10d %12d %10.1f\n", s.session_id(),
+        s.scheme() == pb::SCHEME_ZMAP ? "zmap" : "taylor", s.nx(), s.ny(),
+        s.last_seq(), s.moves_applied(), s.memory_bytes() / 1048576.0);
+  }
+  std::cout << resp.sessions_size() << " session(s) on "
+            << *args->Get("server") << "\n";
+  return 0;
+}
+
+}  // namespace swarf::cli
