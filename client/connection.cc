@@ -64,14 +64,17 @@ absl::Status StreamPath(
       b->set_seq(++seq);
       b->set_tool_id(run.tool_id);
       b->set_rapid(run.rapid);
+      const bool places = run.reposition && k == 0;
+      b->set_reposition(places);
       b->mutable_xyz()->Reserve(3 * (end - k));
       for (size_t i = k; i < end; ++i) {
         b->add_xyz(run.points[i].x);
         b->add_xyz(run.points[i].y);
         b->add_xyz(run.points[i].z);
       }
-      // The very first point only places the tool.
-      const int64_t moves = static_cast<int64_t>(end - k) - (started ? 0 : 1);
+      // The very first point, and a repositioning one, only place the tool.
+      const int64_t moves =
+          static_cast<int64_t>(end - k) - (started && !places ? 0 : 1);
       started = true;
       moves_of.push_back(moves);
       p.moves_total += moves;

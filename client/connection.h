@@ -48,7 +48,10 @@ class Connection {
 struct PathRun {
   int32_t tool_id = 0;
   bool rapid = false;
-  std::vector<Vec3> points;  // continues from the previous run's last point
+  // The first point only places the tool (the session's first run, or after
+  // a tool change); otherwise it continues from the previous run's last.
+  bool reposition = false;
+  std::vector<Vec3> points;
 };
 
 struct StreamProgress {

@@ -453,7 +453,7 @@ class SimulateReactor
                    std::vector<pb::SimulateResponse>* out) {
     auto r = session_->ApplyBatch(
         b.seq(), b.tool_id(), std::span<const double>(b.xyz().data(), b.xyz_size()),
-        registry_->limits().max_batch_points);
+        registry_->limits().max_batch_points, b.reposition());
     if (!r.ok()) {
       if (r.status().code() == absl::StatusCode::kFailedPrecondition) {
         spdlog::warn("session {}: {}", session_->id(),

@@ -40,7 +40,8 @@ int64_t Session::EstimateMemoryBytes(const StockSpec& stock,
 
 absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
                                                 std::span<const double> xyz,
-                                                int64_t max_points) {
+                                                int64_t max_points,
+                                                bool reposition) {
   if (seq == 0) {
     return absl::InvalidArgumentError("moves.seq must start at 1");
   }
@@ -89,7 +90,7 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
   }
   std::vector<Move> moves;
   moves.reserve(points);
-  std::optional<Vec3> pos = last_position_;
+  std::optional<Vec3> pos = reposition ? std::nullopt : last_position_;
   for (int64_t p = 0; p < points; ++p) {
     const Vec3 next{xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]};
     if (pos.has_value()) moves.push_back({*pos, next, tool->radius});

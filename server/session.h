@@ -72,9 +72,11 @@ class Session {
   // FailedPrecondition. Bad values: InvalidArgument naming the field, and
   // nothing applied. Batches of more than max_points points:
   // InvalidArgument.
+  // With `reposition`, the first point only places the tool.
   absl::StatusOr<BatchResult> ApplyBatch(uint64_t seq, int32_t tool_id,
                                          std::span<const double> xyz,
-                                         int64_t max_points);
+                                         int64_t max_points,
+                                         bool reposition = false);
 
   SessionState State() const;
 
