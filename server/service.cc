@@ -334,11 +334,18 @@ class SimulateReactor
     return act;
   }
 
+  // The order matters: a pending read keeps gRPC from calling OnDone, and
+  // the writing_/processing_ flags set by NextLocked keep every other
+  // thread from finishing until this thread has started the write and
+  // scheduled the Process. So the read starts first and Process is
+  // scheduled last; the other way round a Process on another thread could
+  // finish the stream (a seq gap) and get the reactor deleted before
+  // StartRead here.
   void Do(const Act& act) {
-    if (act.process) executor_->Schedule([this] { Process(); });
-    if (act.write != nullptr) StartWrite(act.write);
     if (act.read) StartRead(&req_);
+    if (act.write != nullptr) StartWrite(act.write);
     if (act.finish.has_value()) Finish(*act.finish);
+    if (act.process) executor_->Schedule([this] { Process(); });
   }
 
   // One processing turn on the executor: a slice of the tile job, one
