@@ -1,0 +1,162 @@
+// Toolpath input: G-code for 3-axis mills (LinuxCNC / Fanuc style, as CAM
+// post-processors write it) and CSV/XYZ files of tool-tip positions, parsed
+// into a polyline of tool-tip points in millimetres.
+//
+// G-code rules (the full list is in toolpath.cc):
+// - Start position. A program starts from an unknown machine position. Each
+//   axis is unknown until a word gives it; moves before X, Y and Z are all
+//   known only set the known axes and produce no point. The polyline starts
+//   at the first position where all three are known. Incremental moves (G91)
+//   of an unknown axis and arcs before the start are errors.
+// - Tool changes. M6 may move the machine to a tool-change position we don't
+//   know, so it makes all axes unknown again; the next fully known position
+//   starts a new run (ToolpathPoint::starts_run). No move joins two runs.
+// - Units: G21 mm (the default when neither G20 nor G21 is given, with a
+//   note), G20 inches (x25.4). G90/G91 absolute/incremental axis words;
+//   G90.1/G91.1 absolute/incremental I,J (default incremental).
+// - Arcs (G2/G3) only in the XY plane (G17), by I/J (start == end: a full
+//   circle) or R (negative: the long arc; full circle with R is an error),
+//   optionally helical (Z linear in angle) and with P turns. They become
+//   chords within GcodeOptions::arc_tolerance of the true arc; the last
+//   point is the programmed end bit for bit.
+// - Words that don't move the tool (F, S, H, D, M3, M8, G17, G40, G43, G49,
+//   G54, G80, G94, ...) are counted in Toolpath::ignored(); with G43/G49
+//   ignored, positions are taken as the tip throughout. Anything that
+//   would change the tool's path and isn't simulated (G28, G41/G42, canned
+//   cycles, G92, G53, G18/G19 arcs, A/B/C axes, subprograms, parameters, ...)
+//   is an InvalidArgument error "line N: ..." naming the word: never a guess.
+// - Reading stops at M2/M30, or at the second '%' when the program starts
+//   with one.
+// - A move that doesn't change the position (in either format) adds no
+//   point.
+//
+// Positions are the tool tip, absolute program coordinates (the active
+// work offset, e.g. G54, is the origin).
+//
+// Thread safety: the functions are reentrant; a Toolpath is a value (const
+// methods may run concurrently).
+#ifndef SWARF_CORE_TOOLPATH_H_
+#define SWARF_CORE_TOOLPATH_H_
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/geometry.h"
+
+namespace swarf {
+
+// One tool-tip position. 32 bytes: toolpaths hold millions of points.
+struct ToolpathPoint {
+  Vec3 position;       // tool tip, mm, absolute program coordinates
+  int32_t line = 0;    // 1-based source line that produced the point
+  uint16_t tool = 0;   // tool in effect (see ParseGcode); 0: none selected
+  bool rapid = false;  // the move ending here is a rapid (G0)
+  // No move reaches this point: the first point, or the first after a tool
+  // change. The move to point i (i > 0) is points[i-1] -> points[i] unless
+  // points[i].starts_run.
+  bool starts_run = false;
+};
+static_assert(sizeof(ToolpathPoint) == 32);
+
+// A parsed toolpath: points in program order plus what the parser ignored.
+class Toolpath {
+ public:
+  const std::vector<ToolpathPoint>& points() const { return points_; }
+  int64_t point_count() const { return static_cast<int64_t>(points_.size()); }
+  // Straight moves: consecutive points within a run.
+  int64_t move_count() const { return point_count() - runs_; }
+  int64_t run_count() const { return runs_; }
+
+  // Bounds of all points, rapids and retracts included (mm); empty
+  // intervals when there are no points.
+  const Interval& x_bounds() const { return x_bounds_; }
+  const Interval& y_bounds() const { return y_bounds_; }
+  const Interval& z_bounds() const { return z_bounds_; }
+
+  // Distinct tool numbers of the points, in order of first use.
+  std::vector<int> Tools() const;
+
+  // Source lines read (up to the program end).
+  int64_t source_lines() const { return source_lines_; }
+
+  // Words accepted without effect on the tool path, by word: "F", "S",
+  // "H", "M3" (M03 counts as M3), "G43", "G90.1"-style codes, "O" (program
+  // number), "/" (block delete mark, the block is executed).
+  const std::map<std::string, int64_t>& ignored() const { return ignored_; }
+  int64_t ignored_total() const;
+  // One line for the user, e.g. "ignored 5 words that don't move the tool:
+  // G17 x1, M3 x1, F x2, S x1"; empty when nothing was ignored.
+  std::string IgnoredSummary() const;
+
+  // Remarks to show once, e.g. "no G20/G21: millimetres assumed".
+  const std::vector<std::string>& notes() const { return notes_; }
+
+  // Building (the parsers; tests). Append drops a point that repeats the
+  // previous point's position within a run: a zero-length move sweeps
+  // nothing.
+  void Append(const ToolpathPoint& p);
+  void CountIgnored(const std::string& word, int64_t n = 1);
+  void AddNote(std::string note) { notes_.push_back(std::move(note)); }
+  void set_source_lines(int64_t n) { source_lines_ = n; }
+  void Reserve(int64_t points) { points_.reserve(points); }
+  // Gives back capacity beyond a quarter over the size.
+  void Trim() {
+    if (points_.capacity() > points_.size() + points_.size() / 4) {
+      points_.shrink_to_fit();
+    }
+  }
+
+ private:
+  std::vector<ToolpathPoint> points_;
+  int64_t runs_ = 0;
+  Interval x_bounds_, y_bounds_, z_bounds_;
+  int64_t source_lines_ = 0;
+  std::map<std::string, int64_t> ignored_;
+  std::vector<std::string> notes_;
+};
+
+struct GcodeOptions {
+  // Largest distance between an arc and its chords (mm); in [1e-6, 10].
+  double arc_tolerance = 0.001;
+  // More points is an error (memory: 32 bytes per point).
+  int64_t max_points = 100'000'000;
+};
+
+// Parses a G-code program (rules above). Tool numbers: the T of the last
+// M6, or, before any M6, the last T word (programs that select tools with T
+// alone); 0 when none; T above 65535 is an error. InvalidArgument
+// "line N: ..." on any error, or for bad options.
+absl::StatusOr<Toolpath> ParseGcode(std::string_view text,
+                                    const GcodeOptions& options = {});
+
+// Parses tool-tip positions in mm, one "x y z" per line, separated by
+// commas and/or blanks (spaces, tabs). Blank lines and '#' comments (whole
+// or trailing) are skipped; the first non-comment line may be a header
+// (when it doesn't start with a number). One run, tool 0, no rapids.
+// InvalidArgument "line N: ..." for anything else.
+absl::StatusOr<Toolpath> ParseXyz(std::string_view text,
+                                  int64_t max_points = 100'000'000);
+
+enum class ToolpathFormat { kGcode, kXyz };
+
+// By extension, case-insensitive: .nc .ngc .gcode .tap .cnc -> kGcode;
+// .csv .xyz .txt -> kXyz. InvalidArgument naming the supported ones else.
+absl::StatusOr<ToolpathFormat> ToolpathFormatForPath(std::string_view path);
+
+absl::StatusOr<Toolpath> ParseToolpath(std::string_view text,
+                                       ToolpathFormat format,
+                                       const GcodeOptions& options = {});
+
+// Reads and parses a file, the format from its extension. Errors are
+// prefixed with the path: "<path>: line N: ...". NotFound when the file
+// can't be opened.
+absl::StatusOr<Toolpath> ReadToolpathFile(const std::string& path,
+                                          const GcodeOptions& options = {});
+
+}  // namespace swarf
+
+#endif  // SWARF_CORE_TOOLPATH_H_
