@@ -10,7 +10,7 @@
 #include "absl/strings/str_split.h"
 #include "client/args.h"
 #include "client/commands.h"
-#include "client/json_writer.h"
+#include "client/marks_files.h"
 #include "core/cutting_marks.h"
 #include "core/instances.h"
 #include "core/workpiece.h"
@@ -60,32 +60,6 @@ absl::StatusOr<Rect> ParseRegion(const std::string& v) {
     }
   }
   return Rect{f[0], f[1], f[2], f[3]};
-}
-
-void PrintJson(const std::vector<MarkPolyline>& marks, bool vertex_owners) {
-  JsonWriter j;
-  j.BeginObject().Key("polylines").BeginArray();
-  for (const MarkPolyline& p : marks) {
-    j.BeginObject().Key("closed").Bool(p.closed);
-    j.Key("owners").BeginArray().Int(p.owners[0]).Int(p.owners[1]).EndArray();
-    j.Key("vertices").BeginArray();
-    for (const Vec3& v : p.vertices) {
-      j.BeginArray().Double(v.x).Double(v.y).Double(v.z).EndArray();
-    }
-    j.EndArray().Key("angle_deg").BeginArray();
-    for (double a : p.angle_deg) j.Double(a);
-    j.EndArray();
-    if (vertex_owners) {
-      j.Key("vertex_owners").BeginArray();
-      for (const auto& o : p.vertex_owners) {
-        j.BeginArray().Int(o[0]).Int(o[1]).EndArray();
-      }
-      j.EndArray();
-    }
-    j.EndObject();
-  }
-  j.EndArray().EndObject();
-  std::cout << j.str() << "\n";
 }
 
 }  // namespace
@@ -183,7 +157,7 @@ int MarksCommand(const std::vector<std::string>& argv) {
     return 1;
   }
   if (args->Has("json")) {
-    PrintJson(*marks, args->Has("vertex-owners"));
+    std::cout << MarksJson(*marks, args->Has("vertex-owners")) << "\n";
   } else {
     const MarkSummary s = Summarize(*marks);
     std::cout << absl::StrFormat(

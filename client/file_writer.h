@@ -1,0 +1,41 @@
+// Buffered output files for the writers: errors name the path, and a file
+// that could not be written completely is removed.
+#ifndef SWARF_CLIENT_FILE_WRITER_H_
+#define SWARF_CLIENT_FILE_WRITER_H_
+
+#include <cstdio>
+#include <string>
+#include <string_view>
+
+#include "absl/status/status.h"
+
+namespace swarf::cli {
+
+class FileWriter {
+ public:
+  // Opens (truncates) `path`; check status() before writing.
+  explicit FileWriter(std::string path);
+  ~FileWriter();  // an unclosed file is removed
+  FileWriter(const FileWriter&) = delete;
+  FileWriter& operator=(const FileWriter&) = delete;
+
+  // Appends bytes (buffered). Errors are sticky and reported by Close.
+  void Write(std::string_view data);
+  // Flushes and closes; the first error naming the path, or OK.
+  absl::Status Close();
+  const absl::Status& status() const { return status_; }
+
+ private:
+  void Flush();
+  std::string path_;
+  std::FILE* file_ = nullptr;
+  std::string buffer_;
+  absl::Status status_;
+};
+
+// Writes `data` to `path` whole.
+absl::Status WriteStringToFile(const std::string& path, std::string_view data);
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_FILE_WRITER_H_

@@ -1,0 +1,99 @@
+#include "client/marks_files.h"
+
+#include <algorithm>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "client/colormap.h"
+#include "client/file_writer.h"
+#include "client/json_writer.h"
+
+namespace swarf::cli {
+
+std::string MarksJson(const std::vector<MarkPolyline>& marks,
+                      bool vertex_owners) {
+  JsonWriter j;
+  j.BeginObject().Key("polylines").BeginArray();
+  for (const MarkPolyline& p : marks) {
+    j.BeginObject().Key("closed").Bool(p.closed);
+    j.Key("owners").BeginArray().Int(p.owners[0]).Int(p.owners[1]).EndArray();
+    j.Key("vertices").BeginArray();
+    for (const Vec3& v : p.vertices) {
+      j.BeginArray().Double(v.x).Double(v.y).Double(v.z).EndArray();
+    }
+    j.EndArray().Key("angle_deg").BeginArray();
+    for (double a : p.angle_deg) j.Double(a);
+    j.EndArray();
+    if (vertex_owners) {
+      j.Key("vertex_owners").BeginArray();
+      for (const auto& o : p.vertex_owners) {
+        j.BeginArray().Int(o[0]).Int(o[1]).EndArray();
+      }
+      j.EndArray();
+    }
+    j.EndObject();
+  }
+  j.EndArray().EndObject();
+  return j.str();
+}
+
+absl::Status WriteMarksJson(const std::vector<MarkPolyline>& marks,
+                            const std::string& path) {
+  return WriteStringToFile(path, MarksJson(marks) + "\n");
+}
+
+namespace {
+
+// 7 significant digits: 1e-5 mm on a 100 mm stock, well below any grid.
+std::string Num(double v) { return absl::StrFormat("%.7g", v); }
+
+}  // namespace
+
+std::string MarksSvg(const StockSpec& stock,
+                     const std::vector<MarkPolyline>& marks) {
+  const double w = stock.x1 - stock.x0, h = stock.y1 - stock.y0;
+  // Strokes scale with the stock so that the drawing looks the same at any
+  // size: 1/400 of the longer side, the outline a little thinner.
+  const double stroke = std::max(w, h) / 400;
+  std::string s = absl::StrCat(
+      "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+      "<svg xmlns=\"http://www.w3.org/2000/svg\" version=\"1.1\" width=\"",
+      Num(w), "mm\" height=\"", Num(h), "mm\" viewBox=\"", Num(stock.x0), " ",
+      Num(-stock.y1), " ", Num(w), " ", Num(h), "\">\n",
+      "<title>swarf cutting marks: ", marks.size(),
+      " polylines, mm, y up</title>\n",
+      "<g transform=\"scale(1,-1)\" fill=\"none\" stroke-linecap=\"round\" "
+      "stroke-linejoin=\"round\">\n",
+      "<rect x=\"", Num(stock.x0), "\" y=\"", Num(stock.y0), "\" width=\"",
+      Num(w), "\" height=\"", Num(h), "\" stroke=\"#000000\" stroke-width=\"",
+      Num(stroke * 0.6), "\"/>\n");
+  for (const MarkPolyline& p : marks) {
+    double mean = 0;
+    for (double a : p.angle_deg) mean += a;
+    if (!p.angle_deg.empty()) mean /= p.angle_deg.size();
+    const Rgb c = AngleColor(mean);
+    absl::StrAppend(&s, "<path stroke=\"",
+                    absl::StrFormat("#%02x%02x%02x", c.r, c.g, c.b),
+                    "\" stroke-width=\"", Num(stroke), "\" data-owners=\"",
+                    p.owners[0], " ", p.owners[1], "\" data-angle-deg=\"",
+                    Num(mean), "\" d=\"");
+    for (size_t k = 0; k < p.vertices.size(); ++k) {
+      absl::StrAppend(&s, k == 0 ? "M" : " L", Num(p.vertices[k].x), " ",
+                      Num(p.vertices[k].y));
+    }
+    if (p.closed) s += " Z";
+    absl::StrAppend(&s, "\"><title>owners ", p.owners[0], " ", p.owners[1],
+                    ", mean angle ", absl::StrFormat("%.2f", mean),
+                    " deg</title></path>\n");
+  }
+  s += "</g>\n</svg>\n";
+  return s;
+}
+
+absl::Status WriteMarksSvg(const StockSpec& stock,
+                           const std::vector<MarkPolyline>& marks,
+                           const std::string& path) {
+  return WriteStringToFile(path, MarksSvg(stock, marks));
+}
+
+}  // namespace swarf::cli

@@ -1,0 +1,40 @@
+// Cutting marks as files: marks.json (the schema of `swarf marks --json`)
+// and marks.svg (the polylines in mm over the stock outline).
+#ifndef SWARF_CLIENT_MARKS_FILES_H_
+#define SWARF_CLIENT_MARKS_FILES_H_
+
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "core/cutting_marks.h"
+#include "core/stock.h"
+
+namespace swarf::cli {
+
+// Compact JSON, without a trailing newline:
+// {"polylines":[{"closed":false,"owners":[a,b],"vertices":[[x,y,z],...],
+// "angle_deg":[...]}]}, owner -1 for the stock top; with vertex_owners also
+// "vertex_owners":[[a,b],...] per polyline. Doubles in shortest round-trip
+// form (JsonWriter).
+std::string MarksJson(const std::vector<MarkPolyline>& marks,
+                      bool vertex_owners = false);
+
+// MarksJson(marks) and a newline, as `swarf marks --json` prints it.
+absl::Status WriteMarksJson(const std::vector<MarkPolyline>& marks,
+                            const std::string& path);
+
+// SVG 1.1 in mm: viewBox the stock rectangle with y up (a scale(1,-1) group,
+// so path coordinates are the marks' x and y), the stock outline as a
+// <rect>, and one <path> per polyline (closed ones end in Z) stroked with
+// AngleColor of its mean angle, carrying data-owners and data-angle-deg
+// (mean) attributes and a <title>.
+std::string MarksSvg(const StockSpec& stock,
+                     const std::vector<MarkPolyline>& marks);
+absl::Status WriteMarksSvg(const StockSpec& stock,
+                           const std::vector<MarkPolyline>& marks,
+                           const std::string& path);
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_MARKS_FILES_H_

@@ -1,0 +1,77 @@
+// 8-bit RGB / RGBA raster images and their PNG files (libpng).
+#ifndef SWARF_CLIENT_PNG_IMAGE_H_
+#define SWARF_CLIENT_PNG_IMAGE_H_
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+namespace swarf::cli {
+
+struct Rgb {
+  uint8_t r = 0, g = 0, b = 0;
+  friend bool operator==(const Rgb&, const Rgb&) = default;
+};
+
+// Row-major pixels, row 0 at the top, `channels` bytes per pixel (3: RGB,
+// 4: RGBA, alpha 255 = opaque). Coordinates passed to the accessors must lie
+// inside the image.
+class Image {
+ public:
+  Image() = default;
+  // width, height >= 0; channels 3 or 4 (others are treated as 3). Every
+  // pixel is `fill`, opaque.
+  Image(int width, int height, int channels = 3, Rgb fill = {});
+
+  int width() const { return width_; }
+  int height() const { return height_; }
+  int channels() const { return channels_; }
+  bool empty() const { return width_ == 0 || height_ == 0; }
+
+  uint8_t* row(int y) { return pixels_.data() + Offset(0, y); }
+  const uint8_t* row(int y) const { return pixels_.data() + Offset(0, y); }
+  Rgb Get(int x, int y) const {
+    const uint8_t* p = &pixels_[Offset(x, y)];
+    return {p[0], p[1], p[2]};
+  }
+  uint8_t Alpha(int x, int y) const {
+    return channels_ == 4 ? pixels_[Offset(x, y) + 3] : 255;
+  }
+  void Set(int x, int y, Rgb c) {
+    uint8_t* p = &pixels_[Offset(x, y)];
+    p[0] = c.r;
+    p[1] = c.g;
+    p[2] = c.b;
+  }
+  // Mixes `c` over the pixel with weight a in [0, 1] (clamped).
+  void Blend(int x, int y, Rgb c, double a);
+  // Fills [x0, x1) x [y0, y1), clipped to the image.
+  void FillRect(int x0, int y0, int x1, int y1, Rgb c);
+
+  std::vector<uint8_t>& pixels() { return pixels_; }
+  const std::vector<uint8_t>& pixels() const { return pixels_; }
+
+ private:
+  size_t Offset(int x, int y) const {
+    return (static_cast<size_t>(y) * width_ + x) * channels_;
+  }
+  int width_ = 0, height_ = 0, channels_ = 3;
+  std::vector<uint8_t> pixels_;
+};
+
+// Writes `image` as an 8-bit PNG (RGB or RGBA as the image has), replacing
+// the file. InvalidArgument for an empty image or pixel buffer of the wrong
+// size; PermissionDenied (cannot open) or Internal (libpng or I/O failure)
+// naming the path otherwise, and a partial file is removed.
+absl::Status WritePng(const Image& image, const std::string& path);
+
+// Reads any PNG libpng decodes, converted to 8-bit RGB (no alpha in the
+// file) or RGBA. For tests and tools.
+absl::StatusOr<Image> ReadPng(const std::string& path);
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_PNG_IMAGE_H_

@@ -1,0 +1,42 @@
+// Every output file of `swarf run --out DIR` from plain data: the fetched
+// node grid, the error raster and the cutting marks.
+#ifndef SWARF_CLIENT_RUN_OUTPUTS_H_
+#define SWARF_CLIENT_RUN_OUTPUTS_H_
+
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "client/pictures.h"
+#include "client/surface_grid.h"
+#include "client/surface_mesh.h"
+#include "core/cutting_marks.h"
+
+namespace swarf::cli {
+
+struct RunOutputOptions {
+  ReliefOptions relief;
+  ErrorMapOptions error;
+  MarksPictureOptions marks;
+  SurfaceMeshOptions mesh;
+  bool vrml_colors = true;  // per-vertex height colours in surface.wrl
+};
+
+// A file written and how long it took to build and write (s).
+struct WrittenFile {
+  std::string path;
+  double seconds = 0;
+};
+
+// Writes into the existing directory `dir`, in this order: relief.png;
+// error.png when `error` is given; marks.png, marks.svg and marks.json when
+// `marks` is given; surface.stl and surface.wrl. Stops at the first error
+// (naming the file); files written before it stay.
+absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
+    const std::string& dir, const SurfaceGrid& grid, const ErrorRaster* error,
+    const std::vector<MarkPolyline>* marks,
+    const RunOutputOptions& options = {});
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_RUN_OUTPUTS_H_

@@ -1,0 +1,141 @@
+#include "client/surface_grid.h"
+
+#include <algorithm>
+
+#include "absl/strings/str_format.h"
+
+namespace swarf::cli {
+
+absl::StatusOr<SurfaceGrid> SurfaceGrid::Uncut(const StockSpec& spec,
+                                               SchemeKind scheme) {
+  if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
+  const int64_t n = (int64_t{spec.nx} + 1) * (int64_t{spec.ny} + 1);
+  if (n > kMaxGridNodes) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "grid of %d nodes exceeds the writers' limit of %d", n,
+        kMaxGridNodes));
+  }
+  SurfaceGrid g;
+  g.spec = spec;
+  g.scheme = scheme;
+  SurfaceJet top;
+  top.w = spec.z_top;
+  g.jets.assign(n, top);
+  g.owners.assign(n, -1);
+  return g;
+}
+
+absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
+  absl::StatusOr<SurfaceGrid> g = Uncut(wp.spec(), wp.scheme().kind());
+  if (!g.ok()) return g.status();
+  std::vector<double> w(kTileNodes);
+  std::vector<float> dbuf(5 * kTileNodes);
+  std::vector<int32_t> owner(kTileNodes);
+  float* const d[5] = {&dbuf[0], &dbuf[kTileNodes], &dbuf[2 * kTileNodes],
+                       &dbuf[3 * kTileNodes], &dbuf[4 * kTileNodes]};
+  for (int32_t t = 0; t < wp.tile_count(); ++t) {
+    // Unallocated tiles are untouched stock, which Uncut already holds.
+    if (!wp.TileAllocated(t)) continue;
+    const Workpiece::TileExtent e = wp.Extent(t);
+    wp.ReadTile(t, w.data(), d, owner.data());
+    if (absl::Status st = g->SetNodes(e.i0, e.j0, e.nx, e.ny, w.data(), d,
+                                      owner.data());
+        !st.ok()) {
+      return st;
+    }
+  }
+  return g;
+}
+
+absl::Status SurfaceGrid::SetNodes(int32_t i0, int32_t j0, int32_t nx,
+                                   int32_t ny, const double* w,
+                                   const float* const d[5],
+                                   const int32_t* owner) {
+  if (i0 < 0 || j0 < 0 || nx < 0 || ny < 0 ||
+      int64_t{i0} + nx > nodes_x() || int64_t{j0} + ny > nodes_y()) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "node block at (%d, %d) of %d x %d nodes leaves the %d x %d grid", i0,
+        j0, nx, ny, nodes_x(), nodes_y()));
+  }
+  if (w == nullptr && (nx > 0 && ny > 0)) {
+    return absl::InvalidArgumentError("node block without heights");
+  }
+  for (int32_t j = 0; j < ny; ++j) {
+    for (int32_t i = 0; i < nx; ++i) {
+      const int64_t in = int64_t{j} * nx + i;
+      SurfaceJet& jet = jets[Index(i0 + i, j0 + j)];
+      jet.w = w[in];
+      if (d != nullptr) {
+        jet.wx = d[0][in];
+        jet.wy = d[1][in];
+        jet.wxx = d[2][in];
+        jet.wxy = d[3][in];
+        jet.wyy = d[4][in];
+      } else {
+        jet.wx = jet.wy = jet.wxx = jet.wxy = jet.wyy = 0;
+      }
+      owners[Index(i0 + i, j0 + j)] = owner != nullptr ? owner[in] : -1;
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status SurfaceGrid::Validate() const {
+  if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
+  const int64_t n = (int64_t{spec.nx} + 1) * (int64_t{spec.ny} + 1);
+  if (static_cast<int64_t>(jets.size()) != n ||
+      static_cast<int64_t>(owners.size()) != n) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "grid holds %d jets and %d owners, the spec needs %d nodes",
+        jets.size(), owners.size(), n));
+  }
+  return absl::OkStatus();
+}
+
+ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
+  // Same construction as Workpiece::Corners so that reconstructions agree
+  // bit for bit.
+  const GridGeometry g(spec);
+  ElementCorners e;
+  e.x0 = g.NodeX(ei);
+  e.x1 = g.NodeX(ei + 1);
+  e.y0 = g.NodeY(ej);
+  e.y1 = g.NodeY(ej + 1);
+  e.z_top = spec.z_top;
+  e.c[0] = jet(ei, ej);
+  e.c[1] = jet(ei + 1, ej);
+  e.c[2] = jet(ei + 1, ej + 1);
+  e.c[3] = jet(ei, ej + 1);
+  return e;
+}
+
+double SurfaceGrid::Height(double x, double y) const {
+  const GridGeometry g(spec);
+  x = std::clamp(x, spec.x0, spec.x1);
+  y = std::clamp(y, spec.y0, spec.y1);
+  return GetScheme(scheme).Reconstruct(Corners(g.ElementX(x), g.ElementY(y)),
+                                       x, y);
+}
+
+void SurfaceGrid::Gradient(double x, double y, double* gx, double* gy) const {
+  HeightAndGradient(x, y, gx, gy);
+}
+
+double SurfaceGrid::HeightAndGradient(double x, double y, double* gx,
+                                      double* gy) const {
+  const GridGeometry g(spec);
+  x = std::clamp(x, spec.x0, spec.x1);
+  y = std::clamp(y, spec.y0, spec.y1);
+  const ElementCorners e = Corners(g.ElementX(x), g.ElementY(y));
+  const Scheme& s = GetScheme(scheme);
+  s.Gradient(e, x, y, gx, gy);
+  return s.Reconstruct(e, x, y);
+}
+
+double SurfaceGrid::MinNodeHeight() const {
+  double lo = spec.z_top;
+  for (const SurfaceJet& j : jets) lo = std::min(lo, j.w);
+  return lo;
+}
+
+}  // namespace swarf::cli

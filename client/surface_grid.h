@@ -1,0 +1,79 @@
+// The node grid of a simulated workpiece as plain data: what `swarf run`
+// fetches from the server (tiles of heights, derivatives and owners), or a
+// copy of an in-process Workpiece. The output writers work on this.
+//
+// Contract:
+// - Units: millimetres. Node (i, j) lies at GridGeometry(spec).NodeX(i),
+//   NodeY(j), exactly as in the core, so reconstructions are bit-identical to
+//   Workpiece::Reconstruct for the same nodes.
+// - jets and owners are row-major: index j * (nx + 1) + i. Untouched nodes
+//   are flat at z_top with owner -1. For zmap only jets[].w is used.
+#ifndef SWARF_CLIENT_SURFACE_GRID_H_
+#define SWARF_CLIENT_SURFACE_GRID_H_
+
+#include <cstdint>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "core/scheme.h"
+#include "core/stock.h"
+#include "core/surface_jet.h"
+#include "core/workpiece.h"
+
+namespace swarf::cli {
+
+struct SurfaceGrid {
+  StockSpec spec;
+  SchemeKind scheme = SchemeKind::kTaylor;
+  std::vector<SurfaceJet> jets;  // (nx + 1) * (ny + 1), row-major
+  std::vector<int32_t> owners;   // same size; -1: stock top
+
+  // Untouched stock: every node at z_top, flat, owner -1. InvalidArgument
+  // for a spec ValidateStock rejects, or more than kMaxGridNodes nodes.
+  static absl::StatusOr<SurfaceGrid> Uncut(const StockSpec& spec,
+                                           SchemeKind scheme);
+  // A copy of every node of `wp` (derivatives widened from the core's
+  // floats, as ReadTile gives them).
+  static absl::StatusOr<SurfaceGrid> FromWorkpiece(const Workpiece& wp);
+
+  // Copies a block of nx x ny nodes with first node (i0, j0), row-major
+  // ((j - j0) * nx + (i - i0)), as in Workpiece::ReadTile and the service's
+  // Tile message. `d` (wx, wy, wxx, wxy, wyy) and `owner` may be null: zero
+  // derivatives, owner -1. InvalidArgument if the block leaves the grid.
+  absl::Status SetNodes(int32_t i0, int32_t j0, int32_t nx, int32_t ny,
+                        const double* w, const float* const d[5],
+                        const int32_t* owner);
+
+  // Sizes consistent with the spec, spec valid.
+  absl::Status Validate() const;
+
+  GridGeometry geometry() const { return GridGeometry(spec); }
+  int32_t nodes_x() const { return spec.nx + 1; }
+  int32_t nodes_y() const { return spec.ny + 1; }
+  int64_t Index(int32_t i, int32_t j) const {
+    return int64_t{j} * nodes_x() + i;
+  }
+  const SurfaceJet& jet(int32_t i, int32_t j) const { return jets[Index(i, j)]; }
+  int32_t owner(int32_t i, int32_t j) const { return owners[Index(i, j)]; }
+
+  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny.
+  ElementCorners Corners(int32_t ei, int32_t ej) const;
+  // The scheme's reconstruction at any point of the stock (clamped to the
+  // stock rectangle), as Workpiece::Reconstruct.
+  double Height(double x, double y) const;
+  // Its gradient there, as Workpiece::ReconstructGradient: for taylor the
+  // lowest patch's (exact normals of the patches), for zmap the bilinear's.
+  void Gradient(double x, double y, double* gx, double* gy) const;
+  // Both at once (one element lookup).
+  double HeightAndGradient(double x, double y, double* gx, double* gy) const;
+  // Lowest node height (z_top if uncut).
+  double MinNodeHeight() const;
+};
+
+// Largest grid the writers accept (nodes): 16 Ki x 16 Ki.
+inline constexpr int64_t kMaxGridNodes = int64_t{1} << 28;
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_SURFACE_GRID_H_

@@ -1,0 +1,343 @@
+#include "client/surface_mesh.h"
+
+#include <algorithm>
+#include <bit>
+#include <charconv>
+#include <cmath>
+#include <cstring>
+
+#include "absl/strings/str_format.h"
+#include "client/colormap.h"
+#include "client/file_writer.h"
+#include "core/scheme.h"
+#include "core/thread_pool.h"
+
+namespace swarf::cli {
+namespace {
+
+// STL is little-endian; the writer copies floats as they are in memory.
+static_assert(std::endian::native == std::endian::little,
+              "WriteStl assumes a little-endian host");
+
+constexpr Rgb kWallColor = {110, 110, 110};
+
+}  // namespace
+
+double DefaultZBottom(const StockSpec& spec, double z_min) {
+  const double longer = std::max(spec.x1 - spec.x0, spec.y1 - spec.y0);
+  return z_min - std::max(0.1 * (spec.z_top - z_min), 0.02 * longer);
+}
+
+absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
+    const SurfaceGrid& grid, const SurfaceMeshOptions& options) {
+  if (absl::Status st = grid.Validate(); !st.ok()) return st;
+  const int s = options.subdivision;
+  if (s < 1 || s > 4096) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "subdivision must be in [1, 4096], got %d", s));
+  }
+  const int64_t nx = grid.spec.nx, ny = grid.spec.ny;
+  const int64_t big_nx = nx * s, big_ny = ny * s;
+  const int64_t top = (big_nx + 1) * (big_ny + 1);
+  if (top > kMaxMeshTopVertices) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "a %d x %d lattice (grid %d x %d, subdivision %d) exceeds %d "
+        "vertices",
+        big_nx, big_ny, nx, ny, s, kMaxMeshTopVertices));
+  }
+  const GridGeometry g = grid.geometry();
+  const Scheme& scheme = GetScheme(grid.scheme);
+  TriangleMesh mesh;
+  mesh.top_vertices = top;
+  mesh.lattice_nx = static_cast<int32_t>(big_nx);
+  mesh.lattice_ny = static_cast<int32_t>(big_ny);
+  mesh.vertices.resize(top + 2 * (big_nx + big_ny));
+
+  std::vector<double> xs(big_nx + 1), ys(big_ny + 1);
+  for (int64_t i = 0; i <= big_nx; ++i) {
+    xs[i] = g.NodeX(static_cast<int32_t>(i / s)) + (i % s) * (g.dx() / s);
+  }
+  for (int64_t j = 0; j <= big_ny; ++j) {
+    ys[j] = g.NodeY(static_cast<int32_t>(j / s)) + (j % s) * (g.dy() / s);
+  }
+  auto top_index = [big_nx](int64_t i, int64_t j) {
+    return static_cast<int32_t>(j * (big_nx + 1) + i);
+  };
+  std::vector<double> row_min(big_ny + 1);
+  ThreadPool::Default().ParallelFor(big_ny + 1, [&](int64_t j) {
+    const int32_t ej = static_cast<int32_t>(std::min(j / s, ny - 1));
+    double lo = grid.spec.z_top;
+    for (int32_t ei = 0; ei < nx; ++ei) {
+      // Corners once per element for its s (s + 1 in the last) vertices.
+      const ElementCorners e = grid.Corners(ei, ej);
+      const int64_t i_end = ei == nx - 1 ? big_nx : (ei + 1) * int64_t{s} - 1;
+      for (int64_t i = ei * int64_t{s}; i <= i_end; ++i) {
+        const double z = scheme.Reconstruct(e, xs[i], ys[j]);
+        mesh.vertices[top_index(i, j)] = {xs[i], ys[j], z};
+        lo = std::min(lo, z);
+      }
+    }
+    row_min[j] = lo;
+  });
+  const double z_min = *std::min_element(row_min.begin(), row_min.end());
+  const double z_bottom =
+      options.z_bottom ? *options.z_bottom : DefaultZBottom(grid.spec, z_min);
+  if (!std::isfinite(z_bottom) || !(z_bottom < z_min)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "z_bottom %g must be finite and below the lowest top vertex %g",
+        z_bottom, z_min));
+  }
+  mesh.z_bottom = z_bottom;
+
+  // Bottom vertices, one under each boundary vertex of the top: the south
+  // and north rows (corners included), then the west and east columns.
+  auto bottom_index = [&](int64_t i, int64_t j) {
+    int64_t k;
+    if (j == 0) {
+      k = i;
+    } else if (j == big_ny) {
+      k = (big_nx + 1) + i;
+    } else if (i == 0) {
+      k = 2 * (big_nx + 1) + (j - 1);
+    } else {
+      k = 2 * (big_nx + 1) + (big_ny - 1) + (j - 1);
+    }
+    return static_cast<int32_t>(top + k);
+  };
+  auto set_bottom = [&](int64_t i, int64_t j) {
+    mesh.vertices[bottom_index(i, j)] = {xs[i], ys[j], z_bottom};
+  };
+  for (int64_t i = 0; i <= big_nx; ++i) {
+    set_bottom(i, 0);
+    set_bottom(i, big_ny);
+  }
+  for (int64_t j = 1; j < big_ny; ++j) {
+    set_bottom(0, j);
+    set_bottom(big_nx, j);
+  }
+
+  const int64_t top_tris = 2 * big_nx * big_ny;
+  mesh.triangles.resize(top_tris);
+  ThreadPool::Default().ParallelFor(big_ny, [&](int64_t j) {
+    for (int64_t i = 0; i < big_nx; ++i) {
+      const int32_t v00 = top_index(i, j), v10 = top_index(i + 1, j),
+                    v11 = top_index(i + 1, j + 1), v01 = top_index(i, j + 1);
+      const double z00 = mesh.vertices[v00].z, z10 = mesh.vertices[v10].z,
+                   z11 = mesh.vertices[v11].z, z01 = mesh.vertices[v01].z;
+      auto* t = &mesh.triangles[2 * (j * big_nx + i)];
+      // The diagonal along the smaller height change follows a crease or
+      // a groove instead of cutting across it.
+      if (std::fabs(z00 - z11) <= std::fabs(z10 - z01)) {
+        t[0] = {v00, v10, v11};
+        t[1] = {v00, v11, v01};
+      } else {
+        t[0] = {v00, v10, v01};
+        t[1] = {v10, v11, v01};
+      }
+    }
+  });
+
+  // Side walls: the top's boundary runs counter-clockwise seen from above
+  // (a -> b); each wall quad takes the reverse edge b -> a and its bottom
+  // edge a' -> b', leaving b' -> a' to the bottom face.
+  mesh.triangles.reserve(top_tris + 6 * (big_nx + big_ny) - 2);
+  auto wall = [&](int32_t a, int32_t b, int32_t ab, int32_t bb) {
+    mesh.triangles.push_back({ab, bb, b});
+    mesh.triangles.push_back({ab, b, a});
+  };
+  for (int64_t i = 0; i < big_nx; ++i) {  // south, eastwards
+    wall(top_index(i, 0), top_index(i + 1, 0), bottom_index(i, 0),
+         bottom_index(i + 1, 0));
+  }
+  for (int64_t j = 0; j < big_ny; ++j) {  // east, northwards
+    wall(top_index(big_nx, j), top_index(big_nx, j + 1),
+         bottom_index(big_nx, j), bottom_index(big_nx, j + 1));
+  }
+  for (int64_t i = big_nx; i > 0; --i) {  // north, westwards
+    wall(top_index(i, big_ny), top_index(i - 1, big_ny),
+         bottom_index(i, big_ny), bottom_index(i - 1, big_ny));
+  }
+  for (int64_t j = big_ny; j > 0; --j) {  // west, southwards
+    wall(top_index(0, j), top_index(0, j - 1), bottom_index(0, j),
+         bottom_index(0, j - 1));
+  }
+
+  // Bottom face, clockwise seen from above, using only the walls' bottom
+  // vertices and no degenerate (collinear) triangle: columns between the
+  // south and north rows, with the west and east columns fanned from an
+  // inner south vertex to take the vertices of the west and east sides.
+  auto b = [&](int64_t i, int64_t j) { return bottom_index(i, j); };
+  if (big_nx == 1) {
+    for (int64_t j = 0; j < big_ny; ++j) {
+      mesh.triangles.push_back({b(0, j), b(1, j + 1), b(1, j)});
+      mesh.triangles.push_back({b(0, j), b(0, j + 1), b(1, j + 1)});
+    }
+  } else {
+    const int32_t cw = b(1, 0);
+    for (int64_t j = 0; j < big_ny; ++j) {
+      mesh.triangles.push_back({cw, b(0, j), b(0, j + 1)});
+    }
+    mesh.triangles.push_back({cw, b(0, big_ny), b(1, big_ny)});
+    for (int64_t i = 1; i + 1 < big_nx; ++i) {
+      mesh.triangles.push_back({b(i, 0), b(i + 1, big_ny), b(i + 1, 0)});
+      mesh.triangles.push_back({b(i, 0), b(i, big_ny), b(i + 1, big_ny)});
+    }
+    const int32_t ce = b(big_nx - 1, 0);
+    for (int64_t j = 0; j < big_ny; ++j) {
+      mesh.triangles.push_back({ce, b(big_nx, j + 1), b(big_nx, j)});
+    }
+    mesh.triangles.push_back({ce, b(big_nx - 1, big_ny), b(big_nx, big_ny)});
+  }
+  return mesh;
+}
+
+absl::Status WriteStl(const TriangleMesh& mesh, const std::string& path) {
+  if (mesh.triangles.size() > UINT32_MAX) {
+    return absl::InvalidArgumentError("too many triangles for STL");
+  }
+  FileWriter out(path);
+  if (!out.status().ok()) return out.status();
+  char header[80] = {};
+  std::snprintf(header, sizeof header,
+                "swarf machined surface, binary STL, mm, %zu triangles",
+                mesh.triangles.size());
+  out.Write(std::string_view(header, sizeof header));
+  const uint32_t count = static_cast<uint32_t>(mesh.triangles.size());
+  out.Write(std::string_view(reinterpret_cast<const char*>(&count), 4));
+  char rec[50];
+  for (const auto& t : mesh.triangles) {
+    const Vec3& p = mesh.vertices[t[0]];
+    const Vec3& q = mesh.vertices[t[1]];
+    const Vec3& r = mesh.vertices[t[2]];
+    const double ux = q.x - p.x, uy = q.y - p.y, uz = q.z - p.z;
+    const double vx = r.x - p.x, vy = r.y - p.y, vz = r.z - p.z;
+    double nx = uy * vz - uz * vy, ny = uz * vx - ux * vz,
+           nz = ux * vy - uy * vx;
+    const double len = std::sqrt(nx * nx + ny * ny + nz * nz);
+    if (len > 0 && std::isfinite(len)) {
+      nx /= len;
+      ny /= len;
+      nz /= len;
+    } else {
+      nx = ny = nz = 0;
+    }
+    const float f[12] = {
+        static_cast<float>(nx),  static_cast<float>(ny),
+        static_cast<float>(nz),  static_cast<float>(p.x),
+        static_cast<float>(p.y), static_cast<float>(p.z),
+        static_cast<float>(q.x), static_cast<float>(q.y),
+        static_cast<float>(q.z), static_cast<float>(r.x),
+        static_cast<float>(r.y), static_cast<float>(r.z)};
+    std::memcpy(rec, f, 48);
+    rec[48] = rec[49] = 0;
+    out.Write(std::string_view(rec, 50));
+  }
+  return out.Close();
+}
+
+std::vector<Rgb> SurfaceColors(const TriangleMesh& mesh, double z_top) {
+  std::vector<Rgb> colors(mesh.vertices.size(), kWallColor);
+  double lo = z_top;
+  for (int64_t k = 0; k < mesh.top_vertices; ++k) {
+    lo = std::min(lo, mesh.vertices[k].z);
+  }
+  for (int64_t k = 0; k < mesh.top_vertices; ++k) {
+    const double z = mesh.vertices[k].z;
+    colors[k] = z < z_top ? HeightTint((z - lo) / (z_top - lo)) : kStockColor;
+  }
+  return colors;
+}
+
+namespace {
+
+// Appends `v` as written in the STL (float32), shortest round-trip form.
+void AppendFloat(std::string& out, double v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, static_cast<float>(v));
+  out.append(buf, r.ptr);
+}
+
+void AppendInt(std::string& out, int64_t v) {
+  char buf[24];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  out.append(buf, r.ptr);
+}
+
+}  // namespace
+
+absl::Status WriteVrml(const TriangleMesh& mesh, const std::string& path,
+                       std::span<const Rgb> vertex_colors) {
+  if (!vertex_colors.empty() &&
+      vertex_colors.size() != mesh.vertices.size()) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "%d vertex colours for %d vertices", vertex_colors.size(),
+        mesh.vertices.size()));
+  }
+  FileWriter out(path);
+  if (!out.status().ok()) return out.status();
+  std::string s = absl::StrFormat(
+      "#VRML V2.0 utf8\n"
+      "# swarf machined surface (mm): %d vertices, %d triangles\n"
+      "Shape {\n"
+      "  appearance Appearance { material Material { diffuseColor 0.8 0.8 "
+      "0.8 } }\n"
+      "  geometry IndexedFaceSet {\n"
+      "    solid TRUE\n"
+      "    ccw TRUE\n"
+      "    creaseAngle 0.5\n"
+      "    coord Coordinate {\n"
+      "      point [\n",
+      mesh.vertices.size(), mesh.triangles.size());
+  constexpr size_t kChunk = size_t{1} << 20;
+  for (const Vec3& v : mesh.vertices) {
+    AppendFloat(s, v.x);
+    s += ' ';
+    AppendFloat(s, v.y);
+    s += ' ';
+    AppendFloat(s, v.z);
+    s += '\n';
+    if (s.size() >= kChunk) {
+      out.Write(s);
+      s.clear();
+    }
+  }
+  s += "      ]\n    }\n";
+  if (!vertex_colors.empty()) {
+    s += "    colorPerVertex TRUE\n    color Color {\n      color [\n";
+    char table[256][8];
+    for (int k = 0; k < 256; ++k) {
+      std::snprintf(table[k], sizeof table[k], "%.3f", k / 255.0);
+    }
+    for (const Rgb& c : vertex_colors) {
+      s += table[c.r];
+      s += ' ';
+      s += table[c.g];
+      s += ' ';
+      s += table[c.b];
+      s += '\n';
+      if (s.size() >= kChunk) {
+        out.Write(s);
+        s.clear();
+      }
+    }
+    s += "      ]\n    }\n";
+  }
+  s += "    coordIndex [\n";
+  for (const auto& t : mesh.triangles) {
+    AppendInt(s, t[0]);
+    s += ' ';
+    AppendInt(s, t[1]);
+    s += ' ';
+    AppendInt(s, t[2]);
+    s += " -1\n";
+    if (s.size() >= kChunk) {
+      out.Write(s);
+      s.clear();
+    }
+  }
+  s += "    ]\n  }\n}\n";
+  out.Write(s);
+  return out.Close();
+}
+
+}  // namespace swarf::cli

@@ -1,0 +1,88 @@
+// The machined workpiece as a closed triangle mesh: surface.stl (binary
+// STL) and surface.wrl (VRML97, the display format the paper names).
+//
+// Contract of BuildSurfaceMesh:
+// - Top: a lattice of (nx s + 1) x (ny s + 1) vertices, s the subdivision;
+//   vertex (I, J) lies at NodeX(I / s) + (I % s) dx / s,
+//   NodeY(J / s) + (J % s) dy / s (exactly on the grid nodes where I and J
+//   are multiples of s), at the height of the scheme's reconstruction of
+//   element (min(I / s, nx - 1), min(J / s, ny - 1)) - for
+//   taylor the eq. (2) patches, between nodes too. Each lattice cell is two
+//   triangles, split along the diagonal whose ends differ less in height;
+//   they are the mesh's first 2 NX NY triangles, cell by cell, row-major.
+// - Four vertical side walls from the top's boundary vertices (each one
+//   used, so no T-junctions) down to z_bottom, and a flat bottom at
+//   z_bottom made of the walls' bottom vertices only.
+// - Closed and consistently oriented: every undirected edge belongs to
+//   exactly two triangles, each directed edge to one, and triangles are
+//   counter-clockwise seen from outside. Triangles:
+//   2 NX NY + 6 (NX + NY) - 2 with NX = nx s, NY = ny s; vertices:
+//   (NX + 1)(NY + 1) + 2 (NX + NY).
+#ifndef SWARF_CLIENT_SURFACE_MESH_H_
+#define SWARF_CLIENT_SURFACE_MESH_H_
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "client/png_image.h"
+#include "client/surface_grid.h"
+#include "core/geometry.h"
+
+namespace swarf::cli {
+
+struct TriangleMesh {
+  std::vector<Vec3> vertices;  // mm
+  std::vector<std::array<int32_t, 3>> triangles;  // ccw seen from outside
+  // The first top_vertices vertices are the top lattice, row-major (J, I).
+  int64_t top_vertices = 0;
+  int32_t lattice_nx = 0, lattice_ny = 0;  // NX, NY: lattice cells
+  double z_bottom = 0;
+};
+
+struct SurfaceMeshOptions {
+  // s >= 1: every element as s x s lattice cells.
+  int subdivision = 1;
+  // The bottom plane (mm); must lie strictly below every top vertex. Absent:
+  // DefaultZBottom of the lowest top vertex.
+  std::optional<double> z_bottom;
+};
+
+// Most top lattice vertices BuildSurfaceMesh accepts (int32 triangle
+// indices with room for the walls).
+inline constexpr int64_t kMaxMeshTopVertices = int64_t{1} << 28;
+
+// A bottom plane below `z_min` (the lowest top vertex) by a tenth of the
+// depth machined below the top, and at least 2% of the stock's longer side.
+double DefaultZBottom(const StockSpec& spec, double z_min);
+
+// InvalidArgument for an invalid grid, subdivision < 1, too many vertices,
+// or a z_bottom that is not finite or not below every top vertex.
+absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
+    const SurfaceGrid& grid, const SurfaceMeshOptions& options = {});
+
+// Binary STL: 80-byte header (not starting with "solid"), little-endian
+// uint32 triangle count, per triangle the unit normal (from the vertices'
+// cross product; zero for a degenerate triangle), three vertices as float32
+// and a zero attribute word.
+absl::Status WriteStl(const TriangleMesh& mesh, const std::string& path);
+
+// Per-vertex colours for WriteVrml: top vertices tinted by height as in
+// relief.png (kStockColor at z_top), walls and bottom darker grey.
+std::vector<Rgb> SurfaceColors(const TriangleMesh& mesh, double z_top);
+
+// VRML97: one Shape with an IndexedFaceSet (solid, ccw, creaseAngle 0.5),
+// coordinates as the STL's float32 values, and per-vertex colours when
+// `vertex_colors` has one per vertex (InvalidArgument if it has another
+// non-zero size).
+absl::Status WriteVrml(const TriangleMesh& mesh, const std::string& path,
+                       std::span<const Rgb> vertex_colors = {});
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_SURFACE_MESH_H_

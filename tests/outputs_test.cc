@@ -1,0 +1,886 @@
+// Output writers of `swarf run`: every file is written to a temporary
+// directory and read back (PNG decoded, STL parsed, VRML/SVG/JSON scanned).
+#include <stdlib.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <map>
+#include <memory>
+#include <optional>
+#include <random>
+#include <sstream>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "client/bitmap_font.h"
+#include "client/colormap.h"
+#include "client/marks_files.h"
+#include "client/pictures.h"
+#include "client/png_image.h"
+#include "client/run_outputs.h"
+#include "client/surface_grid.h"
+#include "client/surface_mesh.h"
+#include "core/cutting_marks.h"
+#include "core/valuation.h"
+#include "core/workpiece.h"
+#include "google/protobuf/struct.pb.h"
+#include "google/protobuf/util/json_util.h"
+#include "gtest/gtest.h"
+
+namespace swarf::cli {
+namespace {
+
+constexpr SchemeKind kSchemes[] = {SchemeKind::kZmap, SchemeKind::kTaylor};
+
+// 50 x 30 mm, top at 10, 0.5 mm spacing: 101 x 61 nodes.
+StockSpec TestStock() { return StockSpec{0, 0, 50, 30, 10, 100, 60}; }
+
+// Two overlapping parallel grooves in the north half (a crease between
+// them and edges against the top) and a crater in the south-west.
+std::vector<Move> TestMoves() {
+  return {
+      {{5, 22, 8.5}, {45, 22, 8.5}, 2},
+      {{5, 23.5, 8.5}, {45, 23.5, 8.5}, 2},
+      {{15, 8, 8}, {15, 8, 8}, 3},
+  };
+}
+
+std::unique_ptr<Workpiece> Cut(SchemeKind scheme,
+                               const StockSpec& spec = TestStock(),
+                               const std::vector<Move>& moves = TestMoves()) {
+  auto wp = Workpiece::Create(spec, scheme);
+  EXPECT_TRUE(wp.ok()) << wp.status();
+  auto applied = (*wp)->Apply(moves);
+  EXPECT_TRUE(applied.ok()) << applied.status();
+  return *std::move(wp);
+}
+
+SurfaceGrid GridOf(const Workpiece& wp) {
+  auto g = SurfaceGrid::FromWorkpiece(wp);
+  EXPECT_TRUE(g.ok()) << g.status();
+  return *std::move(g);
+}
+
+// A fresh directory, removed with its files at the end of the test.
+class TempDir {
+ public:
+  TempDir() {
+    std::string tmpl =
+        (std::filesystem::temp_directory_path() / "swarf_outputs_XXXXXX")
+            .string();
+    EXPECT_NE(mkdtemp(tmpl.data()), nullptr);
+    path_ = tmpl;
+  }
+  ~TempDir() { std::filesystem::remove_all(path_); }
+  std::string File(const std::string& name) const { return path_ + "/" + name; }
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+};
+
+std::string ReadAll(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+int Luma(Rgb c) { return (299 * c.r + 587 * c.g + 114 * c.b) / 1000; }
+
+int MaxChannelDiff(Rgb a, Rgb b) {
+  return std::max({std::abs(a.r - b.r), std::abs(a.g - b.g),
+                   std::abs(a.b - b.b)});
+}
+
+size_t CountOf(const std::string& s, const std::string& needle) {
+  size_t n = 0;
+  for (size_t p = s.find(needle); p != std::string::npos;
+       p = s.find(needle, p + needle.size())) {
+    ++n;
+  }
+  return n;
+}
+
+// ------------------------------------------------------------ SurfaceGrid
+
+TEST(SurfaceGridTest, MatchesTheWorkpieceBitForBit) {
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(GetScheme(scheme).name());
+    auto wp = Cut(scheme);
+    const SurfaceGrid g = GridOf(*wp);
+    ASSERT_TRUE(g.Validate().ok());
+    EXPECT_EQ(g.scheme, scheme);
+    int64_t cut = 0;
+    for (int32_t j = 0; j < g.nodes_y(); ++j) {
+      for (int32_t i = 0; i < g.nodes_x(); ++i) {
+        const NodeValue v = wp->Node(i, j);
+        ASSERT_EQ(g.jet(i, j).w, v.jet.w) << i << "," << j;
+        ASSERT_EQ(g.jet(i, j).wx, v.jet.wx);
+        ASSERT_EQ(g.jet(i, j).wyy, v.jet.wyy);
+        ASSERT_EQ(g.owner(i, j), v.owner);
+        cut += v.owner >= 0;
+      }
+    }
+    EXPECT_GT(cut, 100);
+    std::mt19937_64 rng(7);
+    std::uniform_real_distribution<double> ux(-1, 51), uy(-1, 31);
+    for (int k = 0; k < 5000; ++k) {
+      const double x = ux(rng), y = uy(rng);
+      ASSERT_EQ(g.Height(x, y), wp->Reconstruct(x, y)) << x << "," << y;
+      double gx, gy, wx, wy;
+      g.Gradient(x, y, &gx, &gy);
+      wp->ReconstructGradient(x, y, &wx, &wy);
+      ASSERT_EQ(gx, wx);
+      ASSERT_EQ(gy, wy);
+    }
+    // Node positions themselves.
+    EXPECT_EQ(g.Height(25, 22), wp->Reconstruct(25, 22));
+    EXPECT_LT(g.Height(25, 22), 8.6);
+  }
+}
+
+TEST(SurfaceGridTest, SetNodesChecksTheBlock) {
+  auto g = SurfaceGrid::Uncut(TestStock(), SchemeKind::kTaylor);
+  ASSERT_TRUE(g.ok());
+  EXPECT_EQ(g->MinNodeHeight(), 10);
+  const double w[4] = {9, 8, 7, 6};
+  const int32_t owner[4] = {3, 3, 4, 4};
+  EXPECT_FALSE(g->SetNodes(100, 0, 2, 2, w, nullptr, owner).ok());
+  EXPECT_FALSE(g->SetNodes(-1, 0, 2, 2, w, nullptr, owner).ok());
+  EXPECT_FALSE(g->SetNodes(0, 60, 2, 2, w, nullptr, owner).ok());
+  ASSERT_TRUE(g->SetNodes(99, 59, 2, 2, w, nullptr, owner).ok());
+  EXPECT_EQ(g->jet(100, 59).w, 8);
+  EXPECT_EQ(g->jet(99, 60).w, 7);
+  EXPECT_EQ(g->owner(100, 60), 4);
+  EXPECT_EQ(g->MinNodeHeight(), 6);
+  EXPECT_FALSE(SurfaceGrid::Uncut(StockSpec{0, 0, 0, 1, 0, 1, 1},
+                                  SchemeKind::kZmap)
+                   .ok());
+  g->jets.pop_back();
+  EXPECT_FALSE(g->Validate().ok());
+}
+
+// -------------------------------------------------------------------- PNG
+
+TEST(PngTest, RoundTripsRgbAndRgba) {
+  TempDir dir;
+  for (int channels : {3, 4}) {
+    Image im(37, 11, channels, {1, 2, 3});
+    for (int y = 0; y < im.height(); ++y) {
+      for (int x = 0; x < im.width(); ++x) {
+        im.Set(x, y, {uint8_t(x * 7), uint8_t(y * 23), uint8_t(x ^ y)});
+      }
+    }
+    if (channels == 4) im.pixels()[3] = 17;  // one translucent pixel
+    const std::string path = dir.File("rt.png");
+    ASSERT_TRUE(WritePng(im, path).ok());
+    auto back = ReadPng(path);
+    ASSERT_TRUE(back.ok()) << back.status();
+    EXPECT_EQ(back->width(), 37);
+    EXPECT_EQ(back->height(), 11);
+    EXPECT_EQ(back->channels(), channels);
+    EXPECT_EQ(back->pixels(), im.pixels());
+  }
+}
+
+TEST(PngTest, ReportsErrors) {
+  TempDir dir;
+  EXPECT_FALSE(WritePng(Image(3, 3), dir.File("no/such/dir.png")).ok());
+  EXPECT_FALSE(std::filesystem::exists(dir.File("no/such/dir.png")));
+  EXPECT_FALSE(WritePng(Image(), dir.File("empty.png")).ok());
+  std::ofstream(dir.File("fake.png")) << "not a png";
+  EXPECT_FALSE(ReadPng(dir.File("fake.png")).ok());
+  EXPECT_FALSE(ReadPng(dir.File("missing.png")).ok());
+}
+
+// ------------------------------------------------------------------- font
+
+TEST(FontTest, DrawsDistinctGlyphs) {
+  auto ink = [](const std::string& text) {
+    Image im(TextWidth(text, 2) + 4, kGlyphHeight * 2 + 4, 3, {255, 255, 255});
+    DrawText(im, 2, 2, text, {0, 0, 0}, 2);
+    std::vector<bool> mask;
+    for (int y = 0; y < im.height(); ++y) {
+      for (int x = 0; x < im.width(); ++x) mask.push_back(im.Get(x, y).r == 0);
+    }
+    return mask;
+  };
+  EXPECT_EQ(TextWidth("1e-6", 1), 4 * kGlyphAdvance - 1);
+  EXPECT_EQ(TextWidth("1e-6", 3), 3 * (4 * kGlyphAdvance - 1));
+  const std::string chars = "0123456789abcdefghijklmnopqrstuvwxyz.-+()";
+  std::vector<std::vector<bool>> seen;
+  for (char c : chars) {
+    ASSERT_TRUE(HasGlyph(c)) << c;
+    const auto m = ink(std::string(1, c));
+    EXPECT_GT(std::count(m.begin(), m.end(), true), 0) << c;
+    for (const auto& other : seen) EXPECT_NE(m, other) << c;
+    seen.push_back(m);
+  }
+  EXPECT_TRUE(HasGlyph('M'));  // drawn as 'm'
+  EXPECT_EQ(ink("M"), ink("m"));
+  EXPECT_FALSE(HasGlyph('@'));
+  const std::vector<bool> blank = ink(" ");
+  EXPECT_EQ(std::count(blank.begin(), blank.end(), true), 0);
+}
+
+// ----------------------------------------------------------------- relief
+
+TEST(ReliefTest, SizeFollowsTheGrid) {
+  const StockSpec spec = TestStock();
+  PixelFrame f = ReliefFrame(spec, {});
+  EXPECT_EQ(f.width, 101);
+  EXPECT_EQ(f.height, 61);
+  EXPECT_DOUBLE_EQ(f.X(100), 50);
+  EXPECT_DOUBLE_EQ(f.Y(60), 0);
+  f = ReliefFrame(spec, {.max_side = 51});
+  EXPECT_EQ(f.width, 51);
+  EXPECT_EQ(f.height, 31);
+  f = ReliefFrame(spec, {.max_side = 1600, .min_side = 1000});
+  EXPECT_EQ(f.width, 1000);
+  EXPECT_EQ(f.height, 600);
+  // A 1000 x 1000 grid gets one pixel per node, capped at max_side.
+  const StockSpec big{0, 0, 100, 100, 0, 1000, 1000};
+  EXPECT_EQ(ReliefFrame(big, {}).width, 1001);
+  EXPECT_EQ(ReliefFrame(big, {.max_side = 800}).width, 800);
+}
+
+TEST(ReliefTest, ShowsCutsShadedFromTheUpperLeft) {
+  TempDir dir;
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(GetScheme(scheme).name());
+    auto wp = Cut(scheme);
+    const SurfaceGrid g = GridOf(*wp);
+    auto relief = RenderRelief(g);
+    ASSERT_TRUE(relief.ok()) << relief.status();
+    ASSERT_TRUE(WritePng(*relief, dir.File("relief.png")).ok());
+    auto im = ReadPng(dir.File("relief.png"));
+    ASSERT_TRUE(im.ok());
+    ASSERT_EQ(im->width(), 101);
+    ASSERT_EQ(im->height(), 61);
+    const PixelFrame f = ReliefFrame(g.spec, {});
+    auto at = [&](double x, double y) {
+      return im->Get(static_cast<int>(std::lround(f.PixelX(x))),
+                     static_cast<int>(std::lround(f.PixelY(y))));
+    };
+    // Untouched stock: the neutral colour, in every corner.
+    EXPECT_EQ(at(0, 0), kStockColor);
+    EXPECT_EQ(at(50, 30), kStockColor);
+    EXPECT_EQ(at(48, 2), kStockColor);
+    // Groove bottom (north half, so near the top of the picture): bluish
+    // and darker than the stock.
+    const Rgb groove = at(25, 22);
+    EXPECT_GT(groove.b, groove.r);
+    EXPECT_LT(Luma(groove), Luma(kStockColor) - 40);
+    // Its mirror image in y is untouched: y is up.
+    EXPECT_EQ(at(25, 30 - 22), kStockColor);
+    // The crater's centre is the lowest point: darker than the groove; for
+    // taylor (exact normal there: flat) exactly the tint's bottom.
+    EXPECT_LT(Luma(at(15, 8)), Luma(groove) - 20);
+    if (scheme == SchemeKind::kTaylor) {
+      EXPECT_EQ(at(15, 8), HeightTint(0));
+    }
+    // Its inner wall facing the light (south-east side, rising towards the
+    // south-east) is brighter than the one facing away (north-west).
+    const Rgb lit = at(16.5, 6.5), shadow = at(13.5, 9.5);
+    EXPECT_GT(Luma(lit), Luma(shadow) + 30);
+  }
+}
+
+// -------------------------------------------------------------- error map
+
+TEST(ErrorMapTest, LogScaleColoursAndLegend) {
+  ErrorRaster r;
+  r.region = {0, 0, 40, 20};
+  r.cols = 4;
+  r.rows = 2;
+  r.max_error = {0, 1e-6f, 1e-4f, 1e-2f,            // row 0 (south)
+                 1e-3f, std::nanf(""), 5e-7f, 1e-2f};  // row 1 (north)
+  ErrorMapLayout layout;
+  auto im = RenderErrorMap(r, {.min_side = 400}, &layout);
+  ASSERT_TRUE(im.ok()) << im.status();
+  TempDir dir;
+  ASSERT_TRUE(WritePng(*im, dir.File("error.png")).ok());
+  auto back = ReadPng(dir.File("error.png"));
+  ASSERT_TRUE(back.ok());
+  ASSERT_EQ(back->width(), im->width());
+  ASSERT_EQ(back->height(), im->height());
+  EXPECT_EQ(layout.map_width, 400);
+  EXPECT_EQ(layout.map_height, 200);
+  EXPECT_GT(back->width(), 400 + 40);  // the legend beside the map
+  EXPECT_DOUBLE_EQ(layout.lo, 1e-6);
+  EXPECT_NEAR(layout.hi, 1e-2, 1e-9);
+  ASSERT_EQ(layout.ticks.size(), 5u);
+  EXPECT_NEAR(layout.ticks.front(), 1e-6, 1e-12);
+  EXPECT_NEAR(layout.ticks.back(), 1e-2, 1e-8);
+
+  auto cell = [&](int c, int row) {
+    return back->Get(c * 100 + 50, layout.map_height - 1 - (row * 100 + 50));
+  };
+  EXPECT_EQ(cell(0, 0), kZeroErrorColor);
+  EXPECT_EQ(cell(1, 0), Viridis(0));
+  EXPECT_EQ(cell(2, 0), ErrorColor(1e-4f, 1e-6, layout.hi));
+  EXPECT_LE(MaxChannelDiff(cell(2, 0), Viridis(0.5)), 2);
+  EXPECT_EQ(cell(3, 0), Viridis(1));
+  EXPECT_EQ(cell(0, 1), ErrorColor(1e-3f, 1e-6, layout.hi));  // north-west
+  EXPECT_EQ(cell(1, 1), kInvalidErrorColor);
+  EXPECT_EQ(cell(2, 1), Viridis(0));  // below the scale: clamped
+
+  // Legend: the bar runs from the bottom colour to the top one, the zero
+  // swatch, and labels (ink) beside the bar and in the title.
+  EXPECT_EQ(back->Get(layout.bar_x0 + 2, layout.bar_y0), Viridis(1));
+  EXPECT_EQ(back->Get(layout.bar_x0 + 2, layout.bar_y1 - 1), Viridis(0));
+  EXPECT_EQ(back->Get((layout.zero_x0 + layout.zero_x1) / 2,
+                      (layout.zero_y0 + layout.zero_y1) / 2),
+            kZeroErrorColor);
+  auto ink_in = [&](int x0, int y0, int x1, int y1) {
+    int n = 0;
+    for (int y = y0; y < y1; ++y) {
+      for (int x = x0; x < x1; ++x) n += Luma(back->Get(x, y)) < 80;
+    }
+    return n;
+  };
+  EXPECT_GT(ink_in(layout.bar_x1 + 2, layout.bar_y0 - 10, back->width(),
+                   layout.bar_y1 + 10),
+            5 * 120);  // five tick labels
+  EXPECT_GT(ink_in(layout.legend_x0, 0, back->width(), layout.bar_y0 - 12),
+            300);  // "error (mm)", "max 1.00e-2"
+  EXPECT_EQ(ink_in(layout.bar_x1 + 2, layout.zero_y1 + 12, back->width(),
+                   back->height()),
+            0);  // nothing below the swatch's label
+}
+
+TEST(ErrorMapTest, MaxPoolingKeepsASingleSpike) {
+  ErrorRaster r;
+  r.region = {0, 0, 300, 1};
+  r.cols = 3000;
+  r.rows = 10;
+  r.max_error.assign(r.cols * r.rows, 1e-6f);
+  r.max_error[7 * r.cols + 1234] = 5e-3f;
+  ErrorMapLayout layout;
+  auto im = RenderErrorMap(r, {.max_side = 1000}, &layout);
+  ASSERT_TRUE(im.ok());
+  EXPECT_EQ(layout.map_width, 1000);
+  EXPECT_EQ(layout.map_height, 3);
+  int spikes = 0;
+  for (int y = 0; y < layout.map_height; ++y) {
+    for (int x = 0; x < layout.map_width; ++x) {
+      spikes += im->Get(x, y) == Viridis(1);
+    }
+  }
+  EXPECT_EQ(spikes, 1);
+  // Tall enough for the legend even though the map is 3 pixels high.
+  EXPECT_GT(im->height(), 100);
+}
+
+TEST(ErrorMapTest, FromTheValuation) {
+  auto wp = Cut(SchemeKind::kZmap);
+  ValuationOptions vo;
+  vo.map_cols = 100;
+  vo.map_rows = 60;
+  auto stats = MeasureError(*wp, vo);
+  ASSERT_TRUE(stats.ok());
+  ErrorRaster r{{0, 0, 50, 30}, stats->map_cols, stats->map_rows, stats->map};
+  auto im = RenderErrorMap(r);
+  ASSERT_TRUE(im.ok());
+  // 600 x 360 map: cells of 6 pixels. Untouched stock has no error, the
+  // worst cell is the top colour.
+  EXPECT_EQ(im->Get(3, 359 - 3), kZeroErrorColor);  // cell (0, 0)
+  bool top = false;
+  for (int y = 0; y < 360 && !top; ++y) {
+    for (int x = 0; x < 600 && !top; ++x) top = im->Get(x, y) == Viridis(1);
+  }
+  EXPECT_TRUE(top);
+  r.max_error.pop_back();
+  EXPECT_FALSE(RenderErrorMap(r).ok());
+  r.max_error.push_back(0);
+  EXPECT_FALSE(RenderErrorMap(r, {.min_error = 0}).ok());
+  r.region.x1 = r.region.x0;
+  EXPECT_FALSE(RenderErrorMap(r).ok());
+}
+
+// ------------------------------------------------------------------ marks
+
+std::vector<MarkPolyline> TestMarks(const Workpiece& wp) {
+  auto marks = FindCuttingMarks(wp);
+  EXPECT_TRUE(marks.ok()) << marks.status();
+  return *std::move(marks);
+}
+
+TEST(MarksTest, PictureDrawsThePolylinesOverTheRelief) {
+  auto wp = Cut(SchemeKind::kTaylor);
+  const SurfaceGrid g = GridOf(*wp);
+  const std::vector<MarkPolyline> marks = TestMarks(*wp);
+  ASSERT_GE(marks.size(), 3u);
+  const MarksPictureOptions opt;
+  const PixelFrame f = ReliefFrame(g.spec, opt.relief);
+  ASSERT_EQ(f.width, 1000);
+  auto relief = RenderRelief(g, opt.relief);
+  ASSERT_TRUE(relief.ok());
+  auto drawn = RenderMarks(g, marks, opt);
+  ASSERT_TRUE(drawn.ok());
+  TempDir dir;
+  ASSERT_TRUE(WritePng(*drawn, dir.File("marks.png")).ok());
+  auto im = ReadPng(dir.File("marks.png"));
+  ASSERT_TRUE(im.ok());
+  ASSERT_GT(im->width(), f.width);  // the angle legend
+  ASSERT_GE(im->height(), f.height);
+
+  struct Seg {
+    double ax, ay, bx, by;
+  };
+  std::vector<Seg> segs;
+  for (const MarkPolyline& p : marks) {
+    for (size_t k = 0; k + 1 < p.vertices.size(); ++k) {
+      segs.push_back({f.PixelX(p.vertices[k].x), f.PixelY(p.vertices[k].y),
+                      f.PixelX(p.vertices[k + 1].x),
+                      f.PixelY(p.vertices[k + 1].y)});
+    }
+    if (p.closed) {
+      segs.push_back({f.PixelX(p.vertices.back().x),
+                      f.PixelY(p.vertices.back().y),
+                      f.PixelX(p.vertices[0].x), f.PixelY(p.vertices[0].y)});
+    }
+  }
+  auto dist = [&](double px, double py) {
+    double best = 1e300;
+    for (const Seg& s : segs) {
+      const double dx = s.bx - s.ax, dy = s.by - s.ay;
+      const double l2 = dx * dx + dy * dy;
+      double t = l2 > 0 ? ((px - s.ax) * dx + (py - s.ay) * dy) / l2 : 0;
+      t = std::clamp(t, 0.0, 1.0);
+      best = std::min(best, std::hypot(s.ax + t * dx - px, s.ay + t * dy - py));
+    }
+    return best;
+  };
+  // Only pixels near a mark changed, and there are many.
+  int changed = 0;
+  for (int y = 0; y < f.height; ++y) {
+    for (int x = 0; x < f.width; ++x) {
+      if (im->Get(x, y) == relief->Get(x, y)) continue;
+      ++changed;
+      // Halo width 2 + 2 px, plus the half pixel of anti-aliasing.
+      ASSERT_LE(dist(x, y), 2.51) << x << "," << y;
+    }
+  }
+  EXPECT_GT(changed, 1000);
+  // On the line, the pixel takes the angle's colour.
+  int checked = 0;
+  for (const MarkPolyline& p : marks) {
+    for (size_t k = 1; k + 1 < p.vertices.size(); k += 5) {
+      const int x = static_cast<int>(std::lround(f.PixelX(p.vertices[k].x)));
+      const int y = static_cast<int>(std::lround(f.PixelY(p.vertices[k].y)));
+      EXPECT_LE(MaxChannelDiff(im->Get(x, y), AngleColor(p.angle_deg[k])), 60)
+          << x << "," << y;
+      ++checked;
+    }
+  }
+  EXPECT_GT(checked, 10);
+}
+
+TEST(MarksTest, SvgHasOnePathPerPolyline) {
+  auto wp = Cut(SchemeKind::kTaylor);
+  const std::vector<MarkPolyline> marks = TestMarks(*wp);
+  ASSERT_FALSE(marks.empty());
+  TempDir dir;
+  ASSERT_TRUE(WriteMarksSvg(TestStock(), marks, dir.File("marks.svg")).ok());
+  const std::string svg = ReadAll(dir.File("marks.svg"));
+  EXPECT_EQ(svg.rfind("<?xml", 0), 0u);
+  EXPECT_NE(svg.find("viewBox=\"0 -30 50 30\""), std::string::npos);
+  EXPECT_NE(svg.find("scale(1,-1)"), std::string::npos);
+  EXPECT_EQ(CountOf(svg, "<rect "), 1u);
+  EXPECT_EQ(CountOf(svg, "<path "), marks.size());
+  size_t segments = 0, closed = 0;
+  for (const MarkPolyline& p : marks) {
+    segments += p.vertices.size() - 1;
+    closed += p.closed;
+  }
+  EXPECT_EQ(CountOf(svg, " L"), segments);
+  EXPECT_EQ(CountOf(svg, " Z\""), closed);
+  // First vertex of the first polyline, y not flipped in the data.
+  const Vec3 v = marks[0].vertices[0];
+  char first[64];
+  std::snprintf(first, sizeof first, "d=\"M%.7g %.7g", v.x, v.y);
+  EXPECT_NE(svg.find(first), std::string::npos) << first;
+  EXPECT_EQ(svg.substr(svg.size() - 7), "</svg>\n");
+}
+
+TEST(MarksTest, JsonRoundTrips) {
+  auto wp = Cut(SchemeKind::kTaylor);
+  const std::vector<MarkPolyline> marks = TestMarks(*wp);
+  ASSERT_FALSE(marks.empty());
+  TempDir dir;
+  ASSERT_TRUE(WriteMarksJson(marks, dir.File("marks.json")).ok());
+  const std::string text = ReadAll(dir.File("marks.json"));
+  ASSERT_EQ(text.back(), '\n');
+  EXPECT_EQ(text, MarksJson(marks) + "\n");
+  google::protobuf::Struct doc;
+  ASSERT_TRUE(google::protobuf::util::JsonStringToMessage(text, &doc).ok());
+  ASSERT_EQ(doc.fields().size(), 1u);
+  const auto& list = doc.fields().at("polylines").list_value();
+  ASSERT_EQ(static_cast<size_t>(list.values_size()), marks.size());
+  for (size_t k = 0; k < marks.size(); ++k) {
+    const auto& p = list.values(k).struct_value().fields();
+    EXPECT_EQ(p.size(), 4u);  // closed, owners, vertices, angle_deg
+    EXPECT_EQ(p.at("closed").bool_value(), marks[k].closed);
+    EXPECT_EQ(p.at("owners").list_value().values(0).number_value(),
+              marks[k].owners[0]);
+    EXPECT_EQ(p.at("owners").list_value().values(1).number_value(),
+              marks[k].owners[1]);
+    const auto& verts = p.at("vertices").list_value();
+    ASSERT_EQ(static_cast<size_t>(verts.values_size()),
+              marks[k].vertices.size());
+    ASSERT_EQ(static_cast<size_t>(p.at("angle_deg").list_value().values_size()),
+              marks[k].angle_deg.size());
+    for (int i = 0; i < verts.values_size(); ++i) {
+      const auto& xyz = verts.values(i).list_value();
+      ASSERT_EQ(xyz.values_size(), 3);
+      // Shortest round-trip doubles: exact.
+      EXPECT_EQ(xyz.values(0).number_value(), marks[k].vertices[i].x);
+      EXPECT_EQ(xyz.values(1).number_value(), marks[k].vertices[i].y);
+      EXPECT_EQ(xyz.values(2).number_value(), marks[k].vertices[i].z);
+    }
+  }
+  // With vertex owners: one more key per polyline.
+  google::protobuf::Struct with;
+  ASSERT_TRUE(
+      google::protobuf::util::JsonStringToMessage(MarksJson(marks, true), &with)
+          .ok());
+  EXPECT_EQ(with.fields()
+                .at("polylines")
+                .list_value()
+                .values(0)
+                .struct_value()
+                .fields()
+                .size(),
+            5u);
+}
+
+// ------------------------------------------------------------------- mesh
+
+struct StlFile {
+  uint32_t count = 0;
+  std::vector<std::array<float, 3>> normals;
+  std::vector<std::array<std::array<float, 3>, 3>> tris;
+};
+
+StlFile ParseStl(const std::string& bytes) {
+  StlFile f;
+  EXPECT_GE(bytes.size(), 84u);
+  if (bytes.size() < 84) return f;
+  EXPECT_NE(bytes.rfind("solid", 0), 0u);  // would read as ASCII STL
+  std::memcpy(&f.count, bytes.data() + 80, 4);
+  EXPECT_EQ(bytes.size(), 84 + 50 * size_t{f.count});
+  if (bytes.size() != 84 + 50 * size_t{f.count}) return f;
+  for (uint32_t t = 0; t < f.count; ++t) {
+    float v[12];
+    std::memcpy(v, bytes.data() + 84 + 50 * size_t{t}, 48);
+    f.normals.push_back({v[0], v[1], v[2]});
+    f.tris.push_back({{{v[3], v[4], v[5]}, {v[6], v[7], v[8]},
+                       {v[9], v[10], v[11]}}});
+  }
+  return f;
+}
+
+// Checks a parsed STL: closed, oriented, outward normals, bounds; returns
+// the enclosed volume.
+double CheckClosedMesh(const StlFile& f, const StockSpec& spec,
+                       double z_bottom) {
+  std::map<std::array<float, 3>, int> ids;
+  std::map<std::pair<int, int>, int> directed;
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  double volume = 0, prism_volume = 0;
+  int flat_bottom = 0;
+  for (size_t t = 0; t < f.tris.size(); ++t) {
+    int id[3];
+    for (int k = 0; k < 3; ++k) {
+      const auto& p = f.tris[t][k];
+      id[k] = ids.emplace(p, static_cast<int>(ids.size())).first->second;
+      for (int c = 0; c < 3; ++c) {
+        lo[c] = std::min(lo[c], double{p[c]});
+        hi[c] = std::max(hi[c], double{p[c]});
+      }
+    }
+    for (int k = 0; k < 3; ++k) ++directed[{id[k], id[(k + 1) % 3]}];
+    const auto& a = f.tris[t][0];
+    const auto& b = f.tris[t][1];
+    const auto& c = f.tris[t][2];
+    const double u[3] = {b[0] - a[0], b[1] - a[1], b[2] - a[2]};
+    const double v[3] = {c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+    const double n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                         u[0] * v[1] - u[1] * v[0]};
+    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+    EXPECT_GT(len, 0) << "degenerate triangle " << t;
+    const auto& sn = f.normals[t];
+    EXPECT_NEAR(std::hypot(sn[0], sn[1], sn[2]), 1, 1e-5);
+    EXPECT_GT((sn[0] * n[0] + sn[1] * n[1] + sn[2] * n[2]) / len, 0.999)
+        << "normal of triangle " << t << " disagrees with its winding";
+    // Divergence theorem with the winding, against the prism volume of the
+    // upward faces over the bottom plane.
+    volume += (a[0] * (b[1] * c[2] - b[2] * c[1]) -
+               a[1] * (b[0] * c[2] - b[2] * c[0]) +
+               a[2] * (b[0] * c[1] - b[1] * c[0])) /
+              6;
+    if (n[2] > 0) {
+      prism_volume += n[2] / 2 * ((a[2] + b[2] + c[2]) / 3 - z_bottom);
+    }
+    if (sn[2] == -1) ++flat_bottom;
+  }
+  EXPECT_GT(flat_bottom, 0);
+  for (const auto& [edge, n] : directed) {
+    EXPECT_EQ(n, 1) << "directed edge " << edge.first << "->" << edge.second;
+    const auto rev = directed.find({edge.second, edge.first});
+    EXPECT_TRUE(rev != directed.end())
+        << "open edge " << edge.first << "-" << edge.second;
+  }
+  EXPECT_FLOAT_EQ(lo[0], spec.x0);
+  EXPECT_FLOAT_EQ(hi[0], spec.x1);
+  EXPECT_FLOAT_EQ(lo[1], spec.y0);
+  EXPECT_FLOAT_EQ(hi[1], spec.y1);
+  EXPECT_FLOAT_EQ(lo[2], z_bottom);
+  EXPECT_FLOAT_EQ(hi[2], spec.z_top);
+  EXPECT_GT(volume, 0);
+  EXPECT_NEAR(volume, prism_volume, 1e-4 * prism_volume);
+  return volume;
+}
+
+SurfaceMeshOptions MeshOptions(int subdivision,
+                               std::optional<double> z_bottom = {}) {
+  SurfaceMeshOptions o;
+  o.subdivision = subdivision;
+  o.z_bottom = z_bottom;
+  return o;
+}
+
+int64_t ExpectedTriangles(int64_t nx, int64_t ny) {
+  return 2 * nx * ny + 6 * (nx + ny) - 2;
+}
+
+TEST(MeshTest, StlIsClosedAndFollowsTheReconstruction) {
+  TempDir dir;
+  for (SchemeKind scheme : kSchemes) {
+    auto wp = Cut(scheme);
+    const SurfaceGrid g = GridOf(*wp);
+    for (int s : {1, 3}) {
+      SCOPED_TRACE(std::string(GetScheme(scheme).name()) + " s=" +
+                   std::to_string(s));
+      auto mesh = BuildSurfaceMesh(g, MeshOptions(s));
+      ASSERT_TRUE(mesh.ok()) << mesh.status();
+      const int64_t nx = 100 * s, ny = 60 * s;
+      EXPECT_EQ(mesh->lattice_nx, nx);
+      EXPECT_EQ(static_cast<int64_t>(mesh->triangles.size()),
+                ExpectedTriangles(nx, ny));
+      EXPECT_EQ(static_cast<int64_t>(mesh->vertices.size()),
+                (nx + 1) * (ny + 1) + 2 * (nx + ny));
+      // Lowest cut: 8 (crater bottom); default bottom 2% of 50 mm below.
+      EXPECT_NEAR(mesh->z_bottom, 8 - 1, 1e-3);
+      // Top vertices: the scheme on the stated element.
+      const GridGeometry geo = g.geometry();
+      for (int64_t j = 0; j <= ny; j += 7) {
+        for (int64_t i = 0; i <= nx; i += 5) {
+          const Vec3& v = mesh->vertices[j * (nx + 1) + i];
+          const int32_t ei = static_cast<int32_t>(std::min<int64_t>(i / s, 99));
+          const int32_t ej = static_cast<int32_t>(std::min<int64_t>(j / s, 59));
+          ASSERT_EQ(v.x, geo.NodeX(static_cast<int32_t>(i / s)) +
+                             (i % s) * (geo.dx() / s));
+          ASSERT_EQ(v.z, GetScheme(scheme).Reconstruct(g.Corners(ei, ej), v.x,
+                                                        v.y));
+          if (i % s == 0 && j % s == 0) {
+            ASSERT_EQ(v.z, g.Height(v.x, v.y));
+          }
+        }
+      }
+      // Top triangles come first, two per lattice cell, split along the
+      // diagonal with the smaller height change.
+      int64_t along_00_11 = 0;
+      for (int64_t c = 0; c < nx * ny; ++c) {
+        const auto& t0 = mesh->triangles[2 * c];
+        const auto& t1 = mesh->triangles[2 * c + 1];
+        std::vector<int32_t> shared;
+        for (int32_t v : t0) {
+          if (std::find(t1.begin(), t1.end(), v) != t1.end()) {
+            shared.push_back(v);
+          }
+        }
+        ASSERT_EQ(shared.size(), 2u);
+        const int64_t i = c % nx, j = c / nx;
+        auto z = [&](int64_t di, int64_t dj) {
+          return mesh->vertices[(j + dj) * (nx + 1) + i + di].z;
+        };
+        const double d_00_11 = std::fabs(z(0, 0) - z(1, 1));
+        const double d_10_01 = std::fabs(z(1, 0) - z(0, 1));
+        const bool main_diag = std::abs(shared[0] - shared[1]) == nx + 2;
+        along_00_11 += main_diag;
+        ASSERT_LE(main_diag ? d_00_11 : d_10_01, main_diag ? d_10_01 : d_00_11)
+            << "cell " << i << "," << j;
+      }
+      EXPECT_GT(along_00_11, 0);
+      EXPECT_LT(along_00_11, nx * ny);  // both diagonals occur
+      ASSERT_TRUE(WriteStl(*mesh, dir.File("surface.stl")).ok());
+      const StlFile f = ParseStl(ReadAll(dir.File("surface.stl")));
+      ASSERT_EQ(f.count, mesh->triangles.size());
+      const double volume = CheckClosedMesh(f, g.spec, mesh->z_bottom);
+      // Stock block minus what was cut: the grooves and crater take a few
+      // hundred mm^3 out of 50 x 30 x 3.
+      EXPECT_LT(volume, 50.0 * 30 * 3);
+      EXPECT_GT(volume, 50.0 * 30 * 3 - 600);
+    }
+  }
+}
+
+TEST(MeshTest, ThinGridsAndOptions) {
+  TempDir dir;
+  // One element along an axis takes the other bottom triangulation.
+  for (auto [nx, ny] : {std::pair{1, 1}, {1, 4}, {2, 1}, {3, 5}, {7, 2}}) {
+    SCOPED_TRACE(std::to_string(nx) + "x" + std::to_string(ny));
+    const StockSpec spec{-3, 2, 5, 4, 1, nx, ny};
+    auto wp = Cut(SchemeKind::kTaylor, spec, {{{0, 3, 0.8}, {2, 3, 0.9}, 1}});
+    const SurfaceGrid g = GridOf(*wp);
+    for (int s : {1, 2}) {
+      auto mesh = BuildSurfaceMesh(g, MeshOptions(s, -2));
+      ASSERT_TRUE(mesh.ok());
+      EXPECT_EQ(static_cast<int64_t>(mesh->triangles.size()),
+                ExpectedTriangles(nx * s, ny * s));
+      ASSERT_TRUE(WriteStl(*mesh, dir.File("thin.stl")).ok());
+      CheckClosedMesh(ParseStl(ReadAll(dir.File("thin.stl"))), spec, -2);
+    }
+  }
+  auto wp = Cut(SchemeKind::kZmap);
+  const SurfaceGrid g = GridOf(*wp);
+  EXPECT_FALSE(BuildSurfaceMesh(g, MeshOptions(0)).ok());
+  EXPECT_FALSE(BuildSurfaceMesh(g, MeshOptions(1, 8)).ok());  // = lowest point
+  EXPECT_FALSE(BuildSurfaceMesh(g, MeshOptions(1, std::nan(""))).ok());
+  EXPECT_TRUE(BuildSurfaceMesh(g, MeshOptions(1, 7.999)).ok());
+  EXPECT_FALSE(BuildSurfaceMesh(g, MeshOptions(300)).ok());  // too many
+}
+
+TEST(MeshTest, VrmlHasTheSameMesh) {
+  auto wp = Cut(SchemeKind::kTaylor);
+  const SurfaceGrid g = GridOf(*wp);
+  auto mesh = BuildSurfaceMesh(g, MeshOptions(2));
+  ASSERT_TRUE(mesh.ok());
+  TempDir dir;
+  const std::vector<Rgb> colors = SurfaceColors(*mesh, g.spec.z_top);
+  ASSERT_TRUE(WriteVrml(*mesh, dir.File("surface.wrl"), colors).ok());
+  EXPECT_FALSE(WriteVrml(*mesh, dir.File("bad.wrl"),
+                         std::span<const Rgb>(colors).first(3))
+                   .ok());
+  const std::string text = ReadAll(dir.File("surface.wrl"));
+  ASSERT_EQ(text.rfind("#VRML V2.0 utf8\n", 0), 0u);
+  // The numbers inside "point [ ... ]", "color [ ... ]", "coordIndex [ ... ]".
+  auto block = [&](const std::string& key) {
+    const size_t open = text.find(key + " [");
+    EXPECT_NE(open, std::string::npos) << key;
+    const size_t close = text.find(']', open);
+    std::istringstream in(text.substr(open + key.size() + 2,
+                                      close - open - key.size() - 2));
+    std::vector<double> v;
+    for (double d; in >> d;) v.push_back(d);
+    EXPECT_TRUE(in.eof()) << key << " holds a non-number";
+    return v;
+  };
+  const std::vector<double> points = block("point");
+  const std::vector<double> cols = block("color");
+  const std::vector<double> index = block("coordIndex");
+  ASSERT_EQ(points.size(), 3 * mesh->vertices.size());
+  ASSERT_EQ(cols.size(), 3 * mesh->vertices.size());
+  ASSERT_EQ(index.size(), 4 * mesh->triangles.size());
+  for (size_t t = 0; t < mesh->triangles.size(); ++t) {
+    for (int k = 0; k < 3; ++k) {
+      ASSERT_EQ(index[4 * t + k], mesh->triangles[t][k]);
+    }
+    ASSERT_EQ(index[4 * t + 3], -1);
+  }
+  for (size_t v = 0; v < mesh->vertices.size(); v += 97) {
+    // Shortest float text: the same float back.
+    EXPECT_EQ(static_cast<float>(points[3 * v + 2]),
+              static_cast<float>(mesh->vertices[v].z));
+  }
+  // Uncut corner vertex: stock colour; walls darker.
+  EXPECT_NEAR(cols[0], kStockColor.r / 255.0, 1e-3);
+  const size_t wall = mesh->vertices.size() - 1;
+  EXPECT_LT(cols[3 * wall], kStockColor.r / 255.0 - 0.1);
+}
+
+// ------------------------------------------------------------ all outputs
+
+TEST(RunOutputsTest, WritesEveryFile) {
+  auto wp = Cut(SchemeKind::kTaylor);
+  const SurfaceGrid g = GridOf(*wp);
+  const std::vector<MarkPolyline> marks = TestMarks(*wp);
+  ValuationOptions vo;
+  vo.map_cols = 50;
+  vo.map_rows = 30;
+  auto stats = MeasureError(*wp, vo);
+  ASSERT_TRUE(stats.ok());
+  const ErrorRaster raster{{0, 0, 50, 30}, 50, 30, stats->map};
+  TempDir dir;
+  auto written = WriteRunOutputs(dir.path(), g, &raster, &marks);
+  ASSERT_TRUE(written.ok()) << written.status();
+  std::vector<std::string> names;
+  for (const WrittenFile& w : *written) {
+    names.push_back(std::filesystem::path(w.path).filename());
+    EXPECT_GT(std::filesystem::file_size(w.path), 100u) << w.path;
+  }
+  EXPECT_EQ(names, (std::vector<std::string>{
+                       "relief.png", "error.png", "marks.png", "marks.svg",
+                       "marks.json", "surface.stl", "surface.wrl"}));
+  for (const char* png : {"relief.png", "error.png", "marks.png"}) {
+    EXPECT_TRUE(ReadPng(dir.File(png)).ok()) << png;
+  }
+  EXPECT_EQ(ParseStl(ReadAll(dir.File("surface.stl"))).count,
+            ExpectedTriangles(100, 60));
+  // Without error map and marks: only the surface files.
+  TempDir dir2;
+  written = WriteRunOutputs(dir2.path(), g, nullptr, nullptr);
+  ASSERT_TRUE(written.ok());
+  EXPECT_EQ(written->size(), 3u);
+  EXPECT_FALSE(std::filesystem::exists(dir2.File("marks.json")));
+  EXPECT_FALSE(WriteRunOutputs(dir.File("missing"), g, nullptr, nullptr).ok());
+}
+
+// The performance figure: every file for a 1000 x 1000 grid.
+TEST(RunOutputsTest, LargeGridTiming) {
+  const StockSpec spec{0, 0, 100, 100, 20, 1000, 1000};
+  std::vector<Move> moves;
+  for (int k = 0; k < 40; ++k) {  // raster passes, 2 mm apart, ball r = 3
+    const double y = 10 + 2 * k;
+    moves.push_back({{10, y, 17}, {90, y, 17 + 0.02 * k}, 3});
+  }
+  moves.push_back({{50, 50, 14}, {50, 50, 14}, 10});  // a deep crater
+  auto wp = Cut(SchemeKind::kTaylor, spec, moves);
+  const SurfaceGrid g = GridOf(*wp);
+  const std::vector<MarkPolyline> marks = TestMarks(*wp);
+  ValuationOptions vo;
+  vo.map_cols = 1000;
+  vo.map_rows = 1000;
+  auto stats = MeasureError(*wp, vo);
+  ASSERT_TRUE(stats.ok());
+  const ErrorRaster raster{{0, 0, 100, 100}, 1000, 1000, stats->map};
+  TempDir dir;
+  const auto t0 = std::chrono::steady_clock::now();
+  auto written = WriteRunOutputs(dir.path(), g, &raster, &marks);
+  const double total =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0)
+          .count();
+  ASSERT_TRUE(written.ok()) << written.status();
+  for (const WrittenFile& w : *written) {
+    std::printf("  %-12s %7.3f s %10ju bytes\n",
+                std::filesystem::path(w.path).filename().c_str(), w.seconds,
+                static_cast<uintmax_t>(std::filesystem::file_size(w.path)));
+  }
+  std::printf("  all files for 1001 x 1001 nodes, %zu marks: %.3f s\n",
+              marks.size(), total);
+  RecordProperty("seconds", std::to_string(total));
+  EXPECT_LT(total, 30);  // a sanity bound; the figure is in the output
+}
+
+}  // namespace
+}  // namespace swarf::cli
