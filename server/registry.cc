@@ -39,7 +39,8 @@ absl::StatusOr<std::shared_ptr<Session>> Registry::Create(SessionSpec spec) {
   } else if (absl::Status s = ValidateId(spec.id); !s.ok()) {
     return s;
   }
-  if (absl::Status s = ValidateStock(spec.stock); !s.ok()) return s;
+  // Bad input is reported as such even on a full server.
+  if (absl::Status s = Session::ValidateSpec(spec); !s.ok()) return s;
   const int64_t nodes =
       (int64_t{spec.stock.nx} + 1) * (int64_t{spec.stock.ny} + 1);
   if (nodes > limits_.max_nodes_per_session) {

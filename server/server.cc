@@ -13,6 +13,13 @@ namespace swarf::server {
 
 absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
     const ServerOptions& options) {
+  // A full tile with doubles, derivatives and owners is about 131 KB.
+  constexpr int32_t kMinMessageBytes = 1 << 20;
+  if (options.limits.max_message_bytes < kMinMessageBytes) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "max_message_bytes must be at least ", kMinMessageBytes,
+        " (a tile with derivatives is about 131 KB)"));
+  }
   std::unique_ptr<SwarfServer> s(new SwarfServer);
   s->options_ = options;
   s->registry_ = std::make_unique<Registry>(options.limits);

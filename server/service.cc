@@ -354,6 +354,8 @@ class SimulateReactor
     std::vector<pb::SimulateResponse> responses;
     std::optional<pb::SimulateRequest> req;
     std::vector<int32_t> job_tiles;
+    std::optional<uint64_t> job_done;  // the job's last slice: its request
+    int64_t job_count = 0;
     std::vector<int32_t> push_tiles;
     TileOptions job_options, push_options;
     {
@@ -366,7 +368,11 @@ class SimulateReactor
                          job_->tiles.begin() + job_->next + n);
         job_->next += n;
         job_options = job_->options;
-        if (job_->next == job_->tiles.size()) job_.reset();
+        if (job_->next == job_->tiles.size()) {
+          job_done = job_->options.request_id;
+          job_count = static_cast<int64_t>(job_->tiles.size());
+          job_.reset();
+        }
       } else if (!in_.empty()) {
         req = std::move(in_.front());
         in_.pop_front();
@@ -392,6 +398,11 @@ class SimulateReactor
         }
         return 0;
       });
+    }
+    if (job_done.has_value()) {
+      pb::TilesDone* done = responses.emplace_back().mutable_tiles_done();
+      done->set_request_id(*job_done);
+      done->set_tiles(job_count);
     }
     if (req.has_value()) Handle(*req, &responses);
     Act act;
@@ -511,7 +522,10 @@ class SimulateReactor
       return job;
     });
     if (!job.ok()) return Error(r.request_id(), job.status(), out);
-    if (job->tiles.empty()) return;
+    if (job->tiles.empty()) {
+      out->emplace_back().mutable_tiles_done()->set_request_id(r.request_id());
+      return;
+    }
     absl::MutexLock l(&mu_);
     job_ = *std::move(job);
   }

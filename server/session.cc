@@ -7,7 +7,8 @@
 
 namespace swarf::server {
 
-absl::StatusOr<std::shared_ptr<Session>> Session::Create(SessionSpec spec) {
+absl::Status Session::ValidateSpec(const SessionSpec& spec) {
+  if (absl::Status s = ValidateStock(spec.stock); !s.ok()) return s;
   if (spec.tools.empty()) {
     return absl::InvalidArgumentError("tools: at least one tool is needed");
   }
@@ -24,6 +25,11 @@ absl::StatusOr<std::shared_ptr<Session>> Session::Create(SessionSpec spec) {
                        ", ", kMaxRadius, "] mm, got ", t.radius));
     }
   }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::shared_ptr<Session>> Session::Create(SessionSpec spec) {
+  if (absl::Status s = ValidateSpec(spec); !s.ok()) return s;
   auto wp = Workpiece::Create(spec.stock, spec.scheme);
   if (!wp.ok()) return wp.status();
   return std::shared_ptr<Session>(new Session(std::move(spec), *std::move(wp)));

@@ -57,6 +57,8 @@ struct SessionState {
 class Session {
  public:
   // InvalidArgument naming the field for a bad stock or tools.
+  static absl::Status ValidateSpec(const SessionSpec& spec);
+  // Validates, then creates.
   static absl::StatusOr<std::shared_ptr<Session>> Create(SessionSpec spec);
 
   const SessionSpec& spec() const { return spec_; }

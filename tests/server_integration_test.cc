@@ -737,16 +737,25 @@ TEST_P(InstanceStreamTest, MatchesCoreBitForBit) {
   std::map<uint64_t, size_t> stats_pos;
   std::vector<size_t> mid_pos;
   std::vector<const pb::Tile*> pushes, mid, final_tiles;
+  // Each tile request ends with a TilesDone after its last tile.
+  std::map<uint64_t, std::pair<size_t, int64_t>> done;  // id -> (pos, tiles)
+  std::map<uint64_t, size_t> last_tile_pos;
   for (size_t i = 0; i < rs.size(); ++i) {
     switch (rs[i].response_case()) {
       case pb::SimulateResponse::kAck:
         ack_pos.push_back(i);
+        break;
+      case pb::SimulateResponse::kTilesDone:
+        EXPECT_TRUE(done.emplace(rs[i].tiles_done().request_id(),
+                                 std::pair{i, rs[i].tiles_done().tiles()})
+                        .second);
         break;
       case pb::SimulateResponse::kStats:
         EXPECT_TRUE(stats_pos.emplace(rs[i].stats().request_id(), i).second);
         break;
       case pb::SimulateResponse::kTile: {
         const pb::Tile& t = rs[i].tile();
+        last_tile_pos[t.request_id()] = i;
         if (t.request_id() == kSubId) {
           pushes.push_back(&t);
         } else if (t.request_id() == kMidTilesId) {
@@ -763,6 +772,15 @@ TEST_P(InstanceStreamTest, MatchesCoreBitForBit) {
         ADD_FAILURE() << "unexpected response " << rs[i].ShortDebugString();
     }
   }
+
+  // TilesDone: one per tile request (none for the subscription), after its
+  // tiles, counting them.
+  ASSERT_EQ(done.size(), 2u);
+  ASSERT_TRUE(done.count(kMidTilesId) && done.count(kFinalId));
+  EXPECT_EQ(done[kMidTilesId].second, static_cast<int64_t>(mid.size()));
+  EXPECT_EQ(done[kFinalId].second, static_cast<int64_t>(final_tiles.size()));
+  EXPECT_GT(done[kMidTilesId].first, last_tile_pos[kMidTilesId]);
+  EXPECT_GT(done[kFinalId].first, last_tile_pos[kFinalId]);
 
   // Acks: one per batch, in order, equal to the core's results.
   ASSERT_EQ(ack_pos.size(), static_cast<size_t>(batches));
@@ -1063,6 +1081,28 @@ TEST_F(ServerTest, GetTilesSinceVersionReturnsExactlyTheLaterChangedTiles) {
 }
 
 // ------------------------------------------ 3. concurrent sessions
+
+TEST_F(ServerTest, TileRequestThatMatchesNothingStillEnds) {
+  // A client waiting for a TileRequest's answer must learn that there is
+  // none: a TilesDone with zero tiles, in order with the acks.
+  ASSERT_NO_FATAL_FAILURE(StartServer());
+  ASSERT_TRUE(Create(SmallRequest("empty-tiles")).ok());
+  SimStream s(stub_.get(), "empty-tiles");
+  ASSERT_TRUE(s.Write(RawBatch(1, kToolId, {1, 5, 1, 9, 5, -0.5})));
+  // Nothing changed after the last version: no tile matches.
+  ASSERT_TRUE(s.Write(TileRequest(77, 1u << 30, pb::PRECISION_FLOAT, false,
+                                  false)));
+  ASSERT_TRUE(s.Write(RawBatch(2, kToolId, {9, 6, -0.5})));
+  const grpc::Status st = s.Finish();
+  ASSERT_TRUE(st.ok()) << st.error_message();
+  const std::vector<pb::SimulateResponse> rs = s.responses();
+  ASSERT_EQ(rs.size(), 3u);
+  EXPECT_TRUE(rs[0].has_ack());
+  ASSERT_TRUE(rs[1].has_tiles_done()) << rs[1].ShortDebugString();
+  EXPECT_EQ(rs[1].tiles_done().request_id(), 77u);
+  EXPECT_EQ(rs[1].tiles_done().tiles(), 0);
+  EXPECT_TRUE(rs[2].has_ack());
+}
 
 TEST_F(ServerTest, ConcurrentSessionsDoNotInterfere) {
   ASSERT_NO_FATAL_FAILURE(StartServer());
@@ -1627,12 +1667,12 @@ TEST_F(ServerTest, ResourceExhaustedAtEachLimit) {
   // stream before it reaches the session.
   {
     Limits limits;
-    limits.max_message_bytes = 64 << 10;
+    limits.max_message_bytes = 1 << 20;  // the server's floor
     ASSERT_NO_FATAL_FAILURE(StartServer(limits));
     ASSERT_TRUE(Create(SmallRequest("big")).ok());
     std::vector<double> xyz;
-    for (int p = 0; p < 4000; ++p) {  // 96 KB of doubles
-      xyz.insert(xyz.end(), {1 + 8.0 * p / 3999, 5, -0.5});
+    for (int p = 0; p < 60000; ++p) {  // 1.44 MB of doubles
+      xyz.insert(xyz.end(), {1 + 8.0 * p / 59999, 5, -0.5});
     }
     SimStream s(stub_.get(), "big");
     s.Write(RawBatch(1, kToolId, xyz));  // may or may not report the failure
