@@ -4,12 +4,14 @@
 #include <vector>
 
 #include "client/commands.h"
+#include "spdlog/spdlog.h"
 
 namespace {
 
 constexpr char kUsage[] =
     "usage: swarf <command> [options]\n"
     "commands:\n"
+    "  run     simulate a toolpath (G-code or XYZ) and write pictures/meshes\n"
     "  table   the paper's Tables 1 and 2: error and time of both schemes\n"
     "  marks   the cutting marks (creases) of a paper instance\n"
     "  health  whether a running swarfd is serving\n"
@@ -23,8 +25,12 @@ int main(int argc, char** argv) {
     std::cerr << kUsage;
     return 2;
   }
+  // The embedded server logs session events at info; the CLI reports for
+  // itself, so only its warnings and errors show.
+  spdlog::set_level(spdlog::level::warn);
   const std::string cmd = argv[1];
   const std::vector<std::string> args(argv + 2, argv + argc);
+  if (cmd == "run") return swarf::cli::RunCommand(args);
   if (cmd == "table") return swarf::cli::TableCommand(args);
   if (cmd == "marks") return swarf::cli::MarksCommand(args);
   if (cmd == "health") return swarf::cli::HealthCommand(args);

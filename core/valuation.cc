@@ -77,12 +77,20 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         grid.NodeY(ej0) > region.y1 || grid.NodeY(ej1) < region.y0) {
       return;
     }
-    std::vector<BallSweep> sweeps;
+    // The bin's moves, with the XY box where each can cut below the top.
+    struct Candidate {
+      BallSweep sweep;
+      Rect box;
+    };
+    std::vector<Candidate> bin;
+    const double z_top = wp.spec().z_top;
     for (uint32_t id : index.Bin(static_cast<int32_t>(b))) {
       const Move& m = wp.move(id);
-      sweeps.emplace_back(m.from, m.to, m.radius);
+      const BallSweep s(m.from, m.to, m.radius);
+      bin.push_back({s, s.Footprint(z_top).Bounds()});
     }
-    const double z_top = wp.spec().z_top;
+    std::vector<double> xs, ys, est;
+    std::vector<const BallSweep*> kept;
     Partial& p = partials[b];
     for (int32_t ej = ej0; ej < ej1; ++ej) {
       for (int32_t ei = ei0; ei < ei1; ++ei) {
@@ -91,6 +99,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             e.y1 < region.y0) {
           continue;
         }
+        xs.clear();
+        ys.clear();
         for (int sj = 0; sj < n; ++sj) {
           for (int si = 0; si < n; ++si) {
             const bool corner = (si == 0 || si == n - 1) &&
@@ -99,21 +109,54 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             const double x = e.x0 + (e.x1 - e.x0) * si / (n - 1);
             const double y = e.y0 + (e.y1 - e.y0) * sj / (n - 1);
             if (!region.Contains(x, y)) continue;
-            double exact = z_top;
-            for (const BallSweep& s : sweeps) {
-              exact = std::min(exact, s.Height(x, y));
-            }
-            const double err =
-                SampleError(wp.scheme().Reconstruct(e, x, y), exact);
-            if (mapped) map_max(x, y, err);
-            p.sum += err;
-            p.sum_sq += err * err;
-            ++p.n;
-            if (err > p.max) {
-              p.max = err;
-              p.max_x = x;
-              p.max_y = y;
-            }
+            xs.push_back(x);
+            ys.push_back(y);
+          }
+        }
+        if (xs.empty()) continue;
+        // An upper bound of the exact surface at each sample: the sweeps
+        // that own the corners (exact heights of real moves). Only moves
+        // that dip below the element's highest bound inside the element
+        // can lower a sample further; the rest of the bin is skipped.
+        est.assign(xs.size(), z_top);
+        const int32_t corner_i[4] = {ei, ei + 1, ei + 1, ei};
+        const int32_t corner_j[4] = {ej, ej, ej + 1, ej + 1};
+        int32_t owners[4];
+        for (int k = 0; k < 4; ++k) {
+          owners[k] = wp.Node(corner_i[k], corner_j[k]).owner;
+          bool seen = owners[k] < 0;
+          for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
+          if (seen) continue;
+          const Move& m = wp.move(owners[k]);
+          const BallSweep s(m.from, m.to, m.radius);
+          for (size_t q = 0; q < xs.size(); ++q) {
+            est[q] = std::min(est[q], s.Height(xs[q], ys[q]));
+          }
+        }
+        const double cap = *std::max_element(est.begin(), est.end());
+        const Rect box{e.x0, e.y0, e.x1, e.y1};
+        kept.clear();
+        for (const Candidate& c : bin) {
+          if (!c.box.Intersects(box) || !(c.sweep.lowest() < cap)) continue;
+          const BallSweep::Capsule f = c.sweep.Footprint(cap);
+          if (!f.empty && f.Bounds().Intersects(box)) kept.push_back(&c.sweep);
+        }
+        for (size_t q = 0; q < xs.size(); ++q) {
+          double exact = est[q];
+          for (const BallSweep* s : kept) {
+            exact = std::min(exact, s->Height(xs[q], ys[q]));
+          }
+          const double x = xs[q], y = ys[q];
+          const double err =
+              SampleError(wp.scheme().Reconstruct(e, x, y), exact);
+          if (mapped) map_max(x, y, err);
+          p.sum += err;
+          p.sum_sq += err * err;
+          ++p.n;
+          if (err > p.max) {
+            p.max = err;
+            p.max_x = x;
+            p.max_y = y;
           }
         }
       }

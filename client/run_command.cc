@@ -1,0 +1,412 @@
+// swarf run FILE: simulate a real toolpath (G-code or XYZ) on a server (an
+// embedded one unless --server is given) and write pictures and meshes.
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
+#include "client/args.h"
+#include "client/commands.h"
+#include "client/connection.h"
+#include "client/json_writer.h"
+#include "client/run_report.h"
+#include "core/toolpath.h"
+
+namespace swarf::cli {
+namespace {
+
+constexpr char kUsage[] =
+    "usage: swarf run FILE [options]\n"
+    "Simulates a toolpath (G-code .nc/.ngc/.gcode/.tap/.cnc, or x,y,z lines\n"
+    ".csv/.xyz/.txt; positions are the tool tip, mm) and reports the result.\n"
+    "options:\n"
+    "  --tool ball:d=D | ball:r=R   the ball-end cutter (mm); for programs\n"
+    "                               with several tools: --tool N=ball:d=D each\n"
+    "  --stock x0,y0,x1,y1,top      stock (mm); default: the toolpath's XY\n"
+    "                               bounds plus the tool radius, top 0\n"
+    "  --spacing S | --mesh N       grid spacing (mm), or N elements along the\n"
+    "                               longer side; default 0.1 mm (coarser if\n"
+    "                               the grid would pass 16M nodes)\n"
+    "  --scheme taylor|zmap         default taylor\n"
+    "  --arc-tolerance T            chord tolerance for arcs, default 0.001\n"
+    "  --server HOST:PORT           a running swarfd (default: embedded)\n"
+    "  --out DIR                    write relief.png, error.png, marks.png,\n"
+    "                               marks.svg, marks.json, surface.stl,\n"
+    "                               surface.wrl, stats.json\n"
+    "  --subdivide N                STL: split each element N x N using the\n"
+    "                               scheme's patches (default 1)\n"
+    "  --batch N                    moves per batch sent (default 20000)\n"
+    "  --json                       print the stats document instead\n";
+
+struct ToolChoice {
+  double radius = 0;
+};
+
+// "ball:d=3.175" / "ball:r=1" -> radius.
+absl::StatusOr<double> ParseBall(const std::string& spec) {
+  std::vector<std::string> parts = absl::StrSplit(spec, ':');
+  if (parts.size() != 2 || parts[0] != "ball") {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--tool \"", spec, "\": expected ball:d=DIAMETER or ball:r=RADIUS"));
+  }
+  std::vector<std::string> kv = absl::StrSplit(parts[1], '=');
+  double v = 0;
+  if (kv.size() != 2 || (kv[0] != "d" && kv[0] != "r") ||
+      !absl::SimpleAtod(kv[1], &v) || !(v > 0) || !std::isfinite(v)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--tool \"", spec, "\": expected ball:d=D or ball:r=R with D, R > 0"));
+  }
+  return kv[0] == "d" ? v / 2 : v;
+}
+
+// Tool radius per tool number of the program: one unnumbered --tool serves
+// every number; numbered ones ("2=ball:d=3") serve theirs.
+absl::StatusOr<std::map<int, double>> ChooseTools(
+    const std::vector<std::string>& specs, const std::vector<int>& used) {
+  if (specs.empty()) {
+    return absl::InvalidArgumentError(
+        "--tool is required, e.g. --tool ball:d=3.175");
+  }
+  std::optional<double> any;
+  std::map<int, double> numbered;
+  for (const std::string& spec : specs) {
+    const size_t eq = spec.find('=');
+    const size_t colon = spec.find(':');
+    if (eq != std::string::npos && (colon == std::string::npos || eq < colon)) {
+      int n;
+      if (!absl::SimpleAtoi(spec.substr(0, eq), &n)) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("--tool \"", spec, "\": bad tool number"));
+      }
+      auto r = ParseBall(spec.substr(eq + 1));
+      if (!r.ok()) return r.status();
+      numbered[n] = *r;
+    } else {
+      auto r = ParseBall(spec);
+      if (!r.ok()) return r.status();
+      any = *r;
+    }
+  }
+  std::map<int, double> out;
+  for (int t : used) {
+    if (numbered.count(t)) {
+      out[t] = numbered[t];
+    } else if (any.has_value()) {
+      out[t] = *any;
+    } else {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "the program uses tool T", t, ": give --tool ", t, "=ball:d=..."));
+    }
+  }
+  return out;
+}
+
+absl::StatusOr<StockSpec> ChooseStock(const Args& args, const Toolpath& path,
+                                      double max_radius) {
+  StockSpec s;
+  if (auto v = args.Get("stock")) {
+    std::vector<std::string> f = absl::StrSplit(*v, ',');
+    double d[5];
+    if (f.size() != 5 || !absl::SimpleAtod(f[0], &d[0]) ||
+        !absl::SimpleAtod(f[1], &d[1]) || !absl::SimpleAtod(f[2], &d[2]) ||
+        !absl::SimpleAtod(f[3], &d[3]) || !absl::SimpleAtod(f[4], &d[4])) {
+      return absl::InvalidArgumentError(
+          "--stock must be x0,y0,x1,y1,top (five numbers, mm)");
+    }
+    s = {d[0], d[1], d[2], d[3], d[4], 0, 0};
+  } else {
+    // As CAMotics' automatic workpiece: the path's XY bounds, top at 0.
+    const double m = max_radius;
+    s = {path.x_bounds().lo - m, path.y_bounds().lo - m,
+         path.x_bounds().hi + m, path.y_bounds().hi + m, 0, 0, 0};
+  }
+  const double w = s.x1 - s.x0, h = s.y1 - s.y0;
+  if (!(w > 0) || !(h > 0)) {
+    return absl::InvalidArgumentError(
+        "the stock is empty (x1 <= x0 or y1 <= y0)");
+  }
+  double spacing = 0;
+  auto mesh = args.GetInt("mesh");
+  if (!mesh.ok()) return mesh.status();
+  if (auto sp = args.Get("spacing")) {
+    if (!absl::SimpleAtod(*sp, &spacing) || !(spacing > 0)) {
+      return absl::InvalidArgumentError("--spacing must be a number > 0 (mm)");
+    }
+  } else if (mesh->has_value()) {
+    if (**mesh < 1) return absl::InvalidArgumentError("--mesh must be >= 1");
+    spacing = std::max(w, h) / **mesh;
+  } else {
+    constexpr double kMaxNodes = 16e6;
+    spacing = std::max(0.1, std::sqrt(w * h / kMaxNodes));
+  }
+  const double nx = std::ceil(w / spacing - 1e-9), ny = std::ceil(h / spacing - 1e-9);
+  if (nx > kMaxElementsPerAxis || ny > kMaxElementsPerAxis) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("spacing ", spacing, " mm makes a grid of ", nx, " x ",
+                     ny, " elements: too many"));
+  }
+  s.nx = static_cast<int32_t>(std::max(1.0, nx));
+  s.ny = static_cast<int32_t>(std::max(1.0, ny));
+  return s;
+}
+
+// Runs of points with one tool and one kind of feed (the protocol's batches
+// carry one of each); a tool change starts a repositioning run.
+std::vector<PathRun> Runs(const Toolpath& path,
+                          const std::map<int, int32_t>& tool_ids) {
+  std::vector<PathRun> runs;
+  for (const ToolpathPoint& p : path.points()) {
+    const int32_t tool = tool_ids.at(p.tool);
+    if (runs.empty() || p.starts_run || runs.back().tool_id != tool ||
+        runs.back().rapid != p.rapid) {
+      PathRun r;
+      r.tool_id = tool;
+      r.rapid = p.rapid;
+      r.reposition = p.starts_run;
+      runs.push_back(std::move(r));
+    }
+    runs.back().points.push_back(p.position);
+  }
+  return runs;
+}
+
+// Progress on a terminal: one line redrawn at most 10 times a second. Not on
+// a terminal: a line at every quarter.
+class ProgressBar {
+ public:
+  explicit ProgressBar(bool quiet)
+      : tty_(!quiet && isatty(STDERR_FILENO)), quiet_(quiet),
+        start_(std::chrono::steady_clock::now()) {}
+
+  void Update(const StreamProgress& p) {
+    const auto now = std::chrono::steady_clock::now();
+    const double t = std::chrono::duration<double>(now - start_).count();
+    const double frac =
+        p.moves_total > 0 ? static_cast<double>(p.moves_done) / p.moves_total
+                          : 1;
+    const double rate = t > 0 ? p.moves_done / t : 0;
+    const double eta = rate > 0 ? (p.moves_total - p.moves_done) / rate : 0;
+    if (tty_) {
+      if (p.moves_done < p.moves_total &&
+          std::chrono::duration<double>(now - last_).count() < 0.1) {
+        return;
+      }
+      last_ = now;
+      constexpr int kWidth = 30;
+      const int filled = static_cast<int>(frac * kWidth);
+      std::string bar(filled, '=');
+      if (filled < kWidth) bar += '>' + std::string(kWidth - filled - 1, ' ');
+      std::fprintf(stderr, "\r%3.0f%% [%s] %lld/%lld moves  %.2fM moves/s  ETA %.0fs ",
+                   100 * frac, bar.c_str(),
+                   static_cast<long long>(p.moves_done),
+                   static_cast<long long>(p.moves_total), rate / 1e6, eta);
+      if (p.moves_done >= p.moves_total) std::fprintf(stderr, "\n");
+    } else if (!quiet_) {
+      const int quarter = static_cast<int>(frac * 4);
+      if (quarter > last_quarter_) {
+        last_quarter_ = quarter;
+        std::fprintf(stderr, "swarf: %d%% (%lld of %lld moves, %.2fM moves/s)\n",
+                     quarter * 25, static_cast<long long>(p.moves_done),
+                     static_cast<long long>(p.moves_total), rate / 1e6);
+      }
+    }
+  }
+
+ private:
+  const bool tty_, quiet_;
+  const std::chrono::steady_clock::time_point start_;
+  std::chrono::steady_clock::time_point last_;
+  int last_quarter_ = 0;
+};
+
+double Since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0)
+      .count();
+}
+
+std::string NewSessionId() {
+  std::mt19937_64 rng(std::random_device{}());
+  return absl::StrFormat("run-%016x", rng());
+}
+
+}  // namespace
+
+int RunCommand(const std::vector<std::string>& argv) {
+  auto args = Args::Parse(argv,
+                          {"tool", "stock", "spacing", "mesh", "scheme",
+                           "arc-tolerance", "server", "out", "subdivide",
+                           "batch"},
+                          {"json", "help", "quiet"});
+  auto fail = [](const absl::Status& s, int code) {
+    std::cerr << "swarf run: " << s.message() << "\n";
+    return code;
+  };
+  if (!args.ok()) {
+    std::cerr << "swarf run: " << args.status().message() << "\n" << kUsage;
+    return 2;
+  }
+  if (args->Has("help")) {
+    std::cout << kUsage;
+    return 0;
+  }
+  if (args->positional().size() != 1) {
+    std::cerr << "swarf run: give one toolpath FILE\n" << kUsage;
+    return 2;
+  }
+  const std::string file = args->positional()[0];
+  const bool json = args->Has("json");
+
+  // Parse.
+  GcodeOptions gopt;
+  if (auto t = args->Get("arc-tolerance")) {
+    if (!absl::SimpleAtod(*t, &gopt.arc_tolerance) ||
+        !(gopt.arc_tolerance > 0)) {
+      return fail(absl::InvalidArgumentError(
+                      "--arc-tolerance must be a number > 0 (mm)"),
+                  2);
+    }
+  }
+  SchemeKind scheme = SchemeKind::kTaylor;
+  if (auto s = args->Get("scheme")) {
+    auto k = ParseScheme(*s);
+    if (!k.ok()) return fail(k.status(), 2);
+    scheme = *k;
+  }
+  auto batch = args->GetInt("batch");
+  auto subdivide = args->GetInt("subdivide");
+  if (!batch.ok()) return fail(batch.status(), 2);
+  if (!subdivide.ok()) return fail(subdivide.status(), 2);
+  const int64_t batch_points = batch->value_or(20000);
+  if (batch_points < 2) return fail(absl::InvalidArgumentError("--batch must be >= 2"), 2);
+
+  const auto t_parse = std::chrono::steady_clock::now();
+  auto path = ReadToolpathFile(file, gopt);
+  if (!path.ok()) {
+    std::cerr << "swarf run: " << file << ": " << path.status().message()
+              << "\n";
+    return 1;
+  }
+  const double parse_s = Since(t_parse);
+  if (path->move_count() < 1) {
+    std::cerr << "swarf run: " << file << ": no moves\n";
+    return 1;
+  }
+  if (!json) {
+    for (const std::string& note : path->notes()) {
+      std::cerr << "swarf run: note: " << note << "\n";
+    }
+    if (!path->IgnoredSummary().empty()) {
+      std::cerr << "swarf run: " << path->IgnoredSummary() << "\n";
+    }
+  }
+  auto tools = ChooseTools(args->All("tool"), path->Tools());
+  if (!tools.ok()) return fail(tools.status(), 2);
+  double max_radius = 0;
+  for (const auto& [t, r] : *tools) max_radius = std::max(max_radius, r);
+  auto stock = ChooseStock(*args, *path, max_radius);
+  if (!stock.ok()) return fail(stock.status(), 2);
+
+  // Session.
+  auto conn = Connection::Open(args->Get("server").value_or(""));
+  if (!conn.ok()) return fail(conn.status(), 1);
+  const std::string id = NewSessionId();
+  pb::CreateSessionRequest create;
+  create.set_session_id(id);
+  create.mutable_stock()->set_x0(stock->x0);
+  create.mutable_stock()->set_y0(stock->y0);
+  create.mutable_stock()->set_x1(stock->x1);
+  create.mutable_stock()->set_y1(stock->y1);
+  create.mutable_stock()->set_z_top(stock->z_top);
+  create.set_nx(stock->nx);
+  create.set_ny(stock->ny);
+  create.set_scheme(scheme == SchemeKind::kZmap ? pb::SCHEME_ZMAP
+                                                : pb::SCHEME_TAYLOR);
+  std::map<int, int32_t> tool_ids;
+  for (const auto& [t, r] : *tools) {
+    pb::Tool* tool = create.add_tools();
+    tool->set_id(t);
+    tool->mutable_ball()->set_radius(r);
+    tool_ids[t] = t;
+  }
+  pb::Session session;
+  {
+    auto ctx = (*conn)->Context(id, 60);
+    grpc::Status st = (*conn)->stub().CreateSession(ctx.get(), create, &session);
+    if (!st.ok()) return fail(FromGrpc(st), 1);
+  }
+  if (!json) {
+    std::cerr << absl::StrFormat(
+        "swarf run: %s: %d moves, stock [%.3f, %.3f] x [%.3f, %.3f] top %.3f, "
+        "%d x %d elements (%.4g mm), %s, on the %s\n",
+        file, path->move_count(), stock->x0, stock->x1, stock->y0, stock->y1,
+        stock->z_top, stock->nx, stock->ny,
+        (stock->x1 - stock->x0) / stock->nx,
+        scheme == SchemeKind::kZmap ? "zmap" : "taylor", (*conn)->target());
+  }
+
+  // Simulate.
+  const auto t_sim = std::chrono::steady_clock::now();
+  ProgressBar bar(json || args->Has("quiet"));
+  StreamProgress last;
+  absl::Status streamed = StreamPath(
+      **conn, id, Runs(*path, tool_ids), batch_points,
+      [&](const StreamProgress& p) {
+        last = p;
+        bar.Update(p);
+      });
+  const double sim_s = Since(t_sim);
+  if (!streamed.ok()) return fail(streamed, 1);
+
+  // Outputs.
+  RunReport report;
+  report.file = file;
+  report.moves = path->move_count();
+  report.lines = path->source_lines();
+  report.parse_seconds = parse_s;
+  report.simulate_seconds = sim_s;
+  report.nodes_lowered = last.nodes_lowered;
+  report.stock = *stock;
+  report.scheme = scheme;
+  report.server = (*conn)->target();
+  report.ignored = path->IgnoredSummary();
+  const auto t_out = std::chrono::steady_clock::now();
+  OutputOptions oopt;
+  if (auto out = args->Get("out")) oopt.dir = *out;
+  oopt.subdivide = subdivide->value_or(1);
+  absl::Status written = CollectAndWrite(**conn, id, oopt, &report);
+  report.output_seconds = Since(t_out);
+  if (!written.ok()) return fail(written, 1);
+  if (!oopt.dir.empty()) {
+    absl::Status s = WriteStatsJson(report, oopt.dir + "/stats.json");
+    if (!s.ok()) return fail(s, 1);
+  }
+  if (!(*conn)->embedded()) {
+    // A remote session served this run only.
+    auto ctx = (*conn)->Context(id, 30);
+    pb::DeleteSessionRequest del;
+    del.set_session_id(id);
+    pb::DeleteSessionResponse resp;
+    (*conn)->stub().DeleteSession(ctx.get(), del, &resp);
+  }
+  if (json) {
+    std::cout << StatsJson(report) << "\n";
+  } else {
+    std::cout << Summary(report);
+  }
+  return 0;
+}
+
+}  // namespace swarf::cli

@@ -1,0 +1,219 @@
+#include "client/run_report.h"
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <system_error>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "client/json_writer.h"
+#include "client/run_outputs.h"
+#include "client/surface_grid.h"
+#include "core/cutting_marks.h"
+
+namespace swarf::cli {
+namespace {
+
+// The error map's cells: one per element up to 1600 along the longer side.
+void MapSize(const StockSpec& s, int32_t* cols, int32_t* rows) {
+  constexpr int32_t kMaxSide = 1600;
+  const double scale =
+      std::min(1.0, static_cast<double>(kMaxSide) / std::max(s.nx, s.ny));
+  *cols = std::max(1, static_cast<int32_t>(s.nx * scale));
+  *rows = std::max(1, static_cast<int32_t>(s.ny * scale));
+}
+
+absl::StatusOr<std::vector<MarkPolyline>> FetchMarks(Connection& conn,
+                                                     const std::string& id) {
+  auto ctx = conn.Context(id, 3600);
+  pb::GetCuttingMarksRequest req;
+  req.set_session_id(id);
+  auto reader = conn.stub().GetCuttingMarks(ctx.get(), req);
+  std::vector<MarkPolyline> marks;
+  pb::Polyline p;
+  while (reader->Read(&p)) {
+    MarkPolyline& m = marks.emplace_back();
+    m.closed = p.closed();
+    for (int k = 0; k < p.owners_size() && k < 2; ++k) {
+      m.owners[k] = static_cast<int32_t>(p.owners(k));
+    }
+    for (int k = 0; k + 2 < p.xyz_size(); k += 3) {
+      m.vertices.push_back({p.xyz(k), p.xyz(k + 1), p.xyz(k + 2)});
+    }
+    m.angle_deg.assign(p.angle_deg().begin(), p.angle_deg().end());
+  }
+  grpc::Status st = reader->Finish();
+  if (!st.ok()) return FromGrpc(st);
+  return marks;
+}
+
+absl::StatusOr<SurfaceGrid> FetchGrid(Connection& conn, const std::string& id,
+                                      const StockSpec& stock,
+                                      SchemeKind scheme) {
+  auto grid = SurfaceGrid::Uncut(stock, scheme);
+  if (!grid.ok()) return grid.status();
+  auto ctx = conn.Context(id, 3600);
+  pb::GetTilesRequest req;
+  req.set_session_id(id);
+  req.set_precision(pb::PRECISION_DOUBLE);
+  req.set_include_derivatives(scheme == SchemeKind::kTaylor);
+  req.set_include_owners(true);
+  req.set_since_version(0);
+  auto reader = conn.stub().GetTiles(ctx.get(), req);
+  pb::Tile t;
+  while (reader->Read(&t)) {
+    const float* d[5] = {t.wx().data(), t.wy().data(), t.wxx().data(),
+                         t.wxy().data(), t.wyy().data()};
+    absl::Status s = grid->SetNodes(
+        t.i0(), t.j0(), t.nx(), t.ny(), t.heights_d().data(),
+        req.include_derivatives() ? d : nullptr, t.owners().data());
+    if (!s.ok()) return s;
+  }
+  grpc::Status st = reader->Finish();
+  if (!st.ok()) return FromGrpc(st);
+  return grid;
+}
+
+}  // namespace
+
+absl::Status CollectAndWrite(Connection& conn, const std::string& id,
+                             const OutputOptions& options, RunReport* report) {
+  const bool files = !options.dir.empty();
+  const StockSpec& stock = report->stock;
+  {
+    auto ctx = conn.Context(id, 3600);
+    pb::GetErrorStatsRequest req;
+    req.set_session_id(id);
+    if (files) {
+      int32_t cols, rows;
+      MapSize(stock, &cols, &rows);
+      req.set_map_cols(cols);
+      req.set_map_rows(rows);
+    }
+    grpc::Status st = conn.stub().GetErrorStats(ctx.get(), req, &report->error);
+    if (!st.ok()) return FromGrpc(st);
+  }
+  std::vector<MarkPolyline> marks;
+  if (report->scheme == SchemeKind::kTaylor) {
+    auto m = FetchMarks(conn, id);
+    if (!m.ok()) return m.status();
+    marks = *std::move(m);
+    const MarkSummary sum = Summarize(marks);
+    report->has_marks = true;
+    report->marks = sum.polylines;
+    report->mark_vertices = sum.vertices;
+    report->marks_length = sum.total_length;
+    report->marks_min_angle = sum.min_angle_deg;
+    report->marks_max_angle = sum.max_angle_deg;
+  }
+  if (!files) return absl::OkStatus();
+
+  std::error_code ec;
+  std::filesystem::create_directories(options.dir, ec);
+  if (ec) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("cannot create --out ", options.dir, ": ", ec.message()));
+  }
+  auto grid = FetchGrid(conn, id, stock, report->scheme);
+  if (!grid.ok()) return grid.status();
+  ErrorRaster raster;
+  raster.region = {stock.x0, stock.y0, stock.x1, stock.y1};
+  raster.cols = report->error.map_cols();
+  raster.rows = report->error.map_rows();
+  raster.max_error.assign(report->error.map_max_error().begin(),
+                          report->error.map_max_error().end());
+  RunOutputOptions out;
+  out.mesh.subdivision = std::max(1, options.subdivide);
+  auto written = WriteRunOutputs(options.dir, *grid,
+                                 raster.cols > 0 ? &raster : nullptr,
+                                 report->has_marks ? &marks : nullptr, out);
+  if (!written.ok()) return written.status();
+  for (const WrittenFile& f : *written) report->files.push_back(f.path);
+  report->files.push_back(
+      (std::filesystem::path(options.dir) / "stats.json").string());
+  return absl::OkStatus();
+}
+
+std::string StatsJson(const RunReport& r) {
+  JsonWriter j;
+  j.BeginObject();
+  j.Key("file").String(r.file);
+  j.Key("server").String(r.server);
+  j.Key("moves").Int(r.moves);
+  j.Key("source_lines").Int(r.lines);
+  j.Key("nodes_lowered").Int(r.nodes_lowered);
+  j.Key("scheme").String(r.scheme == SchemeKind::kZmap ? "zmap" : "taylor");
+  j.Key("stock").BeginObject()
+      .Key("x0").Double(r.stock.x0).Key("y0").Double(r.stock.y0)
+      .Key("x1").Double(r.stock.x1).Key("y1").Double(r.stock.y1)
+      .Key("top").Double(r.stock.z_top)
+      .Key("nx").Int(r.stock.nx).Key("ny").Int(r.stock.ny)
+      .EndObject();
+  j.Key("seconds").BeginObject()
+      .Key("parse").Double(r.parse_seconds)
+      .Key("simulate").Double(r.simulate_seconds)
+      .Key("outputs").Double(r.output_seconds)
+      .EndObject();
+  j.Key("moves_per_second")
+      .Double(r.simulate_seconds > 0 ? r.moves / r.simulate_seconds : 0);
+  j.Key("error").BeginObject()
+      .Key("max").Double(r.error.max_error())
+      .Key("mean").Double(r.error.mean_error())
+      .Key("rms").Double(r.error.rms_error())
+      .Key("max_at").BeginArray().Double(r.error.max_x())
+      .Double(r.error.max_y()).EndArray()
+      .Key("samples").Int(r.error.samples())
+      .EndObject();
+  if (r.has_marks) {
+    j.Key("marks").BeginObject()
+        .Key("polylines").Int(r.marks)
+        .Key("vertices").Int(r.mark_vertices)
+        .Key("total_length").Double(r.marks_length)
+        .Key("angle_deg").BeginArray().Double(r.marks_min_angle)
+        .Double(r.marks_max_angle).EndArray()
+        .EndObject();
+  }
+  if (!r.ignored.empty()) j.Key("ignored").String(r.ignored);
+  j.Key("files").BeginArray();
+  for (const std::string& f : r.files) j.String(f);
+  j.EndArray();
+  j.EndObject();
+  return j.str();
+}
+
+absl::Status WriteStatsJson(const RunReport& r, const std::string& path) {
+  std::ofstream out(path, std::ios::binary);
+  out << StatsJson(r) << "\n";
+  out.close();
+  if (!out) return absl::InternalError(absl::StrCat("cannot write ", path));
+  return absl::OkStatus();
+}
+
+std::string Summary(const RunReport& r) {
+  std::string s = absl::StrFormat(
+      "%s: %d moves simulated (%s, %d x %d elements) on the %s\n"
+      "  time     parse %.2f s, simulate %.2f s (%.2fM moves/s), outputs %.2f s\n"
+      "  error    max %.3g mm at (%.3f, %.3f), mean %.3g mm, rms %.3g mm "
+      "(%d samples)\n",
+      r.file, r.moves, r.scheme == SchemeKind::kZmap ? "zmap" : "taylor",
+      r.stock.nx, r.stock.ny, r.server, r.parse_seconds, r.simulate_seconds,
+      r.simulate_seconds > 0 ? r.moves / r.simulate_seconds / 1e6 : 0.0,
+      r.output_seconds, r.error.max_error(), r.error.max_x(), r.error.max_y(),
+      r.error.mean_error(), r.error.rms_error(), r.error.samples());
+  if (r.has_marks) {
+    absl::StrAppendFormat(&s,
+                          "  marks    %d polylines, %.1f mm long, %.1f..%.1f "
+                          "degrees between the surfaces\n",
+                          r.marks, r.marks_length, r.marks_min_angle,
+                          r.marks_max_angle);
+  }
+  if (!r.files.empty()) {
+    absl::StrAppend(&s, "  wrote   ");
+    for (const std::string& f : r.files) absl::StrAppend(&s, " ", f);
+    absl::StrAppend(&s, "\n");
+  }
+  return s;
+}
+
+}  // namespace swarf::cli

@@ -1,0 +1,48 @@
+// What `swarf run` gathers from the server after the moves, and the files
+// and summaries it writes.
+#ifndef SWARF_CLIENT_RUN_REPORT_H_
+#define SWARF_CLIENT_RUN_REPORT_H_
+
+#include <cstdint>
+#include <string>
+
+#include "absl/status/status.h"
+#include "client/connection.h"
+#include "core/scheme.h"
+#include "core/stock.h"
+
+namespace swarf::cli {
+
+struct RunReport {
+  std::string file, server, ignored;
+  int64_t moves = 0, lines = 0, nodes_lowered = 0;
+  StockSpec stock;
+  SchemeKind scheme = SchemeKind::kTaylor;
+  double parse_seconds = 0, simulate_seconds = 0, output_seconds = 0;
+  // Error of the scheme against the exact surface (21 samples per element).
+  pb::ErrorStats error;
+  // Cutting marks (taylor only).
+  bool has_marks = false;
+  int64_t marks = 0, mark_vertices = 0;
+  double marks_length = 0, marks_min_angle = 0, marks_max_angle = 0;
+  std::vector<std::string> files;  // written, in order
+};
+
+struct OutputOptions {
+  std::string dir;    // empty: no files, statistics only
+  int subdivide = 1;  // STL: sub-elements per element side
+};
+
+// Fetches the error statistics (and, with a directory, the error map, the
+// node grid and the marks) of session `id` and writes the files.
+absl::Status CollectAndWrite(Connection& conn, const std::string& id,
+                             const OutputOptions& options, RunReport* report);
+
+// The stats document (stats.json) and the human summary.
+std::string StatsJson(const RunReport& r);
+absl::Status WriteStatsJson(const RunReport& r, const std::string& path);
+std::string Summary(const RunReport& r);
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_RUN_REPORT_H_
