@@ -16,10 +16,16 @@ $(BUILD)/build.ninja:
 build: $(BUILD)/build.ninja
 	cmake --build $(BUILD) -j $(JOBS)
 
+# The main job: a sample finishing program (examples/relief.nc, written by
+# scripts/make-example) simulated on the embedded server.
 demo: deps build
-	@mkdir -p out
-	$(BUILD)/bin/swarf table | tee out/table.txt
-	@echo "demo: the table above is also in out/table.txt"
+	$(BUILD)/bin/swarf run examples/relief.nc --tool ball:d=2 \
+	  --stock 0,0,60,60,0 --spacing 0.05 --out out/demo
+	@echo
+	@echo "demo: pictures, meshes and stats are in out/demo/:"
+	@echo "  relief.png (the machined surface), error.png (where the scheme's"
+	@echo "  error is), marks.png/.svg/.json (cutting marks), surface.stl and"
+	@echo "  surface.wrl (meshes), stats.json. The paper's tables: build/bin/swarf table"
 
 test: deps build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)

@@ -149,6 +149,8 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   alignas(64) double cx[kChunk], cy[kChunk], h[kChunk];
   alignas(64) float jets[5][kChunk];
   int32_t ck[kChunk], lk[kChunk];
+  bool lowered_at[kChunk];
+  std::pair<int32_t, int32_t> segment[kChunk];  // (first, length) per row
   float* const jet_rows[5] = {jets[0], jets[1], jets[2], jets[3], jets[4]};
   // Located candidates, and the lowered ones packed (taylor only).
   std::unique_ptr<BallSweep::Points> located, packed;
@@ -165,8 +167,9 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     if (cap.empty) continue;
     const int32_t id = static_cast<int32_t>(first_id + m);
     int32_t n = 0;
+    int32_t segments = 0;  // row segments of the chunk (taylor)
     // The chunk's sweep heights (vectorized), lowering, then the lowered
-    // nodes' derivatives from their located points (vectorized, packed).
+    // nodes' derivatives from their located points (vectorized).
     auto flush = [&] {
       const double* hw = h;
       if constexpr (kDerivatives) {
@@ -178,26 +181,49 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       int32_t low = 0;
       for (int32_t q = 0; q < n; ++q) {
         const int32_t k = ck[q];
-        if (hw[q] < w[k] || (hw[q] == w[k] && id < owner[k])) {
+        const bool lower = hw[q] < w[k] || (hw[q] == w[k] && id < owner[k]);
+        if (lower) {
           w[k] = hw[q];
           owner[k] = id;
-          if constexpr (kDerivatives) {
-            packed->Set(low, located->At(q));
-            lk[low] = k;
-          }
+          if constexpr (kDerivatives) lk[low] = q;
           ++low;
         }
+        if constexpr (kDerivatives) lowered_at[q] = lower;
       }
       lowered += low;
       if constexpr (kDerivatives) {
-        if (low > 0) {
+        if (2 * low >= n) {
+          // Mostly lowered (fresh cuts): jets of the whole chunk, copied to
+          // the tile by row segment, whole segments at once.
+          sweep.Jets(*located, n, jet_rows);
+          for (int32_t s = 0; s < segments; ++s) {
+            const auto [q0, len] = segment[s];
+            const int32_t k0 = ck[q0];
+            bool all = true;
+            for (int32_t q = q0; q < q0 + len; ++q) all &= lowered_at[q];
+            for (int c = 0; c < 5; ++c) {
+              float* dst = tile->d[c] + k0;
+              const float* src = jets[c] + q0;
+              if (all) {
+                std::copy(src, src + len, dst);
+              } else {
+                for (int32_t q = 0; q < len; ++q) {
+                  if (lowered_at[q0 + q]) dst[q] = src[q];
+                }
+              }
+            }
+          }
+        } else if (low > 0) {
+          // A few lowered (finishing over cut stock): only theirs, packed.
+          for (int32_t q = 0; q < low; ++q) packed->Set(q, located->At(lk[q]));
           sweep.Jets(*packed, low, jet_rows);
           for (int32_t q = 0; q < low; ++q) {
-            for (int c = 0; c < 5; ++c) tile->d[c][lk[q]] = jets[c][q];
+            for (int c = 0; c < 5; ++c) tile->d[c][ck[lk[q]]] = jets[c][q];
           }
         }
       }
       n = 0;
+      segments = 0;
     };
     const Rect b = cap.Bounds();
     auto [j_lo, j_hi] = NodeRange(b.y0, b.y1, y0, inv_dy, j_max);
@@ -210,6 +236,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       i_lo = std::max(i_lo, i_base);
       if (i_lo > i_hi) continue;
       if (n + (i_hi - i_lo + 1) > kChunk) flush();
+      if constexpr (kDerivatives) segment[segments++] = {n, i_hi - i_lo + 1};
       const int32_t k0 = (j - j_base) * kTileSize - i_base;
       for (int32_t i = i_lo; i <= i_hi; ++i, ++n) {
         cx[n] = x0 + i * dx;  // as GridGeometry::NodeX: bit-identical
