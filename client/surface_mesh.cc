@@ -72,7 +72,15 @@ absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
       const ElementCorners e = grid.Corners(ei, ej);
       const int64_t i_end = ei == nx - 1 ? big_nx : (ei + 1) * int64_t{s} - 1;
       for (int64_t i = ei * int64_t{s}; i <= i_end; ++i) {
-        const double z = scheme.Reconstruct(e, xs[i], ys[j]);
+        // At a node its simulated height is exact; eq. (2) there can sit
+        // below it where a neighbour's patch, extrapolated across a steep
+        // element, undershoots. The patches fill in between nodes.
+        const double z =
+            (i % s == 0 && j % s == 0)
+                ? std::min(grid.jet(static_cast<int32_t>(i / s),
+                                    static_cast<int32_t>(j / s)).w,
+                           grid.spec.z_top)
+                : scheme.Reconstruct(e, xs[i], ys[j]);
         mesh.vertices[top_index(i, j)] = {xs[i], ys[j], z};
         lo = std::min(lo, z);
       }

@@ -1,0 +1,151 @@
+// swarf run end to end, in process, on the real corpus programs: they run
+// unmodified, the machined heights stay within the stock, and the pictures
+// and the mesh read back valid (the STL watertight).
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "client/commands.h"
+#include "client/png_image.h"
+#include "core/toolpath.h"
+#include "google/protobuf/struct.pb.h"
+#include "google/protobuf/util/json_util.h"
+#include "gtest/gtest.h"
+
+namespace swarf::cli {
+namespace {
+
+struct Stl {
+  std::vector<std::array<float, 9>> triangles;  // 3 vertices each
+};
+
+Stl ReadStl(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::vector<char> bytes((std::istreambuf_iterator<char>(in)),
+                          std::istreambuf_iterator<char>());
+  Stl stl;
+  if (bytes.size() < 84) return stl;
+  uint32_t n;
+  std::memcpy(&n, bytes.data() + 80, 4);
+  EXPECT_EQ(bytes.size(), 84 + 50 * size_t{n}) << "size vs triangle count";
+  for (uint32_t t = 0; t < n && 84 + 50 * (t + 1) <= bytes.size(); ++t) {
+    std::array<float, 9> v;
+    std::memcpy(v.data(), bytes.data() + 84 + 50 * t + 12, 36);
+    stl.triangles.push_back(v);
+  }
+  return stl;
+}
+
+google::protobuf::Struct ReadJson(const std::string& path) {
+  std::ifstream in(path);
+  std::string text((std::istreambuf_iterator<char>(in)),
+                   std::istreambuf_iterator<char>());
+  google::protobuf::Struct s;
+  EXPECT_TRUE(google::protobuf::util::JsonStringToMessage(text, &s).ok())
+      << text.substr(0, 200);
+  return s;
+}
+
+class RunE2eTest : public ::testing::TestWithParam<std::tuple<const char*, const char*>> {};
+
+TEST_P(RunE2eTest, CorpusJobRunsAndItsOutputsAreValid) {
+  const auto [name, tool] = GetParam();
+  const std::string file = std::string(SWARF_CORPUS_DIR) + "/" + name;
+  const std::string out =
+      (std::filesystem::temp_directory_path() /
+       ("swarf-e2e-" + std::string(name) + "-" + std::to_string(::getpid())))
+          .string();
+  std::filesystem::remove_all(out);
+  // 0.25 mm keeps the test quick; the code path is the one of 0.1 mm.
+  ASSERT_EQ(RunCommand({file, "--tool", tool, "--spacing", "0.25", "--out",
+                        out, "--quiet"}),
+            0);
+
+  // The stats document: every move simulated, finite errors, marks found.
+  const auto path = ReadToolpathFile(file);
+  ASSERT_TRUE(path.ok()) << path.status();
+  const google::protobuf::Struct stats = ReadJson(out + "/stats.json");
+  const auto& f = stats.fields();
+  EXPECT_EQ(f.at("moves").number_value(), path->move_count());
+  const auto& err = f.at("error").struct_value().fields();
+  EXPECT_TRUE(std::isfinite(err.at("max").number_value()));
+  EXPECT_GT(err.at("samples").number_value(), 0);
+  EXPECT_GT(f.at("marks").struct_value().fields().at("polylines").number_value(),
+            0);
+  const auto& st = f.at("stock").struct_value().fields();
+  const double x0 = st.at("x0").number_value(), x1 = st.at("x1").number_value();
+  const double y0 = st.at("y0").number_value(), y1 = st.at("y1").number_value();
+  const double top = st.at("top").number_value();
+
+  // Pictures decode at sensible sizes.
+  for (const char* png : {"relief.png", "error.png", "marks.png"}) {
+    auto img = ReadPng(out + "/" + png);
+    ASSERT_TRUE(img.ok()) << png << ": " << img.status();
+    EXPECT_GE(img->width(), 300) << png;
+    EXPECT_GE(img->height(), 300) << png;
+  }
+
+  // The mesh: bounds are the stock; the machined top lies between the
+  // lowest tool tip and the stock top (heights only go down, never below
+  // where a tip went); every edge is shared by exactly two triangles.
+  const Stl stl = ReadStl(out + "/surface.stl");
+  ASSERT_GT(stl.triangles.size(), 1000u);
+  const double lowest_tip = path->z_bounds().lo;
+  float min_x = 1e30f, max_x = -1e30f, min_y = 1e30f, max_y = -1e30f;
+  float min_z = 1e30f, max_z = -1e30f;
+  std::map<std::array<float, 6>, int> edges;
+  for (const auto& t : stl.triangles) {
+    for (int v = 0; v < 3; ++v) {
+      min_x = std::min(min_x, t[3 * v]);
+      max_x = std::max(max_x, t[3 * v]);
+      min_y = std::min(min_y, t[3 * v + 1]);
+      max_y = std::max(max_y, t[3 * v + 1]);
+      min_z = std::min(min_z, t[3 * v + 2]);
+      max_z = std::max(max_z, t[3 * v + 2]);
+      std::array<float, 3> a{t[3 * v], t[3 * v + 1], t[3 * v + 2]};
+      const int w = (v + 1) % 3;
+      std::array<float, 3> b{t[3 * w], t[3 * w + 1], t[3 * w + 2]};
+      if (b < a) std::swap(a, b);
+      ++edges[{a[0], a[1], a[2], b[0], b[1], b[2]}];
+    }
+  }
+  const float eps = 1e-3f;  // float STL coordinates
+  EXPECT_NEAR(min_x, x0, eps);
+  EXPECT_NEAR(max_x, x1, eps);
+  EXPECT_NEAR(min_y, y0, eps);
+  EXPECT_NEAR(max_y, y1, eps);
+  EXPECT_LE(max_z, top + eps);
+  int open = 0;
+  for (const auto& [e, n] : edges) open += n != 2;
+  EXPECT_EQ(open, 0) << "edges not shared by exactly two triangles";
+  // Top vertices (all but the bottom plane's) are at or above the lowest
+  // tip: the bottom is the one plane below it.
+  int below = 0;
+  for (const auto& t : stl.triangles) {
+    for (int v = 0; v < 3; ++v) {
+      const float z = t[3 * v + 2];
+      if (z < lowest_tip - eps && z > min_z + eps) ++below;
+    }
+  }
+  EXPECT_EQ(below, 0) << "machined below the lowest tool tip";
+  EXPECT_LT(min_z, lowest_tip);  // the bottom plane
+  std::filesystem::remove_all(out);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Corpus, RunE2eTest,
+    ::testing::Values(std::tuple{"bear.nc", "ball:d=3.175"},
+                      std::tuple{"cameo.nc", "ball:d=2"}),
+    [](const auto& info) {
+      std::string n = std::get<0>(info.param);
+      return n.substr(0, n.find('.'));
+    });
+
+}  // namespace
+}  // namespace swarf::cli
