@@ -99,13 +99,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     auto m = FetchMarks(conn, id);
     if (!m.ok()) return m.status();
     marks = *std::move(m);
-    const MarkSummary sum = Summarize(marks);
-    report->has_marks = true;
-    report->marks = sum.polylines;
-    report->mark_vertices = sum.vertices;
-    report->marks_length = sum.total_length;
-    report->marks_min_angle = sum.min_angle_deg;
-    report->marks_max_angle = sum.max_angle_deg;
+    report->marks = Summarize(marks);
   }
   if (!files) return absl::OkStatus();
 
@@ -127,7 +121,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   out.mesh.subdivision = std::max(1, options.subdivide);
   auto written = WriteRunOutputs(options.dir, *grid,
                                  raster.cols > 0 ? &raster : nullptr,
-                                 report->has_marks ? &marks : nullptr, out);
+                                 report->marks ? &marks : nullptr, out);
   if (!written.ok()) return written.status();
   for (const WrittenFile& f : *written) report->files.push_back(f.path);
   report->files.push_back(
@@ -165,13 +159,13 @@ std::string StatsJson(const RunReport& r) {
       .Double(r.error.max_y()).EndArray()
       .Key("samples").Int(r.error.samples())
       .EndObject();
-  if (r.has_marks) {
+  if (r.marks) {
     j.Key("marks").BeginObject()
-        .Key("polylines").Int(r.marks)
-        .Key("vertices").Int(r.mark_vertices)
-        .Key("total_length").Double(r.marks_length)
-        .Key("angle_deg").BeginArray().Double(r.marks_min_angle)
-        .Double(r.marks_max_angle).EndArray()
+        .Key("polylines").Int(r.marks->polylines)
+        .Key("vertices").Int(r.marks->vertices)
+        .Key("total_length").Double(r.marks->total_length)
+        .Key("angle_deg").BeginArray().Double(r.marks->min_angle_deg)
+        .Double(r.marks->max_angle_deg).EndArray()
         .EndObject();
   }
   if (!r.ignored.empty()) j.Key("ignored").String(r.ignored);
@@ -201,12 +195,12 @@ std::string Summary(const RunReport& r) {
       r.simulate_seconds > 0 ? r.moves / r.simulate_seconds / 1e6 : 0.0,
       r.output_seconds, r.error.max_error(), r.error.max_x(), r.error.max_y(),
       r.error.mean_error(), r.error.rms_error(), r.error.samples());
-  if (r.has_marks) {
+  if (r.marks) {
     absl::StrAppendFormat(&s,
                           "  marks    %d polylines, %.1f mm long, %.1f..%.1f "
                           "degrees between the surfaces\n",
-                          r.marks, r.marks_length, r.marks_min_angle,
-                          r.marks_max_angle);
+                          r.marks->polylines, r.marks->total_length,
+                          r.marks->min_angle_deg, r.marks->max_angle_deg);
   }
   if (!r.files.empty()) {
     absl::StrAppend(&s, "  wrote   ");

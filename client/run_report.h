@@ -4,10 +4,12 @@
 #define SWARF_CLIENT_RUN_REPORT_H_
 
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "absl/status/status.h"
 #include "client/connection.h"
+#include "core/cutting_marks.h"
 #include "core/scheme.h"
 #include "core/stock.h"
 
@@ -22,9 +24,7 @@ struct RunReport {
   // Error of the scheme against the exact surface (21 samples per element).
   pb::ErrorStats error;
   // Cutting marks (taylor only).
-  bool has_marks = false;
-  int64_t marks = 0, mark_vertices = 0;
-  double marks_length = 0, marks_min_angle = 0, marks_max_angle = 0;
+  std::optional<MarkSummary> marks;
   std::vector<std::string> files;  // written, in order
 };
 

@@ -1,5 +1,7 @@
 // swarf health / swarf sessions: ask a running swarfd.
 #include <future>
+#include <optional>
+#include <set>
 #include <iostream>
 #include <string>
 #include <vector>
@@ -45,22 +47,38 @@ absl::StatusOr<int> HealthStatus(const std::string& server, double timeout_s) {
   return status;
 }
 
+// Parses a command that talks to a running server: --server is required.
+// Returns the exit code to stop with, or nullopt to go on.
+std::optional<int> ParseServerArgs(const char* name, const char* usage,
+                                   const std::vector<std::string>& argv,
+                                   const std::set<std::string>& valued,
+                                   absl::StatusOr<Args>* args) {
+  std::set<std::string> options = valued;
+  options.insert("server");
+  *args = Args::Parse(argv, options, {"help"});
+  if (args->ok() && (*args)->Has("help")) {
+    std::cout << usage;
+    return 0;
+  }
+  if (!args->ok() || !(*args)->Has("server") ||
+      !(*args)->positional().empty()) {
+    std::cerr << "swarf " << name << ": "
+              << (args->ok() ? "--server is required" : args->status().message())
+              << "\n" << usage;
+    return 2;
+  }
+  return std::nullopt;
+}
+
 }  // namespace
 
 int HealthCommand(const std::vector<std::string>& argv) {
   constexpr char kUsage[] =
       "usage: swarf health --server HOST:PORT [--timeout SECONDS]\n"
       "Exits 0 when the server answers SERVING (for health checks).\n";
-  auto args = Args::Parse(argv, {"server", "timeout"}, {"help"});
-  if (!args.ok() || !args->Has("server") || !args->positional().empty()) {
-    std::cerr << "swarf health: "
-              << (args.ok() ? "--server is required" : args.status().message())
-              << "\n" << kUsage;
-    return 2;
-  }
-  if (args->Has("help")) {
-    std::cout << kUsage;
-    return 0;
+  absl::StatusOr<Args> args;
+  if (auto done = ParseServerArgs("health", kUsage, argv, {"timeout"}, &args)) {
+    return *done;
   }
   double timeout = 5;
   if (auto t = args->Get("timeout"); t && !absl::SimpleAtod(*t, &timeout)) {
@@ -85,16 +103,9 @@ int SessionsCommand(const std::vector<std::string>& argv) {
   constexpr char kUsage[] =
       "usage: swarf sessions --server HOST:PORT\n"
       "Lists the server's sessions.\n";
-  auto args = Args::Parse(argv, {"server"}, {"help"});
-  if (!args.ok() || !args->Has("server") || !args->positional().empty()) {
-    std::cerr << "swarf sessions: "
-              << (args.ok() ? "--server is required" : args.status().message())
-              << "\n" << kUsage;
-    return 2;
-  }
-  if (args->Has("help")) {
-    std::cout << kUsage;
-    return 0;
+  absl::StatusOr<Args> args;
+  if (auto done = ParseServerArgs("sessions", kUsage, argv, {}, &args)) {
+    return *done;
   }
   auto conn = Connection::Open(*args->Get("server"));
   if (!conn.ok()) {
