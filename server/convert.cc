@@ -132,6 +132,7 @@ void FillSession(const Session& s, const std::string& replica,
     out->mutable_last_position()->set_z(state.last_position->z);
   }
   out->set_replica(replica);
+  out->set_recovery(s.recovery());
 }
 
 absl::StatusOr<Rect> RectFromProto(const pb::Rect& r,

@@ -28,6 +28,12 @@ ABSL_FLAG(std::string, replica, "",
 ABSL_FLAG(double, drain_seconds, 10,
           "on SIGTERM/SIGINT, how long in-flight calls may finish");
 ABSL_FLAG(std::string, log_level, "info", "trace|debug|info|warn|error");
+ABSL_FLAG(std::string, data_dir, "./swarf-data",
+          "where sessions are journaled (one SQLite file each) and restored "
+          "from at start; empty: keep sessions in memory only");
+ABSL_FLAG(std::string, journal_sync, "full",
+          "full: a batch is on disk (fsync) when acknowledged; normal: "
+          "survives a crash of swarfd, not of the machine; off");
 
 namespace {
 
@@ -64,6 +70,19 @@ int main(int argc, char** argv) {
   options.limits.max_batch_points = absl::GetFlag(FLAGS_max_batch_points);
   options.limits.max_message_bytes = absl::GetFlag(FLAGS_max_message_mb) << 20;
   options.replica = ReplicaName();
+  options.persistence.data_dir = absl::GetFlag(FLAGS_data_dir);
+  const std::string sync = absl::GetFlag(FLAGS_journal_sync);
+  if (sync == "full") {
+    options.persistence.sync = swarf::server::JournalSync::kFull;
+  } else if (sync == "normal") {
+    options.persistence.sync = swarf::server::JournalSync::kNormal;
+  } else if (sync == "off") {
+    options.persistence.sync = swarf::server::JournalSync::kOff;
+  } else {
+    spdlog::error("--journal_sync must be full, normal or off, got \"{}\"",
+                  sync);
+    return 2;
+  }
   auto server = swarf::server::SwarfServer::Start(options);
   if (!server.ok()) {
     spdlog::error("{}", std::string(server.status().message()));

@@ -1,8 +1,11 @@
 #include "server/registry.h"
 
+#include <algorithm>
+#include <filesystem>
 #include <random>
 
 #include "absl/strings/str_cat.h"
+#include "spdlog/spdlog.h"
 
 namespace swarf::server {
 namespace {
@@ -51,35 +54,102 @@ absl::StatusOr<std::shared_ptr<Session>> Registry::Create(SessionSpec spec) {
   const int64_t bytes = Session::EstimateMemoryBytes(spec.stock, spec.scheme);
   {
     absl::MutexLock l(&mu_);
-    if (sessions_.count(spec.id)) {
-      return absl::AlreadyExistsError(
-          absl::StrCat("session ", spec.id, " already exists"));
-    }
-    if (static_cast<int64_t>(sessions_.size()) >= limits_.max_sessions) {
-      return absl::ResourceExhaustedError(absl::StrCat(
-          "this server holds its limit of ", limits_.max_sessions,
-          " sessions"));
-    }
-    if (reserved_bytes_ + bytes > limits_.max_total_memory_bytes) {
-      return absl::ResourceExhaustedError(absl::StrCat(
-          "the session may need ", bytes, " bytes; this server has ",
-          limits_.max_total_memory_bytes - reserved_bytes_, " of ",
-          limits_.max_total_memory_bytes, " left"));
-    }
-    reserved_bytes_ += bytes;
-    // Reserve the id while the (cheap) workpiece is created.
-    sessions_[spec.id] = nullptr;
+    if (absl::Status s = AdmitLocked(spec.id, bytes); !s.ok()) return s;
   }
   const std::string id = spec.id;
-  auto session = Session::Create(std::move(spec));
+  // The journal first: a session that cannot be made durable is refused.
+  absl::StatusOr<std::unique_ptr<Journal>> journal =
+      std::unique_ptr<Journal>();
+  if (!persistence_.data_dir.empty()) {
+    journal = Journal::Create(JournalPath(id), Session::Definition(spec),
+                              persistence_.sync);
+  }
+  absl::StatusOr<std::shared_ptr<Session>> session =
+      journal.ok() ? Session::Create(std::move(spec), *std::move(journal))
+                   : absl::UnavailableError(journal.status().message());
   absl::MutexLock l(&mu_);
   if (!session.ok()) {
     sessions_.erase(id);
     reserved_bytes_ -= bytes;
+    if (!persistence_.data_dir.empty()) Journal::DeleteFiles(JournalPath(id));
     return session.status();
   }
   sessions_[id] = *session;
   return *session;
+}
+
+absl::Status Registry::AdmitLocked(const std::string& id, int64_t bytes) {
+  if (sessions_.count(id)) {
+    return absl::AlreadyExistsError(
+        absl::StrCat("session ", id, " already exists"));
+  }
+  if (static_cast<int64_t>(sessions_.size()) >= limits_.max_sessions) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "this server holds its limit of ", limits_.max_sessions, " sessions"));
+  }
+  if (reserved_bytes_ + bytes > limits_.max_total_memory_bytes) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "the session may need ", bytes, " bytes; this server has ",
+        limits_.max_total_memory_bytes - reserved_bytes_, " of ",
+        limits_.max_total_memory_bytes, " left"));
+  }
+  reserved_bytes_ += bytes;
+  // The id is taken while the session is created.
+  sessions_[id] = nullptr;
+  return absl::OkStatus();
+}
+
+std::string Registry::JournalPath(const std::string& id) const {
+  return (std::filesystem::path(persistence_.data_dir) / (id + ".db"))
+      .string();
+}
+
+absl::StatusOr<int> Registry::RestoreAll() {
+  if (persistence_.data_dir.empty()) return 0;
+  std::error_code ec;
+  std::filesystem::create_directories(persistence_.data_dir, ec);
+  if (ec) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "cannot create --data_dir ", persistence_.data_dir, ": ",
+        ec.message()));
+  }
+  std::vector<std::filesystem::path> files;
+  for (const auto& e :
+       std::filesystem::directory_iterator(persistence_.data_dir, ec)) {
+    if (e.path().extension() == ".db") files.push_back(e.path());
+  }
+  std::sort(files.begin(), files.end());
+  int restored = 0;
+  for (const auto& f : files) {
+    const std::string id = f.stem().string();
+    if (!ValidateId(id).ok()) continue;
+    auto session = Session::Restore(f.string(), persistence_.sync);
+    if (!session.ok()) {
+      spdlog::error("session {}: not restored: {}", id,
+                    std::string(session.status().message()));
+      continue;
+    }
+    const SessionSpec& spec = (*session)->spec();
+    absl::MutexLock l(&mu_);
+    absl::Status admitted = AdmitLocked(
+        id, Session::EstimateMemoryBytes(spec.stock, spec.scheme));
+    if (!admitted.ok()) {
+      spdlog::error("session {}: not restored: {}", id,
+                    std::string(admitted.message()));
+      continue;
+    }
+    sessions_[id] = *session;
+    ++restored;
+    const SessionState st = (*session)->State();
+    if ((*session)->recovery().empty()) {
+      spdlog::info("session {}: restored ({} batches, {} moves)", id,
+                   st.last_seq, st.moves_applied);
+    } else {
+      spdlog::warn("session {}: restored up to batch {}: {}", id, st.last_seq,
+                   (*session)->recovery());
+    }
+  }
+  return restored;
 }
 
 absl::StatusOr<std::shared_ptr<Session>> Registry::Get(
@@ -100,7 +170,9 @@ absl::Status Registry::Delete(const std::string& id) {
   }
   reserved_bytes_ -= Session::EstimateMemoryBytes(it->second->spec().stock,
                                                   it->second->spec().scheme);
+  it->second->MarkDeleted();  // closes its journal
   sessions_.erase(it);
+  if (!persistence_.data_dir.empty()) Journal::DeleteFiles(JournalPath(id));
   return absl::OkStatus();
 }
 

@@ -23,9 +23,22 @@ struct Limits {
   int32_t max_message_bytes = 64 << 20;
 };
 
+// Where sessions are kept: in memory only (empty data_dir), or journaled
+// to one SQLite file per session under data_dir.
+struct Persistence {
+  std::string data_dir;
+  JournalSync sync = JournalSync::kFull;
+};
+
 class Registry {
  public:
-  explicit Registry(const Limits& limits) : limits_(limits) {}
+  explicit Registry(const Limits& limits, Persistence persistence = {})
+      : limits_(limits), persistence_(std::move(persistence)) {}
+
+  // Restores every session journaled under data_dir (at start-up). Sessions
+  // whose journal cannot be read at all are logged and left on disk.
+  // Returns how many were restored.
+  absl::StatusOr<int> RestoreAll();
 
   // Validates the id (1-64 of [A-Za-z0-9_-]; generated when empty) and the
   // limits, then creates. ALREADY_EXISTS, RESOURCE_EXHAUSTED,
@@ -42,7 +55,13 @@ class Registry {
   static absl::Status ValidateId(const std::string& id);
 
  private:
+  std::string JournalPath(const std::string& id) const;
+  // Admission of a session of `bytes` under mu_; reserves them.
+  absl::Status AdmitLocked(const std::string& id, int64_t bytes)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+
   const Limits limits_;
+  const Persistence persistence_;
   mutable absl::Mutex mu_;
   std::map<std::string, std::shared_ptr<Session>> sessions_
       ABSL_GUARDED_BY(mu_);

@@ -8,6 +8,7 @@
 #include "grpcpp/health_check_service_interface.h"
 #include "grpcpp/security/server_credentials.h"
 #include "grpcpp/server_builder.h"
+#include "spdlog/spdlog.h"
 
 namespace swarf::server {
 
@@ -22,7 +23,19 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
   }
   std::unique_ptr<SwarfServer> s(new SwarfServer);
   s->options_ = options;
-  s->registry_ = std::make_unique<Registry>(options.limits);
+  s->registry_ =
+      std::make_unique<Registry>(options.limits, options.persistence);
+  // Sessions come back before the first call is accepted.
+  const auto t0 = std::chrono::steady_clock::now();
+  auto restored = s->registry_->RestoreAll();
+  if (!restored.ok()) return restored.status();
+  if (*restored > 0) {
+    spdlog::info("restored {} session(s) from {} in {:.3f} s", *restored,
+                 options.persistence.data_dir,
+                 std::chrono::duration<double>(
+                     std::chrono::steady_clock::now() - t0)
+                     .count());
+  }
   const int threads = options.worker_threads > 0
                           ? options.worker_threads
                           : static_cast<int>(std::thread::hardware_concurrency());

@@ -22,6 +22,9 @@ struct ServerOptions {
   int worker_threads = 0;  // 0: one per hardware thread
   Limits limits;
   std::string replica = "swarfd";  // reported in x-swarf-replica
+  // Journal sessions under data_dir and restore them at start; empty: in
+  // memory only (tests, the CLI's embedded server).
+  Persistence persistence;
 };
 
 // Thread-safe.

@@ -4,6 +4,7 @@
 #include <set>
 
 #include "absl/strings/str_cat.h"
+#include "server/convert.h"
 
 namespace swarf::server {
 
@@ -28,11 +29,79 @@ absl::Status Session::ValidateSpec(const SessionSpec& spec) {
   return absl::OkStatus();
 }
 
-absl::StatusOr<std::shared_ptr<Session>> Session::Create(SessionSpec spec) {
+absl::StatusOr<std::shared_ptr<Session>> Session::Create(
+    SessionSpec spec, std::unique_ptr<Journal> journal) {
   if (absl::Status s = ValidateSpec(spec); !s.ok()) return s;
   auto wp = Workpiece::Create(spec.stock, spec.scheme);
   if (!wp.ok()) return wp.status();
-  return std::shared_ptr<Session>(new Session(std::move(spec), *std::move(wp)));
+  auto session =
+      std::shared_ptr<Session>(new Session(std::move(spec), *std::move(wp)));
+  session->journal_ = std::move(journal);
+  return session;
+}
+
+std::string Session::Definition(const SessionSpec& spec) {
+  pb::CreateSessionRequest r;
+  r.set_session_id(spec.id);
+  pb::Stock* st = r.mutable_stock();
+  st->set_x0(spec.stock.x0);
+  st->set_y0(spec.stock.y0);
+  st->set_x1(spec.stock.x1);
+  st->set_y1(spec.stock.y1);
+  st->set_z_top(spec.stock.z_top);
+  r.set_nx(spec.stock.nx);
+  r.set_ny(spec.stock.ny);
+  r.set_scheme(spec.scheme == SchemeKind::kZmap ? pb::SCHEME_ZMAP
+                                                : pb::SCHEME_TAYLOR);
+  for (const ToolSpec& t : spec.tools) {
+    pb::Tool* tool = r.add_tools();
+    tool->set_id(t.id);
+    tool->mutable_ball()->set_radius(t.radius);
+  }
+  return r.SerializeAsString();
+}
+
+absl::StatusOr<std::shared_ptr<Session>> Session::Restore(
+    const std::string& path, JournalSync sync) {
+  std::string definition;
+  auto journal = Journal::Open(path, sync, &definition);
+  if (!journal.ok()) return journal.status();
+  pb::CreateSessionRequest req;
+  if (!req.ParseFromString(definition)) {
+    return absl::DataLossError(
+        absl::StrCat("journal ", path, ": the session definition is damaged"));
+  }
+  auto spec = SpecFromRequest(req);
+  if (!spec.ok()) return spec.status();
+  auto session = Create(*std::move(spec));
+  if (!session.ok()) return session.status();
+  Session& s = **session;
+  absl::MutexLock l(&s.mu_);
+  auto problem = (*journal)->Replay([&](const Journal::Batch& b) {
+    const ToolSpec* tool = nullptr;
+    for (const ToolSpec& t : s.spec_.tools) {
+      if (t.id == b.tool_id) tool = &t;
+    }
+    if (tool == nullptr) {
+      return absl::DataLossError(absl::StrCat("unknown tool ", b.tool_id));
+    }
+    return s.ApplyLocked(b.seq, *tool, b.xyz, b.reposition, false).status();
+  });
+  if (!problem.ok()) return problem.status();
+  s.recovery_ = *problem;
+  if (!problem->empty()) {
+    // Batches after the damage cannot be trusted: drop them, so that the
+    // client resends from last_seq + 1 into a consistent journal.
+    if (absl::Status t = (*journal)->Truncate(s.last_seq_); !t.ok()) return t;
+  }
+  s.journal_ = *std::move(journal);
+  return *session;
+}
+
+void Session::MarkDeleted() {
+  absl::MutexLock l(&mu_);
+  deleted_ = true;
+  journal_.reset();
 }
 
 int64_t Session::EstimateMemoryBytes(const StockSpec& stock,
@@ -81,6 +150,19 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
   }
 
   absl::MutexLock l(&mu_);
+  if (deleted_) {
+    return absl::NotFoundError(
+        absl::StrCat("session ", spec_.id, " was deleted"));
+  }
+  return ApplyLocked(seq, *tool, xyz, reposition, true);
+}
+
+absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
+                                                 const ToolSpec& tool,
+                                                 std::span<const double> xyz,
+                                                 bool reposition,
+                                                 bool journal) {
+  const int64_t points = static_cast<int64_t>(xyz.size() / 3);
   BatchResult r;
   r.seq = seq;
   if (seq <= last_seq_) {
@@ -99,11 +181,21 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
   std::optional<Vec3> pos = reposition ? std::nullopt : last_position_;
   for (int64_t p = 0; p < points; ++p) {
     const Vec3 next{xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]};
-    if (pos.has_value()) moves.push_back({*pos, next, tool->radius});
+    if (pos.has_value()) moves.push_back({*pos, next, tool.radius});
     pos = next;
   }
+  // Durable before applied, applied before acknowledged.
+  if (journal && journal_ != nullptr) {
+    if (absl::Status s = journal_->Append(seq, tool.id, reposition, xyz);
+        !s.ok()) {
+      return absl::UnavailableError(s.message());
+    }
+  }
   auto applied = wp_->Apply(moves);
-  if (!applied.ok()) return applied.status();
+  if (!applied.ok()) {
+    if (journal && journal_ != nullptr) journal_->Remove(seq).IgnoreError();
+    return applied.status();
+  }
   last_seq_ = seq;
   last_position_ = pos;
   r.moves_applied = wp_->move_count();

@@ -19,6 +19,7 @@
 #include "core/scheme.h"
 #include "core/stock.h"
 #include "core/workpiece.h"
+#include "server/journal.h"
 
 namespace swarf::server {
 
@@ -58,8 +59,22 @@ class Session {
  public:
   // InvalidArgument naming the field for a bad stock or tools.
   static absl::Status ValidateSpec(const SessionSpec& spec);
-  // Validates, then creates.
-  static absl::StatusOr<std::shared_ptr<Session>> Create(SessionSpec spec);
+  // Validates, then creates. With a journal (not null), every batch is
+  // written to it before it is applied.
+  static absl::StatusOr<std::shared_ptr<Session>> Create(
+      SessionSpec spec, std::unique_ptr<Journal> journal = nullptr);
+  // Rebuilds a session from its journal by replaying its batches, up to the
+  // last whole one; recovery() then says what was wrong, if anything.
+  static absl::StatusOr<std::shared_ptr<Session>> Restore(
+      const std::string& path, JournalSync sync);
+
+  // The journal's definition of a session (its spec as a protobuf).
+  static std::string Definition(const SessionSpec& spec);
+
+  // What restoring found wrong with the journal (empty: nothing).
+  const std::string& recovery() const { return recovery_; }
+  // Later batches fail with NOT_FOUND (streams may outlive a delete).
+  void MarkDeleted();
 
   const SessionSpec& spec() const { return spec_; }
   const std::string& id() const { return spec_.id; }
@@ -92,10 +107,18 @@ class Session {
  private:
   Session(SessionSpec spec, std::unique_ptr<Workpiece> wp)
       : spec_(std::move(spec)), wp_(std::move(wp)) {}
+  // ApplyBatch after validation, under mu_; `journal` false when replaying.
+  absl::StatusOr<BatchResult> ApplyLocked(uint64_t seq, const ToolSpec& tool,
+                                          std::span<const double> xyz,
+                                          bool reposition, bool journal)
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
 
   const SessionSpec spec_;
+  std::string recovery_;  // set once, before the session is shared
   mutable absl::Mutex mu_;
   std::unique_ptr<Workpiece> wp_ ABSL_PT_GUARDED_BY(mu_);
+  std::unique_ptr<Journal> journal_ ABSL_GUARDED_BY(mu_);
+  bool deleted_ ABSL_GUARDED_BY(mu_) = false;
   uint64_t last_seq_ ABSL_GUARDED_BY(mu_) = 0;
   std::optional<Vec3> last_position_ ABSL_GUARDED_BY(mu_);
 };
