@@ -3,7 +3,7 @@
 BUILD ?= build
 JOBS ?= $(shell nproc)
 
-.PHONY: all build deps demo test bench clean
+.PHONY: all build deps demo test bench clean lint-deploy
 
 all: build
 
@@ -35,3 +35,9 @@ bench: deps build
 
 clean:
 	rm -rf $(BUILD)
+
+# Deployment files without an engine or a cluster: nginx -t on the rendered
+# balancer config, compose and Kubernetes YAML, the Dockerfile's shape (also
+# run by `make test`, as the ctest deploy_lint).
+lint-deploy: deps
+	deploy/lint
