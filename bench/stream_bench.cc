@@ -4,11 +4,14 @@
 #include <benchmark/benchmark.h>
 
 #include <cmath>
+#include <filesystem>
+#include <unistd.h>
 #include <thread>
 #include <vector>
 
 #include "core/workpiece.h"
 #include "grpcpp/grpcpp.h"
+#include "server/registry.h"
 #include "server/server.h"
 #include "swarf/v1/swarf.grpc.pb.h"
 
@@ -149,6 +152,51 @@ void BM_EndToEnd(benchmark::State& state) {
       static_cast<double>(pts.size() - 1),
       benchmark::Counter::kIsIterationInvariantRate);
 }
+
+// Restart: a journaled session of `moves` moves is restored by replaying
+// its journal (what swarfd does at start). Reports the restore time.
+void BM_RestartReplay(benchmark::State& state) {
+  const int64_t moves = state.range(0), batch = state.range(1);
+  const std::vector<Vec3> pts = Raster(moves);
+  const std::string dir = "/tmp/swarf-restart-bench-" + std::to_string(::getpid());
+  std::filesystem::remove_all(dir);
+  {
+    server::Registry r(server::Limits{},
+                       {dir, server::JournalSync::kNormal});
+    (void)r.RestoreAll();
+    server::SessionSpec spec;
+    spec.id = "long-job";
+    spec.stock = kStock;
+    spec.tools = {{1, kBallRadius}};
+    auto s = *r.Create(spec);
+    std::vector<double> xyz;
+    uint64_t seq = 0;
+    for (size_t k = 0; k < pts.size(); k += batch) {
+      xyz.clear();
+      for (size_t p = k; p < std::min(pts.size(), k + batch); ++p) {
+        xyz.insert(xyz.end(), {pts[p].x, pts[p].y, pts[p].z});
+      }
+      if (!s->ApplyBatch(++seq, 1, xyz, batch).ok()) {
+        state.SkipWithError("batch failed");
+      }
+    }
+  }
+  for (auto _ : state) {
+    server::Registry r(server::Limits{}, {dir, server::JournalSync::kNormal});
+    auto restored = r.RestoreAll();
+    if (!restored.ok() || *restored != 1) state.SkipWithError("not restored");
+    state.PauseTiming();
+    r.Get("long-job").IgnoreError();
+    state.ResumeTiming();
+  }
+  state.counters["moves"] = static_cast<double>(pts.size() - 1);
+  std::filesystem::remove_all(dir);
+}
+BENCHMARK(BM_RestartReplay)
+    ->Args({1000000, 10000})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(3);
 
 BENCHMARK(BM_InProcess)
     ->Args({1000000, 10000})

@@ -1,6 +1,7 @@
 #include "client/connection.h"
 
 #include <chrono>
+#include <cstdio>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -80,34 +81,85 @@ absl::Status StreamPath(
       p.moves_total += moves;
     }
   }
-  auto ctx = conn.Context(session_id, 24 * 3600);
-  auto stream = conn.stub().Simulate(ctx.get());
-  std::thread writer([&] {
-    for (const auto& r : reqs) {
-      if (!stream->Write(r)) break;  // the stream ended; Finish says why
+  // Stream from batch `from` (1-based); acks before it are counted already.
+  // A stream that breaks (the server restarted, the network dropped) is
+  // resumed: the server says which batch it has last, and the rest is sent
+  // again. A batch the server rejects ends the run.
+  constexpr auto kResumeWindow = std::chrono::seconds(120);
+  uint64_t from = 1;
+  uint64_t acked = 0;
+  auto deadline = std::chrono::steady_clock::now() + kResumeWindow;
+  for (int attempt = 0;; ++attempt) {
+    auto ctx = conn.Context(session_id, 24 * 3600);
+    auto stream = conn.stub().Simulate(ctx.get());
+    std::thread writer([&] {
+      for (uint64_t k = from; k <= reqs.size(); ++k) {
+        if (!stream->Write(reqs[k - 1])) break;  // Finish says why
+      }
+      stream->WritesDone();
+    });
+    pb::SimulateResponse resp;
+    absl::Status batch_error;
+    while (stream->Read(&resp)) {
+      if (resp.has_ack()) {
+        const pb::Ack& a = resp.ack();
+        if (a.seq() > acked) {
+          for (uint64_t k = acked + 1; k <= a.seq(); ++k) {
+            p.moves_done += moves_of[k - 1];
+          }
+          acked = a.seq();
+          p.nodes_lowered += a.nodes_lowered();
+          if (progress) progress(p);
+        }
+      } else if (resp.has_error() && batch_error.ok()) {
+        batch_error = absl::Status(
+            static_cast<absl::StatusCode>(resp.error().code()),
+            absl::StrCat("batch ", resp.error().request_id(), ": ",
+                         resp.error().message()));
+        ctx->TryCancel();
+      }
     }
-    stream->WritesDone();
-  });
-  pb::SimulateResponse resp;
-  absl::Status batch_error;
-  while (stream->Read(&resp)) {
-    if (resp.has_ack()) {
-      const pb::Ack& a = resp.ack();
-      p.moves_done += moves_of[a.seq() - 1];
-      p.nodes_lowered += a.nodes_lowered();
-      if (progress) progress(p);
-    } else if (resp.has_error() && batch_error.ok()) {
-      batch_error = absl::Status(
-          static_cast<absl::StatusCode>(resp.error().code()),
-          absl::StrCat("batch ", resp.error().request_id(), ": ",
-                       resp.error().message()));
-      ctx->TryCancel();
+    writer.join();
+    grpc::Status st = stream->Finish();
+    if (!batch_error.ok()) return batch_error;
+    if (st.ok() && acked == reqs.size()) return absl::OkStatus();
+    const bool transient = st.error_code() == grpc::StatusCode::UNAVAILABLE ||
+                           st.error_code() == grpc::StatusCode::ABORTED ||
+                           st.error_code() == grpc::StatusCode::CANCELLED ||
+                           st.ok();
+    if (!transient || std::chrono::steady_clock::now() > deadline) {
+      return FromGrpc(st.ok() ? grpc::Status(grpc::StatusCode::DATA_LOSS,
+                                             "the stream ended early")
+                              : st);
     }
+    // Ask where the server is; it may still be restarting.
+    std::this_thread::sleep_for(std::chrono::milliseconds(
+        std::min(2000, 100 << std::min(attempt, 4))));
+    auto gctx = conn.Context(session_id, 5);
+    pb::GetSessionRequest get;
+    get.set_session_id(session_id);
+    pb::Session session;
+    grpc::Status gs = conn.stub().GetSession(gctx.get(), get, &session);
+    if (!gs.ok()) {
+      if (gs.error_code() == grpc::StatusCode::NOT_FOUND) return FromGrpc(gs);
+      continue;  // not back yet: the resume window bounds this
+    }
+    from = session.last_seq() + 1;
+    if (session.last_seq() > acked) {
+      // Applied but the ack was lost with the connection.
+      for (uint64_t k = acked + 1; k <= session.last_seq(); ++k) {
+        p.moves_done += moves_of[k - 1];
+      }
+      acked = session.last_seq();
+    }
+    std::fprintf(stderr,
+                 "\nswarf: the stream to the server broke (%s); resuming at "
+                 "batch %llu of %zu\n",
+                 st.ok() ? "ended early" : st.error_message().c_str(),
+                 static_cast<unsigned long long>(from), reqs.size());
+    deadline = std::chrono::steady_clock::now() + kResumeWindow;
+    if (from > reqs.size()) return absl::OkStatus();
   }
-  writer.join();
-  grpc::Status st = stream->Finish();
-  if (!batch_error.ok()) return batch_error;
-  return FromGrpc(st);
 }
 
 }  // namespace swarf::cli

@@ -1,6 +1,10 @@
 #include "client/run_report.h"
 
 #include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <functional>
+#include <thread>
 #include <filesystem>
 #include <fstream>
 #include <system_error>
@@ -75,28 +79,61 @@ absl::StatusOr<SurfaceGrid> FetchGrid(Connection& conn, const std::string& id,
   return grid;
 }
 
+// Runs `fetch` again while the server is unavailable (restarting): its
+// sessions come back from their journals. Gives up after two minutes.
+template <typename T>
+absl::StatusOr<T> Retrying(const char* what,
+                           const std::function<absl::StatusOr<T>()>& fetch) {
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::seconds(120);
+  for (int attempt = 0;; ++attempt) {
+    absl::StatusOr<T> r = fetch();
+    if (r.ok() || r.status().code() != absl::StatusCode::kUnavailable ||
+        std::chrono::steady_clock::now() > deadline) {
+      return r;
+    }
+    if (attempt == 0) {
+      std::fprintf(stderr, "swarf: the server is unavailable (%s); retrying "
+                   "%s\n", std::string(r.status().message()).c_str(), what);
+    }
+    std::this_thread::sleep_for(
+        std::chrono::milliseconds(std::min(2000, 100 << std::min(attempt, 4))));
+  }
+}
+
+std::string Rate(double per_s) {
+  return per_s >= 1e5 ? absl::StrFormat("%.2fM moves/s", per_s / 1e6)
+                      : absl::StrFormat("%.0f moves/s", per_s);
+}
+
 }  // namespace
 
 absl::Status CollectAndWrite(Connection& conn, const std::string& id,
                              const OutputOptions& options, RunReport* report) {
   const bool files = !options.dir.empty();
   const StockSpec& stock = report->stock;
-  {
-    auto ctx = conn.Context(id, 3600);
-    pb::GetErrorStatsRequest req;
-    req.set_session_id(id);
-    if (files) {
-      int32_t cols, rows;
-      MapSize(stock, &cols, &rows);
-      req.set_map_cols(cols);
-      req.set_map_rows(rows);
-    }
-    grpc::Status st = conn.stub().GetErrorStats(ctx.get(), req, &report->error);
-    if (!st.ok()) return FromGrpc(st);
-  }
+  auto stats = Retrying<pb::ErrorStats>(
+      "the error statistics", [&]() -> absl::StatusOr<pb::ErrorStats> {
+        auto ctx = conn.Context(id, 3600);
+        pb::GetErrorStatsRequest req;
+        req.set_session_id(id);
+        if (files) {
+          int32_t cols, rows;
+          MapSize(stock, &cols, &rows);
+          req.set_map_cols(cols);
+          req.set_map_rows(rows);
+        }
+        pb::ErrorStats out;
+        grpc::Status st = conn.stub().GetErrorStats(ctx.get(), req, &out);
+        if (!st.ok()) return FromGrpc(st);
+        return out;
+      });
+  if (!stats.ok()) return stats.status();
+  report->error = *std::move(stats);
   std::vector<MarkPolyline> marks;
   if (report->scheme == SchemeKind::kTaylor) {
-    auto m = FetchMarks(conn, id);
+    auto m = Retrying<std::vector<MarkPolyline>>(
+        "the cutting marks", [&] { return FetchMarks(conn, id); });
     if (!m.ok()) return m.status();
     marks = *std::move(m);
     report->marks = Summarize(marks);
@@ -109,7 +146,9 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     return absl::FailedPreconditionError(
         absl::StrCat("cannot create --out ", options.dir, ": ", ec.message()));
   }
-  auto grid = FetchGrid(conn, id, stock, report->scheme);
+  auto grid = Retrying<SurfaceGrid>("the tiles", [&] {
+    return FetchGrid(conn, id, stock, report->scheme);
+  });
   if (!grid.ok()) return grid.status();
   ErrorRaster raster;
   raster.region = {stock.x0, stock.y0, stock.x1, stock.y1};
@@ -187,12 +226,12 @@ absl::Status WriteStatsJson(const RunReport& r, const std::string& path) {
 std::string Summary(const RunReport& r) {
   std::string s = absl::StrFormat(
       "%s: %d moves simulated (%s, %d x %d elements) on the %s\n"
-      "  time     parse %.2f s, simulate %.2f s (%.2fM moves/s), outputs %.2f s\n"
+      "  time     parse %.2f s, simulate %.2f s (%s), outputs %.2f s\n"
       "  error    max %.3g mm at (%.3f, %.3f), mean %.3g mm, rms %.3g mm "
       "(%d samples)\n",
       r.file, r.moves, r.scheme == SchemeKind::kZmap ? "zmap" : "taylor",
       r.stock.nx, r.stock.ny, r.server, r.parse_seconds, r.simulate_seconds,
-      r.simulate_seconds > 0 ? r.moves / r.simulate_seconds / 1e6 : 0.0,
+      Rate(r.simulate_seconds > 0 ? r.moves / r.simulate_seconds : 0),
       r.output_seconds, r.error.max_error(), r.error.max_x(), r.error.max_y(),
       r.error.mean_error(), r.error.rms_error(), r.error.samples());
   if (r.marks) {
