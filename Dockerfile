@@ -29,7 +29,8 @@ COPY --from=build /build/runtime-packages /tmp/runtime-packages
 RUN apt-get update \
  && xargs -a /tmp/runtime-packages apt-get install -y --no-install-recommends \
  && rm -rf /var/lib/apt/lists/* /tmp/runtime-packages \
- && useradd --system --uid 10001 --user-group --home-dir /var/lib/swarf \
+ && groupadd --gid 10001 swarf \
+ && useradd --uid 10001 --gid swarf --no-create-home --home-dir /var/lib/swarf \
       --shell /usr/sbin/nologin swarf \
  && mkdir -p /var/lib/swarf && chown swarf:swarf /var/lib/swarf
 COPY --from=build /build/bin/swarfd /build/bin/swarf /usr/local/bin/
