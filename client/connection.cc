@@ -1,10 +1,13 @@
 #include "client/connection.h"
 
 #include <chrono>
+#include <cstdlib>
+#include <fstream>
 #include <cstdio>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "client/args.h"
 
 namespace swarf::cli {
 
@@ -14,9 +17,47 @@ absl::Status FromGrpc(const grpc::Status& s) {
                       s.error_message());
 }
 
+namespace {
+
+absl::StatusOr<std::string> ReadFile(const std::string& flag,
+                                     const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--", flag, ": cannot read ", path));
+  }
+  return std::string((std::istreambuf_iterator<char>(in)),
+                     std::istreambuf_iterator<char>());
+}
+
+}  // namespace
+
+absl::StatusOr<ConnectionOptions> ConnectionOptionsFrom(const Args& args) {
+  ConnectionOptions o;
+  if (auto t = args.Get("token")) {
+    o.token = *t;
+  } else if (const char* env = std::getenv("SWARF_TOKEN")) {
+    o.token = env;
+  }
+  const std::pair<const char*, std::string*> files[] = {
+      {"tls-ca", &o.tls_ca}, {"tls-cert", &o.tls_cert}, {"tls-key", &o.tls_key}};
+  for (const auto& [flag, out] : files) {
+    if (auto path = args.Get(flag)) {
+      auto text = ReadFile(flag, *path);
+      if (!text.ok()) return text.status();
+      *out = *std::move(text);
+    }
+  }
+  if (o.tls_cert.empty() != o.tls_key.empty()) {
+    return absl::InvalidArgumentError("--tls-cert and --tls-key go together");
+  }
+  return o;
+}
+
 absl::StatusOr<std::unique_ptr<Connection>> Connection::Open(
-    const std::string& server) {
+    const std::string& server, const ConnectionOptions& options) {
   auto c = std::unique_ptr<Connection>(new Connection);
+  c->token_ = options.token;
   grpc::ChannelArguments args;
   args.SetMaxReceiveMessageSize(64 << 20);
   args.SetMaxSendMessageSize(64 << 20);
@@ -30,8 +71,16 @@ absl::StatusOr<std::unique_ptr<Connection>> Connection::Open(
     c->channel_ = c->embedded_->InProcessChannel();
     c->target_ = "embedded server";
   } else {
-    c->channel_ = grpc::CreateCustomChannel(
-        server, grpc::InsecureChannelCredentials(), args);
+    std::shared_ptr<grpc::ChannelCredentials> creds =
+        grpc::InsecureChannelCredentials();
+    if (!options.tls_ca.empty() || !options.tls_cert.empty()) {
+      grpc::SslCredentialsOptions ssl;
+      ssl.pem_root_certs = options.tls_ca;
+      ssl.pem_private_key = options.tls_key;
+      ssl.pem_cert_chain = options.tls_cert;
+      creds = grpc::SslCredentials(ssl);
+    }
+    c->channel_ = grpc::CreateCustomChannel(server, creds, args);
     c->target_ = server;
   }
   c->stub_ = pb::Swarf::NewStub(c->channel_);
@@ -42,6 +91,7 @@ std::unique_ptr<grpc::ClientContext> Connection::Context(
     const std::string& session_id, double timeout_s) const {
   auto ctx = std::make_unique<grpc::ClientContext>();
   if (!session_id.empty()) ctx->AddMetadata("x-swarf-session", session_id);
+  if (!token_.empty()) ctx->AddMetadata("authorization", "Bearer " + token_);
   ctx->set_deadline(std::chrono::system_clock::now() +
                     std::chrono::milliseconds(
                         static_cast<int64_t>(timeout_s * 1000)));

@@ -23,11 +23,29 @@ namespace pb = ::swarf::v1;
 // absl::Status of a gRPC status, with the code kept.
 absl::Status FromGrpc(const grpc::Status& s);
 
+// How to reach a remote server securely. Empty fields are not used.
+struct ConnectionOptions {
+  std::string token;     // sent as "authorization: Bearer <token>"
+  std::string tls_ca;    // PEM CA of the server's certificate: use TLS
+  std::string tls_cert;  // PEM client certificate (with tls_key)
+  std::string tls_key;
+};
+
+// The options of the CLI flags --token (or $SWARF_TOKEN), --tls-ca,
+// --tls-cert, --tls-key; InvalidArgument naming a file it cannot read.
+class Args;
+absl::StatusOr<ConnectionOptions> ConnectionOptionsFrom(const Args& args);
+// Those flags' names, for Args::Parse.
+inline const char* const kConnectionFlags[] = {"token", "tls-ca", "tls-cert",
+                                               "tls-key"};
+
 class Connection {
  public:
   // `server` empty: start an embedded server.
   static absl::StatusOr<std::unique_ptr<Connection>> Open(
-      const std::string& server);
+      const std::string& server, const ConnectionOptions& options = {});
+
+  std::shared_ptr<grpc::Channel> channel() { return channel_; }
 
   pb::Swarf::Stub& stub() { return *stub_; }
   bool embedded() const { return embedded_ != nullptr; }
@@ -38,6 +56,7 @@ class Connection {
                                                double timeout_s = 600) const;
 
  private:
+  std::string token_;
   std::unique_ptr<server::SwarfServer> embedded_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<pb::Swarf::Stub> stub_;

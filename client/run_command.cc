@@ -11,6 +11,7 @@
 #include <iostream>
 #include <map>
 #include <random>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -43,6 +44,9 @@ constexpr char kUsage[] =
     "  --scheme taylor|zmap         default taylor\n"
     "  --arc-tolerance T            chord tolerance for arcs, default 0.001\n"
     "  --server HOST:PORT           a running swarfd (default: embedded)\n"
+    "  --token T                    its bearer token (or $SWARF_TOKEN)\n"
+    "  --tls-ca FILE                use TLS, trusting this PEM CA\n"
+    "  --tls-cert FILE --tls-key FILE   a client certificate for TLS\n"
     "  --out DIR                    write relief.png, error.png, marks.png,\n"
     "                               marks.svg, marks.json, surface.stl,\n"
     "                               surface.wrl, stats.json\n"
@@ -245,11 +249,12 @@ std::string NewSessionId() {
 }  // namespace
 
 int RunCommand(const std::vector<std::string>& argv) {
-  auto args = Args::Parse(argv,
-                          {"tool", "stock", "spacing", "mesh", "scheme",
-                           "arc-tolerance", "server", "out", "subdivide",
-                           "batch"},
-                          {"json", "help", "quiet"});
+  std::set<std::string> valued = {"tool",   "stock",         "spacing",
+                                   "mesh",   "scheme",        "arc-tolerance",
+                                   "server", "out",           "subdivide",
+                                   "batch"};
+  valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
+  auto args = Args::Parse(argv, valued, {"json", "help", "quiet"});
   auto fail = [](const absl::Status& s, int code) {
     std::cerr << "swarf run: " << s.message() << "\n";
     return code;
@@ -320,7 +325,9 @@ int RunCommand(const std::vector<std::string>& argv) {
   if (!stock.ok()) return fail(stock.status(), 2);
 
   // Session.
-  auto conn = Connection::Open(args->Get("server").value_or(""));
+  auto copt = ConnectionOptionsFrom(*args);
+  if (!copt.ok()) return fail(copt.status(), 2);
+  auto conn = Connection::Open(args->Get("server").value_or(""), *copt);
   if (!conn.ok()) return fail(conn.status(), 1);
   const std::string id = NewSessionId();
   pb::CreateSessionRequest create;

@@ -19,10 +19,8 @@ namespace {
 // grpc.health.v1.Health/Check through a generic stub (the health proto is
 // not part of Debian's gRPC packages): the request for the whole server is
 // empty, the response is field 1 (status, varint: 1 = SERVING).
-absl::StatusOr<int> HealthStatus(const std::string& server, double timeout_s) {
-  auto channel =
-      grpc::CreateChannel(server, grpc::InsecureChannelCredentials());
-  grpc::GenericStub stub(channel);
+absl::StatusOr<int> HealthStatus(Connection& conn, double timeout_s) {
+  grpc::GenericStub stub(conn.channel());
   grpc::ClientContext ctx;
   ctx.set_deadline(std::chrono::system_clock::now() +
                    std::chrono::milliseconds(static_cast<int>(timeout_s * 1e3)));
@@ -55,6 +53,7 @@ std::optional<int> ParseServerArgs(const char* name, const char* usage,
                                    absl::StatusOr<Args>* args) {
   std::set<std::string> options = valued;
   options.insert("server");
+  options.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
   *args = Args::Parse(argv, options, {"help"});
   if (args->ok() && (*args)->Has("help")) {
     std::cout << usage;
@@ -75,6 +74,7 @@ std::optional<int> ParseServerArgs(const char* name, const char* usage,
 int HealthCommand(const std::vector<std::string>& argv) {
   constexpr char kUsage[] =
       "usage: swarf health --server HOST:PORT [--timeout SECONDS]\n"
+      "                    [--token T] [--tls-ca FILE [--tls-cert F --tls-key F]]\n"
       "Exits 0 when the server answers SERVING (for health checks).\n";
   absl::StatusOr<Args> args;
   if (auto done = ParseServerArgs("health", kUsage, argv, {"timeout"}, &args)) {
@@ -85,7 +85,17 @@ int HealthCommand(const std::vector<std::string>& argv) {
     std::cerr << "swarf health: --timeout must be a number\n";
     return 2;
   }
-  auto status = HealthStatus(*args->Get("server"), timeout);
+  auto copt = ConnectionOptionsFrom(*args);
+  if (!copt.ok()) {
+    std::cerr << "swarf health: " << copt.status().message() << "\n";
+    return 2;
+  }
+  auto conn = Connection::Open(*args->Get("server"), *copt);
+  if (!conn.ok()) {
+    std::cerr << "swarf health: " << conn.status().message() << "\n";
+    return 1;
+  }
+  auto status = HealthStatus(**conn, timeout);
   if (!status.ok()) {
     std::cerr << "swarf health: " << *args->Get("server") << ": "
               << status.status().message() << "\n";
@@ -101,13 +111,19 @@ int HealthCommand(const std::vector<std::string>& argv) {
 
 int SessionsCommand(const std::vector<std::string>& argv) {
   constexpr char kUsage[] =
-      "usage: swarf sessions --server HOST:PORT\n"
+      "usage: swarf sessions --server HOST:PORT [--token T]\n"
+      "                      [--tls-ca FILE [--tls-cert F --tls-key F]]\n"
       "Lists the server's sessions.\n";
   absl::StatusOr<Args> args;
   if (auto done = ParseServerArgs("sessions", kUsage, argv, {}, &args)) {
     return *done;
   }
-  auto conn = Connection::Open(*args->Get("server"));
+  auto copt = ConnectionOptionsFrom(*args);
+  if (!copt.ok()) {
+    std::cerr << "swarf sessions: " << copt.status().message() << "\n";
+    return 2;
+  }
+  auto conn = Connection::Open(*args->Get("server"), *copt);
   if (!conn.ok()) {
     std::cerr << "swarf sessions: " << conn.status().message() << "\n";
     return 1;

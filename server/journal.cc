@@ -84,7 +84,8 @@ uint32_t Crc32c(const void* data, size_t size, uint32_t crc) {
 }
 
 absl::StatusOr<std::unique_ptr<Journal>> Journal::Create(
-    const std::string& path, const std::string& definition, JournalSync sync) {
+    const std::string& path, const std::string& definition,
+    const std::string& owner, JournalSync sync) {
   std::error_code ec;
   if (std::filesystem::exists(path, ec)) {
     return absl::AlreadyExistsError(
@@ -104,7 +105,7 @@ absl::StatusOr<std::unique_ptr<Journal>> Journal::Create(
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(j->db_,
                          "INSERT INTO meta (key, value) VALUES (?, ?), "
-                         "('format', ?), ('definition_crc', ?);",
+                         "('format', ?), ('definition_crc', ?), ('owner', ?);",
                          -1, &st, nullptr) != SQLITE_OK) {
     return SqlError(j->db_, "prepare meta");
   }
@@ -113,6 +114,7 @@ absl::StatusOr<std::unique_ptr<Journal>> Journal::Create(
                     SQLITE_TRANSIENT);
   sqlite3_bind_int(st, 3, kFormatVersion);
   sqlite3_bind_int64(st, 4, Crc32c(definition.data(), definition.size()));
+  sqlite3_bind_text(st, 5, owner.c_str(), -1, SQLITE_TRANSIENT);
   const int rc = sqlite3_step(st);
   sqlite3_finalize(st);
   if (rc != SQLITE_DONE) return SqlError(j->db_, "write definition");
@@ -121,7 +123,8 @@ absl::StatusOr<std::unique_ptr<Journal>> Journal::Create(
 }
 
 absl::StatusOr<std::unique_ptr<Journal>> Journal::Open(
-    const std::string& path, JournalSync sync, std::string* definition) {
+    const std::string& path, JournalSync sync, std::string* definition,
+    std::string* owner) {
   auto db = OpenDb(path, SQLITE_OPEN_READWRITE);
   if (!db.ok()) return db.status();
   std::unique_ptr<Journal> j(new Journal(*db, path));
@@ -152,6 +155,9 @@ absl::StatusOr<std::unique_ptr<Journal>> Journal::Open(
       have_crc = true;
     } else if (key == "format") {
       format = sqlite3_column_int(st, 1);
+    } else if (key == "owner") {
+      const unsigned char* t = sqlite3_column_text(st, 1);
+      owner->assign(t != nullptr ? reinterpret_cast<const char*>(t) : "");
     }
   }
   sqlite3_finalize(st);

@@ -45,12 +45,15 @@ class Journal {
 
   // Creates a new journal at `path` holding `definition` (opaque bytes).
   // ALREADY_EXISTS if the file exists.
+  // `owner` is kept beside it (the session's principal).
   static absl::StatusOr<std::unique_ptr<Journal>> Create(
       const std::string& path, const std::string& definition,
-      JournalSync sync);
-  // Opens an existing journal; `definition` receives what Create stored.
+      const std::string& owner, JournalSync sync);
+  // Opens an existing journal; `definition` and `owner` receive what Create
+  // stored.
   static absl::StatusOr<std::unique_ptr<Journal>> Open(
-      const std::string& path, JournalSync sync, std::string* definition);
+      const std::string& path, JournalSync sync, std::string* definition,
+      std::string* owner);
   ~Journal();
 
   // Appends a batch durably (per the sync mode) before it is applied.

@@ -31,6 +31,15 @@ ABSL_FLAG(std::string, log_level, "info", "trace|debug|info|warn|error");
 ABSL_FLAG(std::string, data_dir, "./swarf-data",
           "where sessions are journaled (one SQLite file each) and restored "
           "from at start; empty: keep sessions in memory only");
+ABSL_FLAG(std::string, auth_tokens_file, "",
+          "bearer tokens, one per line (reread when the file changes); "
+          "clients send 'authorization: Bearer <token>'; empty: no auth");
+ABSL_FLAG(std::string, tls_cert, "", "PEM certificate chain: serve TLS");
+ABSL_FLAG(std::string, tls_key, "", "PEM private key of --tls_cert");
+ABSL_FLAG(std::string, tls_client_ca, "",
+          "PEM CA: clients must present a certificate it signed");
+ABSL_FLAG(bool, insecure_public, false,
+          "allow a non-loopback --listen without --auth_tokens_file");
 ABSL_FLAG(std::string, journal_sync, "full",
           "full: a batch is on disk (fsync) when acknowledged; normal: "
           "survives a crash of swarfd, not of the machine; off");
@@ -71,6 +80,11 @@ int main(int argc, char** argv) {
   options.limits.max_message_bytes = absl::GetFlag(FLAGS_max_message_mb) << 20;
   options.replica = ReplicaName();
   options.persistence.data_dir = absl::GetFlag(FLAGS_data_dir);
+  options.auth_tokens_file = absl::GetFlag(FLAGS_auth_tokens_file);
+  options.tls_cert = absl::GetFlag(FLAGS_tls_cert);
+  options.tls_key = absl::GetFlag(FLAGS_tls_key);
+  options.tls_client_ca = absl::GetFlag(FLAGS_tls_client_ca);
+  options.insecure_public = absl::GetFlag(FLAGS_insecure_public);
   const std::string sync = absl::GetFlag(FLAGS_journal_sync);
   if (sync == "full") {
     options.persistence.sync = swarf::server::JournalSync::kFull;

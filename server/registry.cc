@@ -62,7 +62,7 @@ absl::StatusOr<std::shared_ptr<Session>> Registry::Create(SessionSpec spec) {
       std::unique_ptr<Journal>();
   if (!persistence_.data_dir.empty()) {
     journal = Journal::Create(JournalPath(id), Session::Definition(spec),
-                              persistence_.sync);
+                              spec.owner, persistence_.sync);
   }
   absl::StatusOr<std::shared_ptr<Session>> session =
       journal.ok() ? Session::Create(std::move(spec), *std::move(journal))
@@ -153,19 +153,22 @@ absl::StatusOr<int> Registry::RestoreAll() {
 }
 
 absl::StatusOr<std::shared_ptr<Session>> Registry::Get(
-    const std::string& id) const {
+    const std::string& id, const std::string& principal) const {
   absl::MutexLock l(&mu_);
   auto it = sessions_.find(id);
-  if (it == sessions_.end() || it->second == nullptr) {
+  if (it == sessions_.end() || it->second == nullptr ||
+      it->second->spec().owner != principal) {
     return absl::NotFoundError(absl::StrCat("no session ", id));
   }
   return it->second;
 }
 
-absl::Status Registry::Delete(const std::string& id) {
+absl::Status Registry::Delete(const std::string& id,
+                              const std::string& principal) {
   absl::MutexLock l(&mu_);
   auto it = sessions_.find(id);
-  if (it == sessions_.end() || it->second == nullptr) {
+  if (it == sessions_.end() || it->second == nullptr ||
+      it->second->spec().owner != principal) {
     return absl::NotFoundError(absl::StrCat("no session ", id));
   }
   reserved_bytes_ -= Session::EstimateMemoryBytes(it->second->spec().stock,
@@ -176,11 +179,12 @@ absl::Status Registry::Delete(const std::string& id) {
   return absl::OkStatus();
 }
 
-std::vector<std::shared_ptr<Session>> Registry::List() const {
+std::vector<std::shared_ptr<Session>> Registry::List(
+    const std::string& principal) const {
   absl::MutexLock l(&mu_);
   std::vector<std::shared_ptr<Session>> out;
   for (const auto& [id, s] : sessions_) {
-    if (s != nullptr) out.push_back(s);
+    if (s != nullptr && s->spec().owner == principal) out.push_back(s);
   }
   return out;
 }

@@ -44,10 +44,15 @@ class Registry {
   // limits, then creates. ALREADY_EXISTS, RESOURCE_EXHAUSTED,
   // INVALID_ARGUMENT.
   absl::StatusOr<std::shared_ptr<Session>> Create(SessionSpec spec);
-  // NOT_FOUND when absent.
-  absl::StatusOr<std::shared_ptr<Session>> Get(const std::string& id) const;
-  absl::Status Delete(const std::string& id);
-  std::vector<std::shared_ptr<Session>> List() const;
+  // NOT_FOUND when absent, or when it belongs to another principal (so
+  // that its existence is not revealed).
+  absl::StatusOr<std::shared_ptr<Session>> Get(
+      const std::string& id, const std::string& principal = "") const;
+  absl::Status Delete(const std::string& id,
+                      const std::string& principal = "");
+  // The sessions of `principal`.
+  std::vector<std::shared_ptr<Session>> List(
+      const std::string& principal = "") const;
 
   const Limits& limits() const { return limits_; }
 

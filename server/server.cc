@@ -1,6 +1,7 @@
 #include "server/server.h"
 
 #include <chrono>
+#include <fstream>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -21,8 +22,48 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
         "max_message_bytes must be at least ", kMinMessageBytes,
         " (a tile with derivatives is about 131 KB)"));
   }
+  auto tokens = TokenStore::Open(options.auth_tokens_file);
+  if (!tokens.ok()) return tokens.status();
+  if (!options.listen.empty() && !IsLoopback(options.listen) &&
+      !(*tokens)->enabled() && !options.insecure_public) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "refusing to serve ", options.listen,
+        " without authentication: give --auth_tokens_file, listen on "
+        "127.0.0.1, or pass --insecure_public if the network is the "
+        "boundary"));
+  }
+  std::shared_ptr<grpc::ServerCredentials> creds =
+      grpc::InsecureServerCredentials();
+  if (!options.tls_cert.empty() || !options.tls_key.empty()) {
+    auto read = [](const std::string& path) -> absl::StatusOr<std::string> {
+      std::ifstream in(path, std::ios::binary);
+      if (!in) return absl::FailedPreconditionError(absl::StrCat(
+          "cannot read ", path));
+      return std::string((std::istreambuf_iterator<char>(in)),
+                         std::istreambuf_iterator<char>());
+    };
+    auto cert = read(options.tls_cert);
+    auto key = read(options.tls_key);
+    if (!cert.ok()) return cert.status();
+    if (!key.ok()) return key.status();
+    grpc::SslServerCredentialsOptions ssl;
+    ssl.pem_key_cert_pairs.push_back({*key, *cert});
+    if (!options.tls_client_ca.empty()) {
+      auto ca = read(options.tls_client_ca);
+      if (!ca.ok()) return ca.status();
+      ssl.pem_root_certs = *ca;
+      ssl.client_certificate_request =
+          GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY;
+    }
+    creds = grpc::SslServerCredentials(ssl);
+  } else if (!options.tls_client_ca.empty()) {
+    return absl::InvalidArgumentError(
+        "tls_client_ca needs tls_cert and tls_key");
+  }
+
   std::unique_ptr<SwarfServer> s(new SwarfServer);
   s->options_ = options;
+  s->tokens_ = *std::move(tokens);
   s->registry_ =
       std::make_unique<Registry>(options.limits, options.persistence);
   // Sessions come back before the first call is accepted.
@@ -41,14 +82,14 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
                           : static_cast<int>(std::thread::hardware_concurrency());
   s->executor_ = std::make_unique<Executor>(threads);
   s->service_ = std::make_unique<SwarfService>(
-      s->registry_.get(), s->executor_.get(), options.replica);
+      s->registry_.get(), s->executor_.get(), s->tokens_.get(),
+      options.replica);
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
   if (!options.listen.empty()) {
-    builder.AddListeningPort(options.listen, grpc::InsecureServerCredentials(),
-                             &s->port_);
+    builder.AddListeningPort(options.listen, creds, &s->port_);
   }
   builder.RegisterService(s->service_.get());
   builder.SetMaxReceiveMessageSize(options.limits.max_message_bytes);
@@ -60,6 +101,17 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
   }
   s->server_->GetHealthCheckService()->SetServingStatus(true);
   return s;
+}
+
+bool IsLoopback(const std::string& listen) {
+  const size_t colon = listen.rfind(':');
+  std::string host = listen.substr(0, colon == std::string::npos ? listen.size()
+                                                                  : colon);
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']') {
+    host = host.substr(1, host.size() - 2);
+  }
+  return host == "localhost" || host == "::1" || host.rfind("127.", 0) == 0 ||
+         listen.rfind("unix:", 0) == 0;
 }
 
 SwarfServer::~SwarfServer() { Shutdown(absl::Seconds(1)); }

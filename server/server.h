@@ -25,7 +25,17 @@ struct ServerOptions {
   // Journal sessions under data_dir and restore them at start; empty: in
   // memory only (tests, the CLI's embedded server).
   Persistence persistence;
+  // Bearer tokens, one per line (see auth.h); empty: no authentication.
+  std::string auth_tokens_file;
+  // TLS: PEM files of the server's certificate chain and key; with
+  // tls_client_ca, clients must present a certificate it signed.
+  std::string tls_cert, tls_key, tls_client_ca;
+  // Without tokens the server only listens on loopback unless this is set.
+  bool insecure_public = false;
 };
+
+// Whether a listen address (host:port) is on the loopback interface.
+bool IsLoopback(const std::string& listen);
 
 // Thread-safe.
 class SwarfServer {
@@ -47,6 +57,7 @@ class SwarfServer {
  private:
   SwarfServer() = default;
   ServerOptions options_;
+  std::unique_ptr<TokenStore> tokens_;
   std::unique_ptr<Registry> registry_;
   std::unique_ptr<Executor> executor_;
   std::unique_ptr<SwarfService> service_;

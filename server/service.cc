@@ -44,12 +44,28 @@ absl::StatusOr<std::string> SessionIdOf(grpc::CallbackServerContext* ctx,
   return id;
 }
 
+// The caller's principal, from its `authorization` metadata; "" when
+// authentication is off; UNAUTHENTICATED when the token is missing or wrong.
+absl::StatusOr<std::string> PrincipalOf(TokenStore* tokens,
+                                        grpc::CallbackServerContext* ctx) {
+  if (!tokens->enabled()) return std::string();
+  std::string auth;
+  const auto& md = ctx->client_metadata();
+  if (auto it = md.find("authorization"); it != md.end()) {
+    auth.assign(it->second.data(), it->second.size());
+  }
+  return tokens->Check(auth);
+}
+
+// The caller's session, NOT_FOUND when it is another principal's.
 absl::StatusOr<std::shared_ptr<Session>> SessionOf(
-    Registry* registry, grpc::CallbackServerContext* ctx,
+    Registry* registry, TokenStore* tokens, grpc::CallbackServerContext* ctx,
     const std::string& field) {
+  auto principal = PrincipalOf(tokens, ctx);
+  if (!principal.ok()) return principal.status();
   auto id = SessionIdOf(ctx, field);
   if (!id.ok()) return id.status();
-  return registry->Get(*id);
+  return registry->Get(*id, *principal);
 }
 
 // Runs `work` on the executor and finishes the unary call with its status.
@@ -198,10 +214,11 @@ class SimulateReactor
     : public grpc::ServerBidiReactor<pb::SimulateRequest, pb::SimulateResponse> {
  public:
   SimulateReactor(grpc::CallbackServerContext* ctx, Registry* registry,
-                  Executor* executor, const std::string& replica)
+                  Executor* executor, TokenStore* tokens,
+                  const std::string& replica)
       : ctx_(ctx), registry_(registry), executor_(executor) {
     ctx->AddInitialMetadata(kReplicaMetadata, replica);
-    auto session = SessionOf(registry, ctx, "");
+    auto session = SessionOf(registry, tokens, ctx, "");
     if (!session.ok()) {
       finished_ = true;
       Finish(ToGrpcStatus(session.status()));
@@ -588,6 +605,8 @@ grpc::ServerUnaryReactor* SwarfService::CreateSession(
     grpc::CallbackServerContext* ctx, const pb::CreateSessionRequest* req,
     pb::Session* resp) {
   return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+    auto principal = PrincipalOf(tokens_, ctx);
+    if (!principal.ok()) return principal.status();
     pb::CreateSessionRequest r = *req;
     if (r.session_id().empty()) {
       // A client that chose its id for routing may send it only as metadata.
@@ -598,6 +617,7 @@ grpc::ServerUnaryReactor* SwarfService::CreateSession(
     }
     auto spec = SpecFromRequest(r);
     if (!spec.ok()) return spec.status();
+    spec->owner = *principal;
     auto session = registry_->Create(*std::move(spec));
     if (!session.ok()) return session.status();
     FillSession(**session, replica_, resp);
@@ -612,7 +632,7 @@ grpc::ServerUnaryReactor* SwarfService::GetSession(
     grpc::CallbackServerContext* ctx, const pb::GetSessionRequest* req,
     pb::Session* resp) {
   return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
-    auto session = SessionOf(registry_, ctx, req->session_id());
+    auto session = SessionOf(registry_, tokens_, ctx, req->session_id());
     if (!session.ok()) return session.status();
     FillSession(**session, replica_, resp);
     return absl::OkStatus();
@@ -623,7 +643,9 @@ grpc::ServerUnaryReactor* SwarfService::ListSessions(
     grpc::CallbackServerContext* ctx, const pb::ListSessionsRequest*,
     pb::ListSessionsResponse* resp) {
   return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
-    for (const auto& s : registry_->List()) {
+    auto principal = PrincipalOf(tokens_, ctx);
+    if (!principal.ok()) return principal.status();
+    for (const auto& s : registry_->List(*principal)) {
       FillSession(*s, replica_, resp->add_sessions());
     }
     return absl::OkStatus();
@@ -634,9 +656,11 @@ grpc::ServerUnaryReactor* SwarfService::DeleteSession(
     grpc::CallbackServerContext* ctx, const pb::DeleteSessionRequest* req,
     pb::DeleteSessionResponse*) {
   return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+    auto principal = PrincipalOf(tokens_, ctx);
+    if (!principal.ok()) return principal.status();
     auto id = SessionIdOf(ctx, req->session_id());
     if (!id.ok()) return id.status();
-    absl::Status s = registry_->Delete(*id);
+    absl::Status s = registry_->Delete(*id, *principal);
     if (s.ok()) spdlog::info("session {}: deleted", *id);
     return s;
   });
@@ -644,7 +668,7 @@ grpc::ServerUnaryReactor* SwarfService::DeleteSession(
 
 grpc::ServerBidiReactor<pb::SimulateRequest, pb::SimulateResponse>*
 SwarfService::Simulate(grpc::CallbackServerContext* ctx) {
-  return new SimulateReactor(ctx, registry_, executor_, replica_);
+  return new SimulateReactor(ctx, registry_, executor_, tokens_, replica_);
 }
 
 grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(
@@ -658,12 +682,13 @@ grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(
   };
   auto state = std::make_shared<State>();
   Registry* registry = registry_;
+  TokenStore* tokens = tokens_;
   return new ChunkedWriter<pb::Tile>(
       ctx, executor_, replica_,
       [=](std::deque<pb::Tile>* out) -> absl::StatusOr<bool> {
         if (!state->started) {
           state->started = true;
-          auto session = SessionOf(registry, ctx, req->session_id());
+          auto session = SessionOf(registry, tokens, ctx, req->session_id());
           if (!session.ok()) return session.status();
           state->session = *session;
           absl::Status st = state->session->Read([&](const Workpiece& wp) {
@@ -702,7 +727,7 @@ grpc::ServerUnaryReactor* SwarfService::GetErrorStats(
     grpc::CallbackServerContext* ctx, const pb::GetErrorStatsRequest* req,
     pb::ErrorStats* resp) {
   return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
-    auto session = SessionOf(registry_, ctx, req->session_id());
+    auto session = SessionOf(registry_, tokens_, ctx, req->session_id());
     if (!session.ok()) return session.status();
     auto stats = (*session)->Read([&](const Workpiece& wp) {
       return ComputeStats(wp, req->has_region() ? &req->region() : nullptr,
@@ -718,10 +743,11 @@ grpc::ServerUnaryReactor* SwarfService::GetErrorStats(
 grpc::ServerWriteReactor<pb::Polyline>* SwarfService::GetCuttingMarks(
     grpc::CallbackServerContext* ctx, const pb::GetCuttingMarksRequest* req) {
   Registry* registry = registry_;
+  TokenStore* tokens = tokens_;
   return new ChunkedWriter<pb::Polyline>(
       ctx, executor_, replica_,
       [=](std::deque<pb::Polyline>* out) -> absl::StatusOr<bool> {
-        auto session = SessionOf(registry, ctx, req->session_id());
+        auto session = SessionOf(registry, tokens, ctx, req->session_id());
         if (!session.ok()) return session.status();
         auto marks = (*session)->Read([&](const Workpiece& wp) {
           return ComputeMarks(wp, req->has_region() ? &req->region() : nullptr,
@@ -738,7 +764,7 @@ grpc::ServerUnaryReactor* SwarfService::Probe(
     grpc::CallbackServerContext* ctx, const pb::ProbeRequest* req,
     pb::ProbeResponse* resp) {
   return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
-    auto session = SessionOf(registry_, ctx, req->session_id());
+    auto session = SessionOf(registry_, tokens_, ctx, req->session_id());
     if (!session.ok()) return session.status();
     auto probe = (*session)->Read(
         [&](const Workpiece& wp) { return ComputeProbe(wp, *req); });

@@ -7,6 +7,7 @@
 
 #include <string>
 
+#include "server/auth.h"
 #include "server/executor.h"
 #include "server/registry.h"
 #include "swarf/v1/swarf.grpc.pb.h"
@@ -20,9 +21,14 @@ inline constexpr char kReplicaMetadata[] = "x-swarf-replica";
 
 class SwarfService final : public ::swarf::v1::Swarf::CallbackService {
  public:
-  // registry and executor are not owned and must outlive the service.
-  SwarfService(Registry* registry, Executor* executor, std::string replica)
-      : registry_(registry), executor_(executor), replica_(std::move(replica)) {}
+  // registry, executor and tokens are not owned and must outlive the
+  // service.
+  SwarfService(Registry* registry, Executor* executor, TokenStore* tokens,
+               std::string replica)
+      : registry_(registry),
+        executor_(executor),
+        tokens_(tokens),
+        replica_(std::move(replica)) {}
 
   grpc::ServerUnaryReactor* CreateSession(
       grpc::CallbackServerContext* ctx,
@@ -60,6 +66,7 @@ class SwarfService final : public ::swarf::v1::Swarf::CallbackService {
  private:
   Registry* const registry_;
   Executor* const executor_;
+  TokenStore* const tokens_;
   const std::string replica_;
 };
 

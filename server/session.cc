@@ -63,8 +63,8 @@ std::string Session::Definition(const SessionSpec& spec) {
 
 absl::StatusOr<std::shared_ptr<Session>> Session::Restore(
     const std::string& path, JournalSync sync) {
-  std::string definition;
-  auto journal = Journal::Open(path, sync, &definition);
+  std::string definition, owner;
+  auto journal = Journal::Open(path, sync, &definition, &owner);
   if (!journal.ok()) return journal.status();
   pb::CreateSessionRequest req;
   if (!req.ParseFromString(definition)) {
@@ -73,6 +73,7 @@ absl::StatusOr<std::shared_ptr<Session>> Session::Restore(
   }
   auto spec = SpecFromRequest(req);
   if (!spec.ok()) return spec.status();
+  spec->owner = owner;
   auto session = Create(*std::move(spec));
   if (!session.ok()) return session.status();
   Session& s = **session;

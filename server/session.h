@@ -30,6 +30,8 @@ struct ToolSpec {
 
 struct SessionSpec {
   std::string id;
+  // The principal (see auth.h) that created the session; "" without auth.
+  std::string owner;
   StockSpec stock;
   SchemeKind scheme = SchemeKind::kTaylor;
   std::vector<ToolSpec> tools;

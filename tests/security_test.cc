@@ -1,0 +1,245 @@
+// Security: bearer tokens (UNAUTHENTICATED without a valid one; a session
+// is invisible to other tokens; the token file is reread when it changes),
+// the safe default (no public address without auth), and TLS with optional
+// client certificates (certificates made by openssl at test time).
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <thread>
+
+#include "grpcpp/grpcpp.h"
+#include "gtest/gtest.h"
+#include "server/server.h"
+#include "swarf/v1/swarf.grpc.pb.h"
+
+namespace swarf::server {
+namespace {
+
+namespace pb = ::swarf::v1;
+namespace fs = std::filesystem;
+
+class SecurityTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() /
+           ("swarf-sec-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    server_.reset();
+    fs::remove_all(dir_);
+  }
+
+  void WriteTokens(const std::string& text) {
+    std::ofstream(dir_ / "tokens") << text;
+  }
+
+  void Start(ServerOptions opt) {
+    opt.listen = "127.0.0.1:0";
+    auto s = SwarfServer::Start(opt);
+    ASSERT_TRUE(s.ok()) << s.status();
+    server_ = *std::move(s);
+  }
+
+  std::unique_ptr<pb::Swarf::Stub> Stub(
+      std::shared_ptr<grpc::ChannelCredentials> creds =
+          grpc::InsecureChannelCredentials()) {
+    grpc::ChannelArguments args;
+    // The test certificate is for "localhost".
+    args.SetSslTargetNameOverride("localhost");
+    return pb::Swarf::NewStub(grpc::CreateCustomChannel(
+        "127.0.0.1:" + std::to_string(server_->port()), creds, args));
+  }
+
+  static std::unique_ptr<grpc::ClientContext> Ctx(const std::string& token,
+                                                  const std::string& id = "") {
+    auto c = std::make_unique<grpc::ClientContext>();
+    if (!token.empty()) c->AddMetadata("authorization", "Bearer " + token);
+    if (!id.empty()) c->AddMetadata("x-swarf-session", id);
+    c->set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(20));
+    return c;
+  }
+
+  static pb::CreateSessionRequest Request(const std::string& id) {
+    pb::CreateSessionRequest r;
+    r.set_session_id(id);
+    r.mutable_stock()->set_x1(10);
+    r.mutable_stock()->set_y1(10);
+    r.set_nx(10);
+    r.set_ny(10);
+    pb::Tool* t = r.add_tools();
+    t->set_id(1);
+    t->mutable_ball()->set_radius(1);
+    return r;
+  }
+
+  grpc::StatusCode Create(pb::Swarf::Stub* stub, const std::string& token,
+                          const std::string& id) {
+    pb::Session s;
+    return stub->CreateSession(Ctx(token).get(), Request(id), &s).error_code();
+  }
+  grpc::StatusCode Get(pb::Swarf::Stub* stub, const std::string& token,
+                       const std::string& id) {
+    pb::GetSessionRequest r;
+    r.set_session_id(id);
+    pb::Session s;
+    return stub->GetSession(Ctx(token).get(), r, &s).error_code();
+  }
+  // A Simulate stream's status after one batch.
+  grpc::StatusCode Stream(pb::Swarf::Stub* stub, const std::string& token,
+                          const std::string& id, bool* acked) {
+    auto ctx = Ctx(token, id);
+    auto s = stub->Simulate(ctx.get());
+    pb::SimulateRequest req;
+    req.mutable_moves()->set_seq(1);
+    req.mutable_moves()->set_tool_id(1);
+    for (double v : {2.0, 2.0, -0.5, 8.0, 2.0, -0.5}) {
+      req.mutable_moves()->add_xyz(v);
+    }
+    s->Write(req);
+    s->WritesDone();
+    pb::SimulateResponse resp;
+    *acked = false;
+    while (s->Read(&resp)) *acked |= resp.has_ack();
+    return s->Finish().error_code();
+  }
+
+  fs::path dir_;
+  std::unique_ptr<SwarfServer> server_;
+};
+
+TEST_F(SecurityTest, TokensAuthenticateAndSessionsBelongToTheirCreator) {
+  WriteTokens("# team tokens\nalpha-token\n\n  beta-token  \n");
+  ServerOptions opt;
+  opt.auth_tokens_file = (dir_ / "tokens").string();
+  ASSERT_NO_FATAL_FAILURE(Start(opt));
+  auto stub = Stub();
+  using C = grpc::StatusCode;
+  // No token, a wrong one: UNAUTHENTICATED, whatever the call.
+  EXPECT_EQ(Create(stub.get(), "", "s1"), C::UNAUTHENTICATED);
+  EXPECT_EQ(Create(stub.get(), "gamma-token", "s1"), C::UNAUTHENTICATED);
+  EXPECT_EQ(Get(stub.get(), "", "s1"), C::UNAUTHENTICATED);
+  bool acked;
+  EXPECT_EQ(Stream(stub.get(), "", "s1", &acked), C::UNAUTHENTICATED);
+  {
+    pb::ListSessionsResponse list;
+    EXPECT_EQ(stub->ListSessions(Ctx("").get(), {}, &list).error_code(),
+              C::UNAUTHENTICATED);
+  }
+  // alpha's session: alpha uses it; to beta it does not exist.
+  ASSERT_EQ(Create(stub.get(), "alpha-token", "s1"), C::OK);
+  EXPECT_EQ(Get(stub.get(), "alpha-token", "s1"), C::OK);
+  EXPECT_EQ(Stream(stub.get(), "alpha-token", "s1", &acked), C::OK);
+  EXPECT_TRUE(acked);
+  EXPECT_EQ(Get(stub.get(), "beta-token", "s1"), C::NOT_FOUND);
+  EXPECT_EQ(Get(stub.get(), "beta-token", "no-such"), C::NOT_FOUND);
+  EXPECT_EQ(Stream(stub.get(), "beta-token", "s1", &acked), C::NOT_FOUND);
+  EXPECT_FALSE(acked);
+  {
+    pb::ListSessionsResponse list;
+    ASSERT_TRUE(stub->ListSessions(Ctx("beta-token").get(), {}, &list).ok());
+    EXPECT_EQ(list.sessions_size(), 0);
+    ASSERT_TRUE(stub->ListSessions(Ctx("alpha-token").get(), {}, &list).ok());
+    EXPECT_EQ(list.sessions_size(), 1);
+  }
+  {
+    pb::DeleteSessionRequest del;
+    del.set_session_id("s1");
+    pb::DeleteSessionResponse r;
+    EXPECT_EQ(stub->DeleteSession(Ctx("beta-token").get(), del, &r).error_code(),
+              C::NOT_FOUND);
+    EXPECT_EQ(Get(stub.get(), "alpha-token", "s1"), C::OK);
+  }
+  // The file changes: gamma is in, beta is out, without a restart.
+  std::this_thread::sleep_for(std::chrono::milliseconds(1100));
+  WriteTokens("alpha-token\ngamma-token\n");
+  bool switched = false;
+  for (int i = 0; i < 40 && !switched; ++i) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    switched = Create(stub.get(), "gamma-token", "s2") == C::OK;
+  }
+  EXPECT_TRUE(switched) << "the token file was not reread";
+  EXPECT_EQ(Get(stub.get(), "beta-token", "s1"), C::UNAUTHENTICATED);
+  EXPECT_EQ(Get(stub.get(), "alpha-token", "s1"), C::OK);
+}
+
+TEST_F(SecurityTest, NoPublicAddressWithoutAuthUnlessAskedFor) {
+  ServerOptions opt;
+  opt.listen = "0.0.0.0:0";
+  auto refused = SwarfServer::Start(opt);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(refused.status().message().find("--insecure_public"),
+            std::string::npos);
+  opt.insecure_public = true;
+  EXPECT_TRUE(SwarfServer::Start(opt).ok());
+  opt.insecure_public = false;
+  WriteTokens("t\n");
+  opt.auth_tokens_file = (dir_ / "tokens").string();
+  EXPECT_TRUE(SwarfServer::Start(opt).ok());
+  EXPECT_TRUE(IsLoopback("127.0.0.1:50051"));
+  EXPECT_TRUE(IsLoopback("localhost:1"));
+  EXPECT_TRUE(IsLoopback("[::1]:1"));
+  EXPECT_FALSE(IsLoopback("0.0.0.0:1"));
+  EXPECT_FALSE(IsLoopback("[::]:1"));
+  EXPECT_FALSE(IsLoopback("10.1.2.3:1"));
+}
+
+// A CA, a server certificate for localhost and a client certificate.
+bool MakeCertificates(const fs::path& d) {
+  const std::string q = "cd '" + d.string() + "' && ";
+  const std::string cmds[] = {
+      "openssl req -x509 -newkey rsa:2048 -nodes -days 2 -subj /CN=swarf-ca "
+      "-keyout ca.key -out ca.pem",
+      "openssl req -newkey rsa:2048 -nodes -subj /CN=localhost -keyout "
+      "server.key -out server.csr",
+      "printf 'subjectAltName=DNS:localhost,IP:127.0.0.1' > san.ext && "
+      "openssl x509 -req -in server.csr -CA ca.pem -CAkey ca.key "
+      "-CAcreateserial -days 2 -extfile san.ext -out server.pem",
+      "openssl req -newkey rsa:2048 -nodes -subj /CN=client -keyout "
+      "client.key -out client.csr",
+      "openssl x509 -req -in client.csr -CA ca.pem -CAkey ca.key "
+      "-CAcreateserial -days 2 -out client.pem"};
+  for (const std::string& c : cmds) {
+    if (std::system((q + c + " >/dev/null 2>&1").c_str()) != 0) return false;
+  }
+  return true;
+}
+
+std::string Read(const fs::path& p) {
+  std::ifstream in(p);
+  return std::string((std::istreambuf_iterator<char>(in)),
+                     std::istreambuf_iterator<char>());
+}
+
+TEST_F(SecurityTest, TlsAndClientCertificates) {
+  ASSERT_TRUE(MakeCertificates(dir_)) << "openssl failed (install-deps has it)";
+  ServerOptions opt;
+  opt.tls_cert = (dir_ / "server.pem").string();
+  opt.tls_key = (dir_ / "server.key").string();
+  ASSERT_NO_FATAL_FAILURE(Start(opt));
+  grpc::SslCredentialsOptions ssl;
+  ssl.pem_root_certs = Read(dir_ / "ca.pem");
+  EXPECT_EQ(Create(Stub(grpc::SslCredentials(ssl)).get(), "", "tls1"),
+            grpc::StatusCode::OK);
+  // Plaintext to a TLS port fails.
+  EXPECT_NE(Create(Stub().get(), "", "plain"), grpc::StatusCode::OK);
+
+  // Client certificates required: without one no call gets through.
+  server_.reset();
+  opt.tls_client_ca = (dir_ / "ca.pem").string();
+  ASSERT_NO_FATAL_FAILURE(Start(opt));
+  EXPECT_NE(Create(Stub(grpc::SslCredentials(ssl)).get(), "", "nocert"),
+            grpc::StatusCode::OK);
+  ssl.pem_cert_chain = Read(dir_ / "client.pem");
+  ssl.pem_private_key = Read(dir_ / "client.key");
+  EXPECT_EQ(Create(Stub(grpc::SslCredentials(ssl)).get(), "", "withcert"),
+            grpc::StatusCode::OK);
+}
+
+}  // namespace
+}  // namespace swarf::server
