@@ -10,6 +10,7 @@ namespace swarf::cli {
 
 int TableCommand(const std::vector<std::string>& args);
 int RunCommand(const std::vector<std::string>& args);
+int LoadCommand(const std::vector<std::string>& args);
 int HealthCommand(const std::vector<std::string>& args);
 int SessionsCommand(const std::vector<std::string>& args);
 int MarksCommand(const std::vector<std::string>& args);

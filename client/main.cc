@@ -16,6 +16,7 @@ constexpr char kUsage[] =
     "  marks   the cutting marks (creases) of a paper instance\n"
     "  health  whether a running swarfd is serving\n"
     "  sessions  the sessions of a running swarfd\n"
+    "  load    many sessions streaming at once: throughput and latency\n"
     "Run 'swarf <command> --help' for a command's options.\n";
 
 }  // namespace
@@ -35,6 +36,7 @@ int main(int argc, char** argv) {
   if (cmd == "marks") return swarf::cli::MarksCommand(args);
   if (cmd == "health") return swarf::cli::HealthCommand(args);
   if (cmd == "sessions") return swarf::cli::SessionsCommand(args);
+  if (cmd == "load") return swarf::cli::LoadCommand(args);
   if (cmd == "--help" || cmd == "-h" || cmd == "help") {
     std::cout << kUsage;
     return 0;

@@ -1,7 +1,9 @@
 #include "server/service.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <deque>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <memory>
@@ -66,6 +68,18 @@ absl::StatusOr<std::shared_ptr<Session>> SessionOf(
   auto id = SessionIdOf(ctx, field);
   if (!id.ok()) return id.status();
   return registry->Get(*id, *principal);
+}
+
+// Peak resident memory of this process (VmHWM), 0 where /proc is absent.
+int64_t PeakMemoryBytes() {
+  std::ifstream in("/proc/self/status");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("VmHWM:", 0) == 0) {
+      return std::strtoll(line.c_str() + 6, nullptr, 10) * 1024;
+    }
+  }
+  return 0;
 }
 
 // Runs `work` on the executor and finishes the unary call with its status.
@@ -648,6 +662,7 @@ grpc::ServerUnaryReactor* SwarfService::ListSessions(
     for (const auto& s : registry_->List(*principal)) {
       FillSession(*s, replica_, resp->add_sessions());
     }
+    resp->set_server_peak_memory_bytes(PeakMemoryBytes());
     return absl::OkStatus();
   });
 }

@@ -1,0 +1,221 @@
+// swarf load: many sessions streaming at once against a server, to measure
+// throughput, acknowledgement latency and the server's memory.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <iostream>
+#include <mutex>
+#include <random>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/strings/str_format.h"
+#include "client/args.h"
+#include "client/commands.h"
+#include "client/connection.h"
+
+namespace swarf::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+constexpr char kUsage[] =
+    "usage: swarf load [--server HOST:PORT] [--sessions N] [--moves N]\n"
+    "                  [--batch N] [--mesh N] [--token T] [--tls-ca F ...]\n"
+    "Streams a finishing raster (a 1 mm ball, 0.1 mm moves) into N sessions\n"
+    "at once (default 32 sessions of 100000 moves, batches of 2000, grids of\n"
+    "300 x 300) and reports the throughput, the p50/p99 time from sending a\n"
+    "batch to its acknowledgement, the errors and the server's peak memory.\n"
+    "Without --server it loads an embedded server.\n";
+
+struct Result {
+  int64_t moves = 0;
+  std::vector<double> latencies;  // seconds
+  std::string error;
+};
+
+// One session's job: create, stream, delete.
+void RunSession(Connection& conn, const std::string& id, int64_t moves,
+                int64_t batch, int32_t mesh, Result* out) {
+  pb::CreateSessionRequest create;
+  create.set_session_id(id);
+  const double side = mesh * 0.1;
+  create.mutable_stock()->set_x1(side);
+  create.mutable_stock()->set_y1(side);
+  create.set_nx(mesh);
+  create.set_ny(mesh);
+  pb::Tool* tool = create.add_tools();
+  tool->set_id(1);
+  tool->mutable_ball()->set_radius(0.5);
+  {
+    pb::Session s;
+    auto ctx = conn.Context(id, 60);
+    grpc::Status st = conn.stub().CreateSession(ctx.get(), create, &s);
+    if (!st.ok()) {
+      out->error = "create: " + st.error_message();
+      return;
+    }
+  }
+  // A zig-zag raster: rows of 0.1 mm moves across the stock.
+  const int64_t per_row = std::max<int64_t>(2, mesh - 10);
+  std::vector<pb::SimulateRequest> reqs;
+  for (int64_t k = 0, seq = 1; k <= moves; ++seq) {
+    pb::MoveBatch* b = reqs.emplace_back().mutable_moves();
+    b->set_seq(seq);
+    b->set_tool_id(1);
+    for (int64_t n = 0; n < batch && k <= moves; ++n, ++k) {
+      const int64_t row = k / per_row, col = k % per_row;
+      const double x = 0.5 + 0.1 * (row % 2 == 0 ? col : per_row - 1 - col);
+      const double y = 0.5 + std::fmod(0.05 * row, side - 1);
+      b->add_xyz(x);
+      b->add_xyz(y);
+      b->add_xyz(-0.5 + 0.2 * std::sin(0.5 * x + 0.3 * y));
+    }
+  }
+  std::vector<Clock::time_point> sent(reqs.size());
+  std::mutex mu;
+  auto ctx = conn.Context(id, 3600);
+  auto stream = conn.stub().Simulate(ctx.get());
+  std::thread writer([&] {
+    for (size_t k = 0; k < reqs.size(); ++k) {
+      {
+        std::lock_guard<std::mutex> l(mu);
+        sent[k] = Clock::now();
+      }
+      if (!stream->Write(reqs[k])) break;
+    }
+    stream->WritesDone();
+  });
+  pb::SimulateResponse resp;
+  uint64_t acked = 0;
+  while (stream->Read(&resp)) {
+    if (resp.has_ack()) {
+      const auto now = Clock::now();
+      acked = resp.ack().seq();
+      std::lock_guard<std::mutex> l(mu);
+      out->latencies.push_back(
+          std::chrono::duration<double>(now - sent[acked - 1]).count());
+    } else if (resp.has_error()) {
+      out->error = "batch: " + resp.error().message();
+    }
+  }
+  writer.join();
+  grpc::Status st = stream->Finish();
+  if (!st.ok() && out->error.empty()) out->error = "stream: " + st.error_message();
+  if (acked != reqs.size() && out->error.empty()) out->error = "not all acked";
+  out->moves = resp.has_ack() ? resp.ack().moves_applied() : moves;
+  pb::DeleteSessionRequest del;
+  del.set_session_id(id);
+  pb::DeleteSessionResponse dresp;
+  auto dctx = conn.Context(id, 60);
+  conn.stub().DeleteSession(dctx.get(), del, &dresp);
+}
+
+double Percentile(std::vector<double> v, double q) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, static_cast<size_t>(q * v.size()))];
+}
+
+}  // namespace
+
+int LoadCommand(const std::vector<std::string>& argv) {
+  std::set<std::string> valued = {"server", "sessions", "moves", "batch",
+                                  "mesh"};
+  valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
+  auto args = Args::Parse(argv, valued, {"help"});
+  if (!args.ok()) {
+    std::cerr << "swarf load: " << args.status().message() << "\n" << kUsage;
+    return 2;
+  }
+  if (args->Has("help")) {
+    std::cout << kUsage;
+    return 0;
+  }
+  auto sessions = args->GetInt("sessions");
+  auto moves = args->GetInt("moves");
+  auto batch = args->GetInt("batch");
+  auto mesh = args->GetInt("mesh");
+  for (const auto* v : {&sessions, &moves, &batch, &mesh}) {
+    if (!v->ok()) {
+      std::cerr << "swarf load: " << v->status().message() << "\n";
+      return 2;
+    }
+    if (v->value().has_value() && **v <= 0) {
+      std::cerr << "swarf load: counts must be positive\n";
+      return 2;
+    }
+  }
+  const int n = sessions->value_or(32);
+  const int64_t m = moves->value_or(100000);
+  const int64_t b = batch->value_or(2000);
+  const int32_t g = mesh->value_or(300);
+  auto copt = ConnectionOptionsFrom(*args);
+  if (!copt.ok()) {
+    std::cerr << "swarf load: " << copt.status().message() << "\n";
+    return 2;
+  }
+  // One connection per session, as independent clients would have.
+  std::vector<std::unique_ptr<Connection>> conns;
+  std::unique_ptr<Connection> embedded;
+  if (!args->Has("server")) {
+    auto c = Connection::Open("", *copt);
+    if (!c.ok()) {
+      std::cerr << "swarf load: " << c.status().message() << "\n";
+      return 1;
+    }
+    embedded = *std::move(c);
+  } else {
+    for (int k = 0; k < n; ++k) {
+      auto c = Connection::Open(*args->Get("server"), *copt);
+      if (!c.ok()) {
+        std::cerr << "swarf load: " << c.status().message() << "\n";
+        return 1;
+      }
+      conns.push_back(*std::move(c));
+    }
+  }
+  std::vector<Result> results(n);
+  std::mt19937_64 rng(std::random_device{}());
+  const std::string tag = absl::StrFormat("%08x", rng() & 0xffffffff);
+  const auto t0 = Clock::now();
+  std::vector<std::thread> threads;
+  for (int k = 0; k < n; ++k) {
+    Connection& c = embedded ? *embedded : *conns[k];
+    threads.emplace_back([&, k, &c = c] {
+      RunSession(c, absl::StrFormat("load-%s-%d", tag, k), m, b, g,
+                 &results[k]);
+    });
+  }
+  for (auto& t : threads) t.join();
+  const double seconds = std::chrono::duration<double>(Clock::now() - t0).count();
+
+  int64_t total = 0;
+  int errors = 0;
+  std::vector<double> lat;
+  for (const Result& r : results) {
+    total += r.moves;
+    lat.insert(lat.end(), r.latencies.begin(), r.latencies.end());
+    if (!r.error.empty()) {
+      ++errors;
+      std::cerr << "swarf load: " << r.error << "\n";
+    }
+  }
+  Connection& c = embedded ? *embedded : *conns[0];
+  pb::ListSessionsResponse list;
+  auto ctx = c.Context("", 10);
+  c.stub().ListSessions(ctx.get(), {}, &list);
+  std::cout << absl::StrFormat(
+      "%d sessions x %d moves (batches of %d, %dx%d grids) on the %s\n"
+      "  throughput  %.2fM moves/s (%d moves in %.2f s)\n"
+      "  ack latency p50 %.1f ms, p99 %.1f ms (%d batches)\n"
+      "  errors      %d\n"
+      "  server peak memory %.0f MiB\n",
+      n, m, b, g, g, c.target(), total / seconds / 1e6, total, seconds,
+      1e3 * Percentile(lat, 0.5), 1e3 * Percentile(lat, 0.99), lat.size(),
+      errors, list.server_peak_memory_bytes() / 1048576.0);
+  return errors == 0 ? 0 : 1;
+}
+
+}  // namespace swarf::cli
