@@ -179,6 +179,29 @@ absl::Status Registry::Delete(const std::string& id,
   return absl::OkStatus();
 }
 
+int Registry::EvictIdle(double idle_seconds) {
+  std::vector<std::shared_ptr<Session>> idle;
+  {
+    absl::MutexLock l(&mu_);
+    for (const auto& [id, s] : sessions_) {
+      // use_count 1: only the registry holds it, so no stream is open.
+      if (s != nullptr && s.use_count() == 1 &&
+          s->IdleSeconds() >= idle_seconds) {
+        idle.push_back(s);
+      }
+    }
+  }
+  int evicted = 0;
+  for (const auto& s : idle) {
+    if (s->Evict()) {
+      ++evicted;
+      spdlog::info("session {}: evicted after {:.0f} s idle", s->id(),
+                   s->IdleSeconds());
+    }
+  }
+  return evicted;
+}
+
 std::vector<std::shared_ptr<Session>> Registry::List(
     const std::string& principal) const {
   absl::MutexLock l(&mu_);

@@ -20,6 +20,11 @@ struct Limits {
   // Sum over sessions of their worst-case memory (every tile cut).
   int64_t max_total_memory_bytes = int64_t{8} << 30;
   int64_t max_batch_points = int64_t{1} << 20;
+  // Open Simulate streams per client (per token, or per address without
+  // authentication).
+  int32_t max_streams_per_client = 16;
+  // Journaled sessions idle this long leave memory until used (0: never).
+  double idle_evict_seconds = 600;
   int32_t max_message_bytes = 64 << 20;
 };
 
@@ -50,6 +55,10 @@ class Registry {
       const std::string& id, const std::string& principal = "") const;
   absl::Status Delete(const std::string& id,
                       const std::string& principal = "");
+  // Evicts journaled sessions unused for `idle_seconds` that no stream
+  // holds. Returns how many were evicted.
+  int EvictIdle(double idle_seconds);
+
   // The sessions of `principal`.
   std::vector<std::shared_ptr<Session>> List(
       const std::string& principal = "") const;

@@ -100,6 +100,21 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
         absl::StrCat("cannot listen on ", options.listen));
   }
   s->server_->GetHealthCheckService()->SetServingStatus(true);
+  const double idle = options.limits.idle_evict_seconds;
+  if (!options.persistence.data_dir.empty() && idle > 0) {
+    SwarfServer* self = s.get();
+    s->evictor_ = std::thread([self, idle] {
+      const absl::Duration every =
+          std::min(absl::Seconds(idle / 4), absl::Seconds(10));
+      absl::MutexLock l(&self->evictor_mu_);
+      while (!self->evictor_mu_.AwaitWithTimeout(
+          absl::Condition(&self->stopping_), every)) {
+        self->evictor_mu_.Unlock();
+        self->registry_->EvictIdle(idle);
+        self->evictor_mu_.Lock();
+      }
+    });
+  }
   return s;
 }
 
@@ -126,6 +141,11 @@ std::shared_ptr<grpc::Channel> SwarfServer::InProcessChannel() {
 void SwarfServer::Shutdown(absl::Duration deadline) {
   if (shut_down_) return;
   shut_down_ = true;
+  {
+    absl::MutexLock l(&evictor_mu_);
+    stopping_ = true;
+  }
+  if (evictor_.joinable()) evictor_.join();
   server_->GetHealthCheckService()->SetServingStatus(false);
   server_->Shutdown(std::chrono::system_clock::now() +
                     absl::ToChronoSeconds(deadline));

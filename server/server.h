@@ -5,8 +5,10 @@
 
 #include <memory>
 #include <string>
+#include <thread>
 
 #include "absl/status/statusor.h"
+#include "absl/synchronization/mutex.h"
 #include "absl/time/time.h"
 #include "grpcpp/channel.h"
 #include "grpcpp/server.h"
@@ -64,6 +66,10 @@ class SwarfServer {
   std::unique_ptr<grpc::Server> server_;
   int port_ = 0;
   bool shut_down_ = false;
+  // Evicts idle journaled sessions now and then.
+  std::thread evictor_;
+  absl::Mutex evictor_mu_;
+  bool stopping_ ABSL_GUARDED_BY(evictor_mu_) = false;
 };
 
 }  // namespace swarf::server

@@ -229,6 +229,7 @@ class SimulateReactor
  public:
   SimulateReactor(grpc::CallbackServerContext* ctx, Registry* registry,
                   Executor* executor, TokenStore* tokens,
+                  SwarfService::StreamCounter* streams,
                   const std::string& replica)
       : ctx_(ctx), registry_(registry), executor_(executor) {
     ctx->AddInitialMetadata(kReplicaMetadata, replica);
@@ -238,6 +239,21 @@ class SimulateReactor
       Finish(ToGrpcStatus(session.status()));
       return;
     }
+    // A client is its token, or its address without authentication.
+    auto principal = PrincipalOf(tokens, ctx);
+    std::string client = principal.ok() && !principal->empty()
+                             ? *principal
+                             : ctx->peer().substr(0, ctx->peer().rfind(':'));
+    const int32_t limit = registry->limits().max_streams_per_client;
+    if (!streams->Acquire(client, limit)) {
+      finished_ = true;
+      Finish(grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                          absl::StrCat("this client has ", limit,
+                                       " streams open, the server's limit")));
+      return;
+    }
+    streams_ = streams;
+    client_ = std::move(client);
     session_ = *session;
     StartSendInitialMetadata();
     spdlog::info("session {}: stream opened by {}", session_->id(),
@@ -291,6 +307,7 @@ class SimulateReactor
     if (session_ != nullptr) {
       spdlog::info("session {}: stream closed", session_->id());
     }
+    if (streams_ != nullptr) streams_->Release(client_);
     delete this;
   }
 
@@ -594,6 +611,8 @@ class SimulateReactor
   Registry* const registry_;
   Executor* const executor_;
   std::shared_ptr<Session> session_;
+  SwarfService::StreamCounter* streams_ = nullptr;  // counted while open
+  std::string client_;
 
   absl::Mutex mu_;
   pb::SimulateRequest req_;  // target of the read in flight
@@ -614,6 +633,20 @@ class SimulateReactor
 };
 
 }  // namespace
+
+bool SwarfService::StreamCounter::Acquire(const std::string& key,
+                                         int32_t limit) {
+  absl::MutexLock l(&mu_);
+  int32_t& n = open_[key];
+  if (n >= limit) return false;
+  ++n;
+  return true;
+}
+
+void SwarfService::StreamCounter::Release(const std::string& key) {
+  absl::MutexLock l(&mu_);
+  if (--open_[key] <= 0) open_.erase(key);
+}
 
 grpc::ServerUnaryReactor* SwarfService::CreateSession(
     grpc::CallbackServerContext* ctx, const pb::CreateSessionRequest* req,
@@ -683,7 +716,8 @@ grpc::ServerUnaryReactor* SwarfService::DeleteSession(
 
 grpc::ServerBidiReactor<pb::SimulateRequest, pb::SimulateResponse>*
 SwarfService::Simulate(grpc::CallbackServerContext* ctx) {
-  return new SimulateReactor(ctx, registry_, executor_, tokens_, replica_);
+  return new SimulateReactor(ctx, registry_, executor_, tokens_, &streams_,
+                             replica_);
 }
 
 grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(

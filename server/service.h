@@ -5,8 +5,10 @@
 #ifndef SWARF_SERVER_SERVICE_H_
 #define SWARF_SERVER_SERVICE_H_
 
+#include <map>
 #include <string>
 
+#include "absl/synchronization/mutex.h"
 #include "server/auth.h"
 #include "server/executor.h"
 #include "server/registry.h"
@@ -64,10 +66,24 @@ class SwarfService final : public ::swarf::v1::Swarf::CallbackService {
                                   ::swarf::v1::ProbeResponse* resp) override;
 
  private:
+  // Open Simulate streams per client key. Thread-safe.
+ public:
+  class StreamCounter {
+   public:
+    bool Acquire(const std::string& key, int32_t limit);
+    void Release(const std::string& key);
+
+   private:
+    absl::Mutex mu_;
+    std::map<std::string, int32_t> open_ ABSL_GUARDED_BY(mu_);
+  };
+
+ private:
   Registry* const registry_;
   Executor* const executor_;
   TokenStore* const tokens_;
   const std::string replica_;
+  StreamCounter streams_;
 };
 
 }  // namespace swarf::server

@@ -5,6 +5,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "server/convert.h"
+#include "spdlog/spdlog.h"
 
 namespace swarf::server {
 
@@ -37,6 +38,7 @@ absl::StatusOr<std::shared_ptr<Session>> Session::Create(
   auto session =
       std::shared_ptr<Session>(new Session(std::move(spec), *std::move(wp)));
   session->journal_ = std::move(journal);
+  session->Touch();
   return session;
 }
 
@@ -150,19 +152,90 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
     }
   }
 
+  Touch();
   absl::MutexLock l(&mu_);
   if (deleted_) {
     return absl::NotFoundError(
         absl::StrCat("session ", spec_.id, " was deleted"));
   }
+  if (wp_ == nullptr) {
+    if (absl::Status s = ReloadLocked(); !s.ok()) return s;
+  }
   return ApplyLocked(seq, *tool, xyz, reposition, true);
+}
+
+void Session::Touch() const {
+  last_used_ms_.store(absl::ToUnixMillis(absl::Now()),
+                      std::memory_order_relaxed);
+}
+
+double Session::IdleSeconds() const {
+  return (absl::ToUnixMillis(absl::Now()) -
+          last_used_ms_.load(std::memory_order_relaxed)) /
+         1000.0;
+}
+
+bool Session::Evict() {
+  absl::MutexLock l(&mu_);
+  if (journal_ == nullptr || wp_ == nullptr || deleted_) return false;
+  evicted_state_.last_seq = last_seq_;
+  evicted_state_.moves_applied = wp_->move_count();
+  evicted_state_.version = wp_->version();
+  evicted_state_.allocated_tiles = 0;
+  evicted_state_.memory_bytes = 0;
+  evicted_state_.last_position = last_position_;
+  wp_.reset();
+  return true;
+}
+
+bool Session::evicted() const {
+  absl::ReaderMutexLock l(&mu_);
+  return wp_ == nullptr;
+}
+
+void Session::EnsureLoaded() const {
+  Touch();
+  {
+    absl::ReaderMutexLock l(&mu_);
+    if (wp_ != nullptr) return;
+  }
+  absl::MutexLock l(&mu_);
+  if (wp_ == nullptr) ReloadLocked().IgnoreError();  // logged inside
+}
+
+absl::Status Session::ReloadLocked() const {
+  // The same replay as a restart: bit-identical to the evicted grid.
+  auto wp = Workpiece::Create(spec_.stock, spec_.scheme);
+  if (!wp.ok()) return wp.status();
+  wp_ = *std::move(wp);
+  last_seq_ = 0;
+  last_position_.reset();
+  auto problem = journal_->Replay([&](const Journal::Batch& b) {
+    for (const ToolSpec& t : spec_.tools) {
+      if (t.id == b.tool_id) {
+        return ApplyLocked(b.seq, t, b.xyz, b.reposition, false).status();
+      }
+    }
+    return absl::DataLossError(absl::StrCat("unknown tool ", b.tool_id));
+  });
+  if (!problem.ok() || !problem->empty()) {
+    const std::string what =
+        problem.ok() ? *problem : std::string(problem.status().message());
+    spdlog::error("session {}: reloaded up to batch {}: {}", spec_.id,
+                  last_seq_, what);
+    return absl::DataLossError(absl::StrCat("session ", spec_.id,
+                                            " reloaded up to batch ",
+                                            last_seq_, ": ", what));
+  }
+  spdlog::info("session {}: reloaded ({} batches)", spec_.id, last_seq_);
+  return absl::OkStatus();
 }
 
 absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
                                                  const ToolSpec& tool,
                                                  std::span<const double> xyz,
                                                  bool reposition,
-                                                 bool journal) {
+                                                 bool journal) const {
   const int64_t points = static_cast<int64_t>(xyz.size() / 3);
   BatchResult r;
   r.seq = seq;
@@ -210,6 +283,7 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
 
 SessionState Session::State() const {
   absl::ReaderMutexLock l(&mu_);
+  if (wp_ == nullptr) return evicted_state_;  // no reload just to report
   SessionState s;
   s.last_seq = last_seq_;
   s.moves_applied = wp_->move_count();

@@ -5,6 +5,7 @@
 #ifndef SWARF_SERVER_SESSION_H_
 #define SWARF_SERVER_SESSION_H_
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -99,12 +100,21 @@ class Session {
 
   SessionState State() const;
 
-  // Runs fn(const Workpiece&) under the shared lock and returns its result.
+  // Runs fn(const Workpiece&) under the shared lock and returns its result
+  // (reloading an evicted session first).
   template <typename F>
   auto Read(F&& fn) const {
+    EnsureLoaded();
     absl::ReaderMutexLock l(&mu_);
     return fn(*wp_);
   }
+
+  // Drops the grid from memory (a journaled session only; it is rebuilt
+  // from the journal on next use). False when not evictable.
+  bool Evict();
+  bool evicted() const;
+  // Seconds since the session was last used.
+  double IdleSeconds() const;
 
  private:
   Session(SessionSpec spec, std::unique_ptr<Workpiece> wp)
@@ -112,17 +122,26 @@ class Session {
   // ApplyBatch after validation, under mu_; `journal` false when replaying.
   absl::StatusOr<BatchResult> ApplyLocked(uint64_t seq, const ToolSpec& tool,
                                           std::span<const double> xyz,
-                                          bool reposition, bool journal)
+                                          bool reposition, bool journal) const
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+
+  // Rebuilds an evicted session's grid by replaying its journal.
+  void EnsureLoaded() const;
+  absl::Status ReloadLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  void Touch() const;
 
   const SessionSpec spec_;
   std::string recovery_;  // set once, before the session is shared
+  mutable std::atomic<int64_t> last_used_ms_{0};
   mutable absl::Mutex mu_;
-  std::unique_ptr<Workpiece> wp_ ABSL_PT_GUARDED_BY(mu_);
-  std::unique_ptr<Journal> journal_ ABSL_GUARDED_BY(mu_);
+  // Null while evicted; rebuilt (mutable) on use.
+  mutable std::unique_ptr<Workpiece> wp_ ABSL_GUARDED_BY(mu_);
+  // Counters kept while evicted.
+  mutable SessionState evicted_state_ ABSL_GUARDED_BY(mu_);
+  mutable std::unique_ptr<Journal> journal_ ABSL_GUARDED_BY(mu_);
   bool deleted_ ABSL_GUARDED_BY(mu_) = false;
-  uint64_t last_seq_ ABSL_GUARDED_BY(mu_) = 0;
-  std::optional<Vec3> last_position_ ABSL_GUARDED_BY(mu_);
+  mutable uint64_t last_seq_ ABSL_GUARDED_BY(mu_) = 0;
+  mutable std::optional<Vec3> last_position_ ABSL_GUARDED_BY(mu_);
 };
 
 }  // namespace swarf::server

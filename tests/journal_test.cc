@@ -230,6 +230,48 @@ TEST_F(JournalTest, DeletingASessionDeletesItsFiles) {
   EXPECT_EQ(*r2.RestoreAll(), 0);
 }
 
+TEST_F(JournalTest, IdleSessionIsEvictedAndReloadedBitIdentical) {
+  Registry r(Limits{}, Durable());
+  ASSERT_TRUE(r.RestoreAll().ok());
+  {
+    auto s = *r.Create(Spec("idle"));
+    for (int k = 1; k <= kBatches; ++k) {
+      ASSERT_TRUE(s->ApplyBatch(k, 1, Points(k), 1000).ok());
+    }
+    // Held (as by an open stream): not evicted.
+    EXPECT_EQ(r.EvictIdle(0), 0);
+  }
+  EXPECT_EQ(r.EvictIdle(3600), 0);  // not idle long enough
+  EXPECT_EQ(r.EvictIdle(0), 1);
+  auto s = *r.Get("idle");
+  EXPECT_TRUE(s->evicted());
+  // Its counters answer without a reload.
+  const SessionState st = s->State();
+  EXPECT_EQ(st.last_seq, static_cast<uint64_t>(kBatches));
+  EXPECT_EQ(st.moves_applied, kBatches * kPoints - 1);
+  EXPECT_TRUE(s->evicted());
+  // Use reloads it, exactly as it was; it goes on from there.
+  EXPECT_TRUE(Take(*s) == Reference(kBatches));
+  EXPECT_FALSE(s->evicted());
+  ASSERT_TRUE(s->ApplyBatch(kBatches + 1, 1, Points(kBatches + 1), 1000).ok());
+  EXPECT_TRUE(Take(*s) == Reference(kBatches + 1));
+  // A batch may also be what wakes it.
+  s.reset();
+  EXPECT_EQ(r.EvictIdle(0), 1);
+  s = *r.Get("idle");
+  ASSERT_TRUE(s->ApplyBatch(kBatches + 2, 1, Points(kBatches + 2), 1000).ok());
+  EXPECT_TRUE(Take(*s) == Reference(kBatches + 2));
+}
+
+TEST_F(JournalTest, InMemorySessionsAreNeverEvicted) {
+  Registry r(Limits{});
+  auto s = *r.Create(Spec("mem"));
+  ASSERT_TRUE(s->ApplyBatch(1, 1, Points(1), 1000).ok());
+  s.reset();
+  EXPECT_EQ(r.EvictIdle(0), 0);
+  EXPECT_FALSE((*r.Get("mem"))->evicted());
+}
+
 TEST(Crc32cTest, KnownValue) {
   // The CRC32C check value of "123456789".
   EXPECT_EQ(Crc32c("123456789", 9), 0xE3069283u);

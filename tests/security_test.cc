@@ -189,6 +189,62 @@ TEST_F(SecurityTest, NoPublicAddressWithoutAuthUnlessAskedFor) {
   EXPECT_FALSE(IsLoopback("10.1.2.3:1"));
 }
 
+TEST_F(SecurityTest, StreamsPerClientAreLimited) {
+  WriteTokens("alpha-token\nbeta-token\n");
+  ServerOptions opt;
+  opt.auth_tokens_file = (dir_ / "tokens").string();
+  opt.limits.max_streams_per_client = 2;
+  ASSERT_NO_FATAL_FAILURE(Start(opt));
+  auto stub = Stub();
+  ASSERT_EQ(Create(stub.get(), "alpha-token", "a"), grpc::StatusCode::OK);
+  ASSERT_EQ(Create(stub.get(), "beta-token", "b"), grpc::StatusCode::OK);
+  // Two streams held open by alpha: a third is refused, beta's is not.
+  struct Open {
+    std::unique_ptr<grpc::ClientContext> ctx;
+    std::unique_ptr<grpc::ClientReaderWriter<pb::SimulateRequest,
+                                             pb::SimulateResponse>> stream;
+  };
+  auto open = [&](const std::string& token, const std::string& id) {
+    Open o;
+    o.ctx = Ctx(token, id);
+    o.stream = stub->Simulate(o.ctx.get());
+    // A stats request answered proves the stream is up.
+    pb::SimulateRequest req;
+    req.mutable_stats()->set_request_id(1);
+    o.stream->Write(req);
+    pb::SimulateResponse resp;
+    const bool up = o.stream->Read(&resp);
+    return std::pair{std::move(o), up};
+  };
+  auto [s1, up1] = open("alpha-token", "a");
+  auto [s2, up2] = open("alpha-token", "a");
+  EXPECT_TRUE(up1 && up2);
+  auto [s3, up3] = open("alpha-token", "a");
+  EXPECT_FALSE(up3);
+  s3.stream->WritesDone();
+  const grpc::Status refused = s3.stream->Finish();
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(refused.error_message().find("streams"), std::string::npos);
+  auto [s4, up4] = open("beta-token", "b");
+  EXPECT_TRUE(up4);
+  // Closing one makes room again.
+  s1.stream->WritesDone();
+  EXPECT_TRUE(s1.stream->Finish().ok());
+  bool up5 = false;
+  for (int i = 0; i < 20 && !up5; ++i) {  // the release is asynchronous
+    auto [s5, up] = open("alpha-token", "a");
+    up5 = up;
+    s5.stream->WritesDone();
+    s5.stream->Finish();
+    if (!up5) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  EXPECT_TRUE(up5);
+  for (Open* o : {&s2, &s4}) {
+    o->stream->WritesDone();
+    o->stream->Finish();
+  }
+}
+
 // A CA, a server certificate for localhost and a client certificate.
 bool MakeCertificates(const fs::path& d) {
   const std::string q = "cd '" + d.string() + "' && ";
