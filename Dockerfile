@@ -1,7 +1,8 @@
 # swarf: the swarfd server and the swarf CLI on Debian bookworm.
 #
 #   docker build -t swarf .
-#   docker run -p 50051:50051 -v swarf-data:/var/lib/swarf swarf
+#   docker run -p 127.0.0.1:50051:50051 -v swarf-data:/var/lib/swarf \
+#     -e FLAGS_insecure_public=true swarf
 #
 # Extra swarfd flags go after the image name (e.g. --max_sessions 64). See
 # deploy/README.md for compose (3 replicas behind nginx) and Kubernetes.
@@ -45,5 +46,10 @@ HEALTHCHECK --interval=10s --timeout=5s --start-period=20s --retries=3 \
 # swarfd drains on SIGTERM (--drain_seconds, default 10 s): give `docker stop`
 # a longer timeout (docker stop -t 30; compose: stop_grace_period).
 STOPSIGNAL SIGTERM
-ENTRYPOINT ["swarfd", "--listen=0.0.0.0:50051", "--data_dir=/var/lib/swarf"]
+# swarfd refuses a non-loopback address without authentication. Choose, by
+# environment: tokens (FLAGS_auth_tokens_file=/run/secrets/swarf-tokens, a
+# mounted file) or, where the network is the boundary (behind the balancer,
+# on a private network), FLAGS_insecure_public=true.
+ENTRYPOINT ["swarfd", "--listen=0.0.0.0:50051", "--data_dir=/var/lib/swarf", \
+            "--tryfromenv=insecure_public,auth_tokens_file"]
 CMD []

@@ -13,7 +13,9 @@
 //
 // Everything listens on 127.0.0.1 and is stopped by the test (RAII; children
 // also die with the test: PR_SET_PDEATHSIG). nginx must be installed
-// (scripts/install-deps installs it): without it the test fails.
+// (scripts/install-deps installs it): without it the test fails. Its files
+// (logs, nginx config and access log, data directories) are kept after a
+// failure, or always with SWARF_CLUSTER_KEEP=1.
 
 #include <fcntl.h>
 #include <netinet/in.h>
@@ -476,7 +478,8 @@ class ClusterTest : public ::testing::Test {
     for (auto& r : replicas_) {
       if (r.process) r.process->Stop(10s);
     }
-    if (HasFailure()) {
+    const char* keep = std::getenv("SWARF_CLUSTER_KEEP");  // for a look
+    if (HasFailure() || (keep != nullptr && *keep != '\0')) {
       for (auto& r : replicas_) {
         if (r.process) {
           std::fprintf(stderr, "---- %s log:\n%s\n", r.name.c_str(),
