@@ -49,12 +49,16 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
                                 : 0, 0.0f);
   const double cell_x = (region.x1 - region.x0) / std::max(1, options.map_cols);
   const double cell_y = (region.y1 - region.y0) / std::max(1, options.map_rows);
+  // The cell of offset f (in cells) among n, clamped before the conversion:
+  // a region of zero width makes f 0/0 (NaN), and converting NaN or an
+  // out-of-range double to int is undefined.
+  auto cell_index = [](double f, int32_t n) {
+    return f >= n - 1 ? n - 1 : f > 0 ? static_cast<int32_t>(f) : 0;
+  };
   // Samples of different bins can share a cell: a lock-free max.
   auto map_max = [&](double x, double y, double err) {
-    const int32_t cx = std::clamp(
-        static_cast<int32_t>((x - region.x0) / cell_x), 0, options.map_cols - 1);
-    const int32_t cy = std::clamp(
-        static_cast<int32_t>((y - region.y0) / cell_y), 0, options.map_rows - 1);
+    const int32_t cx = cell_index((x - region.x0) / cell_x, options.map_cols);
+    const int32_t cy = cell_index((y - region.y0) / cell_y, options.map_rows);
     std::atomic_ref<float> cell(map[size_t{1} * cy * options.map_cols + cx]);
     const float e = static_cast<float>(err);
     float cur = cell.load(std::memory_order_relaxed);
