@@ -832,8 +832,15 @@ absl::Status GcodeParser::Arc(const Block& b, int64_t line) {
     const double t = static_cast<double>(k) / static_cast<double>(n);
     const double a = a0 + sweep * t;
     const double r = r0 + (r1 - r0) * t;  // spiral when r1 != r0
-    SWARF_RETURN_IF_ERROR(Emit(cx + r * std::cos(a), cy + r * std::sin(a),
-                               z0 + (z1 - z0) * t, false, line));
+    const double x = cx + r * std::cos(a), y = cy + r * std::sin(a);
+    // The arc may bulge past the bound its end points keep.
+    if (!(std::fabs(x) <= kMaxCoordinateMm &&
+          std::fabs(y) <= kMaxCoordinateMm)) {
+      return LineError(line, absl::StrCat(gname, " arc leaves the range of +-",
+                                          kMaxCoordinateMm, " mm at (", x,
+                                          ", ", y, ")"));
+    }
+    SWARF_RETURN_IF_ERROR(Emit(x, y, z0 + (z1 - z0) * t, false, line));
   }
   // The programmed end, exactly.
   SWARF_RETURN_IF_ERROR(Emit(x1, y1, z1, false, line));
