@@ -30,6 +30,17 @@ absl::StatusOr<int32_t> Elements(double length, double spacing,
   return static_cast<int32_t>(n);
 }
 
+// ValidateStock but for the total node count: a grid over the server's node
+// limit is RESOURCE_EXHAUSTED (the registry), even where it is also over the
+// core's, which ValidateStock reports as bad input.
+absl::Status ValidateStockShape(const StockSpec& stock) {
+  StockSpec row = stock, column = stock;
+  row.ny = 1;
+  column.nx = 1;
+  if (absl::Status s = ValidateStock(row); !s.ok()) return s;
+  return ValidateStock(column);
+}
+
 }  // namespace
 
 absl::StatusOr<SessionSpec> SpecFromRequest(
@@ -62,7 +73,7 @@ absl::StatusOr<SessionSpec> SpecFromRequest(
     spec.stock.nx = *nx;
     spec.stock.ny = *ny;
   }
-  if (absl::Status s = ValidateStock(spec.stock); !s.ok()) return s;
+  if (absl::Status s = ValidateStockShape(spec.stock); !s.ok()) return s;
   switch (req.scheme()) {
     case pb::SCHEME_ZMAP:
       spec.scheme = SchemeKind::kZmap;

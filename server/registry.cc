@@ -42,8 +42,15 @@ absl::StatusOr<std::shared_ptr<Session>> Registry::Create(SessionSpec spec) {
   } else if (absl::Status s = ValidateId(spec.id); !s.ok()) {
     return s;
   }
-  // Bad input is reported as such even on a full server.
-  if (absl::Status s = Session::ValidateSpec(spec); !s.ok()) return s;
+  // Bad input is reported as such even on a full server. A grid over the
+  // node limit is RESOURCE_EXHAUSTED even where it is also over the core's
+  // (which ValidateSpec calls bad input): the rest is validated first, with
+  // each element count that is valid on its own taken as 1.
+  SessionSpec shape = spec;
+  for (int32_t* n : {&shape.stock.nx, &shape.stock.ny}) {
+    if (*n >= 1 && *n <= kMaxElementsPerAxis) *n = 1;
+  }
+  if (absl::Status s = Session::ValidateSpec(shape); !s.ok()) return s;
   const int64_t nodes =
       (int64_t{spec.stock.nx} + 1) * (int64_t{spec.stock.ny} + 1);
   if (nodes > limits_.max_nodes_per_session) {
@@ -51,6 +58,7 @@ absl::StatusOr<std::shared_ptr<Session>> Registry::Create(SessionSpec spec) {
         absl::StrCat("the grid has ", nodes, " nodes, more than this server's ",
                      limits_.max_nodes_per_session, " per session"));
   }
+  if (absl::Status s = Session::ValidateSpec(spec); !s.ok()) return s;
   const int64_t bytes = Session::EstimateMemoryBytes(spec.stock, spec.scheme);
   {
     absl::MutexLock l(&mu_);
