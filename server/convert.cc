@@ -268,6 +268,14 @@ absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,
                                             int32_t samples_per_edge,
                                             int32_t map_cols,
                                             int32_t map_rows) {
+  // Checked here as well as in MeasureError, to name the fields.
+  if ((map_cols != 0 || map_rows != 0) &&
+      (map_cols < 1 || map_rows < 1 ||
+       int64_t{map_cols} * map_rows > kMaxMapCells)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "map_cols x map_rows must be 0 x 0 (no map) or at least 1 x 1 and "
+        "at most ", kMaxMapCells, " cells, got ", map_cols, " x ", map_rows));
+  }
   ValuationOptions opt;
   opt.samples_per_edge = samples_per_edge == 0 ? 5 : samples_per_edge;
   opt.map_cols = map_cols;
@@ -305,6 +313,17 @@ absl::StatusOr<std::vector<pb::Polyline>> ComputeMarks(
     if (!r.ok()) return r.status();
     opt.region = *r;
   }
+  // Checked here as well as in FindCuttingMarks, to name the fields.
+  if (!(std::isfinite(screening_threshold) && screening_threshold >= 0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("screening_threshold must be finite and >= 0 (0: the "
+                     "default), got ", screening_threshold));
+  }
+  if (!(min_angle_deg == 0 || (min_angle_deg > 0 && min_angle_deg < 90))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "min_angle_deg must be in (0, 90) (0: the default), got ",
+        min_angle_deg));
+  }
   if (screening_threshold != 0) opt.screening_threshold = screening_threshold;
   if (min_angle_deg != 0) opt.t2_deg = min_angle_deg;
   auto marks = FindCuttingMarks(wp, opt);
@@ -338,8 +357,10 @@ absl::StatusOr<pb::ProbeResponse> ComputeProbe(const Workpiece& wp,
   for (int k = 0; k + 1 < req.xy_size(); k += 2) {
     const double x = req.xy(k), y = req.xy(k + 1);
     if (!std::isfinite(x) || !std::isfinite(y)) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("xy[", k, "] (point ", k / 2, ") must be finite"));
+      const int bad = std::isfinite(x) ? k + 1 : k;
+      return absl::InvalidArgumentError(absl::StrCat(
+          "xy[", bad, "] (point ", k / 2, " ", bad == k ? "x" : "y",
+          ") must be finite, got ", req.xy(bad)));
     }
     double gx, gy;
     wp.ReconstructGradient(x, y, &gx, &gy);
