@@ -225,7 +225,7 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
 // up; subscribed tiles that change are pushed coalesced (one pending push per
 // tile, materialised at its latest version when it is its turn).
 class SimulateReactor
-    : public grpc::ServerBidiReactor<pb::SimulateRequest, pb::SimulateResponse> {
+    : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer> {
  public:
   SimulateReactor(grpc::CallbackServerContext* ctx, Registry* registry,
                   Executor* executor, TokenStore* tokens,
@@ -266,15 +266,28 @@ class SimulateReactor
   }
 
   void OnReadDone(bool ok) override {
+    // Parsed here (raw method): a message that is not a SimulateRequest
+    // ends the reading, and the stream once what came before is answered.
+    pb::SimulateRequest req;
+    const bool parsed =
+        ok && grpc::SerializationTraits<pb::SimulateRequest>::Deserialize(
+                  &req_, &req)
+                  .ok();
     Act act;
     {
       absl::MutexLock l(&mu_);
       read_pending_ = false;
       if (!ok) {
         reads_done_ = true;
+      } else if (!parsed) {
+        reads_done_ = true;
+        read_error_ = grpc::Status(
+            grpc::StatusCode::INVALID_ARGUMENT,
+            absl::StrCat("message ", reads_ + 1,
+                         " of the stream is not a SimulateRequest"));
       } else {
-        in_.push_back(std::move(req_));
-        req_.Clear();
+        ++reads_;
+        in_.push_back(std::move(req));
       }
       act = NextLocked();
     }
@@ -377,7 +390,7 @@ class SimulateReactor
       act.finish = *fatal_;
     } else if (drained && reads_done_ && !HasWorkLocked()) {
       finished_ = true;
-      act.finish = grpc::Status::OK;
+      act.finish = read_error_.value_or(grpc::Status::OK);
     }
     return act;
   }
@@ -391,7 +404,14 @@ class SimulateReactor
   // StartRead here.
   void Do(const Act& act) {
     if (act.read) StartRead(&req_);
-    if (act.write != nullptr) StartWrite(act.write);
+    if (act.write != nullptr) {
+      // One write in flight: the previous one is done with the buffer.
+      write_buf_.Clear();
+      bool own = false;
+      grpc::SerializationTraits<pb::SimulateResponse>::Serialize(
+          *act.write, &write_buf_, &own);
+      StartWrite(&write_buf_);
+    }
     if (act.finish.has_value()) Finish(*act.finish);
     if (act.process) executor_->Schedule([this] { Process(); });
   }
@@ -615,7 +635,8 @@ class SimulateReactor
   std::string client_;
 
   absl::Mutex mu_;
-  pb::SimulateRequest req_;  // target of the read in flight
+  grpc::ByteBuffer req_;        // target of the read in flight
+  grpc::ByteBuffer write_buf_;  // the write in flight, serialized
   std::deque<pb::SimulateRequest> in_ ABSL_GUARDED_BY(mu_);
   std::deque<pb::SimulateResponse> out_ ABSL_GUARDED_BY(mu_);
   std::optional<TileJob> job_ ABSL_GUARDED_BY(mu_);
@@ -624,6 +645,10 @@ class SimulateReactor
   // its latest version when pushed (coalescing).
   std::set<int32_t> pending_push_ ABSL_GUARDED_BY(mu_);
   std::optional<grpc::Status> fatal_ ABSL_GUARDED_BY(mu_);
+  // Requests read, and why reading stopped early (a message that did not
+  // parse): the stream's status once the requests before are answered.
+  uint64_t reads_ ABSL_GUARDED_BY(mu_) = 0;
+  std::optional<grpc::Status> read_error_ ABSL_GUARDED_BY(mu_);
   bool read_pending_ ABSL_GUARDED_BY(mu_) = false;
   bool reads_done_ ABSL_GUARDED_BY(mu_) = false;
   bool writing_ ABSL_GUARDED_BY(mu_) = false;
@@ -714,7 +739,7 @@ grpc::ServerUnaryReactor* SwarfService::DeleteSession(
   });
 }
 
-grpc::ServerBidiReactor<pb::SimulateRequest, pb::SimulateResponse>*
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>*
 SwarfService::Simulate(grpc::CallbackServerContext* ctx) {
   return new SimulateReactor(ctx, registry_, executor_, tokens_, &streams_,
                              replica_);

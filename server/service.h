@@ -21,7 +21,21 @@ inline constexpr char kSessionMetadata[] = "x-swarf-session";
 // Response metadata naming the replica that served the call.
 inline constexpr char kReplicaMetadata[] = "x-swarf-replica";
 
-class SwarfService final : public ::swarf::v1::Swarf::CallbackService {
+// The generated callback service, but Simulate takes raw bytes: the typed
+// callback API reports a message that does not parse to the reactor like
+// the end of the stream, so the server could not tell the client.
+using SwarfCallbackBase = ::swarf::v1::Swarf::WithCallbackMethod_CreateSession<
+    ::swarf::v1::Swarf::WithCallbackMethod_GetSession<
+        ::swarf::v1::Swarf::WithCallbackMethod_ListSessions<
+            ::swarf::v1::Swarf::WithCallbackMethod_DeleteSession<
+                ::swarf::v1::Swarf::WithRawCallbackMethod_Simulate<
+                    ::swarf::v1::Swarf::WithCallbackMethod_GetTiles<
+                        ::swarf::v1::Swarf::WithCallbackMethod_GetErrorStats<
+                            ::swarf::v1::Swarf::WithCallbackMethod_GetCuttingMarks<
+                                ::swarf::v1::Swarf::WithCallbackMethod_Probe<
+                                    ::swarf::v1::Swarf::Service>>>>>>>>>;
+
+class SwarfService final : public SwarfCallbackBase {
  public:
   // registry, executor and tokens are not owned and must outlive the
   // service.
@@ -48,9 +62,9 @@ class SwarfService final : public ::swarf::v1::Swarf::CallbackService {
       grpc::CallbackServerContext* ctx,
       const ::swarf::v1::DeleteSessionRequest* req,
       ::swarf::v1::DeleteSessionResponse* resp) override;
-  grpc::ServerBidiReactor<::swarf::v1::SimulateRequest,
-                          ::swarf::v1::SimulateResponse>*
-  Simulate(grpc::CallbackServerContext* ctx) override;
+  // Serialized SimulateRequests in, SimulateResponses out.
+  grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Simulate(
+      grpc::CallbackServerContext* ctx) override;
   grpc::ServerWriteReactor<::swarf::v1::Tile>* GetTiles(
       grpc::CallbackServerContext* ctx,
       const ::swarf::v1::GetTilesRequest* req) override;
