@@ -2,8 +2,13 @@
 # Debian bookworm machine: both install what is missing first.
 BUILD ?= build
 JOBS ?= $(shell nproc)
+# The clang-14 libFuzzer build (scripts/fuzz) and the ASan+UBSan build.
+FUZZ_BUILD ?= build-fuzz
+ASAN_BUILD ?= build-asan
+FUZZ_SECONDS ?= 30
 
-.PHONY: all build deps demo test bench clean lint-deploy
+.PHONY: all build deps demo test bench clean lint-deploy fuzz fuzz-build \
+	test-sanitize
 
 all: build
 
@@ -27,8 +32,11 @@ demo: deps build
 	@echo "  error is), marks.png/.svg/.json (cutting marks), surface.stl and"
 	@echo "  surface.wrl (meshes), stats.json. The paper's tables: build/bin/swarf table"
 
-test: deps build
+# Also a short run of each fuzzer (20 s, the ctest label "fuzz" of the
+# clang build); the corpus replays are part of the main ctest.
+test: deps build fuzz-build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+	cd $(FUZZ_BUILD) && ctest --output-on-failure -j $(JOBS) -L '^fuzz$$'
 
 bench: deps build
 	$(BUILD)/bin/swarf_bench
@@ -41,3 +49,22 @@ clean:
 # run by `make test`, as the ctest deploy_lint).
 lint-deploy: deps
 	deploy/lint
+
+# Fuzzing (tests/fuzz): each libFuzzer target for FUZZ_SECONDS, both at once;
+# a long run: make fuzz FUZZ_SECONDS=3600 (or scripts/fuzz 3600).
+fuzz-build: deps
+	FUZZ_BUILD=$(FUZZ_BUILD) JOBS=$(JOBS) scripts/fuzz --build-only
+
+fuzz: deps
+	FUZZ_BUILD=$(FUZZ_BUILD) JOBS=$(JOBS) scripts/fuzz $(FUZZ_SECONDS)
+
+# The whole test suite built with ASan + UBSan (-O1, no recovery: any report
+# fails its test). Run by .ci/run after `make test`.
+$(ASAN_BUILD)/build.ninja:
+	cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+	  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1" -DSWARF_SANITIZE=ON
+
+test-sanitize: deps $(ASAN_BUILD)/build.ninja
+	cmake --build $(ASAN_BUILD) -j $(JOBS)
+	cd $(ASAN_BUILD) && UBSAN_OPTIONS=print_stacktrace=1 \
+	  ctest --output-on-failure -j $(JOBS)

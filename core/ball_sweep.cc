@@ -56,7 +56,15 @@ BallSweep::BallSweep(const Vec3& tip_from, const Vec3& tip_to, double radius)
 
 // Clones for wider vectors, picked at load time; the same IEEE operations in
 // every clone (no FMA: -ffp-contract=off), so the same bits.
-__attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
+// SWARF_NO_TARGET_CLONES keeps only the default: clang 14 names the ifunc
+// "<name>.ifunc", so callers in other files don't link (fuzz builds).
+#ifdef SWARF_NO_TARGET_CLONES
+#define SWARF_TARGET_CLONES
+#else
+#define SWARF_TARGET_CLONES \
+  __attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
+#endif
+SWARF_TARGET_CLONES
 void BallSweep::Heights(const double* x, const double* y, int32_t n,
                         double* out) const {
   if (kind_ == kGeneral) {
@@ -70,7 +78,7 @@ void BallSweep::Heights(const double* x, const double* y, int32_t n,
   for (int32_t q = 0; q < n; ++q) out[q] = LocateSphere(c, piece, x[q], y[q]).w;
 }
 
-__attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
+SWARF_TARGET_CLONES
 void BallSweep::Locate(const double* x, const double* y, int32_t n,
                        Points* out) const {
   double* __restrict ow = out->w;
@@ -103,7 +111,7 @@ void BallSweep::Locate(const double* x, const double* y, int32_t n,
   }
 }
 
-__attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
+SWARF_TARGET_CLONES
 void BallSweep::Jets(const Points& pts, int32_t n, float* const d[5]) const {
   const double* __restrict w = pts.w;
   const double* __restrict px = pts.px;

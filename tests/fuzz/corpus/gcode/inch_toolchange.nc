@@ -1,0 +1,14 @@
+(inches, tool changes, words that move nothing)
+G20 G90 G40 G49 G54 G80
+T2 M06
+G43 H2 M08
+G00 X0.0000 Y0.0000 Z0.2000
+G01 Z-0.0100 F10.
+X0.5 Y0.25
+/X0.75 Y0.5
+T5 M6
+G0 X1. Y1. Z0.1
+G1 Z-0.02
+G2 X1.5 Y1.5 I0.25 J0.25
+M5 M9
+M30

@@ -1,0 +1,15 @@
+%
+O1000 (linear moves, absolute and incremental)
+G21 G17 G90 G94
+T1 M6
+S12000 M3
+G0 X0 Y0 Z5
+G1 Z-1 F300
+X10 Y0
+X10 Y10
+G91 X-10
+Y-10 Z0.5
+G90
+G0 Z5
+M30
+%

@@ -1,0 +1,222 @@
+// Writes the seed corpus of request_fuzz into the directory given: one file
+// per seed, the kind byte then the serialized message(s) (see
+// request_fuzz.cc). Run at build time, so the seeds follow the proto.
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "google/protobuf/io/coded_stream.h"
+#include "google/protobuf/io/zero_copy_stream_impl_lite.h"
+#include "swarf/v1/swarf.pb.h"
+
+namespace {
+
+namespace pb = ::swarf::v1;
+namespace fs = std::filesystem;
+
+constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+// Kind bytes (request_fuzz.cc); +8 selects the zmap scheme.
+constexpr char kCreate = 0, kStream = 1, kTiles = 2, kStats = 3, kMarks = 4,
+               kProbe = 5, kZmap = 8;
+
+fs::path out_dir;
+int written = 0;
+
+void Write(const std::string& name, char kind, const std::string& body) {
+  std::ofstream f(out_dir / name, std::ios::binary | std::ios::trunc);
+  f.put(kind);
+  f << body;
+  ++written;
+}
+
+std::string Stream(const std::vector<pb::SimulateRequest>& reqs) {
+  std::string out;
+  {
+    google::protobuf::io::StringOutputStream s(&out);
+    google::protobuf::io::CodedOutputStream c(&s);
+    for (const auto& r : reqs) {
+      c.WriteVarint32(static_cast<uint32_t>(r.ByteSizeLong()));
+      r.SerializeToCodedStream(&c);
+    }
+  }
+  return out;
+}
+
+pb::CreateSessionRequest Create(double x1, double y1, int nx, int ny) {
+  pb::CreateSessionRequest r;
+  r.set_session_id("seed");
+  r.mutable_stock()->set_x1(x1);
+  r.mutable_stock()->set_y1(y1);
+  r.set_nx(nx);
+  r.set_ny(ny);
+  pb::Tool* t = r.add_tools();
+  t->set_id(1);
+  t->mutable_ball()->set_radius(1);
+  return r;
+}
+
+pb::SimulateRequest Batch(uint64_t seq, int tool, std::vector<double> xyz,
+                          bool reposition = false) {
+  pb::SimulateRequest r;
+  r.mutable_moves()->set_seq(seq);
+  r.mutable_moves()->set_tool_id(tool);
+  r.mutable_moves()->set_reposition(reposition);
+  for (double v : xyz) r.mutable_moves()->add_xyz(v);
+  return r;
+}
+
+pb::SimulateRequest Tiles(uint64_t id, bool region, bool derivatives) {
+  pb::SimulateRequest r;
+  pb::TileRequest* t = r.mutable_tiles();
+  t->set_request_id(id);
+  t->set_precision(pb::PRECISION_DOUBLE);
+  t->set_include_derivatives(derivatives);
+  t->set_include_owners(true);
+  if (region) {
+    pb::Rect* g = t->mutable_selection()->mutable_region();
+    g->set_x0(2);
+    g->set_y0(2);
+    g->set_x1(9);
+    g->set_y1(3);
+  } else {
+    pb::TileIndex* i = t->mutable_selection()->add_tiles();
+    i->set_tx(1);
+    i->set_ty(0);
+  }
+  return r;
+}
+
+pb::SimulateRequest Stats(uint64_t id, int cols, int rows) {
+  pb::SimulateRequest r;
+  r.mutable_stats()->set_request_id(id);
+  r.mutable_stats()->set_samples_per_edge(3);
+  r.mutable_stats()->set_map_cols(cols);
+  r.mutable_stats()->set_map_rows(rows);
+  return r;
+}
+
+pb::SimulateRequest Marks(uint64_t id) {
+  pb::SimulateRequest r;
+  r.mutable_marks()->set_request_id(id);
+  r.mutable_marks()->set_min_angle_deg(10);
+  return r;
+}
+
+pb::SimulateRequest Subscribe(uint64_t id) {
+  pb::SimulateRequest r;
+  r.mutable_subscribe()->set_request_id(id);
+  r.mutable_subscribe()->set_include_owners(true);
+  return r;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 2) {
+    std::fprintf(stderr, "usage: %s OUT_DIR\n", argv[0]);
+    return 2;
+  }
+  out_dir = argv[1];
+  fs::create_directories(out_dir);
+
+  // CreateSessionRequest.
+  Write("create_ok", kCreate, Create(10, 10, 20, 20).SerializeAsString());
+  {
+    pb::CreateSessionRequest r = Create(50, 30, 0, 0);
+    r.set_spacing(0.5);
+    r.set_scheme(pb::SCHEME_ZMAP);
+    r.add_tools()->set_id(2);
+    r.mutable_tools(1)->mutable_ball()->set_radius(3);
+    Write("create_spacing", kCreate, r.SerializeAsString());
+  }
+  {
+    pb::CreateSessionRequest r = Create(10, 10, 20, 20);
+    r.mutable_stock()->set_z_top(kNan);
+    Write("create_nan", kCreate, r.SerializeAsString());
+    r.mutable_stock()->set_z_top(0);
+    r.mutable_tools(0)->mutable_ball()->set_radius(-kInf);
+    Write("create_inf_radius", kCreate, r.SerializeAsString());
+  }
+  Write("create_huge", kCreate,
+        Create(1e4, 1e4, 1000000, 1000000).SerializeAsString());
+  Write("create_limit", kCreate, Create(1, 1, 1023, 1023).SerializeAsString());
+  Write("create_negative", kCreate, Create(-5, 10, -3, 7).SerializeAsString());
+  {
+    pb::CreateSessionRequest r = Create(10, 10, 8, 8);
+    r.mutable_tools(0)->mutable_flat()->set_radius(2);
+    Write("create_flat", kCreate, r.SerializeAsString());
+  }
+
+  // Streams.
+  const std::vector<double> line = {1, 1, 1, 1, 1, -0.5, 9, 5, -0.5, 5, 9, -1};
+  Write("stream_ok", kStream,
+        Stream({Subscribe(5), Batch(1, 1, line), Tiles(2, false, true),
+                Batch(2, 2, {3, 3, -2, 7, 7, -0.1}, true), Stats(3, 4, 4),
+                Marks(4), Tiles(6, true, false)}));
+  Write("stream_zmap", kStream + kZmap,
+        Stream({Batch(1, 1, line), Tiles(2, true, true), Stats(3, 0, 0)}));
+  Write("stream_gap_dup", kStream,
+        Stream({Batch(1, 1, line), Batch(1, 1, line), Batch(3, 1, line),
+                Batch(2, 1, {2, 2, -1})}));
+  {
+    std::vector<double> bad = line;
+    bad[4] = kNan;
+    Write("stream_nan", kStream,
+          Stream({Batch(1, 1, bad), Batch(1, 9, line), Batch(0, 1, line),
+                  Batch(1, 1, {1, 2})}));
+  }
+
+  // Unary reads on the prepared session.
+  {
+    pb::GetTilesRequest r;
+    r.set_precision(pb::PRECISION_FLOAT);
+    r.set_include_derivatives(true);
+    r.set_since_version(1);
+    pb::Rect* g = r.mutable_selection()->mutable_region();
+    g->set_x0(-1);
+    g->set_y0(4);
+    g->set_x1(20);
+    g->set_y1(1e300);
+    Write("tiles_region", kTiles, r.SerializeAsString());
+    r.clear_selection();
+    r.mutable_selection()->add_tiles()->set_tx(-1);
+    Write("tiles_bad_index", kTiles + kZmap, r.SerializeAsString());
+  }
+  {
+    pb::GetErrorStatsRequest r;
+    r.set_samples_per_edge(4);
+    r.set_map_cols(10);
+    r.set_map_rows(3);
+    pb::Rect* g = r.mutable_region();
+    g->set_x0(1);
+    g->set_y0(1);
+    g->set_x1(6);
+    g->set_y1(4);
+    Write("stats_region", kStats, r.SerializeAsString());
+    g->set_x1(kInf);
+    Write("stats_inf", kStats + kZmap, r.SerializeAsString());
+  }
+  {
+    pb::GetCuttingMarksRequest r;
+    r.set_screening_threshold(0.01);
+    Write("marks", kMarks, r.SerializeAsString());
+    r.set_min_angle_deg(95);
+    Write("marks_bad_angle", kMarks, r.SerializeAsString());
+  }
+  {
+    pb::ProbeRequest r;
+    for (double v : {1.0, 1.0, 5.0, 5.0, -3.0, 20.0, 9.99, 0.01}) r.add_xy(v);
+    Write("probe", kProbe, r.SerializeAsString());
+    r.add_xy(kNan);
+    r.add_xy(2);
+    Write("probe_nan", kProbe + kZmap, r.SerializeAsString());
+  }
+  std::printf("request_seeds: %d seeds in %s\n", written, out_dir.c_str());
+  return 0;
+}
