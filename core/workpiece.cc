@@ -4,6 +4,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstddef>
+#include <cstring>
 
 #include "absl/strings/str_cat.h"
 #include "core/status_macros.h"
@@ -246,18 +247,29 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     }
     if (n > 0) flush();
   }
-  if (lowered > 0) {
-    // Tighten the cap for later batches.
-    double zmax = -kInf;
-    for (int32_t j = j_base; j <= j_max; ++j) {
-      const double* row = w + (j - j_base) * kTileSize;
-      for (int32_t i = 0; i <= i_max - i_base; ++i) {
-        zmax = std::max(zmax, row[i]);
-      }
-    }
-    tile->zmax = zmax;
-  }
+  if (lowered > 0) tile->zmax = TileTop(t, *tile);  // tighter for later
   return lowered;
+}
+
+double Workpiece::TileTop(int32_t t, const Tile& tile) const {
+  const TileExtent e = Extent(t);
+  double zmax = -kInf;
+  for (int32_t j = 0; j < e.ny; ++j) {
+    const double* row = tile.w + j * kTileSize;
+    for (int32_t i = 0; i < e.nx; ++i) zmax = std::max(zmax, row[i]);
+  }
+  return zmax;
+}
+
+std::optional<Rect> Workpiece::IndexMove(uint32_t id,
+                                         const BallSweep& sweep) {
+  const BallSweep::Capsule cap = sweep.Footprint(spec().z_top);
+  if (cap.empty) return std::nullopt;
+  const Rect b = cap.Bounds();
+  if (!b.Intersects(grid_.bounds())) return std::nullopt;  // misses the stock
+  // Indexed even when it cuts no node: the exact surface still sees it.
+  index_.Add(id, cap);
+  return b;
 }
 
 absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
@@ -275,15 +287,12 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
   sweeps.reserve(moves.size());
   // (tile, move) pairs for every tile a move's footprint may touch.
   std::vector<std::pair<int32_t, uint32_t>> pairs;
-  const double z_top = spec().z_top;
   for (size_t m = 0; m < moves.size(); ++m) {
     sweeps.emplace_back(moves[m].from, moves[m].to, moves[m].radius);
-    const BallSweep::Capsule cap = sweeps.back().Footprint(z_top);
-    if (cap.empty) continue;
-    const Rect b = cap.Bounds();
-    if (!b.Intersects(grid_.bounds())) continue;  // misses the stock
-    // Indexed even when it cuts no node: the exact surface still sees it.
-    index_.Add(static_cast<uint32_t>(result.first_move_id + m), cap);
+    const std::optional<Rect> footprint = IndexMove(
+        static_cast<uint32_t>(result.first_move_id + m), sweeps.back());
+    if (!footprint.has_value()) continue;
+    const Rect& b = *footprint;
     const auto [i_lo, i_hi] =
         NodeRange(b.x0, b.x1, spec().x0, 1 / grid_.dx(), grid_.nx());
     const auto [j_lo, j_hi] =
@@ -457,6 +466,183 @@ int64_t Workpiece::allocated_tiles() const {
 
 int64_t Workpiece::allocated_node_bytes() const {
   return allocated_tiles() * kTileNodes * scheme_->bytes_per_node();
+}
+
+// The state format: a header, then each allocated tile in ascending order.
+// header: "SWARFWP1", scheme kind (u32), nx, ny (i32), x0, y0, x1, y1, z_top
+// (f64), version (u64), moves (u64), allocated tiles (u32)
+// tile: index (u32), version (u64), w (f64 x kTileNodes), owner (i32 x
+// kTileNodes), then for taylor wx, wy, wxx, wxy, wyy (f32 x kTileNodes each)
+namespace {
+
+constexpr char kStateMagic[8] = {'S', 'W', 'A', 'R', 'F', 'W', 'P', '1'};
+
+struct StateHeader {
+  uint32_t scheme;
+  int32_t nx, ny;
+  double x0, y0, x1, y1, z_top;
+  uint64_t version, moves;
+  uint32_t tiles;
+};
+
+// Reads fixed-size values off the front of a byte string.
+class StateReader {
+ public:
+  explicit StateReader(std::string_view bytes) : rest_(bytes) {}
+  bool Read(void* out, size_t size) {
+    if (rest_.size() < size) return false;
+    std::memcpy(out, rest_.data(), size);
+    rest_.remove_prefix(size);
+    return true;
+  }
+  template <typename T>
+  bool Read(T* out) {
+    return Read(out, sizeof(T));
+  }
+  bool done() const { return rest_.empty(); }
+
+ private:
+  std::string_view rest_;
+};
+
+bool SameBits(double a, double b) {
+  return std::memcmp(&a, &b, sizeof a) == 0;
+}
+
+}  // namespace
+
+void Workpiece::SaveState(
+    absl::FunctionRef<void(const void* data, size_t size)> sink) const {
+  const StockSpec& st = spec();
+  sink(kStateMagic, sizeof kStateMagic);
+  const uint32_t scheme = static_cast<uint32_t>(scheme_->kind());
+  sink(&scheme, 4);
+  sink(&st.nx, 4);
+  sink(&st.ny, 4);
+  for (const double* v : {&st.x0, &st.y0, &st.x1, &st.y1, &st.z_top}) {
+    sink(v, 8);
+  }
+  const uint64_t moves = moves_.size();
+  sink(&version_, 8);
+  sink(&moves, 8);
+  const uint32_t tiles = static_cast<uint32_t>(allocated_tiles());
+  sink(&tiles, 4);
+  std::vector<float> d;  // derivatives with uncut nodes zeroed
+  for (int32_t t = 0; t < tile_count(); ++t) {
+    const Tile* tile = tiles_[t].get();
+    if (tile == nullptr) continue;
+    const uint32_t index = static_cast<uint32_t>(t);
+    sink(&index, 4);
+    sink(&tile_version_[t], 8);
+    sink(tile->w, kTileNodes * sizeof(double));
+    sink(tile->owner, kTileNodes * sizeof(int32_t));
+    if (tile->d[0] == nullptr) continue;
+    d.resize(kTileNodes);
+    for (int c = 0; c < 5; ++c) {
+      for (int32_t k = 0; k < kTileNodes; ++k) {
+        d[k] = tile->owner[k] >= 0 ? tile->d[c][k] : 0.0f;
+      }
+      sink(d.data(), kTileNodes * sizeof(float));
+    }
+  }
+}
+
+absl::Status Workpiece::Record(std::span<const Move> moves) {
+  SWARF_RETURN_IF_ERROR(ValidateMoves(moves));
+  if (move_count() + static_cast<int64_t>(moves.size()) > kMaxMoves) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "a workpiece holds at most ", kMaxMoves, " moves; it has ",
+        move_count(), " and the batch adds ", moves.size()));
+  }
+  for (size_t m = 0; m < moves.size(); ++m) {
+    IndexMove(static_cast<uint32_t>(move_count() + m),
+              BallSweep(moves[m].from, moves[m].to, moves[m].radius));
+  }
+  moves_.insert(moves_.end(), moves.begin(), moves.end());
+  return absl::OkStatus();
+}
+
+absl::Status Workpiece::LoadState(std::string_view bytes) {
+  StateReader in(bytes);
+  char magic[8];
+  StateHeader h;
+  if (!in.Read(magic, 8) || std::memcmp(magic, kStateMagic, 8) != 0 ||
+      !in.Read(&h.scheme) || !in.Read(&h.nx) || !in.Read(&h.ny) ||
+      !in.Read(&h.x0) || !in.Read(&h.y0) || !in.Read(&h.x1) ||
+      !in.Read(&h.y1) || !in.Read(&h.z_top) || !in.Read(&h.version) ||
+      !in.Read(&h.moves) || !in.Read(&h.tiles)) {
+    return absl::DataLossError("state: not a workpiece state (header)");
+  }
+  const StockSpec& st = spec();
+  if (h.scheme != static_cast<uint32_t>(scheme_->kind()) || h.nx != st.nx ||
+      h.ny != st.ny || !SameBits(h.x0, st.x0) || !SameBits(h.y0, st.y0) ||
+      !SameBits(h.x1, st.x1) || !SameBits(h.y1, st.y1) ||
+      !SameBits(h.z_top, st.z_top)) {
+    return absl::DataLossError(
+        "state: saved for another stock or scheme than this workpiece's");
+  }
+  if (h.moves != moves_.size()) {
+    return absl::DataLossError(
+        absl::StrCat("state: saved after ", h.moves,
+                     " moves, the workpiece has ", moves_.size()));
+  }
+  if (h.tiles > static_cast<uint32_t>(tile_count())) {
+    return absl::DataLossError(absl::StrCat(
+        "state: ", h.tiles, " tiles, the grid has ", tile_count()));
+  }
+  std::vector<std::unique_ptr<Tile>> tiles(tiles_.size());
+  std::vector<uint64_t> tile_version(tiles_.size(), 0);
+  const bool derivs = scheme_->stores_derivatives();
+  const int32_t moves = static_cast<int32_t>(moves_.size());
+  int64_t last = -1;
+  for (uint32_t n = 0; n < h.tiles; ++n) {
+    uint32_t t = 0;
+    uint64_t version = 0;
+    if (!in.Read(&t) || !in.Read(&version)) {
+      return absl::DataLossError("state: truncated");
+    }
+    if (static_cast<int64_t>(t) <= last ||
+        t >= static_cast<uint32_t>(tile_count()) || version == 0 ||
+        version > h.version) {
+      return absl::DataLossError(absl::StrCat(
+          "state: tile ", t, " (version ", version, ") out of order or range"));
+    }
+    last = t;
+    auto tile = std::make_unique<Tile>(arena_.get(), derivs);
+    if (!in.Read(tile->w, kTileNodes * sizeof(double)) ||
+        !in.Read(tile->owner, kTileNodes * sizeof(int32_t))) {
+      return absl::DataLossError("state: truncated");
+    }
+    if (derivs) {
+      for (int c = 0; c < 5; ++c) {
+        if (!in.Read(tile->d[c], kTileNodes * sizeof(float))) {
+          return absl::DataLossError("state: truncated");
+        }
+      }
+    }
+    // What Apply guarantees: a node is uncut at the top, or cut strictly
+    // below it by a move of the workpiece.
+    for (int32_t k = 0; k < kTileNodes; ++k) {
+      const int32_t o = tile->owner[k];
+      const double w = tile->w[k];
+      const bool ok = o == -1 ? SameBits(w, st.z_top)
+                              : o >= 0 && o < moves && std::isfinite(w) &&
+                                    w < st.z_top;
+      if (!ok) {
+        return absl::DataLossError(absl::StrCat(
+            "state: tile ", t, " node ", k, " has height ", w,
+            " and owner ", o));
+      }
+    }
+    tile->zmax = TileTop(static_cast<int32_t>(t), *tile);
+    tile_version[t] = version;
+    tiles[t] = std::move(tile);
+  }
+  if (!in.done()) return absl::DataLossError("state: trailing bytes");
+  tiles_.swap(tiles);
+  tile_version_.swap(tile_version);
+  version_ = h.version;
+  return absl::OkStatus();
 }
 
 }  // namespace swarf

@@ -18,9 +18,12 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
+#include <string_view>
 #include <vector>
 
+#include "absl/functional/function_ref.h"
 #include "absl/status/statusor.h"
 #include "core/ball_sweep.h"
 #include "core/geometry.h"
@@ -80,6 +83,26 @@ class Workpiece {
   // previous batch.
   absl::StatusOr<ApplyResult> Apply(std::span<const Move> moves);
 
+  // Snapshots: restoring a workpiece without redoing every cut.
+  //
+  // SaveState writes the nodal state (the allocated tiles' parameters and
+  // owners, the tile versions and the workpiece version; not the moves) to
+  // `sink`, piece by piece, in a little-endian format LoadState reads.
+  // Derivatives of uncut nodes are written as zeros, so equal states give
+  // equal bytes.
+  void SaveState(
+      absl::FunctionRef<void(const void* data, size_t size)> sink) const;
+  // Appends moves whose cuts the nodal state already holds (as LoadState
+  // restores it): they get ids and are indexed, and nothing is cut.
+  // Validated as Apply validates.
+  absl::Status Record(std::span<const Move> moves);
+  // Replaces the nodal state by a saved one. The workpiece must have the
+  // saved one's stock and scheme and exactly as many moves (the same moves,
+  // re-added with Record); it is then bit-identical to the saved workpiece,
+  // and so is every later Apply. DataLoss naming the problem for bytes that
+  // are not such a state; the workpiece is then unchanged.
+  absl::Status LoadState(std::string_view bytes);
+
   const GridGeometry& grid() const { return grid_; }
   const StockSpec& spec() const { return grid_.spec(); }
   const Scheme& scheme() const { return *scheme_; }
@@ -136,6 +159,11 @@ class Workpiece {
   struct Tile;
   Workpiece(const StockSpec& spec, const Scheme& scheme, ThreadPool* pool);
   std::unique_ptr<Tile> NewTile() const;
+  // Indexes move `id` when its footprint below the top reaches the stock;
+  // returns the footprint's bounds then.
+  std::optional<Rect> IndexMove(uint32_t id, const BallSweep& sweep);
+  // The highest node of tile t (what CutTile caps cuts with).
+  double TileTop(int32_t t, const Tile& tile) const;
   template <bool kDerivatives>
   int64_t CutTile(int32_t t, Tile* tile, std::span<const BallSweep> sweeps,
                   std::span<const uint32_t> batch_moves,

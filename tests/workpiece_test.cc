@@ -623,5 +623,161 @@ TEST(WorkpieceExactHeightTest, SeesCutsBetweenNodes) {
   EXPECT_EQ(wp->ExactHeight(7.5, 7.5), 0);
 }
 
+std::string SavedState(const Workpiece& wp) {
+  std::string out;
+  wp.SaveState([&](const void* data, size_t size) {
+    out.append(static_cast<const char*>(data), size);
+  });
+  return out;
+}
+
+// Everything observable of two workpieces is bit-identical: nodes (heights,
+// derivatives, owners), versions, tiles and the exact surface.
+void ExpectSameWorkpiece(const Workpiece& a, const Workpiece& b) {
+  ASSERT_EQ(a.move_count(), b.move_count());
+  EXPECT_EQ(a.version(), b.version());
+  EXPECT_EQ(a.allocated_tiles(), b.allocated_tiles());
+  for (int32_t t = 0; t < a.tile_count(); ++t) {
+    EXPECT_EQ(a.TileAllocated(t), b.TileAllocated(t)) << "tile " << t;
+    EXPECT_EQ(a.TileVersion(t), b.TileVersion(t)) << "tile " << t;
+  }
+  const std::vector<NodeValue> na = Snapshot(a), nb = Snapshot(b);
+  for (size_t k = 0; k < na.size(); ++k) {
+    ASSERT_TRUE(SameJet(na[k].jet, nb[k].jet)) << "node " << k;
+    ASSERT_EQ(na[k].owner, nb[k].owner) << "node " << k;
+  }
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> ux(-4, 44), uy(-4, 34);
+  for (int k = 0; k < 2000; ++k) {
+    const double x = ux(rng), y = uy(rng);
+    ASSERT_EQ(a.ExactHeight(x, y), b.ExactHeight(x, y)) << x << "," << y;
+  }
+}
+
+// A workpiece rebuilt from a saved state (its moves recorded, not cut) is
+// the saved one bit for bit, and stays so as both go on cutting.
+TEST(WorkpieceStateTest, RestoredStateIsBitIdenticalAndContinues) {
+  const std::vector<Move> moves = MixedMoves(21, 600);
+  const std::span<const Move> first(moves.data(), 350),
+      rest(moves.data() + 350, 250);
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(SchemeName(scheme));
+    auto original = MakeWorkpiece(MixedStock(), scheme);
+    for (size_t k = 0; k < first.size(); k += 50) {
+      ASSERT_TRUE(original->Apply(first.subspan(k, 50)).ok());
+    }
+    const std::string state = SavedState(*original);
+
+    auto restored = MakeWorkpiece(MixedStock(), scheme);
+    ASSERT_TRUE(restored->Record(first.subspan(0, 100)).ok());
+    ASSERT_TRUE(restored->Record(first.subspan(100)).ok());
+    ASSERT_TRUE(restored->LoadState(state).ok());
+    ExpectSameWorkpiece(*original, *restored);
+    // Saving again gives the same bytes (uncut derivatives are zeros).
+    EXPECT_EQ(SavedState(*restored), state);
+
+    for (size_t k = 0; k < rest.size(); k += 50) {
+      auto a = original->Apply(rest.subspan(k, 50));
+      auto b = restored->Apply(rest.subspan(k, 50));
+      ASSERT_TRUE(a.ok() && b.ok());
+      EXPECT_EQ(a->changed_tiles, b->changed_tiles);
+      EXPECT_EQ(a->nodes_lowered, b->nodes_lowered);
+    }
+    ExpectSameWorkpiece(*original, *restored);
+    EXPECT_EQ(SavedState(*restored), SavedState(*original));
+  }
+}
+
+// An empty workpiece's state restores to an empty workpiece.
+TEST(WorkpieceStateTest, UncutStateRoundTrips) {
+  auto a = MakeWorkpiece(MixedStock(), SchemeKind::kTaylor);
+  auto b = MakeWorkpiece(MixedStock(), SchemeKind::kTaylor);
+  ASSERT_TRUE(b->LoadState(SavedState(*a)).ok());
+  EXPECT_EQ(b->allocated_tiles(), 0);
+  EXPECT_EQ(b->version(), 0u);
+}
+
+// Bytes that are not the state of this workpiece are DataLoss, and the
+// workpiece is left as it was.
+TEST(WorkpieceStateTest, ForeignOrDamagedStatesAreRejected) {
+  const std::vector<Move> moves = MixedMoves(5, 200);
+  auto original = MakeWorkpiece(MixedStock(), SchemeKind::kTaylor);
+  ASSERT_TRUE(original->Apply(moves).ok());
+  const std::string state = SavedState(*original);
+  ASSERT_GT(original->allocated_tiles(), 0);
+
+  auto expect_rejected = [&](const std::string& bytes,
+                             const std::string& what) {
+    auto target = MakeWorkpiece(MixedStock(), SchemeKind::kTaylor);
+    ASSERT_TRUE(target->Record(moves).ok());
+    const std::string before = SavedState(*target);
+    const absl::Status s = target->LoadState(bytes);
+    EXPECT_EQ(s.code(), absl::StatusCode::kDataLoss) << what << ": " << s;
+    EXPECT_THAT(std::string(s.message()), HasSubstr(what));
+    EXPECT_EQ(SavedState(*target), before) << what;
+  };
+  // Fewer moves recorded than were saved.
+  auto fewer = MakeWorkpiece(MixedStock(), SchemeKind::kTaylor);
+  ASSERT_TRUE(fewer->Record(std::span<const Move>(moves.data(), 199)).ok());
+  EXPECT_EQ(fewer->LoadState(state).code(), absl::StatusCode::kDataLoss);
+  // Another scheme, another stock.
+  auto zmap = MakeWorkpiece(MixedStock(), SchemeKind::kZmap);
+  ASSERT_TRUE(zmap->Record(moves).ok());
+  EXPECT_THAT(std::string(zmap->LoadState(state).message()),
+              HasSubstr("another stock or scheme"));
+  StockSpec other = MixedStock();
+  other.z_top = std::nextafter(other.z_top, 100.0);
+  auto moved = MakeWorkpiece(other, SchemeKind::kTaylor);
+  ASSERT_TRUE(moved->Record(moves).ok());
+  EXPECT_EQ(moved->LoadState(state).code(), absl::StatusCode::kDataLoss);
+
+  expect_rejected(state.substr(0, 20), "header");
+  expect_rejected(state.substr(0, state.size() - 1), "truncated");
+  expect_rejected(state + "x", "trailing bytes");
+  std::string bad_magic = state;
+  bad_magic[0] = 'X';
+  expect_rejected(bad_magic, "header");
+  // The first tile's first owner (after the header, index and version, and
+  // the tile's heights) set to a move that does not exist.
+  const size_t header = 8 + 4 + 8 + 5 * 8 + 8 + 8 + 4;
+  const size_t owner0 = header + 4 + 8 + kTileNodes * sizeof(double);
+  std::string bad_owner = state;
+  const int32_t absent = 200;
+  std::memcpy(bad_owner.data() + owner0, &absent, 4);
+  expect_rejected(bad_owner, "owner 200");
+  // A height above the top.
+  std::string bad_height = state;
+  const double high = MixedStock().z_top + 1;
+  std::memcpy(bad_height.data() + header + 12, &high, 8);
+  expect_rejected(bad_height, "height");
+  // A tile index beyond the grid.
+  std::string bad_tile = state;
+  const uint32_t far = 1000;
+  std::memcpy(bad_tile.data() + header, &far, 4);
+  expect_rejected(bad_tile, "out of order or range");
+}
+
+// Record indexes moves as Apply does: the exact surface sees them.
+TEST(WorkpieceStateTest, RecordedMovesAreIndexedAndValidated) {
+  const std::vector<Move> moves = MixedMoves(9, 300);
+  auto cut = MakeWorkpiece(MixedStock(), SchemeKind::kZmap);
+  auto recorded = MakeWorkpiece(MixedStock(), SchemeKind::kZmap);
+  ASSERT_TRUE(cut->Apply(moves).ok());
+  ASSERT_TRUE(recorded->Record(moves).ok());
+  EXPECT_EQ(recorded->allocated_tiles(), 0);  // nothing cut
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<double> ux(-4, 44), uy(-4, 34);
+  for (int k = 0; k < 2000; ++k) {
+    const double x = ux(rng), y = uy(rng);
+    ASSERT_EQ(cut->ExactHeight(x, y), recorded->ExactHeight(x, y));
+  }
+  Move bad = moves[0];
+  bad.to.y = std::nan("");
+  const absl::Status s = recorded->Record(std::vector<Move>{moves[1], bad});
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(s.message()), HasSubstr("moves[1].to.y"));
+  EXPECT_EQ(recorded->move_count(), 300);
+}
+
 }  // namespace
 }  // namespace swarf
