@@ -14,16 +14,12 @@
 #include <bit>
 #include <chrono>
 #include <cmath>
-#include <condition_variable>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <fstream>
 #include <functional>
 #include <future>
 #include <limits>
 #include <memory>
-#include <mutex>
 #include <string>
 #include <string_view>
 #include <thread>
@@ -40,6 +36,8 @@
 #include "server/service.h"
 #include "spdlog/spdlog.h"
 #include "swarf/v1/swarf.grpc.pb.h"
+#include "tests/server_test_util.h"
+#include "tests/sim_stream.h"
 
 namespace swarf::server {
 namespace {
@@ -48,33 +46,24 @@ namespace pb = ::swarf::v1;
 using std::chrono::milliseconds;
 using std::chrono::seconds;
 using Clock = std::chrono::steady_clock;
+using ::swarf::testing::CollectTiles;
+using ::swarf::testing::ForSession;
+using ::swarf::testing::kTimeout;
+using ::swarf::testing::MovesRequest;
+using ::swarf::testing::SetStock;
+using ::swarf::testing::SimStream;
+using ::swarf::testing::ValueOrDie;
 
 constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInf = std::numeric_limits<double>::infinity();
-// Bound on every call and wait, so that a hang fails instead of blocking.
-constexpr auto kTimeout = seconds(60);
 // How soon a healthy session's call must complete while bad requests run.
 constexpr auto kPrompt = seconds(10);
 constexpr int32_t kToolId = 1;
-
-template <typename T>
-T ValueOrDie(absl::StatusOr<T> v) {
-  if (!v.ok()) {
-    std::fprintf(stderr, "%s\n", v.status().ToString().c_str());
-    std::abort();
-  }
-  return *std::move(v);
-}
 
 uint64_t Bits(double v) { return std::bit_cast<uint64_t>(v); }
 
 bool Has(const std::string& s, std::string_view sub) {
   return s.find(sub) != std::string::npos;
-}
-
-void ForSession(grpc::ClientContext* ctx, const std::string& id) {
-  if (!id.empty()) ctx->AddMetadata(kSessionMetadata, id);
-  ctx->set_deadline(std::chrono::system_clock::now() + kTimeout);
 }
 
 // Resident memory of this process (server and clients), bytes.
@@ -108,87 +97,6 @@ int64_t RssBytes() {
 }
 
 // -------------------------------------------------------------- streams
-
-// A Simulate stream: requests are written from the caller's thread while a
-// reader thread collects every response (so backpressure never deadlocks).
-class SimStream {
- public:
-  SimStream(pb::Swarf::Stub* stub, const std::string& session) {
-    ForSession(&ctx_, session);
-    stream_ = stub->Simulate(&ctx_);
-    reader_ = std::thread([this] { ReadLoop(); });
-  }
-  ~SimStream() {
-    if (!finished_) {
-      ctx_.TryCancel();
-      reader_.join();
-      stream_->Finish();
-    }
-  }
-
-  bool Write(const pb::SimulateRequest& r) { return stream_->Write(r); }
-  void Cancel() { ctx_.TryCancel(); }
-
-  // Half-closes, waits for the server to finish and returns its status.
-  grpc::Status Finish() {
-    stream_->WritesDone();
-    return Wait();
-  }
-  // Waits for the end of the stream (the server's status).
-  grpc::Status Wait() {
-    reader_.join();
-    finished_ = true;
-    return stream_->Finish();
-  }
-
-  // Waits (bounded) until pred(responses so far) holds.
-  bool WaitFor(
-      const std::function<bool(const std::vector<pb::SimulateResponse>&)>&
-          pred,
-      Clock::duration timeout = kTimeout) {
-    std::unique_lock<std::mutex> l(mu_);
-    cv_.wait_for(l, timeout, [&] { return done_ || pred(responses_); });
-    return pred(responses_);
-  }
-  // Waits (bounded) until there are n responses.
-  bool WaitForCount(size_t n, Clock::duration timeout = kTimeout) {
-    return WaitFor([n](const auto& rs) { return rs.size() >= n; }, timeout);
-  }
-
-  std::vector<pb::SimulateResponse> responses() const {
-    std::lock_guard<std::mutex> l(mu_);
-    return responses_;
-  }
-
- private:
-  void ReadLoop() {
-    pb::SimulateResponse r;
-    while (stream_->Read(&r)) {
-      {
-        std::lock_guard<std::mutex> l(mu_);
-        responses_.push_back(std::move(r));
-      }
-      cv_.notify_all();
-      r.Clear();
-    }
-    {
-      std::lock_guard<std::mutex> l(mu_);
-      done_ = true;
-    }
-    cv_.notify_all();
-  }
-
-  grpc::ClientContext ctx_;
-  std::unique_ptr<
-      grpc::ClientReaderWriter<pb::SimulateRequest, pb::SimulateResponse>>
-      stream_;
-  mutable std::mutex mu_;
-  std::condition_variable cv_;
-  std::vector<pb::SimulateResponse> responses_;
-  bool done_ = false;
-  bool finished_ = false;
-  std::thread reader_;
-};
 
 // A bidi call of raw bytes through the generic stub (no protobuf on the
 // client side), one operation at a time on a completion queue.
@@ -282,14 +190,7 @@ pb::CreateSessionRequest SessionRequest(const std::string& id,
                                         double radius) {
   pb::CreateSessionRequest r;
   r.set_session_id(id);
-  pb::Stock* st = r.mutable_stock();
-  st->set_x0(stock.x0);
-  st->set_y0(stock.y0);
-  st->set_x1(stock.x1);
-  st->set_y1(stock.y1);
-  st->set_z_top(stock.z_top);
-  r.set_nx(stock.nx);
-  r.set_ny(stock.ny);
+  SetStock(stock, &r);
   r.set_scheme(pb::SCHEME_TAYLOR);
   pb::Tool* t = r.add_tools();
   t->set_id(kToolId);
@@ -309,11 +210,7 @@ pb::CreateSessionRequest SmallRequest(const std::string& id) {
 
 pb::SimulateRequest BatchRequest(uint64_t seq, const std::vector<double>& xyz,
                                  int32_t tool = kToolId) {
-  pb::SimulateRequest r;
-  r.mutable_moves()->set_seq(seq);
-  r.mutable_moves()->set_tool_id(tool);
-  r.mutable_moves()->mutable_xyz()->Assign(xyz.begin(), xyz.end());
-  return r;
+  return MovesRequest(seq, tool, xyz);
 }
 
 // A line of `points` tip positions at depth z from (x0, y) to (x1, y).
@@ -411,12 +308,7 @@ class BadInputTest : public ::testing::Test {
   grpc::Status ReadTiles(const std::string& id, pb::GetTilesRequest req,
                          std::vector<pb::Tile>* out) {
     grpc::ClientContext ctx;
-    ForSession(&ctx, id);
-    req.set_session_id(id);
-    auto reader = stub_->GetTiles(&ctx, req);
-    pb::Tile t;
-    while (reader->Read(&t)) out->push_back(t);
-    return reader->Finish();
+    return CollectTiles(stub_.get(), &ctx, id, std::move(req), out);
   }
   grpc::Status ErrorStats(const std::string& id, pb::GetErrorStatsRequest req) {
     grpc::ClientContext ctx;

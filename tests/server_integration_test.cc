@@ -10,19 +10,14 @@
 #include <algorithm>
 #include <atomic>
 #include <bit>
-#include <chrono>
 #include <cmath>
-#include <condition_variable>
 #include <cstdint>
-#include <cstdio>
-#include <cstdlib>
 #include <functional>
 #include <future>
 #include <latch>
 #include <limits>
 #include <map>
 #include <memory>
-#include <mutex>
 #include <ostream>
 #include <set>
 #include <string>
@@ -45,11 +40,20 @@
 #include "server/session.h"
 #include "spdlog/spdlog.h"
 #include "swarf/v1/swarf.grpc.pb.h"
+#include "tests/server_test_util.h"
+#include "tests/sim_stream.h"
 
 namespace swarf::server {
 namespace {
 
 namespace pb = ::swarf::v1;
+using ::swarf::testing::CollectTiles;
+using ::swarf::testing::ForSession;
+using ::swarf::testing::MovesRequest;
+using ::swarf::testing::SetDeadline;
+using ::swarf::testing::SetStock;
+using ::swarf::testing::SimStream;
+using ::swarf::testing::ValueOrDie;
 
 constexpr char kReplica[] = "it-replica";
 constexpr int32_t kToolId = 7;
@@ -59,32 +63,12 @@ constexpr int32_t kDecoyToolId = 3;
 constexpr double kDecoyRadius = 2.5;
 // Connecting moves run at this tip height, above every stock top here.
 constexpr double kSafeZ = 50;
-// Bound on every call and wait, so that a hang fails instead of blocking.
-constexpr auto kTimeout = std::chrono::seconds(60);
-
-template <typename T>
-T ValueOrDie(absl::StatusOr<T> v) {
-  if (!v.ok()) {
-    std::fprintf(stderr, "%s\n", v.status().ToString().c_str());
-    std::abort();
-  }
-  return *std::move(v);
-}
 
 uint64_t Bits(double v) { return std::bit_cast<uint64_t>(v); }
 uint32_t Bits(float v) { return std::bit_cast<uint32_t>(v); }
 
 bool Has(const std::string& s, std::string_view sub) {
   return s.find(sub) != std::string::npos;
-}
-
-void SetDeadline(grpc::ClientContext* ctx) {
-  ctx->set_deadline(std::chrono::system_clock::now() + kTimeout);
-}
-
-void ForSession(grpc::ClientContext* ctx, const std::string& id) {
-  ctx->AddMetadata(kSessionMetadata, id);
-  SetDeadline(ctx);
 }
 
 // ------------------------------------------------------------- toolpaths
@@ -426,103 +410,11 @@ pb::SimulateRequest TileRequest(uint64_t id, uint64_t since,
   return r;
 }
 
-pb::SimulateRequest RawBatch(uint64_t seq, int32_t tool,
-                             std::vector<double> xyz) {
-  pb::SimulateRequest r;
-  r.mutable_moves()->set_seq(seq);
-  r.mutable_moves()->set_tool_id(tool);
-  r.mutable_moves()->mutable_xyz()->Assign(xyz.begin(), xyz.end());
-  return r;
-}
-
-// A Simulate stream: requests are written from the caller's thread while a
-// reader thread collects every response, so that server backpressure never
-// deadlocks the test.
-class SimStream {
- public:
-  // An empty `session` sends no x-swarf-session metadata.
-  SimStream(pb::Swarf::Stub* stub, const std::string& session) {
-    if (!session.empty()) ctx_.AddMetadata(kSessionMetadata, session);
-    SetDeadline(&ctx_);
-    stream_ = stub->Simulate(&ctx_);
-    reader_ = std::thread([this] { ReadLoop(); });
-  }
-  ~SimStream() {
-    if (!finished_) {
-      ctx_.TryCancel();
-      reader_.join();
-      stream_->Finish();
-    }
-  }
-
-  bool Write(const pb::SimulateRequest& r) { return stream_->Write(r); }
-  void Cancel() { ctx_.TryCancel(); }
-
-  // Half-closes, waits for the server to finish and returns its status.
-  grpc::Status Finish() {
-    stream_->WritesDone();
-    reader_.join();
-    finished_ = true;
-    return stream_->Finish();
-  }
-
-  // Waits (bounded) until pred(responses so far) holds.
-  bool WaitFor(
-      const std::function<bool(const std::vector<pb::SimulateResponse>&)>&
-          pred) {
-    std::unique_lock<std::mutex> l(mu_);
-    cv_.wait_for(l, kTimeout, [&] { return done_ || pred(responses_); });
-    return pred(responses_);
-  }
-
-  std::vector<pb::SimulateResponse> responses() const {
-    std::lock_guard<std::mutex> l(mu_);
-    return responses_;
-  }
-  grpc::ClientContext& context() { return ctx_; }
-
- private:
-  void ReadLoop() {
-    pb::SimulateResponse r;
-    while (stream_->Read(&r)) {
-      {
-        std::lock_guard<std::mutex> l(mu_);
-        responses_.push_back(std::move(r));
-      }
-      cv_.notify_all();
-      r.Clear();
-    }
-    {
-      std::lock_guard<std::mutex> l(mu_);
-      done_ = true;
-    }
-    cv_.notify_all();
-  }
-
-  grpc::ClientContext ctx_;
-  std::unique_ptr<
-      grpc::ClientReaderWriter<pb::SimulateRequest, pb::SimulateResponse>>
-      stream_;
-  mutable std::mutex mu_;
-  std::condition_variable cv_;
-  std::vector<pb::SimulateResponse> responses_;
-  bool done_ = false;
-  bool finished_ = false;
-  std::thread reader_;
-};
-
 pb::CreateSessionRequest CreateRequest(const std::string& id,
                                        const Toolpath& tp, pb::Scheme scheme) {
   pb::CreateSessionRequest r;
   r.set_session_id(id);
-  pb::Stock* st = r.mutable_stock();
-  st->set_x0(tp.stock.x0);
-  st->set_y0(tp.stock.y0);
-  st->set_x1(tp.stock.x1);
-  st->set_y1(tp.stock.y1);
-  st->set_z_top(tp.stock.z_top);
-  r.set_nx(tp.stock.nx);
-  r.set_ny(tp.stock.ny);
+  SetStock(tp.stock, &r);
   r.set_scheme(scheme);
   pb::Tool* decoy = r.add_tools();
   decoy->set_id(kDecoyToolId);
@@ -608,12 +500,7 @@ class ServerTest : public ::testing::Test {
                          std::vector<pb::Tile>* out,
                          std::string* replica = nullptr) {
     grpc::ClientContext ctx;
-    ForSession(&ctx, id);
-    req.set_session_id(id);
-    auto reader = stub_->GetTiles(&ctx, req);
-    pb::Tile t;
-    while (reader->Read(&t)) out->push_back(t);
-    grpc::Status st = reader->Finish();
+    grpc::Status st = CollectTiles(stub_.get(), &ctx, id, std::move(req), out);
     if (replica != nullptr) *replica = ReplicaOf(ctx);
     return st;
   }
@@ -963,16 +850,16 @@ TEST_F(ServerTest, RepositionBatchesCutExactlyTheInstanceMoves) {
     for (size_t k = 0; k < inst.moves.size(); ++k) {
       const Move& m = inst.moves[k];
       pb::SimulateRequest r =
-          RawBatch(k + 1, kToolId,
-                   {m.from.x, m.from.y, m.from.z, m.to.x, m.to.y, m.to.z});
+          MovesRequest(k + 1, kToolId,
+                       {m.from.x, m.from.y, m.from.z, m.to.x, m.to.y, m.to.z});
       r.mutable_moves()->set_reposition(true);
       ASSERT_TRUE(s.Write(r));
       want.push_back(ValueOrDie(wp->Apply(std::span<const Move>(&m, 1))));
     }
     // Without reposition the next batch continues from the last point.
     const Vec3 last = inst.moves.back().to;
-    ASSERT_TRUE(s.Write(
-        RawBatch(inst.moves.size() + 1, kToolId, {last.x, last.y, kSafeZ})));
+    ASSERT_TRUE(s.Write(MovesRequest(inst.moves.size() + 1, kToolId,
+                                     {last.x, last.y, kSafeZ})));
     const Move lift{last, {last.x, last.y, kSafeZ}, tp.radius};
     want.push_back(ValueOrDie(wp->Apply(std::span<const Move>(&lift, 1))));
     const grpc::Status st = s.Finish();
@@ -1088,11 +975,11 @@ TEST_F(ServerTest, TileRequestThatMatchesNothingStillEnds) {
   ASSERT_NO_FATAL_FAILURE(StartServer());
   ASSERT_TRUE(Create(SmallRequest("empty-tiles")).ok());
   SimStream s(stub_.get(), "empty-tiles");
-  ASSERT_TRUE(s.Write(RawBatch(1, kToolId, {1, 5, 1, 9, 5, -0.5})));
+  ASSERT_TRUE(s.Write(MovesRequest(1, kToolId, {1, 5, 1, 9, 5, -0.5})));
   // Nothing changed after the last version: no tile matches.
   ASSERT_TRUE(s.Write(TileRequest(77, 1u << 30, pb::PRECISION_FLOAT, false,
                                   false)));
-  ASSERT_TRUE(s.Write(RawBatch(2, kToolId, {9, 6, -0.5})));
+  ASSERT_TRUE(s.Write(MovesRequest(2, kToolId, {9, 6, -0.5})));
   const grpc::Status st = s.Finish();
   ASSERT_TRUE(st.ok()) << st.error_message();
   const std::vector<pb::SimulateResponse> rs = s.responses();
@@ -1332,7 +1219,7 @@ TEST_F(ServerTest, ResumeOnANewStreamDuplicatesAndGaps) {
   ExpectTilesEqualCore(id, full.wp(), true);
 
   // A gap (last + 2) fails the stream and is not applied.
-  ASSERT_TRUE(s.Write(RawBatch(n + 2, kToolId, {50, 50, -20})));
+  ASSERT_TRUE(s.Write(MovesRequest(n + 2, kToolId, {50, 50, -20})));
   const grpc::Status gap = s.Finish();
   EXPECT_EQ(gap.error_code(), grpc::StatusCode::FAILED_PRECONDITION)
       << gap.error_message();
@@ -1346,7 +1233,7 @@ TEST_F(ServerTest, ResumeOnANewStreamDuplicatesAndGaps) {
   // The session goes on at last + 1 on a new stream; a move at kSafeZ
   // cuts nothing.
   SimStream s3(stub_.get(), id);
-  ASSERT_TRUE(s3.Write(RawBatch(n + 1, kToolId, {50, 50, kSafeZ})));
+  ASSERT_TRUE(s3.Write(MovesRequest(n + 1, kToolId, {50, 50, kSafeZ})));
   ASSERT_TRUE(s3.Finish().ok());
   const std::vector<pb::Ack> acks3 = AcksOf(s3.responses());
   ASSERT_EQ(acks3.size(), 1u);
@@ -1524,15 +1411,15 @@ TEST_F(ServerTest, PerRequestErrorsKeepTheStreamGoing) {
     ASSERT_TRUE(s.Write(r));
     want.push_back(e);
   };
-  send(RawBatch(1, kToolId, with_nan), {3, 1, "xyz[4]"});
-  send(RawBatch(1, kToolId, with_inf), {3, 1, "xyz[2]"});
-  send(RawBatch(1, 99, line(10, 5)), {3, 1, "tool_id"});
-  send(RawBatch(1, kToolId, line(101, 5)), {3, 1, "xyz"});
-  send(RawBatch(1, kToolId, ragged), {3, 1, "xyz"});
-  send(RawBatch(0, kToolId, line(10, 5)), {3, 0, "seq"});
+  send(MovesRequest(1, kToolId, with_nan), {3, 1, "xyz[4]"});
+  send(MovesRequest(1, kToolId, with_inf), {3, 1, "xyz[2]"});
+  send(MovesRequest(1, 99, line(10, 5)), {3, 1, "tool_id"});
+  send(MovesRequest(1, kToolId, line(101, 5)), {3, 1, "xyz"});
+  send(MovesRequest(1, kToolId, ragged), {3, 1, "xyz"});
+  send(MovesRequest(0, kToolId, line(10, 5)), {3, 0, "seq"});
   // None of the rejected batches consumed seq 1; the batch limit is
   // inclusive.
-  send(RawBatch(1, kToolId, line(100, 5)), {0, 1, ""});
+  send(MovesRequest(1, kToolId, line(100, 5)), {0, 1, ""});
   {
     pb::SimulateRequest r =
         TileRequest(7, 0, pb::PRECISION_FLOAT, false, false);
@@ -1551,7 +1438,7 @@ TEST_F(ServerTest, PerRequestErrorsKeepTheStreamGoing) {
     r.mutable_stats()->mutable_region()->set_x0(nan);
     send(r, {3, 9, "region"});
   }
-  send(RawBatch(2, kToolId, line(10, 7)), {0, 2, ""});
+  send(MovesRequest(2, kToolId, line(10, 7)), {0, 2, ""});
   const grpc::Status st = s.Finish();
   ASSERT_TRUE(st.ok()) << st.error_message();
   const std::vector<pb::SimulateResponse> rs = s.responses();
@@ -1586,9 +1473,9 @@ TEST_F(ServerTest, FailedPreconditionDerivativesOfZmapAndSeqGap) {
   ASSERT_TRUE(s.Write(
       TileRequest(1, 0, pb::PRECISION_DOUBLE, /*derivatives=*/true, false)));
   ASSERT_TRUE(s.Write(SubscribeRequest(2, pb::PRECISION_DOUBLE, true, false)));
-  ASSERT_TRUE(s.Write(RawBatch(1, kToolId, {5, 5, 5, 5, 5, -1})));
+  ASSERT_TRUE(s.Write(MovesRequest(1, kToolId, {5, 5, 5, 5, 5, -1})));
   // A gap: seq 3 after 1.
-  ASSERT_TRUE(s.Write(RawBatch(3, kToolId, {6, 6, -1})));
+  ASSERT_TRUE(s.Write(MovesRequest(3, kToolId, {6, 6, -1})));
   const grpc::Status st = s.Finish();
   EXPECT_EQ(st.error_code(), grpc::StatusCode::FAILED_PRECONDITION)
       << st.error_message();
@@ -1675,7 +1562,8 @@ TEST_F(ServerTest, ResourceExhaustedAtEachLimit) {
       xyz.insert(xyz.end(), {1 + 8.0 * p / 59999, 5, -0.5});
     }
     SimStream s(stub_.get(), "big");
-    s.Write(RawBatch(1, kToolId, xyz));  // may or may not report the failure
+    // The write may or may not report the failure.
+    s.Write(MovesRequest(1, kToolId, xyz));
     const grpc::Status st = s.Finish();
     EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED)
         << st.error_message();

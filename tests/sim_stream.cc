@@ -1,0 +1,90 @@
+#include "tests/sim_stream.h"
+
+#include <utility>
+
+#include "server/service.h"
+
+namespace swarf::testing {
+
+namespace pb = ::swarf::v1;
+
+void SetDeadline(grpc::ClientContext* ctx) {
+  ctx->set_deadline(std::chrono::system_clock::now() + kTimeout);
+}
+
+void ForSession(grpc::ClientContext* ctx, const std::string& id) {
+  if (!id.empty()) ctx->AddMetadata(server::kSessionMetadata, id);
+  SetDeadline(ctx);
+}
+
+grpc::Status CollectTiles(pb::Swarf::Stub* stub, grpc::ClientContext* ctx,
+                          const std::string& id, pb::GetTilesRequest req,
+                          std::vector<pb::Tile>* out) {
+  ForSession(ctx, id);
+  req.set_session_id(id);
+  auto reader = stub->GetTiles(ctx, req);
+  pb::Tile t;
+  while (reader->Read(&t)) out->push_back(t);
+  return reader->Finish();
+}
+
+SimStream::SimStream(pb::Swarf::Stub* stub, const std::string& session) {
+  ForSession(&ctx_, session);
+  stream_ = stub->Simulate(&ctx_);
+  reader_ = std::thread([this] { ReadLoop(); });
+}
+
+SimStream::~SimStream() {
+  if (!finished_) {
+    ctx_.TryCancel();
+    reader_.join();
+    stream_->Finish();
+  }
+}
+
+grpc::Status SimStream::Finish() {
+  stream_->WritesDone();
+  return Wait();
+}
+
+grpc::Status SimStream::Wait() {
+  reader_.join();
+  finished_ = true;
+  return stream_->Finish();
+}
+
+bool SimStream::WaitFor(const std::function<bool(const Responses&)>& pred,
+                        std::chrono::steady_clock::duration timeout) {
+  std::unique_lock<std::mutex> l(mu_);
+  cv_.wait_for(l, timeout, [&] { return done_ || pred(responses_); });
+  return pred(responses_);
+}
+
+bool SimStream::WaitForCount(size_t n,
+                             std::chrono::steady_clock::duration timeout) {
+  return WaitFor([n](const Responses& rs) { return rs.size() >= n; }, timeout);
+}
+
+SimStream::Responses SimStream::responses() const {
+  std::lock_guard<std::mutex> l(mu_);
+  return responses_;
+}
+
+void SimStream::ReadLoop() {
+  pb::SimulateResponse r;
+  while (stream_->Read(&r)) {
+    {
+      std::lock_guard<std::mutex> l(mu_);
+      responses_.push_back(std::move(r));
+    }
+    cv_.notify_all();
+    r.Clear();
+  }
+  {
+    std::lock_guard<std::mutex> l(mu_);
+    done_ = true;
+  }
+  cv_.notify_all();
+}
+
+}  // namespace swarf::testing
