@@ -126,11 +126,10 @@ void FillSession(const Session& s, const std::string& replica,
     tool->mutable_ball()->set_radius(t.radius);
   }
   out->set_tile_size(kTileSize);
-  s.Read([&](const Workpiece& wp) {
-    out->set_tiles_x(wp.tiles_x());
-    out->set_tiles_y(wp.tiles_y());
-    return 0;
-  });
+  // From the spec, as the workpiece computes them: an evicted session is
+  // described without being reloaded.
+  out->set_tiles_x((s.spec().stock.nx + kTileSize) / kTileSize);
+  out->set_tiles_y((s.spec().stock.ny + kTileSize) / kTileSize);
   const SessionState state = s.State();
   out->set_last_seq(state.last_seq);
   out->set_moves_applied(state.moves_applied);
@@ -144,6 +143,7 @@ void FillSession(const Session& s, const std::string& replica,
   }
   out->set_replica(replica);
   out->set_recovery(s.recovery());
+  out->set_snapshot_seq(state.snapshot_seq);
 }
 
 absl::StatusOr<Rect> RectFromProto(const pb::Rect& r,

@@ -2,6 +2,10 @@
 
 #include <sqlite3.h>
 
+#if defined(__x86_64__)
+#include <nmmintrin.h>
+#endif
+
 #include <array>
 #include <cstring>
 #include <filesystem>
@@ -75,12 +79,38 @@ absl::StatusOr<sqlite3*> OpenDb(const std::string& path, int flags) {
 
 }  // namespace
 
-uint32_t Crc32c(const void* data, size_t size, uint32_t crc) {
+uint32_t Crc32cPortable(const void* data, size_t size, uint32_t crc) {
   static const std::array<uint32_t, 256> table = MakeCrcTable();
   const auto* p = static_cast<const uint8_t*>(data);
   crc = ~crc;
   for (size_t i = 0; i < size; ++i) crc = table[(crc ^ p[i]) & 0xFF] ^ (crc >> 8);
   return ~crc;
+}
+
+#if defined(__x86_64__)
+// SSE4.2's crc32 instruction computes CRC32C: about 10x the table's speed,
+// which matters for snapshots of tens of MB.
+__attribute__((target("sse4.2"))) static uint32_t Crc32cSse42(
+    const void* data, size_t size, uint32_t crc) {
+  const auto* p = static_cast<const uint8_t*>(data);
+  uint64_t c = ~crc;
+  for (; size >= 8; size -= 8, p += 8) {
+    uint64_t v;
+    std::memcpy(&v, p, 8);
+    c = _mm_crc32_u64(c, v);
+  }
+  uint32_t c32 = static_cast<uint32_t>(c);
+  for (; size > 0; --size) c32 = _mm_crc32_u8(c32, *p++);
+  return ~c32;
+}
+#endif
+
+uint32_t Crc32c(const void* data, size_t size, uint32_t crc) {
+#if defined(__x86_64__)
+  static const bool hardware = __builtin_cpu_supports("sse4.2");
+  if (hardware) return Crc32cSse42(data, size, crc);
+#endif
+  return Crc32cPortable(data, size, crc);
 }
 
 absl::StatusOr<std::unique_ptr<Journal>> Journal::Create(

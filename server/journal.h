@@ -33,6 +33,8 @@ enum class JournalSync {
 
 // CRC32C (Castagnoli) of `data`, continuing from `crc`.
 uint32_t Crc32c(const void* data, size_t size, uint32_t crc = 0);
+// The same by table lookup, without the CPU's instruction (for tests).
+uint32_t Crc32cPortable(const void* data, size_t size, uint32_t crc = 0);
 
 class Journal {
  public:

@@ -48,6 +48,10 @@ ABSL_FLAG(bool, insecure_public, false,
 ABSL_FLAG(std::string, journal_sync, "full",
           "full: a batch is on disk (fsync) when acknowledged; normal: "
           "survives a crash of swarfd, not of the machine; off");
+ABSL_FLAG(int64_t, snapshot_every_moves, 1'000'000,
+          "write a session's snapshot (its tiles) after this many moves, so "
+          "that a restart replays at most that many; 0: only when a session "
+          "is evicted or swarfd stops");
 
 namespace {
 
@@ -93,6 +97,13 @@ int main(int argc, char** argv) {
   options.tls_key = absl::GetFlag(FLAGS_tls_key);
   options.tls_client_ca = absl::GetFlag(FLAGS_tls_client_ca);
   options.insecure_public = absl::GetFlag(FLAGS_insecure_public);
+  options.persistence.snapshot_every_moves =
+      absl::GetFlag(FLAGS_snapshot_every_moves);
+  if (options.persistence.snapshot_every_moves < 0) {
+    spdlog::error("--snapshot_every_moves must be >= 0, got {}",
+                  options.persistence.snapshot_every_moves);
+    return 2;
+  }
   const std::string sync = absl::GetFlag(FLAGS_journal_sync);
   if (sync == "full") {
     options.persistence.sync = swarf::server::JournalSync::kFull;

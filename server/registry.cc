@@ -73,13 +73,14 @@ absl::StatusOr<std::shared_ptr<Session>> Registry::Create(SessionSpec spec) {
                               spec.owner, persistence_.sync);
   }
   absl::StatusOr<std::shared_ptr<Session>> session =
-      journal.ok() ? Session::Create(std::move(spec), *std::move(journal))
+      journal.ok() ? Session::Create(std::move(spec), *std::move(journal),
+                                     Snapshots(id))
                    : absl::UnavailableError(journal.status().message());
   absl::MutexLock l(&mu_);
   if (!session.ok()) {
     sessions_.erase(id);
     reserved_bytes_ -= bytes;
-    if (!persistence_.data_dir.empty()) Journal::DeleteFiles(JournalPath(id));
+    DeleteFiles(id);
     return session.status();
   }
   sessions_[id] = *session;
@@ -112,6 +113,32 @@ std::string Registry::JournalPath(const std::string& id) const {
       .string();
 }
 
+SnapshotPolicy Registry::Snapshots(const std::string& id) const {
+  return {SnapshotPath(JournalPath(id)), persistence_.snapshot_every_moves};
+}
+
+void Registry::DeleteFiles(const std::string& id) const {
+  if (persistence_.data_dir.empty()) return;
+  Journal::DeleteFiles(JournalPath(id));
+  DeleteSnapshot(SnapshotPath(JournalPath(id)));
+}
+
+int Registry::SnapshotAll() {
+  std::vector<std::shared_ptr<Session>> all;
+  {
+    absl::MutexLock l(&mu_);
+    for (const auto& [id, s] : sessions_) {
+      if (s != nullptr) all.push_back(s);
+    }
+  }
+  int written = 0;
+  for (const auto& s : all) {
+    const absl::StatusOr<bool> saved = s->SaveSnapshot();  // logged inside
+    if (saved.ok() && *saved) ++written;
+  }
+  return written;
+}
+
 absl::StatusOr<int> Registry::RestoreAll() {
   if (persistence_.data_dir.empty()) return 0;
   std::error_code ec;
@@ -131,7 +158,8 @@ absl::StatusOr<int> Registry::RestoreAll() {
   for (const auto& f : files) {
     const std::string id = f.stem().string();
     if (!ValidateId(id).ok()) continue;
-    auto session = Session::Restore(f.string(), persistence_.sync);
+    auto session =
+        Session::Restore(f.string(), persistence_.sync, Snapshots(id));
     if (!session.ok()) {
       spdlog::error("session {}: not restored: {}", id,
                     std::string(session.status().message()));
@@ -183,7 +211,7 @@ absl::Status Registry::Delete(const std::string& id,
                                                   it->second->spec().scheme);
   it->second->MarkDeleted();  // closes its journal
   sessions_.erase(it);
-  if (!persistence_.data_dir.empty()) Journal::DeleteFiles(JournalPath(id));
+  DeleteFiles(id);
   return absl::OkStatus();
 }
 

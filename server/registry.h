@@ -33,6 +33,9 @@ struct Limits {
 struct Persistence {
   std::string data_dir;
   JournalSync sync = JournalSync::kFull;
+  // A session's snapshot is rewritten after this many moves (0: only when
+  // it is evicted or the server stops), bounding what a restart replays.
+  int64_t snapshot_every_moves = 1'000'000;
 };
 
 class Registry {
@@ -59,6 +62,11 @@ class Registry {
   // holds. Returns how many were evicted.
   int EvictIdle(double idle_seconds);
 
+  // Writes a snapshot of every journaled session that changed since its
+  // last one (at shutdown, so that the next start replays nothing).
+  // Returns how many were written.
+  int SnapshotAll();
+
   // The sessions of `principal`.
   std::vector<std::shared_ptr<Session>> List(
       const std::string& principal = "") const;
@@ -70,6 +78,9 @@ class Registry {
 
  private:
   std::string JournalPath(const std::string& id) const;
+  SnapshotPolicy Snapshots(const std::string& id) const;
+  // Removes a session's journal and snapshot files.
+  void DeleteFiles(const std::string& id) const;
   // Admission of a session of `bytes` under mu_; reserves them.
   absl::Status AdmitLocked(const std::string& id, int64_t bytes)
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);

@@ -5,6 +5,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "server/convert.h"
+#include "server/snapshot.h"
 #include "spdlog/spdlog.h"
 
 namespace swarf::server {
@@ -31,13 +32,15 @@ absl::Status Session::ValidateSpec(const SessionSpec& spec) {
 }
 
 absl::StatusOr<std::shared_ptr<Session>> Session::Create(
-    SessionSpec spec, std::unique_ptr<Journal> journal) {
+    SessionSpec spec, std::unique_ptr<Journal> journal,
+    SnapshotPolicy snapshots) {
   if (absl::Status s = ValidateSpec(spec); !s.ok()) return s;
   auto wp = Workpiece::Create(spec.stock, spec.scheme);
   if (!wp.ok()) return wp.status();
   auto session =
       std::shared_ptr<Session>(new Session(std::move(spec), *std::move(wp)));
   session->journal_ = std::move(journal);
+  if (session->journal_ != nullptr) session->snapshots_ = std::move(snapshots);
   session->Touch();
   return session;
 }
@@ -64,7 +67,8 @@ std::string Session::Definition(const SessionSpec& spec) {
 }
 
 absl::StatusOr<std::shared_ptr<Session>> Session::Restore(
-    const std::string& path, JournalSync sync) {
+    const std::string& path, JournalSync sync, SnapshotPolicy snapshots) {
+  const absl::Time start = absl::Now();
   std::string definition, owner;
   auto journal = Journal::Open(path, sync, &definition, &owner);
   if (!journal.ok()) return journal.status();
@@ -76,29 +80,153 @@ absl::StatusOr<std::shared_ptr<Session>> Session::Restore(
   auto spec = SpecFromRequest(req);
   if (!spec.ok()) return spec.status();
   spec->owner = owner;
-  auto session = Create(*std::move(spec));
+  auto session =
+      Create(*std::move(spec), *std::move(journal), std::move(snapshots));
   if (!session.ok()) return session.status();
   Session& s = **session;
   absl::MutexLock l(&s.mu_);
-  auto problem = (*journal)->Replay([&](const Journal::Batch& b) {
-    const ToolSpec* tool = nullptr;
-    for (const ToolSpec& t : s.spec_.tools) {
-      if (t.id == b.tool_id) tool = &t;
-    }
-    if (tool == nullptr) {
-      return absl::DataLossError(absl::StrCat("unknown tool ", b.tool_id));
-    }
-    return s.ApplyLocked(b.seq, *tool, b.xyz, b.reposition, false).status();
-  });
+  auto problem = s.RebuildLocked();
   if (!problem.ok()) return problem.status();
   s.recovery_ = *problem;
   if (!problem->empty()) {
     // Batches after the damage cannot be trusted: drop them, so that the
     // client resends from last_seq + 1 into a consistent journal.
-    if (absl::Status t = (*journal)->Truncate(s.last_seq_); !t.ok()) return t;
+    if (absl::Status t = s.journal_->Truncate(s.last_seq_); !t.ok()) return t;
   }
-  s.journal_ = *std::move(journal);
+  spdlog::info("session {}: rebuilt in {:.3f} s", s.spec_.id,
+               absl::ToDoubleSeconds(absl::Now() - start));
+  // A long replay is not repeated at the next start.
+  if (s.snapshots_.every_moves > 0 &&
+      s.wp_->move_count() - s.snapshot_moves_ >= s.snapshots_.every_moves) {
+    s.SaveSnapshotLocked().IgnoreError();  // logged inside
+  }
   return *session;
+}
+
+absl::StatusOr<std::string> Session::RebuildLocked() const {
+  std::optional<Snapshot> snapshot;
+  if (!snapshots_.path.empty()) {
+    auto read = ReadSnapshot(snapshots_.path);
+    if (read.ok()) {
+      snapshot = *std::move(read);
+    } else if (!absl::IsNotFound(read.status())) {
+      spdlog::warn("session {}: {}; replaying the whole journal", spec_.id,
+                   std::string(read.status().message()));
+    }
+  }
+  {
+    absl::MutexLock l(&snapshot_mu_);
+    snapshot_seq_ = 0;
+  }
+  bool unusable = false;
+  auto problem = ReplayLocked(snapshot ? &*snapshot : nullptr, &unusable);
+  if (unusable) {
+    // Not the state of this journal: rebuild from the batches alone.
+    DeleteSnapshot(snapshots_.path);
+    problem = ReplayLocked(nullptr, &unusable);
+  } else if (snapshot.has_value()) {
+    absl::MutexLock l(&snapshot_mu_);
+    snapshot_seq_ = snapshot->seq;
+  }
+  return problem;
+}
+
+absl::StatusOr<std::string> Session::ReplayLocked(const Snapshot* snapshot,
+                                                  bool* unusable) const {
+  auto wp = Workpiece::Create(spec_.stock, spec_.scheme);
+  if (!wp.ok()) return wp.status();
+  wp_ = *std::move(wp);
+  last_seq_ = 0;
+  last_position_.reset();
+  snapshot_moves_ = 0;
+  *unusable = false;
+  int64_t replayed = 0;
+  auto problem = journal_->Replay([&](const Journal::Batch& b) {
+    const ToolSpec* tool = FindTool(b.tool_id);
+    if (tool == nullptr) {
+      return absl::DataLossError(absl::StrCat("unknown tool ", b.tool_id));
+    }
+    if (snapshot == nullptr || b.seq > snapshot->seq) {
+      ++replayed;
+      return ApplyLocked(b.seq, *tool, b.xyz, b.reposition, false).status();
+    }
+    // Held by the snapshot: the moves are recorded, not cut again.
+    std::optional<Vec3> end;
+    const std::vector<Move> moves = BatchMoves(*tool, b.xyz, b.reposition, &end);
+    if (absl::Status s = wp_->Record(moves); !s.ok()) return s;
+    last_seq_ = b.seq;
+    last_position_ = end;
+    if (b.seq == snapshot->seq) {
+      if (absl::Status s = wp_->LoadState(snapshot->state); !s.ok()) {
+        spdlog::warn("session {}: snapshot at batch {} does not fit: {}",
+                     spec_.id, snapshot->seq, std::string(s.message()));
+        *unusable = true;
+        return s;
+      }
+      snapshot_moves_ = wp_->move_count();
+    }
+    return absl::OkStatus();
+  });
+  if (snapshot != nullptr && problem.ok() && !*unusable &&
+      last_seq_ < snapshot->seq) {
+    spdlog::warn("session {}: snapshot at batch {} is beyond the journal's "
+                 "last whole batch {}", spec_.id, snapshot->seq, last_seq_);
+    *unusable = true;
+  }
+  if (snapshot != nullptr && !*unusable) {
+    spdlog::info("session {}: from the snapshot at batch {}, {} batches "
+                 "replayed", spec_.id, snapshot->seq, replayed);
+  }
+  return problem;
+}
+
+absl::StatusOr<bool> Session::SaveSnapshot() {
+  absl::ReaderMutexLock l(&mu_);
+  if (wp_ == nullptr || deleted_) return false;
+  return SaveSnapshotLocked();
+}
+
+absl::StatusOr<bool> Session::SaveSnapshotLocked() const {
+  if (snapshots_.path.empty()) return false;
+  absl::MutexLock l(&snapshot_mu_);
+  if (last_seq_ == 0 || snapshot_seq_ == last_seq_) return false;
+  const absl::Time start = absl::Now();
+  absl::Status s = WriteSnapshot(snapshots_.path, last_seq_, *wp_);
+  if (!s.ok()) {
+    // The journal still has everything: only the next restart is slower.
+    spdlog::warn("session {}: {}", spec_.id, std::string(s.message()));
+    return s;
+  }
+  snapshot_seq_ = last_seq_;
+  snapshot_moves_ = wp_->move_count();
+  spdlog::info("session {}: snapshot at batch {} ({} moves) in {:.3f} s",
+               spec_.id, last_seq_, wp_->move_count(),
+               absl::ToDoubleSeconds(absl::Now() - start));
+  return true;
+}
+
+const ToolSpec* Session::FindTool(int32_t id) const {
+  for (const ToolSpec& t : spec_.tools) {
+    if (t.id == id) return &t;
+  }
+  return nullptr;
+}
+
+std::vector<Move> Session::BatchMoves(const ToolSpec& tool,
+                                      std::span<const double> xyz,
+                                      bool reposition,
+                                      std::optional<Vec3>* end) const {
+  const int64_t points = static_cast<int64_t>(xyz.size() / 3);
+  std::vector<Move> moves;
+  moves.reserve(points);
+  std::optional<Vec3> pos = reposition ? std::nullopt : last_position_;
+  for (int64_t p = 0; p < points; ++p) {
+    const Vec3 next{xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]};
+    if (pos.has_value()) moves.push_back({*pos, next, tool.radius});
+    pos = next;
+  }
+  *end = pos;
+  return moves;
 }
 
 void Session::MarkDeleted() {
@@ -134,10 +262,7 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
         absl::StrCat("moves.xyz has ", points, " points, more than the limit ",
                      max_points, " per batch"));
   }
-  const ToolSpec* tool = nullptr;
-  for (const ToolSpec& t : spec_.tools) {
-    if (t.id == tool_id) tool = &t;
-  }
+  const ToolSpec* tool = FindTool(tool_id);
   if (tool == nullptr) {
     return absl::InvalidArgumentError(absl::StrCat(
         "moves.tool_id ", tool_id, " is not a tool of session ", spec_.id));
@@ -161,7 +286,12 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
   if (wp_ == nullptr) {
     if (absl::Status s = ReloadLocked(); !s.ok()) return s;
   }
-  return ApplyLocked(seq, *tool, xyz, reposition, true);
+  auto result = ApplyLocked(seq, *tool, xyz, reposition, true);
+  if (result.ok() && snapshots_.every_moves > 0 &&
+      wp_->move_count() - snapshot_moves_ >= snapshots_.every_moves) {
+    SaveSnapshotLocked().IgnoreError();  // logged inside
+  }
+  return result;
 }
 
 void Session::Touch() const {
@@ -178,6 +308,8 @@ double Session::IdleSeconds() const {
 bool Session::Evict() {
   absl::MutexLock l(&mu_);
   if (journal_ == nullptr || wp_ == nullptr || deleted_) return false;
+  // So that the reload loads the state instead of redoing every cut.
+  SaveSnapshotLocked().IgnoreError();  // logged inside
   evicted_state_.last_seq = last_seq_;
   evicted_state_.moves_applied = wp_->move_count();
   evicted_state_.version = wp_->version();
@@ -204,20 +336,8 @@ void Session::EnsureLoaded() const {
 }
 
 absl::Status Session::ReloadLocked() const {
-  // The same replay as a restart: bit-identical to the evicted grid.
-  auto wp = Workpiece::Create(spec_.stock, spec_.scheme);
-  if (!wp.ok()) return wp.status();
-  wp_ = *std::move(wp);
-  last_seq_ = 0;
-  last_position_.reset();
-  auto problem = journal_->Replay([&](const Journal::Batch& b) {
-    for (const ToolSpec& t : spec_.tools) {
-      if (t.id == b.tool_id) {
-        return ApplyLocked(b.seq, t, b.xyz, b.reposition, false).status();
-      }
-    }
-    return absl::DataLossError(absl::StrCat("unknown tool ", b.tool_id));
-  });
+  // The same rebuild as a restart: bit-identical to the evicted grid.
+  auto problem = RebuildLocked();
   if (!problem.ok() || !problem->empty()) {
     const std::string what =
         problem.ok() ? *problem : std::string(problem.status().message());
@@ -236,7 +356,6 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
                                                  std::span<const double> xyz,
                                                  bool reposition,
                                                  bool journal) const {
-  const int64_t points = static_cast<int64_t>(xyz.size() / 3);
   BatchResult r;
   r.seq = seq;
   if (seq <= last_seq_) {
@@ -250,14 +369,8 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
         absl::StrCat("moves.seq ", seq, " after ", last_seq_, ": batches ",
                      last_seq_ + 1, "..", seq - 1, " are missing"));
   }
-  std::vector<Move> moves;
-  moves.reserve(points);
-  std::optional<Vec3> pos = reposition ? std::nullopt : last_position_;
-  for (int64_t p = 0; p < points; ++p) {
-    const Vec3 next{xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]};
-    if (pos.has_value()) moves.push_back({*pos, next, tool.radius});
-    pos = next;
-  }
+  std::optional<Vec3> pos;
+  const std::vector<Move> moves = BatchMoves(tool, xyz, reposition, &pos);
   // Durable before applied, applied before acknowledged.
   if (journal && journal_ != nullptr) {
     if (absl::Status s = journal_->Append(seq, tool.id, reposition, xyz);
@@ -283,8 +396,17 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
 
 SessionState Session::State() const {
   absl::ReaderMutexLock l(&mu_);
-  if (wp_ == nullptr) return evicted_state_;  // no reload just to report
   SessionState s;
+  {
+    absl::MutexLock l2(&snapshot_mu_);
+    s.snapshot_seq = snapshot_seq_;
+  }
+  if (wp_ == nullptr) {  // no reload just to report
+    const uint64_t snapshot_seq = s.snapshot_seq;
+    s = evicted_state_;
+    s.snapshot_seq = snapshot_seq;
+    return s;
+  }
   s.last_seq = last_seq_;
   s.moves_applied = wp_->move_count();
   s.version = wp_->version();

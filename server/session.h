@@ -21,6 +21,7 @@
 #include "core/stock.h"
 #include "core/workpiece.h"
 #include "server/journal.h"
+#include "server/snapshot.h"
 
 namespace swarf::server {
 
@@ -56,6 +57,15 @@ struct SessionState {
   int64_t allocated_tiles = 0;
   int64_t memory_bytes = 0;
   std::optional<Vec3> last_position;
+  uint64_t snapshot_seq = 0;  // batches the snapshot on disk holds (0: none)
+};
+
+// Snapshots of a journaled session's workpiece (see snapshot.h).
+struct SnapshotPolicy {
+  std::string path;  // empty: no snapshots
+  // A snapshot is written after a batch once this many moves were applied
+  // since the last one (0: only when evicted or saved explicitly).
+  int64_t every_moves = 0;
 };
 
 class Session {
@@ -65,11 +75,20 @@ class Session {
   // Validates, then creates. With a journal (not null), every batch is
   // written to it before it is applied.
   static absl::StatusOr<std::shared_ptr<Session>> Create(
-      SessionSpec spec, std::unique_ptr<Journal> journal = nullptr);
-  // Rebuilds a session from its journal by replaying its batches, up to the
-  // last whole one; recovery() then says what was wrong, if anything.
+      SessionSpec spec, std::unique_ptr<Journal> journal = nullptr,
+      SnapshotPolicy snapshots = {});
+  // Rebuilds a session from its journal, up to the last whole batch:
+  // from the snapshot when there is a usable one (its batches' moves are
+  // recorded, the later batches replayed), otherwise by replaying every
+  // batch; recovery() then says what was wrong with the journal, if
+  // anything. Bit-identical either way.
   static absl::StatusOr<std::shared_ptr<Session>> Restore(
-      const std::string& path, JournalSync sync);
+      const std::string& path, JournalSync sync, SnapshotPolicy snapshots = {});
+
+  // Writes a snapshot of the current state unless the last one holds it
+  // already (or the session has no snapshot path, or is evicted). Returns
+  // whether one was written.
+  absl::StatusOr<bool> SaveSnapshot();
 
   // The journal's definition of a session (its spec as a protobuf).
   static std::string Definition(const SessionSpec& spec);
@@ -125,9 +144,28 @@ class Session {
                                           bool reposition, bool journal) const
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
 
-  // Rebuilds an evicted session's grid by replaying its journal.
+  // Rebuilds an evicted session's grid from its snapshot and journal.
   void EnsureLoaded() const;
   absl::Status ReloadLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  // Rebuilds wp_, last_seq_ and last_position_ from the snapshot (when
+  // usable) and the journal. Returns what stopped the replay early ("" if
+  // nothing did).
+  absl::StatusOr<std::string> RebuildLocked() const
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  // One pass of RebuildLocked, from `snapshot` if not null; sets
+  // *snapshot_unusable when the snapshot does not fit the journal.
+  absl::StatusOr<std::string> ReplayLocked(const Snapshot* snapshot,
+                                           bool* snapshot_unusable) const
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  // The moves of a batch continuing from last_position_ (from its first
+  // point with `reposition`); *end receives the tool's position after it.
+  std::vector<Move> BatchMoves(const ToolSpec& tool,
+                               std::span<const double> xyz, bool reposition,
+                               std::optional<Vec3>* end) const
+      ABSL_SHARED_LOCKS_REQUIRED(mu_);
+  const ToolSpec* FindTool(int32_t id) const;
+  absl::StatusOr<bool> SaveSnapshotLocked() const
+      ABSL_SHARED_LOCKS_REQUIRED(mu_);
   void Touch() const;
 
   const SessionSpec spec_;
@@ -142,6 +180,13 @@ class Session {
   bool deleted_ ABSL_GUARDED_BY(mu_) = false;
   mutable uint64_t last_seq_ ABSL_GUARDED_BY(mu_) = 0;
   mutable std::optional<Vec3> last_position_ ABSL_GUARDED_BY(mu_);
+  SnapshotPolicy snapshots_;  // set once, before the session is shared
+  // Serialises snapshot writers (which hold mu_ shared only).
+  mutable absl::Mutex snapshot_mu_ ABSL_ACQUIRED_AFTER(mu_);
+  // Batches the snapshot on disk holds (0: none).
+  mutable uint64_t snapshot_seq_ ABSL_GUARDED_BY(snapshot_mu_) = 0;
+  // Moves applied when it was written (or when this process restored).
+  mutable std::atomic<int64_t> snapshot_moves_{0};
 };
 
 }  // namespace swarf::server

@@ -2,7 +2,9 @@
 // middle of a streamed job (several times, at seeded random points),
 // restarted on its data directory, and the client resumes. Nothing that was
 // acknowledged is lost, and the final heights, derivatives and owners are
-// bit-identical to an uninterrupted run of the same moves.
+// bit-identical to an uninterrupted run of the same moves. Snapshots are
+// written every 5 batches, so restarts load one and replay the tail (and a
+// kill may land in the middle of writing one).
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -73,7 +75,8 @@ class Swarfd {
       dup2(fd, 2);
       execl(SWARFD_PATH, SWARFD_PATH, "--listen", "127.0.0.1:0",
             ("--data_dir=" + data_dir).c_str(), "--journal_sync=full",
-            "--worker_threads=2", static_cast<char*>(nullptr));
+            "--worker_threads=2", "--snapshot_every_moves=2000",
+            static_cast<char*>(nullptr));
       _exit(127);
     }
     // The port from the log: "listening on ... (port N)".
@@ -192,8 +195,21 @@ TEST(CrashTest, KilledServerLosesNothingAcknowledgedAndEndsBitIdentical) {
     EXPECT_EQ(s.recovery(), "");
     // The kill really came mid-stream: acknowledged work was at stake.
     EXPECT_GT(last_acked, next_seq);
-    std::printf("round %d: killed after ack %d, restored at batch %d\n",
-                round, last_acked, static_cast<int>(s.last_seq()));
+    // The restart loaded a snapshot rather than replaying everything.
+    std::ifstream in(dir / ("log" + std::to_string(starts)));
+    const std::string text((std::istreambuf_iterator<char>(in)),
+                           std::istreambuf_iterator<char>());
+    std::smatch m;
+    ASSERT_TRUE(std::regex_search(
+        text, m, std::regex(R"(from the snapshot at batch (\d+), (\d+) batches replayed)")))
+        << text;
+    EXPECT_GE(s.snapshot_seq(), std::stoull(m[1].str()));
+    EXPECT_LE(s.snapshot_seq(), s.last_seq());
+    std::printf(
+        "round %d: killed after ack %d, restored at batch %d from the "
+        "snapshot at batch %s (%s replayed)\n",
+        round, last_acked, static_cast<int>(s.last_seq()), m[1].str().c_str(),
+        m[2].str().c_str());
     next_seq = static_cast<int>(s.last_seq()) + 1;
   }
 

@@ -6,6 +6,8 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -40,17 +42,28 @@ SessionSpec Spec(const std::string& id) {
   return s;
 }
 
-// The heights, owners and derivatives of every node.
-struct Snapshot {
+// The heights, owners and derivatives of every node, the versions, and the
+// exact surface (which needs every move) along a line.
+struct NodeState {
   std::vector<double> w;
   std::vector<int32_t> owner;
   std::vector<float> d;
-  bool operator==(const Snapshot&) const = default;
+  std::vector<uint64_t> versions;
+  std::vector<double> exact;
+  bool operator==(const NodeState&) const = default;
 };
 
-Snapshot Take(const Session& s) {
+NodeState Take(const Session& s) {
   return s.Read([](const Workpiece& wp) {
-    Snapshot snap;
+    NodeState snap;
+    snap.versions.push_back(wp.version());
+    snap.versions.push_back(static_cast<uint64_t>(wp.move_count()));
+    for (int32_t t = 0; t < wp.tile_count(); ++t) {
+      snap.versions.push_back(wp.TileVersion(t));
+    }
+    for (int k = 0; k <= 400; ++k) {
+      snap.exact.push_back(wp.ExactHeight(0.025 * k, 1 + 0.0213 * k));
+    }
     for (int32_t t = 0; t < wp.tile_count(); ++t) {
       const Workpiece::TileExtent e = wp.Extent(t);
       const size_t n = e.nx * e.ny, at = snap.w.size();
@@ -68,7 +81,7 @@ Snapshot Take(const Session& s) {
 }
 
 // A session of the first `batches` batches, kept in memory only.
-Snapshot Reference(int batches) {
+NodeState Reference(int batches) {
   Registry r(Limits{});
   auto s = *r.Create(Spec("ref"));
   for (int k = 1; k <= batches; ++k) {
@@ -103,6 +116,45 @@ class JournalTest : public ::testing::Test {
   std::string File(const std::string& id) const {
     return (dir_ / (id + ".db")).string();
   }
+  std::string SnapshotFile(const std::string& id) const {
+    return (dir_ / (id + ".snap")).string();
+  }
+
+  // Flips one byte of batch k's points in the journal file.
+  void DamageBatch(const std::string& id, int k) {
+    std::fstream f(File(id), std::ios::in | std::ios::out | std::ios::binary);
+    std::string bytes((std::istreambuf_iterator<char>(f)),
+                      std::istreambuf_iterator<char>());
+    const std::vector<double> points = Points(k);
+    const std::string needle(reinterpret_cast<const char*>(&points[30]), 24);
+    const size_t at = bytes.find(needle);
+    ASSERT_NE(at, std::string::npos) << "batch " << k << " not in the file";
+    f.seekp(static_cast<std::streamoff>(at + 3));
+    f.put(static_cast<char>(bytes[at + 3] ^ 0x5A));
+  }
+
+  // Snapshots every 120 moves: batch 1 has 49 moves, the others 50, so
+  // they are written after batches 3, 6, 9, 12, ...
+  Persistence Snapshotting() const {
+    Persistence p = Durable();
+    p.snapshot_every_moves = 120;
+    return p;
+  }
+
+  // Writes a journaled session of `batches` batches with snapshots.
+  void WriteSnapshottedJob(const std::string& id, int batches,
+                           SchemeKind scheme = SchemeKind::kTaylor) {
+    Registry r(Limits{}, Snapshotting());
+    ASSERT_TRUE(r.RestoreAll().ok());
+    SessionSpec spec = Spec(id);
+    spec.scheme = scheme;
+    auto s = r.Create(spec);
+    ASSERT_TRUE(s.ok()) << s.status();
+    for (int k = 1; k <= batches; ++k) {
+      ASSERT_TRUE((*s)->ApplyBatch(k, 1, Points(k), 1000).ok());
+    }
+    EXPECT_EQ((*s)->State().snapshot_seq, static_cast<uint64_t>(batches / 3 * 3));
+  }
 
   fs::path dir_;
 };
@@ -121,7 +173,7 @@ TEST_F(JournalTest, RestartReplaysToTheSameStateAndContinues) {
   // next batch applies, and a second restart has it too.
   EXPECT_TRUE(s->ApplyBatch(kBatches, 1, Points(kBatches), 1000)->duplicate);
   ASSERT_TRUE(s->ApplyBatch(kBatches + 1, 1, Points(kBatches + 1), 1000).ok());
-  const Snapshot after = Take(*s);
+  const NodeState after = Take(*s);
   s.reset();
   Registry r2(Limits{}, Durable());
   ASSERT_EQ(*r2.RestoreAll(), 1);
@@ -130,17 +182,7 @@ TEST_F(JournalTest, RestartReplaysToTheSameStateAndContinues) {
 
 TEST_F(JournalTest, DamagedBatchRestoresUpToTheLastWholeOne) {
   ASSERT_NO_FATAL_FAILURE(WriteJob("job"));
-  // Flip one byte of batch 8's points in the file.
-  std::fstream f(File("job"), std::ios::in | std::ios::out | std::ios::binary);
-  std::string bytes((std::istreambuf_iterator<char>(f)),
-                    std::istreambuf_iterator<char>());
-  const std::vector<double> b8 = Points(8);
-  const std::string needle(reinterpret_cast<const char*>(&b8[30]), 24);
-  const size_t at = bytes.find(needle);
-  ASSERT_NE(at, std::string::npos) << "batch 8 not found in the file";
-  f.seekp(static_cast<std::streamoff>(at + 3));
-  f.put(static_cast<char>(bytes[at + 3] ^ 0x5A));
-  f.close();
+  ASSERT_NO_FATAL_FAILURE(DamageBatch("job", 8));
 
   Registry r(Limits{}, Durable());
   ASSERT_EQ(*r.RestoreAll(), 1);
@@ -245,6 +287,9 @@ TEST_F(JournalTest, IdleSessionIsEvictedAndReloadedBitIdentical) {
   EXPECT_EQ(r.EvictIdle(0), 1);
   auto s = *r.Get("idle");
   EXPECT_TRUE(s->evicted());
+  // Evicting wrote a snapshot, which the reload loads.
+  EXPECT_TRUE(fs::exists(SnapshotFile("idle")));
+  EXPECT_EQ(s->State().snapshot_seq, static_cast<uint64_t>(kBatches));
   // Its counters answer without a reload.
   const SessionState st = s->State();
   EXPECT_EQ(st.last_seq, static_cast<uint64_t>(kBatches));
@@ -272,9 +317,157 @@ TEST_F(JournalTest, InMemorySessionsAreNeverEvicted) {
   EXPECT_FALSE((*r.Get("mem"))->evicted());
 }
 
+// A restart loads the last snapshot and replays only the batches after it;
+// the result is the uninterrupted run's, bit for bit, and goes on as one.
+TEST_F(JournalTest, RestartFromASnapshotReplaysOnlyTheTail) {
+  ASSERT_NO_FATAL_FAILURE(WriteSnapshottedJob("job", 14));
+  ASSERT_TRUE(fs::exists(SnapshotFile("job")));
+  EXPECT_FALSE(fs::exists(SnapshotFile("job") + ".tmp"));
+  Registry r(Limits{}, Snapshotting());
+  ASSERT_EQ(*r.RestoreAll(), 1);
+  auto s = *r.Get("job");
+  const SessionState st = s->State();
+  EXPECT_EQ(s->recovery(), "");
+  EXPECT_EQ(st.last_seq, 14u);
+  EXPECT_EQ(st.moves_applied, 14 * kPoints - 1);
+  // Restored from batch 12's snapshot (a whole replay would have written a
+  // new one at 14).
+  EXPECT_EQ(st.snapshot_seq, 12u);
+  EXPECT_TRUE(Take(*s) == Reference(14));
+  // The tool position survived: batch 15 continues from batch 14's end.
+  ASSERT_TRUE(s->ApplyBatch(15, 1, Points(15), 1000).ok());
+  EXPECT_EQ(s->State().snapshot_seq, 15u);
+  EXPECT_TRUE(Take(*s) == Reference(15));
+}
+
+// A damaged or truncated snapshot, or one of another session, is not used:
+// the whole journal is replayed instead, nothing is lost, and a good
+// snapshot replaces it.
+TEST_F(JournalTest, BadSnapshotFallsBackToTheWholeJournal) {
+  ASSERT_NO_FATAL_FAILURE(WriteSnapshottedJob("job", 14));
+  ASSERT_NO_FATAL_FAILURE(
+      WriteSnapshottedJob("zmap", 14, SchemeKind::kZmap));
+  const std::string good = SnapshotFile("job") + ".good";
+  fs::copy_file(SnapshotFile("job"), good);
+  const auto size = fs::file_size(good);
+  const struct {
+    std::string what;
+    std::function<void()> spoil;
+  } cases[] = {
+      {"a flipped payload byte",
+       [&] {
+         std::fstream f(SnapshotFile("job"),
+                        std::ios::in | std::ios::out | std::ios::binary);
+         f.seekp(static_cast<std::streamoff>(size / 2));
+         f.put('\x7f');
+       }},
+      {"a flipped header byte",
+       [&] {
+         std::fstream f(SnapshotFile("job"),
+                        std::ios::in | std::ios::out | std::ios::binary);
+         f.seekp(17);
+         f.put('\x01');
+       }},
+      {"a truncated file",
+       [&] { fs::resize_file(SnapshotFile("job"), size - 4096); }},
+      {"an empty file", [&] { fs::resize_file(SnapshotFile("job"), 0); }},
+      {"another session's snapshot",
+       [&] {
+         fs::copy_file(SnapshotFile("zmap"), SnapshotFile("job"),
+                       fs::copy_options::overwrite_existing);
+       }},
+  };
+  for (const auto& c : cases) {
+    SCOPED_TRACE(c.what);
+    fs::copy_file(good, SnapshotFile("job"),
+                  fs::copy_options::overwrite_existing);
+    c.spoil();
+    Registry r(Limits{}, Snapshotting());
+    ASSERT_EQ(*r.RestoreAll(), 2);
+    auto s = *r.Get("job");
+    EXPECT_EQ(s->recovery(), "");
+    EXPECT_EQ(s->State().last_seq, 14u);
+    EXPECT_TRUE(Take(*s) == Reference(14));
+    // The long replay wrote a snapshot of the whole job.
+    EXPECT_EQ(s->State().snapshot_seq, 14u);
+  }
+}
+
+// A snapshot beyond the journal's last whole batch (the journal was
+// damaged after it was written) cannot be used: its moves are gone.
+TEST_F(JournalTest, SnapshotBeyondADamagedJournalIsDropped) {
+  ASSERT_NO_FATAL_FAILURE(WriteSnapshottedJob("job", 14));
+  ASSERT_NO_FATAL_FAILURE(DamageBatch("job", 8));
+  Registry r(Limits{}, Snapshotting());
+  ASSERT_EQ(*r.RestoreAll(), 1);
+  auto s = *r.Get("job");
+  EXPECT_EQ(s->State().last_seq, 7u);
+  EXPECT_NE(s->recovery().find("batch 8"), std::string::npos) << s->recovery();
+  EXPECT_TRUE(Take(*s) == Reference(7));
+  EXPECT_EQ(s->State().snapshot_seq, 7u);  // rewritten for what is left
+  for (int k = 8; k <= 14; ++k) {
+    ASSERT_TRUE(s->ApplyBatch(k, 1, Points(k), 1000).ok()) << k;
+  }
+  EXPECT_TRUE(Take(*s) == Reference(14));
+  s.reset();
+  Registry r2(Limits{}, Snapshotting());
+  ASSERT_EQ(*r2.RestoreAll(), 1);
+  EXPECT_TRUE(Take(**r2.Get("job")) == Reference(14));
+}
+
+// At shutdown every changed session is snapshotted, so the next start
+// replays nothing; deleting the session removes the snapshot too.
+TEST_F(JournalTest, SnapshotAllThenRestartReplaysNothing) {
+  Persistence never = Durable();
+  never.snapshot_every_moves = 0;
+  {
+    Registry r(Limits{}, never);
+    ASSERT_TRUE(r.RestoreAll().ok());
+    auto a = *r.Create(Spec("a"));
+    auto b = *r.Create(Spec("b"));
+    (void)*r.Create(Spec("untouched"));
+    for (int k = 1; k <= 5; ++k) {
+      ASSERT_TRUE(a->ApplyBatch(k, 1, Points(k), 1000).ok());
+      ASSERT_TRUE(b->ApplyBatch(k, 1, Points(k + 1), 1000).ok());
+    }
+    EXPECT_FALSE(fs::exists(SnapshotFile("a")));
+    EXPECT_EQ(r.SnapshotAll(), 2);
+    EXPECT_EQ(r.SnapshotAll(), 0);  // nothing changed since
+    EXPECT_EQ(a->State().snapshot_seq, 5u);
+    EXPECT_FALSE(fs::exists(SnapshotFile("untouched")));
+  }
+  Registry r(Limits{}, never);
+  ASSERT_EQ(*r.RestoreAll(), 3);
+  auto a = *r.Get("a");
+  EXPECT_EQ(a->State().snapshot_seq, 5u);
+  EXPECT_TRUE(Take(*a) == Reference(5));
+  ASSERT_TRUE(r.Delete("a").ok());
+  EXPECT_FALSE(fs::exists(SnapshotFile("a")));
+  EXPECT_FALSE(fs::exists(File("a")));
+  EXPECT_TRUE(fs::exists(SnapshotFile("b")));
+}
+
 TEST(Crc32cTest, KnownValue) {
   // The CRC32C check value of "123456789".
   EXPECT_EQ(Crc32c("123456789", 9), 0xE3069283u);
+  EXPECT_EQ(Crc32cPortable("123456789", 9), 0xE3069283u);
+}
+
+// The instruction path (when the CPU has it) and the table agree for every
+// length and alignment, and when continued piece by piece.
+TEST(Crc32cTest, FastPathMatchesTable) {
+  std::mt19937 rng(4);
+  std::vector<uint8_t> data(300);
+  for (uint8_t& b : data) b = static_cast<uint8_t>(rng());
+  for (size_t off = 0; off < 9; ++off) {
+    for (size_t len = 0; off + len <= data.size(); len += 7) {
+      ASSERT_EQ(Crc32c(data.data() + off, len),
+                Crc32cPortable(data.data() + off, len))
+          << off << "+" << len;
+    }
+  }
+  const uint32_t whole = Crc32c(data.data(), data.size());
+  EXPECT_EQ(Crc32c(data.data() + 100, 200, Crc32c(data.data(), 100)), whole);
 }
 
 }  // namespace
