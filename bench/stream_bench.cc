@@ -153,16 +153,19 @@ void BM_EndToEnd(benchmark::State& state) {
       benchmark::Counter::kIsIterationInvariantRate);
 }
 
-// Restart: a journaled session of `moves` moves is restored by replaying
-// its journal (what swarfd does at start). Reports the restore time.
-void BM_RestartReplay(benchmark::State& state) {
+// Restart: a journaled session of `moves` moves is restored (what swarfd
+// does at start) from its journal and, with snapshots every `every` moves
+// (0: none), from its last snapshot plus the batches after it. Reports the
+// restore time, and the batch the snapshot held.
+void BM_Restart(benchmark::State& state) {
   const int64_t moves = state.range(0), batch = state.range(1);
+  server::Persistence persistence{
+      "/tmp/swarf-restart-bench-" + std::to_string(::getpid()),
+      server::JournalSync::kNormal, state.range(2)};
   const std::vector<Vec3> pts = Raster(moves);
-  const std::string dir = "/tmp/swarf-restart-bench-" + std::to_string(::getpid());
-  std::filesystem::remove_all(dir);
+  std::filesystem::remove_all(persistence.data_dir);
   {
-    server::Registry r(server::Limits{},
-                       {dir, server::JournalSync::kNormal});
+    server::Registry r(server::Limits{}, persistence);
     (void)r.RestoreAll();
     server::SessionSpec spec;
     spec.id = "long-job";
@@ -181,19 +184,30 @@ void BM_RestartReplay(benchmark::State& state) {
       }
     }
   }
+  uint64_t snapshot_seq = 0, last_seq = 0;
   for (auto _ : state) {
-    server::Registry r(server::Limits{}, {dir, server::JournalSync::kNormal});
+    server::Registry r(server::Limits{}, persistence);
     auto restored = r.RestoreAll();
     if (!restored.ok() || *restored != 1) state.SkipWithError("not restored");
     state.PauseTiming();
-    r.Get("long-job").IgnoreError();
+    const server::SessionState st = (*r.Get("long-job"))->State();
+    snapshot_seq = st.snapshot_seq;
+    last_seq = st.last_seq;
     state.ResumeTiming();
   }
   state.counters["moves"] = static_cast<double>(pts.size() - 1);
-  std::filesystem::remove_all(dir);
+  state.counters["batches"] = static_cast<double>(last_seq);
+  state.counters["snapshot_at"] = static_cast<double>(snapshot_seq);
+  std::filesystem::remove_all(persistence.data_dir);
 }
-BENCHMARK(BM_RestartReplay)
-    ->Args({1000000, 10000})
+// Moves, moves per batch, snapshot every (0: never).
+BENCHMARK(BM_Restart)
+    ->Args({1000000, 10000, 0})
+    ->Args({1000000, 10000, 1000000})
+    ->Args({1000000, 10000, 600000})
+    ->Args({5000000, 10000, 0})
+    ->Args({5000000, 10000, 1000000})
+    ->Args({5500000, 10000, 1000000})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(3);

@@ -759,6 +759,9 @@ TEST_F(ClusterTest, SessionsStayOnTheirReplicaThroughNginxAndRestart) {
       EXPECT_EQ(rep, victim_name) << s.id;
       EXPECT_EQ(session.last_seq(), static_cast<uint64_t>(kBatchesBefore))
           << s.id;
+      // The SIGTERM drain snapshotted it: the restart replayed nothing.
+      EXPECT_EQ(session.snapshot_seq(), static_cast<uint64_t>(kBatchesBefore))
+          << s.id;
       EXPECT_EQ(session.moves_applied(),
                 int64_t{kBatchesBefore} * kPointsPerBatch - 1)
           << s.id;
