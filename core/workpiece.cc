@@ -485,24 +485,19 @@ struct StateHeader {
   uint32_t tiles;
 };
 
-// Reads fixed-size values off the front of a byte string.
+// Reads fixed-size values from a source of bytes.
 class StateReader {
  public:
-  explicit StateReader(std::string_view bytes) : rest_(bytes) {}
-  bool Read(void* out, size_t size) {
-    if (rest_.size() < size) return false;
-    std::memcpy(out, rest_.data(), size);
-    rest_.remove_prefix(size);
-    return true;
-  }
+  explicit StateReader(absl::FunctionRef<bool(void*, size_t)> read)
+      : read_(read) {}
+  bool Read(void* out, size_t size) { return read_(out, size); }
   template <typename T>
   bool Read(T* out) {
     return Read(out, sizeof(T));
   }
-  bool done() const { return rest_.empty(); }
 
  private:
-  std::string_view rest_;
+  absl::FunctionRef<bool(void*, size_t)> read_;
 };
 
 bool SameBits(double a, double b) {
@@ -563,7 +558,20 @@ absl::Status Workpiece::Record(std::span<const Move> moves) {
 }
 
 absl::Status Workpiece::LoadState(std::string_view bytes) {
-  StateReader in(bytes);
+  return LoadState(
+      [&](void* data, size_t size) {
+        if (bytes.size() < size) return false;
+        std::memcpy(data, bytes.data(), size);
+        bytes.remove_prefix(size);
+        return true;
+      },
+      [] { return absl::OkStatus(); });
+}
+
+absl::Status Workpiece::LoadState(
+    absl::FunctionRef<bool(void* data, size_t size)> read,
+    absl::FunctionRef<absl::Status()> verify) {
+  StateReader in(read);
   char magic[8];
   StateHeader h;
   if (!in.Read(magic, 8) || std::memcmp(magic, kStateMagic, 8) != 0 ||
@@ -638,7 +646,9 @@ absl::Status Workpiece::LoadState(std::string_view bytes) {
     tile_version[t] = version;
     tiles[t] = std::move(tile);
   }
-  if (!in.done()) return absl::DataLossError("state: trailing bytes");
+  char extra;
+  if (in.Read(&extra, 1)) return absl::DataLossError("state: trailing bytes");
+  SWARF_RETURN_IF_ERROR(verify());
   tiles_.swap(tiles);
   tile_version_.swap(tile_version);
   version_ = h.version;

@@ -102,6 +102,13 @@ class Workpiece {
   // and so is every later Apply. DataLoss naming the problem for bytes that
   // are not such a state; the workpiece is then unchanged.
   absl::Status LoadState(std::string_view bytes);
+  // The same, reading the state piece by piece: read(data, size) fills
+  // `data` with the next `size` bytes, or returns false at the end (the
+  // state must be followed by the end). Once all is read and found valid,
+  // verify() may still refuse it (a checksum over what was read): its error
+  // is returned and the workpiece is unchanged.
+  absl::Status LoadState(absl::FunctionRef<bool(void* data, size_t size)> read,
+                         absl::FunctionRef<absl::Status()> verify);
 
   const GridGeometry& grid() const { return grid_; }
   const StockSpec& spec() const { return grid_.spec(); }

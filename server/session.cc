@@ -104,14 +104,15 @@ absl::StatusOr<std::shared_ptr<Session>> Session::Restore(
 }
 
 absl::StatusOr<std::string> Session::RebuildLocked() const {
-  std::optional<Snapshot> snapshot;
+  std::optional<SnapshotHeader> snapshot;
   if (!snapshots_.path.empty()) {
-    auto read = ReadSnapshot(snapshots_.path);
+    auto read = ReadSnapshotHeader(snapshots_.path);
     if (read.ok()) {
       snapshot = *std::move(read);
     } else if (!absl::IsNotFound(read.status())) {
       spdlog::warn("session {}: {}; replaying the whole journal", spec_.id,
                    std::string(read.status().message()));
+      DeleteSnapshot(snapshots_.path);
     }
   }
   {
@@ -131,8 +132,8 @@ absl::StatusOr<std::string> Session::RebuildLocked() const {
   return problem;
 }
 
-absl::StatusOr<std::string> Session::ReplayLocked(const Snapshot* snapshot,
-                                                  bool* unusable) const {
+absl::StatusOr<std::string> Session::ReplayLocked(
+    const SnapshotHeader* snapshot, bool* unusable) const {
   auto wp = Workpiece::Create(spec_.stock, spec_.scheme);
   if (!wp.ok()) return wp.status();
   wp_ = *std::move(wp);
@@ -157,9 +158,10 @@ absl::StatusOr<std::string> Session::ReplayLocked(const Snapshot* snapshot,
     last_seq_ = b.seq;
     last_position_ = end;
     if (b.seq == snapshot->seq) {
-      if (absl::Status s = wp_->LoadState(snapshot->state); !s.ok()) {
-        spdlog::warn("session {}: snapshot at batch {} does not fit: {}",
-                     spec_.id, snapshot->seq, std::string(s.message()));
+      if (absl::Status s = LoadSnapshot(snapshots_.path, *snapshot, wp_.get());
+          !s.ok()) {
+        spdlog::warn("session {}: {}; replaying the whole journal", spec_.id,
+                     std::string(s.message()));
         *unusable = true;
         return s;
       }

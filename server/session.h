@@ -154,7 +154,7 @@ class Session {
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   // One pass of RebuildLocked, from `snapshot` if not null; sets
   // *snapshot_unusable when the snapshot does not fit the journal.
-  absl::StatusOr<std::string> ReplayLocked(const Snapshot* snapshot,
+  absl::StatusOr<std::string> ReplayLocked(const SnapshotHeader* snapshot,
                                            bool* snapshot_unusable) const
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   // The moves of a batch continuing from last_position_ (from its first

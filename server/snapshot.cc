@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstddef>
 #include <cstring>
@@ -102,19 +103,19 @@ absl::Status WriteSnapshot(const std::string& path, uint64_t seq,
   return absl::OkStatus();
 }
 
-absl::StatusOr<Snapshot> ReadSnapshot(const std::string& path) {
+absl::StatusOr<SnapshotHeader> ReadSnapshotHeader(const std::string& path) {
   const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   if (fd < 0) {
     if (errno == ENOENT) return absl::NotFoundError("no snapshot");
-    return absl::DataLossError(absl::StrCat("snapshot ", path, ": ",
-                                            std::strerror(errno)));
+    return absl::DataLossError(
+        absl::StrCat("snapshot ", path, ": ", std::strerror(errno)));
   }
   Header h{};
-  Snapshot snap;
-  std::string problem;
   const off_t size = ::lseek(fd, 0, SEEK_END);
-  if (::pread(fd, &h, sizeof h, 0) != sizeof h ||
-      std::memcmp(h.magic, kMagic, sizeof kMagic) != 0 ||
+  const bool whole = ::pread(fd, &h, sizeof h, 0) == sizeof h;
+  ::close(fd);
+  std::string problem;
+  if (!whole || std::memcmp(h.magic, kMagic, sizeof kMagic) != 0 ||
       h.header_crc != HeaderCrc(h)) {
     problem = "not a whole snapshot header";
   } else if (h.format != kFormat) {
@@ -124,28 +125,64 @@ absl::StatusOr<Snapshot> ReadSnapshot(const std::string& path) {
              h.payload_bytes != static_cast<uint64_t>(size) - sizeof h) {
     problem = absl::StrCat("truncated (", size, " bytes for a payload of ",
                            h.payload_bytes, ")");
-  } else {
-    snap.seq = h.seq;
-    snap.state.resize(h.payload_bytes);
-    size_t done = 0;
-    while (done < snap.state.size()) {
-      const ssize_t n = ::pread(fd, snap.state.data() + done,
-                                snap.state.size() - done, sizeof h + done);
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) break;
-      done += static_cast<size_t>(n);
-    }
-    if (done != snap.state.size()) {
-      problem = "unreadable";
-    } else if (Crc32c(snap.state.data(), snap.state.size()) != h.payload_crc) {
-      problem = "damaged (checksum)";
-    }
   }
-  ::close(fd);
   if (!problem.empty()) {
     return absl::DataLossError(absl::StrCat("snapshot ", path, ": ", problem));
   }
-  return snap;
+  return SnapshotHeader{h.seq, h.payload_bytes, h.payload_crc};
+}
+
+absl::Status LoadSnapshot(const std::string& path,
+                          const SnapshotHeader& header, Workpiece* wp) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) {
+    return absl::DataLossError(
+        absl::StrCat("snapshot ", path, ": ", std::strerror(errno)));
+  }
+  // Reads the payload through a buffer, summing it as it goes.
+  std::string buffer(size_t{1} << 20, '\0');
+  size_t at = 0, have = 0;   // unread bytes: buffer[at, have)
+  uint64_t offset = sizeof(Header), left = header.payload_bytes;
+  uint32_t crc = 0;
+  bool io_error = false;
+  auto read = [&](void* out, size_t size) {
+    char* dst = static_cast<char*>(out);
+    while (size > 0) {
+      if (at == have) {
+        if (left == 0) return false;
+        const size_t want = std::min<uint64_t>(buffer.size(), left);
+        const ssize_t n = ::pread(fd, buffer.data(), want, offset);
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0) {
+          io_error = true;
+          return false;
+        }
+        crc = Crc32c(buffer.data(), static_cast<size_t>(n), crc);
+        offset += n;
+        left -= n;
+        at = 0;
+        have = static_cast<size_t>(n);
+      }
+      const size_t take = std::min(size, have - at);
+      std::memcpy(dst, buffer.data() + at, take);
+      at += take;
+      dst += take;
+      size -= take;
+    }
+    return true;
+  };
+  absl::Status s = wp->LoadState(read, [&] {
+    if (io_error || left != 0 || crc != header.payload_crc) {
+      return absl::DataLossError("damaged (checksum)");
+    }
+    return absl::OkStatus();
+  });
+  ::close(fd);
+  if (!s.ok()) {
+    return absl::DataLossError(
+        absl::StrCat("snapshot ", path, ": ", s.message()));
+  }
+  return absl::OkStatus();
 }
 
 void DeleteSnapshot(const std::string& path) {

@@ -21,9 +21,11 @@
 
 namespace swarf::server {
 
-struct Snapshot {
-  uint64_t seq = 0;   // the last batch the state holds (>= 1)
-  std::string state;  // Workpiece::SaveState bytes
+// What a snapshot file's header says.
+struct SnapshotHeader {
+  uint64_t seq = 0;  // the last batch the state holds (>= 1)
+  uint64_t payload_bytes = 0;
+  uint32_t payload_crc = 0;
 };
 
 // Where the snapshot of the session journaled at `journal_path` lives.
@@ -32,9 +34,15 @@ std::string SnapshotPath(const std::string& journal_path);
 // Saves wp's state, which holds batches 1..seq, to `path`.
 absl::Status WriteSnapshot(const std::string& path, uint64_t seq,
                            const Workpiece& wp);
-// NotFound when there is none; DataLoss naming the problem when it is not
-// a whole snapshot.
-absl::StatusOr<Snapshot> ReadSnapshot(const std::string& path);
+// NotFound when there is none; DataLoss naming the problem when its header
+// is damaged or the file's size is not what the header says.
+absl::StatusOr<SnapshotHeader> ReadSnapshotHeader(const std::string& path);
+// Loads the state `header` describes into wp (Workpiece::LoadState),
+// streaming it (a 1 MiB buffer, whatever the grid's size) and checking its
+// CRC32C before wp takes it. DataLoss when it is damaged or is not a state
+// of wp; wp is unchanged then.
+absl::Status LoadSnapshot(const std::string& path,
+                          const SnapshotHeader& header, Workpiece* wp);
 // Removes the snapshot and any half-written one.
 void DeleteSnapshot(const std::string& path);
 

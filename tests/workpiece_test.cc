@@ -755,6 +755,27 @@ TEST(WorkpieceStateTest, ForeignOrDamagedStatesAreRejected) {
   const uint32_t far = 1000;
   std::memcpy(bad_tile.data() + header, &far, 4);
   expect_rejected(bad_tile, "out of order or range");
+
+  // Read piece by piece, a whole state is still refused by verify() (a
+  // checksum over it), and then not taken.
+  auto target = MakeWorkpiece(MixedStock(), SchemeKind::kTaylor);
+  ASSERT_TRUE(target->Record(moves).ok());
+  const std::string before = SavedState(*target);
+  std::string_view rest = state;
+  auto read = [&](void* data, size_t size) {
+    if (rest.size() < size) return false;
+    std::memcpy(data, rest.data(), size);
+    rest.remove_prefix(size);
+    return true;
+  };
+  const absl::Status refused = target->LoadState(
+      read, [] { return absl::DataLossError("checksum refused"); });
+  EXPECT_EQ(refused.message(), "checksum refused");
+  EXPECT_TRUE(rest.empty());
+  EXPECT_EQ(SavedState(*target), before);
+  rest = state;
+  ASSERT_TRUE(target->LoadState(read, [] { return absl::OkStatus(); }).ok());
+  EXPECT_EQ(SavedState(*target), state);
 }
 
 // Record indexes moves as Apply does: the exact surface sees them.
