@@ -45,6 +45,9 @@ ABSL_FLAG(std::string, tls_client_ca, "",
           "PEM CA: clients must present a certificate it signed");
 ABSL_FLAG(bool, insecure_public, false,
           "allow a non-loopback --listen without --auth_tokens_file");
+ABSL_FLAG(std::string, trusted_proxies, "",
+          "balancers (IP addresses or CIDR prefixes, comma-separated) whose "
+          "x-real-ip metadata names the client for --max_streams_per_client");
 ABSL_FLAG(std::string, journal_sync, "full",
           "full: a batch is on disk (fsync) when acknowledged; normal: "
           "survives a crash of swarfd, not of the machine; off");
@@ -97,6 +100,7 @@ int main(int argc, char** argv) {
   options.tls_key = absl::GetFlag(FLAGS_tls_key);
   options.tls_client_ca = absl::GetFlag(FLAGS_tls_client_ca);
   options.insecure_public = absl::GetFlag(FLAGS_insecure_public);
+  options.trusted_proxies = absl::GetFlag(FLAGS_trusted_proxies);
   options.persistence.snapshot_every_moves =
       absl::GetFlag(FLAGS_snapshot_every_moves);
   if (options.persistence.snapshot_every_moves < 0) {

@@ -61,6 +61,9 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
         "tls_client_ca needs tls_cert and tls_key");
   }
 
+  auto trust = ProxyTrust::Parse(options.trusted_proxies);
+  if (!trust.ok()) return trust.status();
+
   std::unique_ptr<SwarfServer> s(new SwarfServer);
   s->options_ = options;
   s->tokens_ = *std::move(tokens);
@@ -83,7 +86,7 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
   s->executor_ = std::make_unique<Executor>(threads);
   s->service_ = std::make_unique<SwarfService>(
       s->registry_.get(), s->executor_.get(), s->tokens_.get(),
-      options.replica);
+      options.replica, *std::move(trust));
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();

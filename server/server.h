@@ -34,6 +34,9 @@ struct ServerOptions {
   std::string tls_cert, tls_key, tls_client_ca;
   // Without tokens the server only listens on loopback unless this is set.
   bool insecure_public = false;
+  // Balancers whose x-real-ip names the client (client_id.h): addresses or
+  // CIDR prefixes, comma-separated; empty: none.
+  std::string trusted_proxies;
 };
 
 // Whether a listen address (host:port) is on the loopback interface.

@@ -230,7 +230,7 @@ class SimulateReactor
   SimulateReactor(grpc::CallbackServerContext* ctx, Registry* registry,
                   Executor* executor, TokenStore* tokens,
                   SwarfService::StreamCounter* streams,
-                  const std::string& replica)
+                  const ProxyTrust& trust, const std::string& replica)
       : ctx_(ctx), registry_(registry), executor_(executor) {
     ctx->AddInitialMetadata(kReplicaMetadata, replica);
     auto session = SessionOf(registry, tokens, ctx, "");
@@ -241,9 +241,14 @@ class SimulateReactor
     }
     // A client is its token, or its address without authentication.
     auto principal = PrincipalOf(tokens, ctx);
-    std::string client = principal.ok() && !principal->empty()
-                             ? *principal
-                             : ctx->peer().substr(0, ctx->peer().rfind(':'));
+    std::string real_ip;
+    const auto& md = ctx->client_metadata();
+    if (auto it = md.find(kRealIpMetadata); it != md.end()) {
+      real_ip.assign(it->second.data(), it->second.size());
+    }
+    std::string client =
+        ClientKey(principal.ok() ? *principal : "", ctx->peer(),
+                  real_ip.empty() ? nullptr : &real_ip, trust);
     const int32_t limit = registry->limits().max_streams_per_client;
     if (!streams->Acquire(client, limit)) {
       finished_ = true;
@@ -256,8 +261,8 @@ class SimulateReactor
     client_ = std::move(client);
     session_ = *session;
     StartSendInitialMetadata();
-    spdlog::info("session {}: stream opened by {}", session_->id(),
-                 ctx->peer());
+    spdlog::info("session {}: stream opened by {} (client {})",
+                 session_->id(), ctx->peer(), client_);
     {
       absl::MutexLock l(&mu_);
       read_pending_ = true;
@@ -742,7 +747,7 @@ grpc::ServerUnaryReactor* SwarfService::DeleteSession(
 grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>*
 SwarfService::Simulate(grpc::CallbackServerContext* ctx) {
   return new SimulateReactor(ctx, registry_, executor_, tokens_, &streams_,
-                             replica_);
+                             trust_, replica_);
 }
 
 grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(

@@ -10,6 +10,7 @@
 
 #include "absl/synchronization/mutex.h"
 #include "server/auth.h"
+#include "server/client_id.h"
 #include "server/executor.h"
 #include "server/registry.h"
 #include "swarf/v1/swarf.grpc.pb.h"
@@ -38,13 +39,15 @@ using SwarfCallbackBase = ::swarf::v1::Swarf::WithCallbackMethod_CreateSession<
 class SwarfService final : public SwarfCallbackBase {
  public:
   // registry, executor and tokens are not owned and must outlive the
-  // service.
+  // service. Streams are counted per client (client_id.h), believing
+  // x-real-ip from `trust`'s proxies.
   SwarfService(Registry* registry, Executor* executor, TokenStore* tokens,
-               std::string replica)
+               std::string replica, ProxyTrust trust = {})
       : registry_(registry),
         executor_(executor),
         tokens_(tokens),
-        replica_(std::move(replica)) {}
+        replica_(std::move(replica)),
+        trust_(std::move(trust)) {}
 
   grpc::ServerUnaryReactor* CreateSession(
       grpc::CallbackServerContext* ctx,
@@ -97,6 +100,7 @@ class SwarfService final : public SwarfCallbackBase {
   Executor* const executor_;
   TokenStore* const tokens_;
   const std::string replica_;
+  const ProxyTrust trust_;
   StreamCounter streams_;
 };
 

@@ -67,6 +67,8 @@ constexpr int kBatchesBefore = 3;  // batches streamed before the restart
 constexpr int kPointsPerBatch = 120;
 constexpr char kSessionKey[] = "x-swarf-session";
 constexpr char kReplicaKey[] = "x-swarf-replica";
+// What every stream claims as its x-real-ip, which nginx must overwrite.
+constexpr char kSpoofedIp[] = "192.0.2.77";
 
 // ---------------------------------------------------------------- processes
 
@@ -364,6 +366,8 @@ class Client {
   grpc::Status Stream(const std::string& id, int session_index, int first,
                       int last, std::string* replica, std::string* problem) {
     auto ctx = Ctx(id, 60s);
+    // A client cannot name itself: nginx replaces this with its peer.
+    ctx->AddMetadata("x-real-ip", kSpoofedIp);
     auto stream = stub_->Simulate(ctx.get());
     std::thread writer([&] {
       for (int seq = first; seq <= last; ++seq) {
@@ -501,7 +505,8 @@ class ClusterTest : public ::testing::Test {
         SWARF_SWARFD,           "--listen=" + r.address(),
         "--replica=" + r.name,  "--worker_threads=2",
         "--max_sessions=64",    "--max_total_memory_mb=1024",
-        "--drain_seconds=2",    "--log_level=info"};
+        "--drain_seconds=2",    "--log_level=info",
+        "--trusted_proxies=127.0.0.1"};
     if (persistence_) argv.push_back("--data_dir=" + r.data_dir.string());
     return std::make_unique<Process>(r.name, argv,
                                      dir_ / (r.name + ".log"));
@@ -700,6 +705,17 @@ TEST_F(ClusterTest, SessionsStayOnTheirReplicaThroughNginxAndRestart) {
     ASSERT_TRUE(direct.List(&ids).ok()) << r.name;
     const auto& want = by_replica[r.name];
     EXPECT_EQ(std::set<std::string>(ids.begin(), ids.end()), want) << r.name;
+  }
+
+  // Streams were counted per real client (swarfd trusts nginx's
+  // x-real-ip, here 127.0.0.1), never per what the client claimed.
+  for (const auto& r : replicas_) {
+    const std::string log = r.process->log();
+    if (by_replica[r.name].empty()) continue;
+    EXPECT_NE(log.find("(client 127.0.0.1)"), std::string::npos) << r.name;
+    EXPECT_EQ(log.find(std::string("client ") + kSpoofedIp),
+              std::string::npos)
+        << r.name << " believed a client's own x-real-ip";
   }
 
   // Phase 2: stop the replica of the first session.

@@ -11,6 +11,7 @@
 
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
+#include "server/client_id.h"
 #include "server/server.h"
 #include "swarf/v1/swarf.grpc.pb.h"
 
@@ -108,6 +109,30 @@ class SecurityTest : public ::testing::Test {
     return s->Finish().error_code();
   }
 
+  // A Simulate stream held open, and whether it is up (a stats request
+  // was answered).
+  struct Open {
+    std::unique_ptr<grpc::ClientContext> ctx;
+    std::unique_ptr<grpc::ClientReaderWriter<pb::SimulateRequest,
+                                             pb::SimulateResponse>> stream;
+  };
+  static std::pair<Open, bool> OpenStream(
+      pb::Swarf::Stub* stub, std::unique_ptr<grpc::ClientContext> ctx) {
+    Open o;
+    o.ctx = std::move(ctx);
+    o.stream = stub->Simulate(o.ctx.get());
+    pb::SimulateRequest req;
+    req.mutable_stats()->set_request_id(1);
+    o.stream->Write(req);
+    pb::SimulateResponse resp;
+    const bool up = o.stream->Read(&resp);
+    return std::pair{std::move(o), up};
+  }
+  static void Close(Open* o) {
+    o->stream->WritesDone();
+    o->stream->Finish().IgnoreError();
+  }
+
   fs::path dir_;
   std::unique_ptr<SwarfServer> server_;
 };
@@ -199,22 +224,8 @@ TEST_F(SecurityTest, StreamsPerClientAreLimited) {
   ASSERT_EQ(Create(stub.get(), "alpha-token", "a"), grpc::StatusCode::OK);
   ASSERT_EQ(Create(stub.get(), "beta-token", "b"), grpc::StatusCode::OK);
   // Two streams held open by alpha: a third is refused, beta's is not.
-  struct Open {
-    std::unique_ptr<grpc::ClientContext> ctx;
-    std::unique_ptr<grpc::ClientReaderWriter<pb::SimulateRequest,
-                                             pb::SimulateResponse>> stream;
-  };
   auto open = [&](const std::string& token, const std::string& id) {
-    Open o;
-    o.ctx = Ctx(token, id);
-    o.stream = stub->Simulate(o.ctx.get());
-    // A stats request answered proves the stream is up.
-    pb::SimulateRequest req;
-    req.mutable_stats()->set_request_id(1);
-    o.stream->Write(req);
-    pb::SimulateResponse resp;
-    const bool up = o.stream->Read(&resp);
-    return std::pair{std::move(o), up};
+    return OpenStream(stub.get(), Ctx(token, id));
   };
   auto [s1, up1] = open("alpha-token", "a");
   auto [s2, up2] = open("alpha-token", "a");
@@ -243,6 +254,90 @@ TEST_F(SecurityTest, StreamsPerClientAreLimited) {
     o->stream->WritesDone();
     o->stream->Finish();
   }
+}
+
+// Behind a balancer every stream comes from the balancer's address. When it
+// is trusted, the x-real-ip it sets names the client; from anyone else the
+// header is ignored, so a client cannot choose whose streams it uses.
+TEST_F(SecurityTest, StreamsBehindATrustedBalancerCountPerRealClient) {
+  ServerOptions opt;
+  opt.limits.max_streams_per_client = 1;
+  opt.trusted_proxies = "10.1.0.0/16, 127.0.0.0/8";
+  ASSERT_NO_FATAL_FAILURE(Start(opt));
+  auto stub = Stub();
+  ASSERT_EQ(Create(stub.get(), "", "a"), grpc::StatusCode::OK);
+  auto open = [&](const std::string& real_ip) {
+    auto ctx = Ctx("", "a");
+    if (!real_ip.empty()) ctx->AddMetadata("x-real-ip", real_ip);
+    return OpenStream(stub.get(), std::move(ctx));
+  };
+  auto [c1, up1] = open("192.0.2.1");
+  auto [c1again, up1again] = open("192.0.2.1");
+  auto [c2, up2] = open("2001:db8::7");
+  EXPECT_TRUE(up1);
+  EXPECT_FALSE(up1again) << "the same client twice";
+  EXPECT_TRUE(up2) << "another client behind the same balancer";
+  // Not an address: the balancer's own.
+  auto [junk, up_junk] = open("not-an-ip");
+  auto [direct, up_direct] = open("");
+  EXPECT_TRUE(up_junk);
+  EXPECT_FALSE(up_direct);
+  for (Open* o : {&c1, &c1again, &c2, &junk, &direct}) Close(o);
+
+  // Untrusted (only 10.1.0.0/16): every stream is 127.0.0.1's.
+  server_.reset();
+  opt.trusted_proxies = "10.1.0.0/16";
+  ASSERT_NO_FATAL_FAILURE(Start(opt));
+  stub = Stub();
+  ASSERT_EQ(Create(stub.get(), "", "a"), grpc::StatusCode::OK);
+  auto [d1, ok1] = open("192.0.2.1");
+  auto [d2, ok2] = open("192.0.2.2");
+  EXPECT_TRUE(ok1);
+  EXPECT_FALSE(ok2) << "x-real-ip from an untrusted peer was believed";
+  for (Open* o : {&d1, &d2}) Close(o);
+}
+
+TEST(ClientIdTest, TrustedProxiesParseAndMatch) {
+  auto t = ProxyTrust::Parse("127.0.0.1, 10.0.0.0/8,fd00::/8,192.168.4.0/23");
+  ASSERT_TRUE(t.ok()) << t.status();
+  EXPECT_TRUE(t->Trusts("127.0.0.1"));
+  EXPECT_FALSE(t->Trusts("127.0.0.2"));
+  EXPECT_TRUE(t->Trusts("10.255.3.4"));
+  EXPECT_FALSE(t->Trusts("11.0.0.1"));
+  EXPECT_TRUE(t->Trusts("192.168.5.200"));  // /23: .4.0 - .5.255
+  EXPECT_FALSE(t->Trusts("192.168.6.1"));
+  EXPECT_TRUE(t->Trusts("fd12::1"));
+  EXPECT_FALSE(t->Trusts("fe80::1"));
+  EXPECT_FALSE(t->Trusts("::ffff:10.0.0.1"));  // another family
+  EXPECT_FALSE(t->Trusts("garbage"));
+  EXPECT_TRUE(ProxyTrust::Parse("")->empty());
+  EXPECT_TRUE(ProxyTrust::Parse("0.0.0.0/0")->Trusts("8.8.8.8"));
+  for (const char* bad : {"10.0.0.0/33", "fd00::/129", "10.0.0/8", "host",
+                          "10.0.0.0/", "10.0.0.0/-1", "10.0.0.0/8x"}) {
+    const auto p = ProxyTrust::Parse(bad);
+    EXPECT_EQ(p.status().code(), absl::StatusCode::kInvalidArgument) << bad;
+    EXPECT_NE(p.status().message().find(bad), std::string::npos) << bad;
+  }
+  // swarfd refuses to start with a bad list.
+  ServerOptions opt;
+  opt.listen = "127.0.0.1:0";
+  opt.trusted_proxies = "10.0.0.0/33";
+  EXPECT_EQ(SwarfServer::Start(opt).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+TEST(ClientIdTest, ClientKeys) {
+  EXPECT_EQ(PeerAddress("ipv4:10.1.2.3:5000"), "10.1.2.3");
+  EXPECT_EQ(PeerAddress("ipv6:[::1]:5000"), "::1");
+  EXPECT_EQ(PeerAddress("unix:/tmp/s"), "unix:/tmp/s");
+  const ProxyTrust trust = *ProxyTrust::Parse("10.0.0.5");
+  const std::string ip = "192.0.2.9", junk = "x";
+  EXPECT_EQ(ClientKey("principal", "ipv4:10.0.0.5:1", &ip, trust),
+            "principal");
+  EXPECT_EQ(ClientKey("", "ipv4:10.0.0.5:1", &ip, trust), ip);
+  EXPECT_EQ(ClientKey("", "ipv4:10.0.0.6:1", &ip, trust), "10.0.0.6");
+  EXPECT_EQ(ClientKey("", "ipv4:10.0.0.5:1", &junk, trust), "10.0.0.5");
+  EXPECT_EQ(ClientKey("", "ipv4:10.0.0.5:1", nullptr, trust), "10.0.0.5");
 }
 
 // A CA, a server certificate for localhost and a client certificate.
