@@ -113,6 +113,32 @@ BENCHMARK_CAPTURE(BM_FinishingMoves, zmap, SchemeKind::kZmap)
 BENCHMARK_CAPTURE(BM_FinishingMoves, taylor, SchemeKind::kTaylor)
     ->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// Recording moves without cutting them (a restart from a snapshot): the
+// same finishing raster (45,000 moves) in batches of 10000. Reports ns per
+// move.
+void BM_RecordMoves(benchmark::State& state) {
+  const std::vector<Move> moves = FinishingRaster(0.2, 0.1, 100);
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto wp = *Workpiece::Create({0, 0, 100, 100, 0, 1000, 1000},
+                                 SchemeKind::kTaylor);
+    state.ResumeTiming();
+    for (size_t k = 0; k < moves.size(); k += 10000) {
+      const size_t n = std::min<size_t>(10000, moves.size() - k);
+      benchmark::DoNotOptimize(
+          wp->Record(std::span<const Move>(moves.data() + k, n)));
+    }
+    state.PauseTiming();
+    wp.reset();
+    state.ResumeTiming();
+  }
+  state.counters["ns_per_move"] = benchmark::Counter(
+      static_cast<double>(moves.size()),
+      benchmark::Counter::kIsIterationInvariantRate |
+          benchmark::Counter::kInvert);
+}
+BENCHMARK(BM_RecordMoves)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 }  // namespace
 }  // namespace swarf
 

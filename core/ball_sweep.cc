@@ -166,15 +166,17 @@ SurfaceJet BallSweep::CylinderJetEq14(const SweepPoint& p) const {
   return ClampedJet(j);
 }
 
-BallSweep::Capsule BallSweep::Footprint(double cap) const {
+BallSweep::Capsule BallSweep::FootprintEnds(const Vec3& a, const Vec3& b,
+                                             double r, double r2,
+                                             double cap) {
   Capsule c;
   // Only centres below cap + r can put the ball below cap.
-  const double z_lim = cap + r_ + kFootprintMargin;
+  const double z_lim = cap + r + kFootprintMargin;
   double t0 = 0, t1 = 1;
-  if (a_.z >= z_lim && b_.z >= z_lim) return c;
-  if (a_.z >= z_lim || b_.z >= z_lim) {
-    const double t = (z_lim - a_.z) / (b_.z - a_.z);
-    if (a_.z < z_lim) {
+  if (a.z >= z_lim && b.z >= z_lim) return c;
+  if (a.z >= z_lim || b.z >= z_lim) {
+    const double t = (z_lim - a.z) / (b.z - a.z);
+    if (a.z < z_lim) {
       t1 = std::min(1.0, t + 1e-12);
     } else {
       t0 = std::max(0.0, t - 1e-12);
@@ -182,18 +184,35 @@ BallSweep::Capsule BallSweep::Footprint(double cap) const {
   }
   // Over the kept part, a ball at height zc reaches below cap within a
   // horizontal radius sqrt(r^2 - (zc - cap)^2), largest at the lowest centre.
-  const double z_min = std::min(a_.z, b_.z);
-  double rho = r_;
+  const double z_min = std::min(a.z, b.z);
+  double rho = r;
   if (z_min > cap) {
     const double h = z_min - cap;
-    rho = std::sqrt(std::max(0.0, r2_ - h * h));
+    rho = std::sqrt(std::max(0.0, r2 - h * h));
   }
   c.empty = false;
-  c.x0 = a_.x + t0 * (b_.x - a_.x);
-  c.y0 = a_.y + t0 * (b_.y - a_.y);
-  c.x1 = a_.x + t1 * (b_.x - a_.x);
-  c.y1 = a_.y + t1 * (b_.y - a_.y);
+  c.x0 = a.x + t0 * (b.x - a.x);
+  c.y0 = a.y + t0 * (b.y - a.y);
+  c.x1 = a.x + t1 * (b.x - a.x);
+  c.y1 = a.y + t1 * (b.y - a.y);
   c.radius = rho * (1 + 1e-12) + kFootprintMargin;
+  return c;
+}
+
+std::optional<Rect> BallSweep::FootprintBounds(const Vec3& tip_from,
+                                               const Vec3& tip_to,
+                                               double radius, double cap) {
+  // The centres as the constructor places them.
+  const Vec3 a{tip_from.x, tip_from.y, tip_from.z + radius};
+  const Vec3 b{tip_to.x, tip_to.y, tip_to.z + radius};
+  const Capsule c = FootprintEnds(a, b, radius, radius * radius, cap);
+  if (c.empty) return std::nullopt;
+  return c.Bounds();
+}
+
+BallSweep::Capsule BallSweep::Footprint(double cap) const {
+  Capsule c = FootprintEnds(a_, b_, r_, r2_, cap);
+  if (c.empty) return c;
   c.length = std::hypot(c.x1 - c.x0, c.y1 - c.y0);
   if (c.length > 0) {
     c.ux = (c.x1 - c.x0) / c.length;

@@ -15,6 +15,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <optional>
 #include <limits>
 #include <utility>
 
@@ -208,7 +209,15 @@ class BallSweep {
       iv->Intersect(x_lo, x_hi);
     }
   };
+  // Where the sweep reaches below the height `cap` (a conservative capsule
+  // around it).
   Capsule Footprint(double cap) const;
+  // The footprint's bounds for the move between two tool tips, bit-identical
+  // to BallSweep(tip_from, tip_to, radius).Footprint(cap).Bounds(), without
+  // building the sweep; nullopt where the footprint is empty.
+  static std::optional<Rect> FootprintBounds(const Vec3& tip_from,
+                                             const Vec3& tip_to,
+                                             double radius, double cap);
 
  private:
   enum Kind : uint8_t { kPoint, kVertical, kGeneral };
@@ -233,6 +242,11 @@ class BallSweep {
   // clamped root `depth` = sqrt(r^2 - n^2).
   [[gnu::always_inline]] SurfaceJet CylinderJet(double w, double px, double py,
                                                 double depth) const;
+
+  // The footprint's ends and radius (not its direction), for ball centres
+  // a and b of radius r (r2 = r * r).
+  static Capsule FootprintEnds(const Vec3& a, const Vec3& b, double r,
+                               double r2, double cap);
 
   Vec3 a_, b_;  // ball centres at the start and end
   double r_, r2_;

@@ -12,8 +12,9 @@ std::pair<int32_t, int32_t> BinRange(double a, double b, double origin,
   const double lo = std::floor((a - origin) / bin_size);
   const double hi = std::floor((b - origin) / bin_size);
   if (!(hi >= 0) || !(lo < bins)) return {1, 0};
-  return {static_cast<int32_t>(std::fmax(lo, 0.0)),
-          static_cast<int32_t>(std::fmin(hi, bins - 1.0))};
+  // Not NaN here, so the conditionals are fmax/fmin without their calls.
+  return {static_cast<int32_t>(lo > 0 ? lo : 0.0),
+          static_cast<int32_t>(hi < bins - 1.0 ? hi : bins - 1.0)};
 }
 
 }  // namespace
@@ -24,9 +25,7 @@ MoveIndex::MoveIndex(const GridGeometry& grid)
       bins_y_((grid.ny() + kBinElements - 1) / kBinElements),
       bins_(static_cast<size_t>(bins_x_) * bins_y_) {}
 
-void MoveIndex::Add(uint32_t id, const BallSweep::Capsule& footprint) {
-  if (footprint.empty) return;
-  const Rect b = footprint.Bounds();
+void MoveIndex::Add(uint32_t id, const Rect& b) {
   const auto [bx0, bx1] = BinRange(b.x0, b.x1, grid_.spec().x0,
                                    grid_.dx() * kBinElements, bins_x_);
   const auto [by0, by1] = BinRange(b.y0, b.y1, grid_.spec().y0,

@@ -20,8 +20,9 @@ class MoveIndex {
 
   explicit MoveIndex(const GridGeometry& grid);
 
-  // Records move `id` under every bin its footprint's bounding box touches.
-  void Add(uint32_t id, const BallSweep::Capsule& footprint);
+  // Records move `id` under every bin its footprint's bounding box
+  // (BallSweep::FootprintBounds) touches.
+  void Add(uint32_t id, const Rect& bounds);
 
   int32_t bins_x() const { return bins_x_; }
   int32_t bins_y() const { return bins_y_; }

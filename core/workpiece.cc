@@ -261,14 +261,14 @@ double Workpiece::TileTop(int32_t t, const Tile& tile) const {
   return zmax;
 }
 
-std::optional<Rect> Workpiece::IndexMove(uint32_t id,
-                                         const BallSweep& sweep) {
-  const BallSweep::Capsule cap = sweep.Footprint(spec().z_top);
-  if (cap.empty) return std::nullopt;
-  const Rect b = cap.Bounds();
-  if (!b.Intersects(grid_.bounds())) return std::nullopt;  // misses the stock
+std::optional<Rect> Workpiece::IndexMove(uint32_t id, const Move& move) {
+  const std::optional<Rect> b = BallSweep::FootprintBounds(
+      move.from, move.to, move.radius, spec().z_top);
+  if (!b.has_value() || !b->Intersects(grid_.bounds())) {
+    return std::nullopt;  // above the top, or beside the stock
+  }
   // Indexed even when it cuts no node: the exact surface still sees it.
-  index_.Add(id, cap);
+  index_.Add(id, *b);
   return b;
 }
 
@@ -290,7 +290,7 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
   for (size_t m = 0; m < moves.size(); ++m) {
     sweeps.emplace_back(moves[m].from, moves[m].to, moves[m].radius);
     const std::optional<Rect> footprint = IndexMove(
-        static_cast<uint32_t>(result.first_move_id + m), sweeps.back());
+        static_cast<uint32_t>(result.first_move_id + m), moves[m]);
     if (!footprint.has_value()) continue;
     const Rect& b = *footprint;
     const auto [i_lo, i_hi] =
@@ -550,8 +550,7 @@ absl::Status Workpiece::Record(std::span<const Move> moves) {
         move_count(), " and the batch adds ", moves.size()));
   }
   for (size_t m = 0; m < moves.size(); ++m) {
-    IndexMove(static_cast<uint32_t>(move_count() + m),
-              BallSweep(moves[m].from, moves[m].to, moves[m].radius));
+    IndexMove(static_cast<uint32_t>(move_count() + m), moves[m]);
   }
   moves_.insert(moves_.end(), moves.begin(), moves.end());
   return absl::OkStatus();

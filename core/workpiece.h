@@ -168,7 +168,7 @@ class Workpiece {
   std::unique_ptr<Tile> NewTile() const;
   // Indexes move `id` when its footprint below the top reaches the stock;
   // returns the footprint's bounds then.
-  std::optional<Rect> IndexMove(uint32_t id, const BallSweep& sweep);
+  std::optional<Rect> IndexMove(uint32_t id, const Move& move);
   // The highest node of tile t (what CutTile caps cuts with).
   double TileTop(int32_t t, const Tile& tile) const;
   template <bool kDerivatives>

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <string>
@@ -610,6 +611,34 @@ TEST(BallSweepFootprintTest, RadiusIsTheCrossSectionAtTheCap) {
   EXPECT_NEAR(span.lo, -std::sqrt(3.0), 1e-6);
   EXPECT_NEAR(span.hi, 10 + std::sqrt(3.0), 1e-6);
   EXPECT_TRUE(c.RowSpan(1.8).empty());
+}
+
+// The bounds computed without building the sweep (what indexing moves
+// uses) are the footprint's, bit for bit, and empty exactly when it is.
+TEST(BallSweepFootprintTest, BoundsWithoutTheSweepAreBitIdentical) {
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> u(-20, 20), rad(1e-3, 5);
+  int empty = 0;
+  for (int k = 0; k < 20000; ++k) {
+    const Vec3 a{u(rng), u(rng), u(rng) / 4};
+    // Plunges, level moves and points as well as general ones.
+    Vec3 b{u(rng), u(rng), u(rng) / 4};
+    if (k % 5 == 1) b = {a.x, a.y, b.z};
+    if (k % 5 == 2) b.z = a.z;
+    if (k % 5 == 3) b = a;
+    const double r = rad(rng), cap = u(rng) / 8;
+    const BallSweep::Capsule c = BallSweep(a, b, r).Footprint(cap);
+    const std::optional<Rect> bounds = BallSweep::FootprintBounds(a, b, r, cap);
+    ASSERT_EQ(bounds.has_value(), !c.empty) << k;
+    if (c.empty) {
+      ++empty;
+      continue;
+    }
+    const Rect want = c.Bounds();
+    ASSERT_EQ(std::memcmp(&want, &*bounds, sizeof(Rect)), 0) << k;
+  }
+  EXPECT_GT(empty, 1000);  // both cases were exercised
+  EXPECT_LT(empty, 19000);
 }
 
 }  // namespace
