@@ -500,6 +500,9 @@ class StateReader {
   absl::FunctionRef<bool(void*, size_t)> read_;
 };
 
+// kMaxDerivative as a float: the largest derivative Apply stores.
+constexpr float kMaxStoredDerivative = static_cast<float>(kMaxDerivative);
+
 bool SameBits(double a, double b) {
   return std::memcmp(&a, &b, sizeof a) == 0;
 }
@@ -628,7 +631,8 @@ absl::Status Workpiece::LoadState(
       }
     }
     // What Apply guarantees: a node is uncut at the top, or cut strictly
-    // below it by a move of the workpiece.
+    // below it by a move of the workpiece, with derivatives that BallSweep
+    // bounds (those of uncut nodes are never read).
     for (int32_t k = 0; k < kTileNodes; ++k) {
       const int32_t o = tile->owner[k];
       const double w = tile->w[k];
@@ -639,6 +643,13 @@ absl::Status Workpiece::LoadState(
         return absl::DataLossError(absl::StrCat(
             "state: tile ", t, " node ", k, " has height ", w,
             " and owner ", o));
+      }
+      for (int c = 0; derivs && o >= 0 && c < 5; ++c) {
+        if (!(std::fabs(tile->d[c][k]) <= kMaxStoredDerivative)) {
+          return absl::DataLossError(absl::StrCat(
+              "state: tile ", t, " node ", k, " has derivative ",
+              tile->d[c][k]));
+        }
       }
     }
     tile->zmax = TileTop(static_cast<int32_t>(t), *tile);

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <numeric>
 #include <random>
@@ -755,6 +756,19 @@ TEST(WorkpieceStateTest, ForeignOrDamagedStatesAreRejected) {
   const uint32_t far = 1000;
   std::memcpy(bad_tile.data() + header, &far, 4);
   expect_rejected(bad_tile, "out of order or range");
+  // An infinite derivative (wx) of the first tile's first cut node.
+  auto owner_of = [&](int32_t k) {
+    int32_t o;
+    std::memcpy(&o, state.data() + owner0 + 4 * k, 4);
+    return o;
+  };
+  int32_t cut = 0;
+  while (owner_of(cut) < 0) ++cut;
+  std::string bad_derivative = state;
+  const float inf = std::numeric_limits<float>::infinity();
+  std::memcpy(bad_derivative.data() + owner0 + kTileNodes * 4 + 4 * cut, &inf,
+              4);
+  expect_rejected(bad_derivative, "derivative inf");
 
   // Read piece by piece, a whole state is still refused by verify() (a
   // checksum over it), and then not taken.
