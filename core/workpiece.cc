@@ -502,6 +502,10 @@ class StateReader {
 
 // kMaxDerivative as a float: the largest derivative Apply stores.
 constexpr float kMaxStoredDerivative = static_cast<float>(kMaxDerivative);
+// Far below any cut (tool tips are above -kMaxCoordinate; the margin covers
+// the sweep's rounding), and high enough that height differences divided by
+// a grid step stay finite.
+constexpr double kMinCutHeight = -2 * kMaxCoordinate;
 
 bool SameBits(double a, double b) {
   return std::memcmp(&a, &b, sizeof a) == 0;
@@ -631,13 +635,14 @@ absl::Status Workpiece::LoadState(
       }
     }
     // What Apply guarantees: a node is uncut at the top, or cut strictly
-    // below it by a move of the workpiece, with derivatives that BallSweep
-    // bounds (those of uncut nodes are never read).
+    // below it (but not below what a move reaches) by a move of the
+    // workpiece, with derivatives that BallSweep bounds (those of uncut
+    // nodes are never read).
     for (int32_t k = 0; k < kTileNodes; ++k) {
       const int32_t o = tile->owner[k];
       const double w = tile->w[k];
       const bool ok = o == -1 ? SameBits(w, st.z_top)
-                              : o >= 0 && o < moves && std::isfinite(w) &&
+                              : o >= 0 && o < moves && w >= kMinCutHeight &&
                                     w < st.z_top;
       if (!ok) {
         return absl::DataLossError(absl::StrCat(

@@ -756,7 +756,8 @@ TEST(WorkpieceStateTest, ForeignOrDamagedStatesAreRejected) {
   const uint32_t far = 1000;
   std::memcpy(bad_tile.data() + header, &far, 4);
   expect_rejected(bad_tile, "out of order or range");
-  // An infinite derivative (wx) of the first tile's first cut node.
+  // The first tile's first cut node: a height below anything a move cuts
+  // (differences of it overflow), an infinite derivative (wx).
   auto owner_of = [&](int32_t k) {
     int32_t o;
     std::memcpy(&o, state.data() + owner0 + 4 * k, 4);
@@ -764,6 +765,10 @@ TEST(WorkpieceStateTest, ForeignOrDamagedStatesAreRejected) {
   };
   int32_t cut = 0;
   while (owner_of(cut) < 0) ++cut;
+  std::string too_deep = state;
+  const double deep = -1e300;
+  std::memcpy(too_deep.data() + header + 12 + 8 * cut, &deep, 8);
+  expect_rejected(too_deep, "height -1e+300");
   std::string bad_derivative = state;
   const float inf = std::numeric_limits<float>::infinity();
   std::memcpy(bad_derivative.data() + owner0 + kTileNodes * 4 + 4 * cut, &inf,
