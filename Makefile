@@ -33,10 +33,11 @@ demo: deps build
 	@echo "  surface.wrl (meshes), stats.json. The paper's tables: build/bin/swarf table"
 
 # Also a short run of each fuzzer (20 s, the ctest label "fuzz" of the
-# clang build); the corpus replays are part of the main ctest.
+# clang build), the three at once whatever JOBS is (each runs for a fixed
+# time); the corpus replays are part of the main ctest.
 test: deps build fuzz-build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
-	cd $(FUZZ_BUILD) && ctest --output-on-failure -j $(JOBS) -L '^fuzz$$'
+	cd $(FUZZ_BUILD) && ctest --output-on-failure -j 3 -L '^fuzz$$'
 
 bench: deps build
 	$(BUILD)/bin/swarf_bench
@@ -50,7 +51,7 @@ clean:
 lint-deploy: deps
 	deploy/lint
 
-# Fuzzing (tests/fuzz): each libFuzzer target for FUZZ_SECONDS, both at once;
+# Fuzzing (tests/fuzz): each libFuzzer target for FUZZ_SECONDS, all at once;
 # a long run: make fuzz FUZZ_SECONDS=3600 (or scripts/fuzz 3600).
 fuzz-build: deps
 	FUZZ_BUILD=$(FUZZ_BUILD) JOBS=$(JOBS) scripts/fuzz --build-only

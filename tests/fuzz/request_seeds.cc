@@ -2,9 +2,6 @@
 // per seed, the kind byte then the serialized message(s) (see
 // request_fuzz.cc). Run at build time, so the seeds follow the proto.
 
-#include <cstdio>
-#include <filesystem>
-#include <fstream>
 #include <limits>
 #include <string>
 #include <vector>
@@ -12,11 +9,11 @@
 #include "google/protobuf/io/coded_stream.h"
 #include "google/protobuf/io/zero_copy_stream_impl_lite.h"
 #include "swarf/v1/swarf.pb.h"
+#include "tests/fuzz/seed_dir.h"
 
 namespace {
 
 namespace pb = ::swarf::v1;
-namespace fs = std::filesystem;
 
 constexpr double kNan = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInf = std::numeric_limits<double>::infinity();
@@ -24,16 +21,6 @@ constexpr double kInf = std::numeric_limits<double>::infinity();
 // Kind bytes (request_fuzz.cc); +8 selects the zmap scheme.
 constexpr char kCreate = 0, kStream = 1, kTiles = 2, kStats = 3, kMarks = 4,
                kProbe = 5, kZmap = 8;
-
-fs::path out_dir;
-int written = 0;
-
-void Write(const std::string& name, char kind, const std::string& body) {
-  std::ofstream f(out_dir / name, std::ios::binary | std::ios::trunc);
-  f.put(kind);
-  f << body;
-  ++written;
-}
 
 std::string Stream(const std::vector<pb::SimulateRequest>& reqs) {
   std::string out;
@@ -118,58 +105,56 @@ pb::SimulateRequest Subscribe(uint64_t id) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc != 2) {
-    std::fprintf(stderr, "usage: %s OUT_DIR\n", argv[0]);
-    return 2;
-  }
-  out_dir = argv[1];
-  fs::create_directories(out_dir);
+  swarf::fuzz::SeedDir seeds(argc, argv);
 
   // CreateSessionRequest.
-  Write("create_ok", kCreate, Create(10, 10, 20, 20).SerializeAsString());
+  seeds.Write("create_ok", kCreate, Create(10, 10, 20, 20).SerializeAsString());
   {
     pb::CreateSessionRequest r = Create(50, 30, 0, 0);
     r.set_spacing(0.5);
     r.set_scheme(pb::SCHEME_ZMAP);
     r.add_tools()->set_id(2);
     r.mutable_tools(1)->mutable_ball()->set_radius(3);
-    Write("create_spacing", kCreate, r.SerializeAsString());
+    seeds.Write("create_spacing", kCreate, r.SerializeAsString());
   }
   {
     pb::CreateSessionRequest r = Create(10, 10, 20, 20);
     r.mutable_stock()->set_z_top(kNan);
-    Write("create_nan", kCreate, r.SerializeAsString());
+    seeds.Write("create_nan", kCreate, r.SerializeAsString());
     r.mutable_stock()->set_z_top(0);
     r.mutable_tools(0)->mutable_ball()->set_radius(-kInf);
-    Write("create_inf_radius", kCreate, r.SerializeAsString());
+    seeds.Write("create_inf_radius", kCreate, r.SerializeAsString());
   }
-  Write("create_huge", kCreate,
-        Create(1e4, 1e4, 1000000, 1000000).SerializeAsString());
-  Write("create_limit", kCreate, Create(1, 1, 1023, 1023).SerializeAsString());
-  Write("create_negative", kCreate, Create(-5, 10, -3, 7).SerializeAsString());
+  seeds.Write("create_huge", kCreate,
+              Create(1e4, 1e4, 1000000, 1000000).SerializeAsString());
+  seeds.Write("create_limit", kCreate,
+              Create(1, 1, 1023, 1023).SerializeAsString());
+  seeds.Write("create_negative", kCreate,
+              Create(-5, 10, -3, 7).SerializeAsString());
   {
     pb::CreateSessionRequest r = Create(10, 10, 8, 8);
     r.mutable_tools(0)->mutable_flat()->set_radius(2);
-    Write("create_flat", kCreate, r.SerializeAsString());
+    seeds.Write("create_flat", kCreate, r.SerializeAsString());
   }
 
   // Streams.
   const std::vector<double> line = {1, 1, 1, 1, 1, -0.5, 9, 5, -0.5, 5, 9, -1};
-  Write("stream_ok", kStream,
-        Stream({Subscribe(5), Batch(1, 1, line), Tiles(2, false, true),
-                Batch(2, 2, {3, 3, -2, 7, 7, -0.1}, true), Stats(3, 4, 4),
-                Marks(4), Tiles(6, true, false)}));
-  Write("stream_zmap", kStream + kZmap,
-        Stream({Batch(1, 1, line), Tiles(2, true, true), Stats(3, 0, 0)}));
-  Write("stream_gap_dup", kStream,
-        Stream({Batch(1, 1, line), Batch(1, 1, line), Batch(3, 1, line),
-                Batch(2, 1, {2, 2, -1})}));
+  seeds.Write("stream_ok", kStream,
+              Stream({Subscribe(5), Batch(1, 1, line), Tiles(2, false, true),
+                      Batch(2, 2, {3, 3, -2, 7, 7, -0.1}, true), Stats(3, 4, 4),
+                      Marks(4), Tiles(6, true, false)}));
+  seeds.Write(
+      "stream_zmap", kStream + kZmap,
+      Stream({Batch(1, 1, line), Tiles(2, true, true), Stats(3, 0, 0)}));
+  seeds.Write("stream_gap_dup", kStream,
+              Stream({Batch(1, 1, line), Batch(1, 1, line), Batch(3, 1, line),
+                      Batch(2, 1, {2, 2, -1})}));
   {
     std::vector<double> bad = line;
     bad[4] = kNan;
-    Write("stream_nan", kStream,
-          Stream({Batch(1, 1, bad), Batch(1, 9, line), Batch(0, 1, line),
-                  Batch(1, 1, {1, 2})}));
+    seeds.Write("stream_nan", kStream,
+                Stream({Batch(1, 1, bad), Batch(1, 9, line), Batch(0, 1, line),
+                        Batch(1, 1, {1, 2})}));
   }
 
   // Unary reads on the prepared session.
@@ -183,10 +168,10 @@ int main(int argc, char** argv) {
     g->set_y0(4);
     g->set_x1(20);
     g->set_y1(1e300);
-    Write("tiles_region", kTiles, r.SerializeAsString());
+    seeds.Write("tiles_region", kTiles, r.SerializeAsString());
     r.clear_selection();
     r.mutable_selection()->add_tiles()->set_tx(-1);
-    Write("tiles_bad_index", kTiles + kZmap, r.SerializeAsString());
+    seeds.Write("tiles_bad_index", kTiles + kZmap, r.SerializeAsString());
   }
   {
     pb::GetErrorStatsRequest r;
@@ -198,25 +183,24 @@ int main(int argc, char** argv) {
     g->set_y0(1);
     g->set_x1(6);
     g->set_y1(4);
-    Write("stats_region", kStats, r.SerializeAsString());
+    seeds.Write("stats_region", kStats, r.SerializeAsString());
     g->set_x1(kInf);
-    Write("stats_inf", kStats + kZmap, r.SerializeAsString());
+    seeds.Write("stats_inf", kStats + kZmap, r.SerializeAsString());
   }
   {
     pb::GetCuttingMarksRequest r;
     r.set_screening_threshold(0.01);
-    Write("marks", kMarks, r.SerializeAsString());
+    seeds.Write("marks", kMarks, r.SerializeAsString());
     r.set_min_angle_deg(95);
-    Write("marks_bad_angle", kMarks, r.SerializeAsString());
+    seeds.Write("marks_bad_angle", kMarks, r.SerializeAsString());
   }
   {
     pb::ProbeRequest r;
     for (double v : {1.0, 1.0, 5.0, 5.0, -3.0, 20.0, 9.99, 0.01}) r.add_xy(v);
-    Write("probe", kProbe, r.SerializeAsString());
+    seeds.Write("probe", kProbe, r.SerializeAsString());
     r.add_xy(kNan);
     r.add_xy(2);
-    Write("probe_nan", kProbe + kZmap, r.SerializeAsString());
+    seeds.Write("probe_nan", kProbe + kZmap, r.SerializeAsString());
   }
-  std::printf("request_seeds: %d seeds in %s\n", written, out_dir.c_str());
-  return 0;
+  return seeds.Done();
 }
