@@ -272,13 +272,18 @@ std::optional<Rect> Workpiece::IndexMove(uint32_t id, const Move& move) {
   return b;
 }
 
-absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
+absl::Status Workpiece::AdmitMoves(std::span<const Move> moves) const {
   SWARF_RETURN_IF_ERROR(ValidateMoves(moves));
   if (move_count() + static_cast<int64_t>(moves.size()) > kMaxMoves) {
     return absl::ResourceExhaustedError(absl::StrCat(
         "a workpiece holds at most ", kMaxMoves, " moves; it has ",
         move_count(), " and the batch adds ", moves.size()));
   }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
+  SWARF_RETURN_IF_ERROR(AdmitMoves(moves));
   ApplyResult result;
   result.first_move_id = move_count();
   result.moves = static_cast<int64_t>(moves.size());
@@ -550,12 +555,7 @@ void Workpiece::SaveState(
 }
 
 absl::Status Workpiece::Record(std::span<const Move> moves) {
-  SWARF_RETURN_IF_ERROR(ValidateMoves(moves));
-  if (move_count() + static_cast<int64_t>(moves.size()) > kMaxMoves) {
-    return absl::ResourceExhaustedError(absl::StrCat(
-        "a workpiece holds at most ", kMaxMoves, " moves; it has ",
-        move_count(), " and the batch adds ", moves.size()));
-  }
+  SWARF_RETURN_IF_ERROR(AdmitMoves(moves));
   for (size_t m = 0; m < moves.size(); ++m) {
     IndexMove(static_cast<uint32_t>(move_count() + m), moves[m]);
   }

@@ -166,6 +166,8 @@ class Workpiece {
   struct Tile;
   Workpiece(const StockSpec& spec, const Scheme& scheme, ThreadPool* pool);
   std::unique_ptr<Tile> NewTile() const;
+  // ValidateMoves, and ResourceExhausted past kMaxMoves (Apply and Record).
+  absl::Status AdmitMoves(std::span<const Move> moves) const;
   // Indexes move `id` when its footprint below the top reaches the stock;
   // returns the footprint's bounds then.
   std::optional<Rect> IndexMove(uint32_t id, const Move& move);

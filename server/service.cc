@@ -24,15 +24,19 @@ namespace {
 
 namespace pb = ::swarf::v1;
 
+// The call's metadata value under `key` ("" when absent).
+std::string MetadataOf(grpc::CallbackServerContext* ctx, const char* key) {
+  const auto& md = ctx->client_metadata();
+  auto it = md.find(key);
+  return it == md.end() ? std::string()
+                        : std::string(it->second.data(), it->second.size());
+}
+
 // The session id of a call: the request's field and/or the
 // x-swarf-session metadata, which must agree when both are given.
 absl::StatusOr<std::string> SessionIdOf(grpc::CallbackServerContext* ctx,
                                         const std::string& field) {
-  std::string meta;
-  const auto& md = ctx->client_metadata();
-  if (auto it = md.find(kSessionMetadata); it != md.end()) {
-    meta.assign(it->second.data(), it->second.size());
-  }
+  const std::string meta = MetadataOf(ctx, kSessionMetadata);
   if (!field.empty() && !meta.empty() && field != meta) {
     return absl::InvalidArgumentError(
         absl::StrCat("session_id \"", field, "\" differs from the ",
@@ -51,12 +55,7 @@ absl::StatusOr<std::string> SessionIdOf(grpc::CallbackServerContext* ctx,
 absl::StatusOr<std::string> PrincipalOf(TokenStore* tokens,
                                         grpc::CallbackServerContext* ctx) {
   if (!tokens->enabled()) return std::string();
-  std::string auth;
-  const auto& md = ctx->client_metadata();
-  if (auto it = md.find("authorization"); it != md.end()) {
-    auth.assign(it->second.data(), it->second.size());
-  }
-  return tokens->Check(auth);
+  return tokens->Check(MetadataOf(ctx, "authorization"));
 }
 
 // The caller's session, NOT_FOUND when it is another principal's.
@@ -241,11 +240,7 @@ class SimulateReactor
     }
     // A client is its token, or its address without authentication.
     auto principal = PrincipalOf(tokens, ctx);
-    std::string real_ip;
-    const auto& md = ctx->client_metadata();
-    if (auto it = md.find(kRealIpMetadata); it != md.end()) {
-      real_ip.assign(it->second.data(), it->second.size());
-    }
+    const std::string real_ip = MetadataOf(ctx, kRealIpMetadata);
     std::string client =
         ClientKey(principal.ok() ? *principal : "", ctx->peer(),
                   real_ip.empty() ? nullptr : &real_ip, trust);

@@ -96,10 +96,7 @@ absl::StatusOr<std::shared_ptr<Session>> Session::Restore(
   spdlog::info("session {}: rebuilt in {:.3f} s", s.spec_.id,
                absl::ToDoubleSeconds(absl::Now() - start));
   // A long replay is not repeated at the next start.
-  if (s.snapshots_.every_moves > 0 &&
-      s.wp_->move_count() - s.snapshot_moves_ >= s.snapshots_.every_moves) {
-    s.SaveSnapshotLocked().IgnoreError();  // logged inside
-  }
+  if (s.SnapshotDueLocked()) s.SaveSnapshotLocked().IgnoreError();  // logged
   return *session;
 }
 
@@ -180,6 +177,11 @@ absl::StatusOr<std::string> Session::ReplayLocked(
                  "replayed", spec_.id, snapshot->seq, replayed);
   }
   return problem;
+}
+
+bool Session::SnapshotDueLocked() const {
+  return snapshots_.every_moves > 0 &&
+         wp_->move_count() - snapshot_moves_ >= snapshots_.every_moves;
 }
 
 absl::StatusOr<bool> Session::SaveSnapshot() {
@@ -289,8 +291,7 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
     if (absl::Status s = ReloadLocked(); !s.ok()) return s;
   }
   auto result = ApplyLocked(seq, *tool, xyz, reposition, true);
-  if (result.ok() && snapshots_.every_moves > 0 &&
-      wp_->move_count() - snapshot_moves_ >= snapshots_.every_moves) {
+  if (result.ok() && SnapshotDueLocked()) {
     SaveSnapshotLocked().IgnoreError();  // logged inside
   }
   return result;
@@ -399,23 +400,19 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
 SessionState Session::State() const {
   absl::ReaderMutexLock l(&mu_);
   SessionState s;
-  {
-    absl::MutexLock l2(&snapshot_mu_);
-    s.snapshot_seq = snapshot_seq_;
+  if (wp_ == nullptr) {
+    s = evicted_state_;  // no reload just to report
+  } else {
+    s.last_seq = last_seq_;
+    s.moves_applied = wp_->move_count();
+    s.version = wp_->version();
+    s.allocated_tiles = wp_->allocated_tiles();
+    s.memory_bytes = wp_->allocated_node_bytes() +
+                     wp_->move_count() * static_cast<int64_t>(sizeof(Move));
+    s.last_position = last_position_;
   }
-  if (wp_ == nullptr) {  // no reload just to report
-    const uint64_t snapshot_seq = s.snapshot_seq;
-    s = evicted_state_;
-    s.snapshot_seq = snapshot_seq;
-    return s;
-  }
-  s.last_seq = last_seq_;
-  s.moves_applied = wp_->move_count();
-  s.version = wp_->version();
-  s.allocated_tiles = wp_->allocated_tiles();
-  s.memory_bytes = wp_->allocated_node_bytes() +
-                   wp_->move_count() * static_cast<int64_t>(sizeof(Move));
-  s.last_position = last_position_;
+  absl::MutexLock l2(&snapshot_mu_);
+  s.snapshot_seq = snapshot_seq_;
   return s;
 }
 

@@ -166,6 +166,8 @@ class Session {
   const ToolSpec* FindTool(int32_t id) const;
   absl::StatusOr<bool> SaveSnapshotLocked() const
       ABSL_SHARED_LOCKS_REQUIRED(mu_);
+  // Whether every_moves moves were applied since the last snapshot.
+  bool SnapshotDueLocked() const ABSL_SHARED_LOCKS_REQUIRED(mu_);
   void Touch() const;
 
   const SessionSpec spec_;
