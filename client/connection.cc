@@ -4,6 +4,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <cstdio>
+#include <optional>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -96,6 +97,21 @@ std::unique_ptr<grpc::ClientContext> Connection::Context(
                     std::chrono::milliseconds(
                         static_cast<int64_t>(timeout_s * 1000)));
   return ctx;
+}
+
+std::vector<Move> RunMoves(const std::vector<PathRun>& runs,
+                           const std::map<int32_t, double>& radius_by_tool) {
+  std::vector<Move> moves;
+  std::optional<Vec3> pos;
+  for (const PathRun& run : runs) {
+    if (run.reposition) pos.reset();
+    const double r = radius_by_tool.at(run.tool_id);
+    for (const Vec3& p : run.points) {
+      if (pos.has_value()) moves.push_back({*pos, p, r});
+      pos = p;
+    }
+  }
+  return moves;
 }
 
 absl::Status StreamPath(

@@ -6,12 +6,14 @@
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
 #include "core/geometry.h"
+#include "core/workpiece.h"
 #include "grpcpp/grpcpp.h"
 #include "server/server.h"
 #include "swarf/v1/swarf.grpc.pb.h"
@@ -72,6 +74,11 @@ struct PathRun {
   bool reposition = false;
   std::vector<Vec3> points;
 };
+
+// The moves a session numbers from these runs, in id order (as
+// Session::BatchMoves does), with the radius of each run's tool.
+std::vector<Move> RunMoves(const std::vector<PathRun>& runs,
+                           const std::map<int32_t, double>& radius_by_tool);
 
 struct StreamProgress {
   int64_t moves_done = 0;   // acknowledged

@@ -25,6 +25,7 @@
 #include "client/json_writer.h"
 #include "client/run_report.h"
 #include "core/toolpath.h"
+#include "server/convert.h"
 
 namespace swarf::cli {
 namespace {
@@ -41,7 +42,7 @@ constexpr char kUsage[] =
     "  --spacing S | --mesh N       grid spacing (mm), or N elements along the\n"
     "                               longer side; default 0.1 mm (coarser if\n"
     "                               the grid would pass 16M nodes)\n"
-    "  --scheme taylor|zmap         default taylor\n"
+    "  --scheme guarded|taylor|zmap default guarded (README, \"The model\")\n"
     "  --arc-tolerance T            chord tolerance for arcs, default 0.001\n"
     "  --server HOST:PORT           a running swarfd (default: embedded)\n"
     "  --token T                    its bearer token (or $SWARF_TOKEN)\n"
@@ -284,7 +285,7 @@ int RunCommand(const std::vector<std::string>& argv) {
                   2);
     }
   }
-  SchemeKind scheme = SchemeKind::kTaylor;
+  SchemeKind scheme = SchemeKind::kGuarded;
   if (auto s = args->Get("scheme")) {
     auto k = ParseScheme(*s);
     if (!k.ok()) return fail(k.status(), 2);
@@ -339,8 +340,7 @@ int RunCommand(const std::vector<std::string>& argv) {
   create.mutable_stock()->set_z_top(stock->z_top);
   create.set_nx(stock->nx);
   create.set_ny(stock->ny);
-  create.set_scheme(scheme == SchemeKind::kZmap ? pb::SCHEME_ZMAP
-                                                : pb::SCHEME_TAYLOR);
+  create.set_scheme(server::SchemeToProto(scheme));
   std::map<int, int32_t> tool_ids;
   for (const auto& [t, r] : *tools) {
     pb::Tool* tool = create.add_tools();
@@ -361,15 +361,16 @@ int RunCommand(const std::vector<std::string>& argv) {
         file, path->move_count(), stock->x0, stock->x1, stock->y0, stock->y1,
         stock->z_top, stock->nx, stock->ny,
         (stock->x1 - stock->x0) / stock->nx,
-        scheme == SchemeKind::kZmap ? "zmap" : "taylor", (*conn)->target());
+        GetScheme(scheme).name(), (*conn)->target());
   }
 
   // Simulate.
   const auto t_sim = std::chrono::steady_clock::now();
   ProgressBar bar(json || args->Has("quiet"));
   StreamProgress last;
+  const std::vector<PathRun> runs = Runs(*path, tool_ids);
   absl::Status streamed = StreamPath(
-      **conn, id, Runs(*path, tool_ids), batch_points,
+      **conn, id, runs, batch_points,
       [&](const StreamProgress& p) {
         last = p;
         bar.Update(p);
@@ -393,6 +394,10 @@ int RunCommand(const std::vector<std::string>& argv) {
   OutputOptions oopt;
   if (auto out = args->Get("out")) oopt.dir = *out;
   oopt.subdivide = subdivide->value_or(1);
+  std::map<int32_t, double> radius_by_tool;
+  for (const auto& [t, r] : *tools) radius_by_tool[tool_ids.at(t)] = r;
+  const std::vector<Move> moves = RunMoves(runs, radius_by_tool);
+  oopt.moves = &moves;
   absl::Status written = CollectAndWrite(**conn, id, oopt, &report);
   report.output_seconds = Since(t_out);
   if (!written.ok()) return fail(written, 1);

@@ -61,7 +61,7 @@ absl::StatusOr<SurfaceGrid> FetchGrid(Connection& conn, const std::string& id,
   pb::GetTilesRequest req;
   req.set_session_id(id);
   req.set_precision(pb::PRECISION_DOUBLE);
-  req.set_include_derivatives(scheme == SchemeKind::kTaylor);
+  req.set_include_derivatives(GetScheme(scheme).stores_derivatives());
   req.set_include_owners(true);
   req.set_since_version(0);
   auto reader = conn.stub().GetTiles(ctx.get(), req);
@@ -131,7 +131,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   if (!stats.ok()) return stats.status();
   report->error = *std::move(stats);
   std::vector<MarkPolyline> marks;
-  if (report->scheme == SchemeKind::kTaylor) {
+  if (GetScheme(report->scheme).stores_derivatives()) {
     auto m = Retrying<std::vector<MarkPolyline>>(
         "the cutting marks", [&] { return FetchMarks(conn, id); });
     if (!m.ok()) return m.status();
@@ -150,6 +150,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     return FetchGrid(conn, id, stock, report->scheme);
   });
   if (!grid.ok()) return grid.status();
+  if (options.moves != nullptr) grid->moves = *options.moves;
   ErrorRaster raster;
   raster.region = {stock.x0, stock.y0, stock.x1, stock.y1};
   raster.cols = report->error.map_cols();
@@ -176,7 +177,7 @@ std::string StatsJson(const RunReport& r) {
   j.Key("moves").Int(r.moves);
   j.Key("source_lines").Int(r.lines);
   j.Key("nodes_lowered").Int(r.nodes_lowered);
-  j.Key("scheme").String(r.scheme == SchemeKind::kZmap ? "zmap" : "taylor");
+  j.Key("scheme").String(std::string(GetScheme(r.scheme).name()));
   j.Key("stock").BeginObject()
       .Key("x0").Double(r.stock.x0).Key("y0").Double(r.stock.y0)
       .Key("x1").Double(r.stock.x1).Key("y1").Double(r.stock.y1)
@@ -229,7 +230,7 @@ std::string Summary(const RunReport& r) {
       "  time     parse %.2f s, simulate %.2f s (%s), outputs %.2f s\n"
       "  error    max %.3g mm at (%.3f, %.3f), mean %.3g mm, rms %.3g mm "
       "(%d samples)\n",
-      r.file, r.moves, r.scheme == SchemeKind::kZmap ? "zmap" : "taylor",
+      r.file, r.moves, GetScheme(r.scheme).name(),
       r.stock.nx, r.stock.ny, r.server, r.parse_seconds, r.simulate_seconds,
       Rate(r.simulate_seconds > 0 ? r.moves / r.simulate_seconds : 0),
       r.output_seconds, r.error.max_error(), r.error.max_x(), r.error.max_y(),

@@ -19,7 +19,7 @@ struct RunReport {
   std::string file, server, ignored;
   int64_t moves = 0, lines = 0, nodes_lowered = 0;
   StockSpec stock;
-  SchemeKind scheme = SchemeKind::kTaylor;
+  SchemeKind scheme = SchemeKind::kGuarded;
   double parse_seconds = 0, simulate_seconds = 0, output_seconds = 0;
   // Error of the scheme against the exact surface (21 samples per element).
   pb::ErrorStats error;
@@ -31,6 +31,8 @@ struct RunReport {
 struct OutputOptions {
   std::string dir;    // empty: no files, statistics only
   int subdivide = 1;  // STL: sub-elements per element side
+  // The session's moves by id (SurfaceGrid::moves); not owned, may be null.
+  const std::vector<Move>* moves = nullptr;
 };
 
 // Fetches the error statistics (and, with a directory, the error map, the

@@ -28,6 +28,10 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::Uncut(const StockSpec& spec,
 absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
   absl::StatusOr<SurfaceGrid> g = Uncut(wp.spec(), wp.scheme().kind());
   if (!g.ok()) return g.status();
+  g->moves.reserve(wp.move_count());
+  for (int64_t id = 0; id < wp.move_count(); ++id) {
+    g->moves.push_back(wp.move(id));
+  }
   std::vector<double> w(kTileNodes);
   std::vector<float> dbuf(5 * kTileNodes);
   std::vector<int32_t> owner(kTileNodes);
@@ -102,10 +106,15 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
   e.y0 = g.NodeY(ej);
   e.y1 = g.NodeY(ej + 1);
   e.z_top = spec.z_top;
-  e.c[0] = jet(ei, ej);
-  e.c[1] = jet(ei + 1, ej);
-  e.c[2] = jet(ei + 1, ej + 1);
-  e.c[3] = jet(ei, ej + 1);
+  const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
+  const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
+  for (int k = 0; k < 4; ++k) {
+    e.c[k] = jet(is[k], js[k]);
+    const int32_t o = owner(is[k], js[k]);
+    if (o >= 0 && o < static_cast<int64_t>(moves.size())) {
+      e.reach[k] = ReachOf(moves[o]);
+    }
+  }
   return e;
 }
 

@@ -25,9 +25,12 @@ namespace swarf::cli {
 
 struct SurfaceGrid {
   StockSpec spec;
-  SchemeKind scheme = SchemeKind::kTaylor;
+  SchemeKind scheme = SchemeKind::kGuarded;
   std::vector<SurfaceJet> jets;  // (nx + 1) * (ny + 1), row-major
   std::vector<int32_t> owners;   // same size; -1: stock top
+  // The session's moves by id, for the guarded scheme's reach of each
+  // owner (ReachOf). Owners beyond it have an unbounded reach.
+  std::vector<Move> moves;
 
   // Untouched stock: every node at z_top, flat, owner -1. InvalidArgument
   // for a spec ValidateStock rejects, or more than kMaxGridNodes nodes.

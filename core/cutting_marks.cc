@@ -1170,7 +1170,22 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
   // not the crease's shape; next to a junction, up to the half element by
   // which a junction may leave its element.
   const double h = std::fmin(grid.dx(), grid.dy());
-  return Chain(kept, tol, 0.1 * h, kJunctionMargin * h);
+  std::vector<MarkPolyline> marks =
+      Chain(kept, tol, 0.1 * h, kJunctionMargin * h);
+  if (wp.scheme().kind() == SchemeKind::kGuarded) {
+    // A crease lies on both owners' surfaces: never below either's lowest
+    // point (patches met far from their nodes can cross lower).
+    for (MarkPolyline& p : marks) {
+      for (size_t k = 0; k < p.vertices.size(); ++k) {
+        for (int32_t id : p.vertex_owners[k]) {
+          if (id < 0 || id >= wp.move_count()) continue;
+          p.vertices[k].z =
+              std::max(p.vertices[k].z, ReachOf(wp.move(id)).z_low);
+        }
+      }
+    }
+  }
+  return marks;
 }
 
 double ExactCreaseDistance(const Workpiece& wp, int32_t a, int32_t b, double x,

@@ -19,6 +19,80 @@ double BilinearHeight(const ElementCorners& e, double x, double y) {
                    std::lerp(e.c[3].w, e.c[2].w, s), t);
 }
 
+bool CornerReach::Contains(double x, double y) const {
+  if (!bounded) return true;
+  // Distance from the segment, clamped to its ends.
+  const double ux = bx - ax, uy = by - ay;
+  const double px = x - ax, py = y - ay;
+  const double len2 = ux * ux + uy * uy;
+  double t = len2 > 0 ? (px * ux + py * uy) / len2 : 0;
+  t = std::clamp(t, 0.0, 1.0);
+  const double dx = px - t * ux, dy = py - t * uy;
+  const double r = radius * (1 + 1e-9);
+  return dx * dx + dy * dy <= r * r;
+}
+
+namespace {
+
+void BilinearGradient(const ElementCorners& e, double x, double y, double* gx,
+                      double* gy) {
+  const double lx = e.x1 - e.x0, ly = e.y1 - e.y0;
+  const double s = (x - e.x0) / lx, t = (y - e.y0) / ly;
+  const double w0 = e.c[0].w, w1 = e.c[1].w, w2 = e.c[2].w, w3 = e.c[3].w;
+  *gx = ((1 - t) * (w1 - w0) + t * (w2 - w3)) / lx;
+  *gy = ((1 - s) * (w3 - w0) + s * (w2 - w1)) / ly;
+}
+
+// The element falls back to the bilinear (see GuardedHeight).
+bool ElementUntrusted(const ElementCorners& e) {
+  const double d = std::hypot(e.x1 - e.x0, e.y1 - e.y0);
+  for (const SurfaceJet& j : e.c) {
+    if (!PatchTrusted(j, d)) return true;
+  }
+  return false;
+}
+
+// The guarded minimum over the corners whose footprint holds (x, y): the
+// index of the corner that gives it (-1: the top), or -2 when no corner
+// counts there.
+int GuardedMin(const ElementCorners& e, double x, double y, double* w) {
+  const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
+  const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
+  *w = e.z_top;
+  int best = -1;
+  bool any = false;
+  for (int k = 0; k < 4; ++k) {
+    if (!e.reach[k].Contains(x, y)) continue;
+    any = true;
+    const double p =
+        std::max(EvaluatePatch(e.c[k], xs[k], ys[k], x, y), e.reach[k].z_low);
+    if (p < *w) {
+      *w = p;
+      best = k;
+    }
+  }
+  return any ? best : -2;
+}
+
+}  // namespace
+
+bool PatchTrusted(const SurfaceJet& j, double d) {
+  const double s2 = j.wx * j.wx + j.wy * j.wy;
+  if (s2 == 0) return true;
+  // Curvature along the gradient direction.
+  const double k =
+      (j.wx * j.wx * j.wxx + 2 * j.wx * j.wy * j.wxy + j.wy * j.wy * j.wyy) /
+      s2;
+  return 4 * std::sqrt(s2) * std::abs(k) * d < 1 + s2;
+}
+
+double GuardedHeight(const ElementCorners& e, double x, double y) {
+  if (ElementUntrusted(e)) return BilinearHeight(e, x, y);
+  double w;
+  if (GuardedMin(e, x, y, &w) == -2) return BilinearHeight(e, x, y);
+  return w;
+}
+
 double MinOfPatches(const ElementCorners& e, double x, double y) {
   const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
   const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
@@ -44,11 +118,7 @@ class ZmapScheme final : public Scheme {
   }
   void Gradient(const ElementCorners& e, double x, double y, double* gx,
                 double* gy) const override {
-    const double lx = e.x1 - e.x0, ly = e.y1 - e.y0;
-    const double s = (x - e.x0) / lx, t = (y - e.y0) / ly;
-    const double w0 = e.c[0].w, w1 = e.c[1].w, w2 = e.c[2].w, w3 = e.c[3].w;
-    *gx = ((1 - t) * (w1 - w0) + t * (w2 - w3)) / lx;
-    *gy = ((1 - s) * (w3 - w0) + s * (w2 - w1)) / ly;
+    BilinearGradient(e, x, y, gx, gy);
   }
 };
 
@@ -80,25 +150,58 @@ class TaylorScheme final : public Scheme {
   }
 };
 
+class GuardedScheme final : public Scheme {
+ public:
+  SchemeKind kind() const override { return SchemeKind::kGuarded; }
+  std::string_view name() const override { return "guarded"; }
+  int parameters_per_node() const override { return 6; }
+  bool stores_derivatives() const override { return true; }
+  int bytes_per_node() const override { return 32; }  // as taylor
+  double Reconstruct(const ElementCorners& e, double x,
+                     double y) const override {
+    return GuardedHeight(e, x, y);
+  }
+  void Gradient(const ElementCorners& e, double x, double y, double* gx,
+                double* gy) const override {
+    double w;
+    const int k = ElementUntrusted(e) ? -2 : GuardedMin(e, x, y, &w);
+    if (k == -2) {
+      BilinearGradient(e, x, y, gx, gy);
+      return;
+    }
+    *gx = *gy = 0;  // the top, or a patch held at its owner's lowest point
+    if (k < 0) return;
+    const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
+    const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
+    if (EvaluatePatch(e.c[k], xs[k], ys[k], x, y) < e.reach[k].z_low) return;
+    PatchGradient(e.c[k], xs[k], ys[k], x, y, gx, gy);
+  }
+};
+
 }  // namespace
 
 const Scheme& GetScheme(SchemeKind kind) {
   static const ZmapScheme* const zmap = new ZmapScheme;
   static const TaylorScheme* const taylor = new TaylorScheme;
+  static const GuardedScheme* const guarded = new GuardedScheme;
   switch (kind) {
     case SchemeKind::kZmap:
       return *zmap;
     case SchemeKind::kTaylor:
+      return *taylor;
+    case SchemeKind::kGuarded:
       break;
   }
-  return *taylor;
+  return *guarded;
 }
 
 absl::StatusOr<SchemeKind> ParseScheme(std::string_view name) {
   if (name == "zmap") return SchemeKind::kZmap;
   if (name == "taylor") return SchemeKind::kTaylor;
+  if (name == "guarded") return SchemeKind::kGuarded;
   return absl::InvalidArgumentError(
-      absl::StrCat("unknown scheme \"", std::string(name), "\" (expected zmap or taylor)"));
+      absl::StrCat("unknown scheme \"", std::string(name),
+                   "\" (expected guarded, taylor or zmap)"));
 }
 
 }  // namespace swarf

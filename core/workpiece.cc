@@ -417,6 +417,18 @@ void Workpiece::ReconstructGradient(double x, double y, double* gx,
                     gy);
 }
 
+CornerReach ReachOf(const Move& m) {
+  CornerReach r;
+  r.bounded = true;
+  r.ax = m.from.x;
+  r.ay = m.from.y;
+  r.bx = m.to.x;
+  r.by = m.to.y;
+  r.radius = m.radius;
+  r.z_low = std::min(m.from.z, m.to.z);
+  return r;
+}
+
 ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
   ElementCorners e;
   e.x0 = grid_.NodeX(ei);
@@ -424,10 +436,13 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
   e.y0 = grid_.NodeY(ej);
   e.y1 = grid_.NodeY(ej + 1);
   e.z_top = spec().z_top;
-  e.c[0] = Node(ei, ej).jet;
-  e.c[1] = Node(ei + 1, ej).jet;
-  e.c[2] = Node(ei + 1, ej + 1).jet;
-  e.c[3] = Node(ei, ej + 1).jet;
+  const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
+  const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
+  for (int k = 0; k < 4; ++k) {
+    const NodeValue n = Node(is[k], js[k]);
+    e.c[k] = n.jet;
+    if (n.owner >= 0) e.reach[k] = ReachOf(moves_[n.owner]);
+  }
   return e;
 }
 

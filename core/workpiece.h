@@ -45,6 +45,11 @@ struct Move {
   double radius = 0;
 };
 
+// Where move m's swept surface exists and how low it goes (for the guarded
+// scheme): the XY capsule of its tips' segment widened by the radius, and its
+// lowest tip.
+CornerReach ReachOf(const Move& m);
+
 // Physical bounds on moves (mm). They keep every intermediate value of the
 // sweep finite (squares of coordinates, 1 / (1e-4 r)^3 at a rim).
 inline constexpr double kMinRadius = 1e-4;
@@ -120,7 +125,8 @@ class Workpiece {
 
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
   NodeValue Node(int32_t i, int32_t j) const;
-  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny.
+  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with each cut corner's
+  // reach (ReachOf its owner).
   ElementCorners Corners(int32_t ei, int32_t ej) const;
   // The scheme's reconstructed surface at a point of the stock (clamped to
   // the stock rectangle).

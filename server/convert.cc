@@ -43,6 +43,34 @@ absl::Status ValidateStockShape(const StockSpec& stock) {
 
 }  // namespace
 
+pb::Scheme SchemeToProto(SchemeKind kind) {
+  switch (kind) {
+    case SchemeKind::kZmap:
+      return pb::SCHEME_ZMAP;
+    case SchemeKind::kTaylor:
+      return pb::SCHEME_TAYLOR;
+    case SchemeKind::kGuarded:
+      break;
+  }
+  return pb::SCHEME_GUARDED;
+}
+
+absl::StatusOr<SchemeKind> SchemeFromProto(int value,
+                                           const std::string& field) {
+  switch (value) {
+    case pb::SCHEME_ZMAP:
+      return SchemeKind::kZmap;
+    case pb::SCHEME_TAYLOR:
+      return SchemeKind::kTaylor;
+    case pb::SCHEME_UNSPECIFIED:
+    case pb::SCHEME_GUARDED:
+      return SchemeKind::kGuarded;
+    default:
+      return absl::InvalidArgumentError(
+          absl::StrCat(field, " ", value, " is unknown"));
+  }
+}
+
 absl::StatusOr<SessionSpec> SpecFromRequest(
     const pb::CreateSessionRequest& req) {
   SessionSpec spec;
@@ -74,18 +102,9 @@ absl::StatusOr<SessionSpec> SpecFromRequest(
     spec.stock.ny = *ny;
   }
   if (absl::Status s = ValidateStockShape(spec.stock); !s.ok()) return s;
-  switch (req.scheme()) {
-    case pb::SCHEME_ZMAP:
-      spec.scheme = SchemeKind::kZmap;
-      break;
-    case pb::SCHEME_UNSPECIFIED:
-    case pb::SCHEME_TAYLOR:
-      spec.scheme = SchemeKind::kTaylor;
-      break;
-    default:
-      return absl::InvalidArgumentError(
-          absl::StrCat("scheme ", req.scheme(), " is unknown"));
-  }
+  auto scheme = SchemeFromProto(req.scheme(), "scheme");
+  if (!scheme.ok()) return scheme.status();
+  spec.scheme = *scheme;
   for (int k = 0; k < req.tools_size(); ++k) {
     const pb::Tool& t = req.tools(k);
     if (t.has_flat() || t.has_bull_nose()) {
@@ -118,8 +137,7 @@ void FillSession(const Session& s, const std::string& replica,
   st->set_z_top(spec.stock.z_top);
   out->set_nx(spec.stock.nx);
   out->set_ny(spec.stock.ny);
-  out->set_scheme(spec.scheme == SchemeKind::kZmap ? pb::SCHEME_ZMAP
-                                                   : pb::SCHEME_TAYLOR);
+  out->set_scheme(SchemeToProto(spec.scheme));
   for (const ToolSpec& t : spec.tools) {
     pb::Tool* tool = out->add_tools();
     tool->set_id(t.id);
@@ -288,8 +306,7 @@ absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,
   auto stats = MeasureError(wp, opt);
   if (!stats.ok()) return stats.status();
   pb::ErrorStats out;
-  out.set_scheme(wp.scheme().kind() == SchemeKind::kZmap ? pb::SCHEME_ZMAP
-                                                         : pb::SCHEME_TAYLOR);
+  out.set_scheme(SchemeToProto(wp.scheme().kind()));
   out.set_max_error(stats->max_error);
   out.set_mean_error(stats->mean_error);
   out.set_rms_error(stats->rms_error);

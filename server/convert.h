@@ -18,6 +18,11 @@ namespace swarf::server {
 
 namespace pb = ::swarf::v1;
 
+// The API's scheme for a core scheme, and back (SCHEME_UNSPECIFIED is
+// SCHEME_GUARDED; InvalidArgument naming `field` for an unknown value).
+pb::Scheme SchemeToProto(SchemeKind kind);
+absl::StatusOr<SchemeKind> SchemeFromProto(int value, const std::string& field);
+
 absl::StatusOr<SessionSpec> SpecFromRequest(
     const pb::CreateSessionRequest& req);
 void FillSession(const Session& s, const std::string& replica,

@@ -695,7 +695,7 @@ grpc::ServerUnaryReactor* SwarfService::CreateSession(
     FillSession(**session, replica_, resp);
     spdlog::info("session {}: created ({}x{} elements, {})", (*session)->id(),
                  resp->nx(), resp->ny(),
-                 resp->scheme() == pb::SCHEME_ZMAP ? "zmap" : "taylor");
+                 pb::Scheme_Name(resp->scheme()));
     return absl::OkStatus();
   });
 }

@@ -56,8 +56,7 @@ std::string Session::Definition(const SessionSpec& spec) {
   st->set_z_top(spec.stock.z_top);
   r.set_nx(spec.stock.nx);
   r.set_ny(spec.stock.ny);
-  r.set_scheme(spec.scheme == SchemeKind::kZmap ? pb::SCHEME_ZMAP
-                                                : pb::SCHEME_TAYLOR);
+  r.set_scheme(SchemeToProto(spec.scheme));
   for (const ToolSpec& t : spec.tools) {
     pb::Tool* tool = r.add_tools();
     tool->set_id(t.id);

@@ -35,7 +35,7 @@ struct SessionSpec {
   // The principal (see auth.h) that created the session; "" without auth.
   std::string owner;
   StockSpec stock;
-  SchemeKind scheme = SchemeKind::kTaylor;
+  SchemeKind scheme = SchemeKind::kGuarded;
   std::vector<ToolSpec> tools;
 };
 
