@@ -112,7 +112,7 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
     e.c[k] = jet(is[k], js[k]);
     const int32_t o = owner(is[k], js[k]);
     if (o >= 0 && o < static_cast<int64_t>(moves.size())) {
-      e.reach[k] = ReachOf(moves[o]);
+      e.reach[k] = ReachOf(moves, o, spec.z_top);
     }
   }
   return e;

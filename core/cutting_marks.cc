@@ -1180,7 +1180,7 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
         for (int32_t id : p.vertex_owners[k]) {
           if (id < 0 || id >= wp.move_count()) continue;
           p.vertices[k].z =
-              std::max(p.vertices[k].z, ReachOf(wp.move(id)).z_low);
+              std::max(p.vertices[k].z, ReachOf(wp.moves(), id, s.z_top).z_low);
         }
       }
     }

@@ -8,6 +8,10 @@
 
 namespace swarf {
 
+namespace {
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
+}  // namespace
+
 double BilinearHeight(const ElementCorners& e, double x, double y) {
   // Eq. (16). With s = (1 + xi) / 2 and t = (1 + eta) / 2 in [0, 1] its four
   // shape functions are the nested linear interpolation below: the same
@@ -19,17 +23,23 @@ double BilinearHeight(const ElementCorners& e, double x, double y) {
                    std::lerp(e.c[3].w, e.c[2].w, s), t);
 }
 
-bool CornerReach::Contains(double x, double y) const {
-  if (!bounded) return true;
+bool CornerReach::Capsule::Contains(double x, double y) const {
   // Distance from the segment, clamped to its ends.
   const double ux = bx - ax, uy = by - ay;
   const double px = x - ax, py = y - ay;
   const double len2 = ux * ux + uy * uy;
-  double t = len2 > 0 ? (px * ux + py * uy) / len2 : 0;
-  t = std::clamp(t, 0.0, 1.0);
+  const double t =
+      len2 > 0 ? std::clamp((px * ux + py * uy) / len2, 0.0, 1.0) : 0.0;
   const double dx = px - t * ux, dy = py - t * uy;
-  const double r = radius * (1 + 1e-9);
-  return dx * dx + dy * dy <= r * r;
+  return dx * dx + dy * dy <= radius * radius;
+}
+
+bool CornerReach::Contains(double x, double y) const {
+  if (!bounded) return true;
+  for (int k = 0; k < count; ++k) {
+    if (capsule[k].Contains(x, y)) return true;
+  }
+  return false;
 }
 
 namespace {
@@ -43,53 +53,85 @@ void BilinearGradient(const ElementCorners& e, double x, double y, double* gx,
   *gy = ((1 - s) * (w3 - w0) + s * (w2 - w1)) / ly;
 }
 
-// The element falls back to the bilinear (see GuardedHeight).
-bool ElementUntrusted(const ElementCorners& e) {
-  const double d = std::hypot(e.x1 - e.x0, e.y1 - e.y0);
-  for (const SurfaceJet& j : e.c) {
-    if (!PatchTrusted(j, d)) return true;
-  }
-  return false;
-}
-
-// The guarded minimum over the corners whose footprint holds (x, y): the
-// index of the corner that gives it (-1: the top), or -2 when no corner
-// counts there.
-int GuardedMin(const ElementCorners& e, double x, double y, double* w) {
+// Corner k's term of the guarded minimum at (x, y), for (x, y) in its
+// footprint: its patch (held at its owner's lowest point) within its trust
+// radius, the bilinear `b` beyond. Sets *patch when the patch is used.
+double GuardedTerm(const ElementCorners& e, int k, double x, double y,
+                   double b, bool* patch) {
   const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
   const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
+  const double dx = x - xs[k], dy = y - ys[k];
+  const PatchTrust trust = TrustPatch(e.c[k], dx, dy);
+  *patch = trust != PatchTrust::kNone;
+  if (!*patch) return b;
+  const double p = std::max(EvaluatePatch(e.c[k], xs[k], ys[k], x, y),
+                            e.reach[k].z_low);
+  if (trust == PatchTrust::kLowerBound && b > p) {
+    *patch = false;
+    return b;
+  }
+  return p;
+}
+
+// The guarded minimum: the index of the corner that gives it (-1: the top),
+// or -2 when it is the bilinear.
+int GuardedMin(const ElementCorners& e, double x, double y, double* w) {
+  const double b = BilinearHeight(e, x, y);
   *w = e.z_top;
   int best = -1;
   bool any = false;
   for (int k = 0; k < 4; ++k) {
     if (!e.reach[k].Contains(x, y)) continue;
     any = true;
-    const double p =
-        std::max(EvaluatePatch(e.c[k], xs[k], ys[k], x, y), e.reach[k].z_low);
-    if (p < *w) {
-      *w = p;
-      best = k;
+    bool patch;
+    const double v = GuardedTerm(e, k, x, y, b, &patch);
+    if (v < *w) {
+      *w = v;
+      best = patch ? k : -2;
     }
   }
-  return any ? best : -2;
+  if (!any) {
+    *w = b;
+    return -2;
+  }
+  return best;
 }
 
 }  // namespace
 
-bool PatchTrusted(const SurfaceJet& j, double d) {
+double RimDistance(const SurfaceJet& j) {
   const double s2 = j.wx * j.wx + j.wy * j.wy;
-  if (s2 == 0) return true;
-  // Curvature along the gradient direction.
-  const double k =
-      (j.wx * j.wx * j.wxx + 2 * j.wx * j.wy * j.wxy + j.wy * j.wy * j.wyy) /
-      s2;
-  return 4 * std::sqrt(s2) * std::abs(k) * d < 1 + s2;
+  // Curvature along the gradient direction (at a flat node, the larger
+  // principal curvature).
+  double k;
+  if (s2 > 0) {
+    k = (j.wx * j.wx * j.wxx + 2 * j.wx * j.wy * j.wxy + j.wy * j.wy * j.wyy) /
+        s2;
+  } else {
+    const double m = 0.5 * (j.wxx + j.wyy);
+    const double q = std::hypot(0.5 * (j.wxx - j.wyy), j.wxy);
+    k = std::max(std::abs(m + q), std::abs(m - q));
+  }
+  const double denom = std::abs(k) * (std::sqrt(1 + s2) + std::sqrt(s2));
+  if (!(denom > 0)) return kInfinity;  // a plane
+  return (1 + s2) / denom;
+}
+
+PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
+  const double delta = RimDistance(j);
+  if (delta == kInfinity) return PatchTrust::kFull;
+  const double reach = kPatchReach * delta;
+  if (dx * dx + dy * dy > reach * reach) return PatchTrust::kNone;
+  const double s = std::hypot(j.wx, j.wy);
+  if (s > 0 && (dx * j.wx + dy * j.wy) / s > kPatchUphill * delta) {
+    return PatchTrust::kLowerBound;  // uphill, towards the rim
+  }
+  return PatchTrust::kFull;
 }
 
 double GuardedHeight(const ElementCorners& e, double x, double y) {
-  if (ElementUntrusted(e)) return BilinearHeight(e, x, y);
   double w;
-  if (GuardedMin(e, x, y, &w) == -2) return BilinearHeight(e, x, y);
+  GuardedMin(e, x, y, &w);
   return w;
 }
 
@@ -164,7 +206,7 @@ class GuardedScheme final : public Scheme {
   void Gradient(const ElementCorners& e, double x, double y, double* gx,
                 double* gy) const override {
     double w;
-    const int k = ElementUntrusted(e) ? -2 : GuardedMin(e, x, y, &w);
+    const int k = GuardedMin(e, x, y, &w);
     if (k == -2) {
       BilinearGradient(e, x, y, gx, gy);
       return;

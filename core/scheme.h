@@ -20,19 +20,23 @@ namespace swarf {
 enum class SchemeKind { kZmap, kTaylor, kGuarded };
 
 // What a corner node's patch stands for: its owner's swept surface, which
-// exists only over the owner's footprint (an XY capsule: the segment
-// (ax, ay)-(bx, by) widened by `radius`) and never goes below `z_low` (the
-// lowest point the owner's tool reaches). Unbounded for uncut nodes (their
+// exists only over the owner's footprint (XY capsules: segments widened by
+// their radius; the owner's, and those of the moves continuing it on the
+// same path, whose surface carries on smoothly) and never goes below `z_low`
+// (the lowest point the owner's tool reaches). Unbounded for uncut nodes (their
 // patch is the stock top, everywhere) and where the owner is unknown.
 struct CornerReach {
+  struct Capsule {
+    double ax = 0, ay = 0, bx = 0, by = 0;
+    double radius = 0;
+    bool Contains(double x, double y) const;  // closed
+  };
   bool bounded = false;
-  double ax = 0, ay = 0, bx = 0, by = 0;
-  double radius = 0;
+  int count = 0;  // capsules in use
+  Capsule capsule[3];
   double z_low = -std::numeric_limits<double>::infinity();
 
-  // Whether (x, y) lies in the footprint (always, when unbounded). Points
-  // within 1e-9 of the radius count as inside: a node its owner lowered is
-  // inside however the distance rounds.
+  // Whether (x, y) lies in a capsule (always, when unbounded).
   bool Contains(double x, double y) const;
 };
 
@@ -73,25 +77,44 @@ double MinOfPatches(const ElementCorners& e, double x, double y);
 // The guarded reconstruction (kGuarded). Eq. (2) assumes every element lies
 // inside smooth pieces; at rims and walls a corner's patch, extrapolated
 // across the element, can plunge far below anything the tool reaches (a rim
-// node carries a slope of up to 1e4). Two rules make a patch say only what it
-// knows about its owner's surface:
-// - Where: a patch counts only inside its owner's footprint (CornerReach),
-//   and never below its owner's lowest point. Where no corner's patch counts
-//   (a point that none of the four owners reaches), the bilinear.
-// - How far: a patch is the osculating quadric of its owner's surface. Along
-//   the gradient, with slope s and curvature k there, a surface that turns
-//   like a circle (a ball's sphere or cylinder, the common case) has third
-//   derivative 3 s k^2 / (1 + s^2), so the patch's error at distance d is
-//   about s k^2 d^3 / (2 (1 + s^2)), while the bilinear's error over the
-//   element is about k d^2 / 8. The patch is the better model when
-//   4 s |k| d < 1 + s^2 with d the element's diagonal (PatchTrusted). If any
-//   corner fails it (a node near a rim or a wall), the whole element is
-//   the bilinear of eq. (16): exactly the z-map there, never worse.
-// Every value is between the lowest z_low of the corners that count and the
-// top, so nothing lies below what the owning tools reach.
+// node carries a slope of up to 1e4, and float storage of its huge, nearly
+// singular Hessian leaves spurious negative curvature). A patch is a
+// statement about its owner's swept surface near its node, so corner k's
+// term of the minimum at (x, y) is:
+// - nothing, outside its owner's footprint (CornerReach: where the owner's
+//   sweep, or a move continuing it, reaches below the top): no surface of
+//   the owner is there. Where no corner has a term, the bilinear.
+// - its patch, held at or above the owner's lowest tip, where TrustPatch
+//   trusts it (kFull); the larger of that and the bilinear where the patch
+//   is only a lower bound (kLowerBound); the bilinear of eq. (16) (the
+//   z-map's answer) beyond (kNone).
+// The minimum starts at the top. So every value is the bilinear, the top or
+// a patch inside its owner's reach held above the owner's lowest tip: never
+// below the lowest tip of the moves owning the corners.
 double GuardedHeight(const ElementCorners& e, double x, double y);
-// Whether a patch with jet `j` is trusted over an element of diagonal `d`.
-bool PatchTrusted(const SurfaceJet& j, double d);
+
+// Along the gradient, with slope s and curvature k, a patch is the
+// osculating parabola of a circle of radius (1 + s^2)^(3/2) / |k| (a ball's
+// sphere or cylinder is one), which turns vertical, ending the height field
+// (a rim), at the distance
+//   RimDistance = (1 + s^2) / (|k| (sqrt(1 + s^2) + s))
+// uphill from the node; infinite for a plane. At a flat node, k is the
+// larger principal curvature.
+double RimDistance(const SurfaceJet& j);
+
+// How far a patch is trusted, in rim distances: in any direction up to
+// kPatchReach; uphill, towards the rim, up to kPatchUphill, beyond which the
+// parabola, rising slower than the circle, only bounds the surface from
+// below. Both measured on the corpus and the analytic walls
+// (docs/benchmarks.md, "Guarded scheme"): uphill 1.0 lets the slot whose
+// rim is at the top err 2% more than the z-map, 0.8 gives up half the gain
+// on bear.nc; a reach of 2 gives up a third of it, 4 is where the gain
+// stops growing.
+inline constexpr double kPatchReach = 4;
+inline constexpr double kPatchUphill = 0.9;
+enum class PatchTrust { kFull, kLowerBound, kNone };
+// The trust of the patch with jet `j` at offset (dx, dy) from its node.
+PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy);
 
 const Scheme& GetScheme(SchemeKind kind);
 // "zmap", "taylor" or "guarded"; InvalidArgument otherwise.

@@ -417,15 +417,38 @@ void Workpiece::ReconstructGradient(double x, double y, double* gx,
                     gy);
 }
 
-CornerReach ReachOf(const Move& m) {
+namespace {
+bool SamePoint(const Vec3& a, const Vec3& b) {
+  return a.x == b.x && a.y == b.y && a.z == b.z;
+}
+}  // namespace
+
+CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
   CornerReach r;
   r.bounded = true;
-  r.ax = m.from.x;
-  r.ay = m.from.y;
-  r.bx = m.to.x;
-  r.by = m.to.y;
-  r.radius = m.radius;
+  // Where each sweep is below the top (beyond, the top is lower anyway): a
+  // rapid above the stock continues no surface.
+  auto add = [&](const Move& m) {
+    const BallSweep::Capsule c =
+        BallSweep(m.from, m.to, m.radius).Footprint(z_top);
+    if (c.empty) return;
+    // The footprint's exact radius (Footprint widens it by a margin for
+    // the cut; here a point just outside must stay outside, as for the
+    // exact surface).
+    const double h = std::min(m.from.z, m.to.z) + m.radius - z_top;
+    const double rho =
+        h > 0 ? std::sqrt(std::max(0.0, m.radius * m.radius - h * h))
+              : m.radius;
+    r.capsule[r.count++] = {c.x0, c.y0, c.x1, c.y1, rho};
+  };
+  const Move& m = moves[id];
+  add(m);
   r.z_low = std::min(m.from.z, m.to.z);
+  if (id > 0 && SamePoint(moves[id - 1].to, m.from)) add(moves[id - 1]);
+  if (id + 1 < static_cast<int64_t>(moves.size()) &&
+      SamePoint(moves[id + 1].from, m.to)) {
+    add(moves[id + 1]);
+  }
   return r;
 }
 
@@ -441,7 +464,7 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
   for (int k = 0; k < 4; ++k) {
     const NodeValue n = Node(is[k], js[k]);
     e.c[k] = n.jet;
-    if (n.owner >= 0) e.reach[k] = ReachOf(moves_[n.owner]);
+    if (n.owner >= 0) e.reach[k] = ReachOf(moves_, n.owner, e.z_top);
   }
   return e;
 }

@@ -45,10 +45,12 @@ struct Move {
   double radius = 0;
 };
 
-// Where move m's swept surface exists and how low it goes (for the guarded
-// scheme): the XY capsule of its tips' segment widened by the radius, and its
+// Where the swept surface of moves[id] exists and how low it goes (for the
+// guarded scheme): the XY capsule where it goes below z_top (BallSweep::
+// Footprint), with those of the moves before and after it when they
+// continue the same path (one's end is the other's start), and its own
 // lowest tip.
-CornerReach ReachOf(const Move& m);
+CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top);
 
 // Physical bounds on moves (mm). They keep every intermediate value of the
 // sweep finite (squares of coordinates, 1 / (1e-4 r)^3 at a rim).
@@ -121,6 +123,7 @@ class Workpiece {
 
   int64_t move_count() const { return static_cast<int64_t>(moves_.size()); }
   const Move& move(int64_t id) const { return moves_[id]; }
+  std::span<const Move> moves() const { return moves_; }
   uint64_t version() const { return version_; }
 
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
