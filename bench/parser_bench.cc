@@ -6,9 +6,9 @@
 #include <cstdio>
 #include <string>
 
-#include "core/toolpath.h"
+#include "gcode/toolpath.h"
 
-namespace swarf {
+namespace swarf::gcode {
 namespace {
 
 std::string ReadFile(const std::string& path) {
@@ -126,6 +126,6 @@ BENCHMARK(BM_SyntheticXyz)
     ->Unit(benchmark::kMillisecond);
 
 }  // namespace
-}  // namespace swarf
+}  // namespace swarf::gcode
 
 BENCHMARK_MAIN();

@@ -24,9 +24,15 @@
 #include "client/connection.h"
 #include "client/json_writer.h"
 #include "client/run_report.h"
-#include "core/toolpath.h"
+#include "gcode/toolpath.h"
 
 namespace swarf::cli {
+
+using gcode::GcodeOptions;
+using gcode::ReadToolpathFile;
+using gcode::Toolpath;
+using gcode::ToolpathPoint;
+
 namespace {
 
 constexpr char kUsage[] =

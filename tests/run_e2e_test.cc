@@ -13,13 +13,15 @@
 
 #include "client/commands.h"
 #include "client/png_image.h"
-#include "core/toolpath.h"
+#include "gcode/toolpath.h"
 #include "google/protobuf/struct.pb.h"
 #include "google/protobuf/util/json_util.h"
 #include "gtest/gtest.h"
 
 namespace swarf::cli {
 namespace {
+
+using gcode::ReadToolpathFile;
 
 struct Stl {
   std::vector<std::array<float, 9>> triangles;  // 3 vertices each

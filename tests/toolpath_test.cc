@@ -1,7 +1,7 @@
 // The toolpath parsers: G-code constructs with exact expected points, arcs
 // (direction, chord error, exact ends), errors with line numbers, the
 // corpus programs, and XYZ input.
-#include "core/toolpath.h"
+#include "gcode/toolpath.h"
 
 #include <algorithm>
 #include <cmath>
@@ -19,7 +19,7 @@
 #error "SWARF_CORPUS_DIR must point at ../shared/corpus"
 #endif
 
-namespace swarf {
+namespace swarf::gcode {
 namespace {
 
 using ::testing::ElementsAre;
@@ -831,4 +831,4 @@ TEST(FormatTest, ByExtension) {
 }
 
 }  // namespace
-}  // namespace swarf
+}  // namespace swarf::gcode

@@ -10,10 +10,10 @@
 #include <string_view>
 
 #include "absl/strings/match.h"
-#include "core/toolpath.h"
+#include "gcode/toolpath.h"
 #include "tests/fuzz/fuzz_check.h"
 
-namespace swarf {
+namespace swarf::gcode {
 namespace {
 
 // Small, so that one input stays fast (32 bytes per point).
@@ -66,10 +66,10 @@ void CheckError(const absl::Status& s) {
 }
 
 }  // namespace
-}  // namespace swarf
+}  // namespace swarf::gcode
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-  using namespace swarf;
+  using namespace swarf::gcode;
   const std::string_view text(reinterpret_cast<const char*>(data), size);
   GcodeOptions options;
   options.max_points = kMaxPoints;

@@ -35,8 +35,8 @@
 //
 // Thread safety: the functions are reentrant; a Toolpath is a value (const
 // methods may run concurrently).
-#ifndef SWARF_CORE_TOOLPATH_H_
-#define SWARF_CORE_TOOLPATH_H_
+#ifndef SWARF_GCODE_TOOLPATH_H_
+#define SWARF_GCODE_TOOLPATH_H_
 
 #include <cstdint>
 #include <map>
@@ -47,7 +47,7 @@
 #include "absl/status/statusor.h"
 #include "core/geometry.h"
 
-namespace swarf {
+namespace swarf::gcode {
 
 // One tool-tip position. 32 bytes: toolpaths hold millions of points.
 struct ToolpathPoint {
@@ -157,6 +157,6 @@ absl::StatusOr<Toolpath> ParseToolpath(std::string_view text,
 absl::StatusOr<Toolpath> ReadToolpathFile(const std::string& path,
                                           const GcodeOptions& options = {});
 
-}  // namespace swarf
+}  // namespace swarf::gcode
 
-#endif  // SWARF_CORE_TOOLPATH_H_
+#endif  // SWARF_GCODE_TOOLPATH_H_

@@ -1,4 +1,4 @@
-#include "core/toolpath.h"
+#include "gcode/toolpath.h"
 
 #include <algorithm>
 #include <cerrno>
@@ -17,7 +17,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/status_macros.h"
 
-namespace swarf {
+namespace swarf::gcode {
 namespace {
 
 constexpr double kPi = std::numbers::pi;
@@ -1077,4 +1077,4 @@ absl::StatusOr<Toolpath> ReadToolpathFile(const std::string& path,
   return tp;
 }
 
-}  // namespace swarf
+}  // namespace swarf::gcode
