@@ -40,6 +40,7 @@
 
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -95,6 +96,21 @@ class Toolpath {
   // Remarks to show once, e.g. "no G20/G21: millimetres assumed".
   const std::vector<std::string>& notes() const { return notes_; }
 
+  // Moves the interpreter could not simulate because an axis was unknown
+  // (feeds after M6 or G28 to an unknown home before X, Y and Z are known
+  // again, or with an axis never given), and the first of them.
+  struct DroppedMove {
+    int32_t line = 0;
+    char missing[4] = {};  // the unknown axes, e.g. "Z" or "XYZ"
+  };
+  int64_t dropped_moves() const { return dropped_moves_; }
+  const std::vector<DroppedMove>& first_dropped() const {
+    return first_dropped_;
+  }
+  // "dropped 3 feed moves with an unknown axis: line 4 (Z unknown), ...";
+  // empty when none.
+  std::string DroppedSummary() const;
+
   // Building (the parsers; tests). Append drops a point that repeats the
   // previous point's position within a run: a zero-length move sweeps
   // nothing.
@@ -102,6 +118,9 @@ class Toolpath {
   void CountIgnored(const std::string& word, int64_t n = 1);
   void AddNote(std::string note) { notes_.push_back(std::move(note)); }
   void set_source_lines(int64_t n) { source_lines_ = n; }
+  // Keeps the first kFirstDropped.
+  static constexpr size_t kFirstDropped = 10;
+  void AddDropped(int32_t line, unsigned missing_axes_mask);
   void Reserve(int64_t points) { points_.reserve(points); }
   // Gives back capacity beyond a quarter over the size.
   void Trim() {
@@ -117,6 +136,14 @@ class Toolpath {
   int64_t source_lines_ = 0;
   std::map<std::string, int64_t> ignored_;
   std::vector<std::string> notes_;
+  int64_t dropped_moves_ = 0;
+  std::vector<DroppedMove> first_dropped_;
+};
+
+enum class Dialect {
+  kLinuxCnc,  // RS274/NGC as LinuxCNC documents it (the default)
+  kFanuc,     // + M98/M99 subprograms (O-numbered programs in the file)
+  kGrbl,      // + '$' setting lines ignored with a note
 };
 
 struct GcodeOptions {
@@ -124,6 +151,21 @@ struct GcodeOptions {
   double arc_tolerance = 0.001;
   // More points is an error (memory: 32 bytes per point).
   int64_t max_points = 100'000'000;
+  // More executed blocks (lines, loops and calls unrolled) is an error: a
+  // program that loops forever stops here.
+  int64_t max_blocks = 200'000'000;
+  // Deeper subroutine nesting is an error.
+  int max_call_depth = 100;
+  // The G28 and G30 positions (machine coordinates, mm) until the program
+  // sets them with G28.1/G30.1; unknown when unset (G28/G30 then make the
+  // axes they move unknown, like a tool change).
+  bool home_known = false;
+  double home[3] = {0, 0, 0};
+  // Where external subroutine files (o<name> call -> name.ngc) are looked
+  // up: the program's directory. Empty: none (calls of undefined
+  // subroutines are errors).
+  std::string subroutine_dir;
+  Dialect dialect = Dialect::kLinuxCnc;
 };
 
 // Parses a G-code program (rules above). Tool numbers: the T of the last
@@ -147,15 +189,24 @@ enum class ToolpathFormat { kGcode, kXyz };
 // .csv .xyz .txt -> kXyz. InvalidArgument naming the supported ones else.
 absl::StatusOr<ToolpathFormat> ToolpathFormatForPath(std::string_view path);
 
+// By content: the first line that is neither blank nor a comment decides.
+// Numbers ("1.5, 2, -0.3"), or a header of letters x, y, z between
+// separators, make kXyz; anything else (words such as G0, N10, %, O100,
+// #1=2) kGcode. An empty or comment-only text: kGcode.
+ToolpathFormat DetectToolpathFormat(std::string_view text);
+
 absl::StatusOr<Toolpath> ParseToolpath(std::string_view text,
                                        ToolpathFormat format,
                                        const GcodeOptions& options = {});
 
-// Reads and parses a file, the format from its extension. Errors are
-// prefixed with the path: "<path>: line N: ...". NotFound when the file
+// Reads and parses a file, the format from `format` when given, else from
+// its content (DetectToolpathFormat). External subroutines are looked up in
+// the file's directory unless options.subroutine_dir is set. Errors are
+// prefixed with the path once: "<path>: line N: ...". NotFound when the file
 // can't be opened.
-absl::StatusOr<Toolpath> ReadToolpathFile(const std::string& path,
-                                          const GcodeOptions& options = {});
+absl::StatusOr<Toolpath> ReadToolpathFile(
+    const std::string& path, const GcodeOptions& options = {},
+    std::optional<ToolpathFormat> format = std::nullopt);
 
 }  // namespace swarf::gcode
 
