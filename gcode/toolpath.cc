@@ -243,6 +243,24 @@ absl::StatusOr<Toolpath> ParseToolpath(std::string_view text,
   return ParseGcode(text, options);
 }
 
+Excursion FarthestOutside(const Toolpath& path, double x0, double y0,
+                          double x1, double y1, double top) {
+  Excursion e;
+  const std::vector<ToolpathPoint>& pts = path.points();
+  for (size_t i = 0; i < pts.size(); ++i) {
+    const ToolpathPoint& p = pts[i];
+    if (p.rapid || p.starts_run || !(p.position.z < top)) continue;
+    const double dx = std::max({x0 - p.position.x, p.position.x - x1, 0.0});
+    const double dy = std::max({y0 - p.position.y, p.position.y - y1, 0.0});
+    const double d = std::hypot(dx, dy);
+    if (d > e.distance) {
+      e.distance = d;
+      e.index = static_cast<int64_t>(i);
+    }
+  }
+  return e;
+}
+
 ToolpathFormat DetectToolpathFormat(std::string_view text) {
   const char* p = SkipBom(text.data(), text.data() + text.size());
   const char* const end = text.data() + text.size();

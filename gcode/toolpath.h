@@ -183,6 +183,16 @@ absl::StatusOr<Toolpath> ParseGcode(std::string_view text,
 absl::StatusOr<Toolpath> ParseXyz(std::string_view text,
                                   int64_t max_points = 100'000'000);
 
+// Where a toolpath's cut leaves a stock's XY rectangle [x0, x1] x [y0, y1]:
+// over the ends of feed moves below `top`, the largest XY distance outside
+// the rectangle (mm) and that point's index; {0, -1} when none is outside.
+struct Excursion {
+  double distance = 0;
+  int64_t index = -1;
+};
+Excursion FarthestOutside(const Toolpath& path, double x0, double y0,
+                          double x1, double y1, double top);
+
 enum class ToolpathFormat { kGcode, kXyz };
 
 // By extension, case-insensitive: .nc .ngc .gcode .tap .cnc -> kGcode;
