@@ -376,6 +376,7 @@ class Interpreter final : public ParameterSource {
   int64_t blocks_ = 0;
   // Forward skip to an O-word.
   bool skipping_ = false;
+  bool arrived_ = false;  // the line being read ends a skip
   std::string skip_label_;
   uint32_t skip_kinds_ = 0;
   int64_t skip_from_ = 0;
@@ -533,6 +534,12 @@ absl::Status Interpreter::ReadOLine(const char* p, const char* end,
   b->o_has_value = false;
   b->o_args.clear();
   p = SkipBlanks(rest, end);
+  // A line reached by skipping only runs when it is an elseif or a
+  // while: other values (an endsub's, ending a definition) aren't read.
+  if (arrived_ && b->o_kind != OKind::kElseif &&
+      b->o_kind != OKind::kWhile) {
+    return absl::OkStatus();
+  }
   switch (b->o_kind) {
     case OKind::kCall:
       while (p < end && *p == '[') {
@@ -767,6 +774,7 @@ absl::StatusOr<Toolpath> Interpreter::Run(std::string_view text) {
       skipping_ = false;
       arrived = true;
     }
+    arrived_ = arrived;
     if (++blocks_ > options_.max_blocks) {
       return Err(absl::StrCat("more than ", options_.max_blocks,
                               " blocks executed (max_blocks): an endless "
