@@ -65,6 +65,36 @@ std::string SyntheticGcode(int64_t lines) {
   return s;
 }
 
+// Straight-line CAM output: one G1 then modal X Y Z words, 3 decimals.
+std::string StraightGcode(int64_t lines) {
+  std::string s = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F1000\n";
+  char buf[96];
+  for (int64_t i = 3; i < lines; ++i) {
+    std::snprintf(buf, sizeof buf, "X%.3f Y%.3f Z%.3f\n", (i % 400) * 0.25,
+                  (i / 400) * 0.25, -1 - 0.001 * (i % 997));
+    s += buf;
+  }
+  return s;
+}
+
+// A parameter-heavy program: the same kind of raster computed by nested
+// while loops with named parameters and expressions (a sine relief), 400 x
+// 400 points: 3 blocks per point.
+constexpr char kParametricRaster[] =
+    "G21 G90 G17\n"
+    "#<step> = 0.25\n"
+    "#<y> = 0\n"
+    "G0 X0 Y0 Z5\n"
+    "o1 while [#<y> LT 100]\n"
+    "  #<x> = 0\n"
+    "  o2 while [#<x> LT 100]\n"
+    "    G1 X#<x> Y#<y> Z[-1 - 0.5 * sin[#<x> * 3.6] * cos[#<y> * 3.6]]\n"
+    "    #<x> = [#<x> + #<step>]\n"
+    "  o2 endwhile\n"
+    "  #<y> = [#<y> + #<step>]\n"
+    "o1 endwhile\n"
+    "M2\n";
+
 std::string SyntheticXyz(int64_t lines) {
   std::string s = "x,y,z\n";
   char buf[64];
@@ -82,7 +112,7 @@ void Run(benchmark::State& state, const std::string& text, bool gcode) {
     return;
   }
   const int64_t lines = CountLines(text);
-  int64_t points = 0;
+  int64_t points = 0, blocks = 0;
   for (auto _ : state) {
     absl::StatusOr<Toolpath> tp = gcode ? ParseGcode(text) : ParseXyz(text);
     if (!tp.ok()) {
@@ -90,12 +120,16 @@ void Run(benchmark::State& state, const std::string& text, bool gcode) {
       return;
     }
     points = tp->point_count();
+    blocks = tp->blocks_executed();
     benchmark::DoNotOptimize(tp);
   }
   state.counters["lines/s"] =
       benchmark::Counter(static_cast<double>(lines * state.iterations()),
                          benchmark::Counter::kIsRate);
   state.counters["lines"] = static_cast<double>(lines);
+  state.counters["blocks/s"] = benchmark::Counter(
+      static_cast<double>(blocks * state.iterations()),
+      benchmark::Counter::kIsRate);
   state.counters["points"] = static_cast<double>(points);
   state.SetBytesProcessed(static_cast<int64_t>(text.size()) *
                           state.iterations());
@@ -115,6 +149,21 @@ void BM_SyntheticGcode(benchmark::State& state) {
 }
 BENCHMARK(BM_SyntheticGcode)
     ->Name("Synthetic/gcode_1M_lines")
+    ->Unit(benchmark::kMillisecond);
+
+void BM_StraightGcode(benchmark::State& state) {
+  static const std::string text = StraightGcode(1'000'000);
+  Run(state, text, true);
+}
+BENCHMARK(BM_StraightGcode)
+    ->Name("Synthetic/gcode_straight_1M_lines")
+    ->Unit(benchmark::kMillisecond);
+
+void BM_Parametric(benchmark::State& state) {
+  Run(state, kParametricRaster, true);
+}
+BENCHMARK(BM_Parametric)
+    ->Name("Synthetic/gcode_parametric_400x400")
     ->Unit(benchmark::kMillisecond);
 
 void BM_SyntheticXyz(benchmark::State& state) {

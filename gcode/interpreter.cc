@@ -351,12 +351,19 @@ class Interpreter final : public ParameterSource {
 
   double scale() const { return inches_ ? kMmPerInch : 1.0; }
   // Machine = program * scale + Offset(axis).
+  // Cached: recomputed after any parameter may have changed.
   double Offset(int a) const {
-    const int cs = static_cast<int>(params_[kCoordSystem]);
-    double o = params_[kCoordBase + 20 * cs + a];
-    if (params_[kG92On] != 0) o += params_[kG92 + a];
-    if (a == 2) o += params_[kToolLength];
-    return o;
+    if (offsets_dirty_) {
+      const int cs = std::clamp(static_cast<int>(params_[kCoordSystem]), 1, 9);
+      for (int k = 0; k < 3; ++k) {
+        double o = params_[kCoordBase + 20 * cs + k];
+        if (params_[kG92On] != 0) o += params_[kG92 + k];
+        if (k == 2) o += params_[kToolLength];
+        offset_[k] = o;
+      }
+      offsets_dirty_ = false;
+    }
+    return offset_[a];
   }
   double ProgramPosition(int a) const {
     return (pos_[a] - Offset(a)) / scale();
@@ -366,6 +373,8 @@ class Interpreter final : public ParameterSource {
   const GcodeOptions options_;
   Toolpath path_;
   std::vector<double> params_;
+  mutable double offset_[3] = {0, 0, 0};
+  mutable bool offsets_dirty_ = true;
   std::unordered_map<std::string, double> globals_;
   std::deque<Source> files_;  // stable addresses: views into owned text
   std::vector<Frame> frames_;
@@ -487,6 +496,7 @@ absl::Status Interpreter::SetParameter(const ParamRef& ref, double v) {
       return Err(absl::StrCat("#", ref.number, " is read-only"));
     }
     params_[ref.number] = v;
+    offsets_dirty_ = true;
     return absl::OkStatus();
   }
   auto& map = ref.name[0] == '_' ? globals_ : frame().named;
@@ -580,8 +590,6 @@ absl::Status Interpreter::ReadBlock(const char* p, const char* end, Block* b) {
     b->block_delete = true;
     ++p;
   }
-  const char* o = Prelude(p, end);
-  if (o < end && (*o == 'O' || *o == 'o')) return ReadOLine(o, end, b);
   while (p < end) {
     const char c = *p;
     if (IsBlank(c)) {
@@ -621,17 +629,31 @@ absl::Status Interpreter::ReadBlock(const char* p, const char* end, Block* b) {
       }
     }
     ++p;
-    if (letter == 'O') return Err("an O-word must start its line");
+    if (letter == 'O') {
+      // Only an N word may come before an O-word.
+      if (b->words != 0 || b->ng != 0 || b->nm != 0 || !b->settings.empty()) {
+        return Err("an O-word must start its line");
+      }
+      return ReadOLine(p - 1, end, b);
+    }
     double v;
-    {
+    // The common case first: a plain number.
+    const char* num = ScanNumber(p, end, &v);
+    if (num != nullptr) {
+      if (num < end && *num == '.') {
+        return Err(absl::StrCat("malformed number in ", std::string(1, letter),
+                                " word"));
+      }
+      p = num;
+    } else {
       const char* q = SkipBlanks(p, end);
       if (q >= end || *q == '(' || *q == ';' ||
           ((*q & ~0x20) >= 'A' && (*q & ~0x20) <= 'Z' &&
            !(q + 1 < end && ((q[1] & ~0x20) >= 'A' && (q[1] & ~0x20) <= 'Z')))) {
         return Err(absl::StrCat(std::string(1, letter), " word has no number"));
       }
+      SWARF_RETURN_IF_ERROR(Wrap(ReadReal(&p, end, *this, &v)));
     }
-    SWARF_RETURN_IF_ERROR(ReadValue(&p, end, &v));
     switch (letter) {
       case 'G': {
         const double t = v * 10;
@@ -797,6 +819,7 @@ absl::StatusOr<Toolpath> Interpreter::Run(std::string_view text) {
     }
   }
   path_.set_source_lines(max_main_line_);
+  path_.set_blocks_executed(blocks_);
   if (end_line > 0 && cur_.file == 0) {
     // Say so when something that looks like program text was not read.
     int64_t unread = 0;
@@ -1432,6 +1455,7 @@ absl::Status Interpreter::ApplyGCodes(const Block& b, int* new_motion,
       }
     }
     params_[kCoordSystem] = cs;
+    offsets_dirty_ = true;
   }
   if (distance >= 0) incremental_ = distance == 910;
   if (arc_distance >= 0) arc_absolute_ = arc_distance == 901;
@@ -1448,6 +1472,7 @@ absl::Status Interpreter::ApplyGCodes(const Block& b, int* new_motion,
 // offsets it by the given length and G43.2 Z adds to that; G49 cancels.
 absl::Status Interpreter::ToolLength(const Block& b, int code,
                                      uint32_t* used) {
+  offsets_dirty_ = true;
   if (code == 430 || code == 490) {
     params_[kToolLength] = 0;
     return absl::OkStatus();
@@ -1466,6 +1491,7 @@ absl::Status Interpreter::ToolLength(const Block& b, int code,
 }
 
 absl::Status Interpreter::NonModal(const Block& b, int code, uint32_t* used) {
+  offsets_dirty_ = true;
   const double s = scale();
   const auto given = [&](int a) { return (b.words & Bit(kAxisName[a])) != 0; };
   const auto value = [&](int a) { return b.value[kAxisName[a] - 'A'] * s; };

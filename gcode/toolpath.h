@@ -83,6 +83,9 @@ class Toolpath {
 
   // Source lines read (up to the program end).
   int64_t source_lines() const { return source_lines_; }
+  // Blocks executed (G-code: lines with words, loops and calls unrolled).
+  int64_t blocks_executed() const { return blocks_executed_; }
+  void set_blocks_executed(int64_t n) { blocks_executed_ = n; }
 
   // Words accepted without effect on the tool path, by word: "F", "S",
   // "H", "M3" (M03 counts as M3), "G43", "G90.1"-style codes, "O" (program
@@ -134,6 +137,7 @@ class Toolpath {
   int64_t runs_ = 0;
   Interval x_bounds_, y_bounds_, z_bounds_;
   int64_t source_lines_ = 0;
+  int64_t blocks_executed_ = 0;
   std::map<std::string, int64_t> ignored_;
   std::vector<std::string> notes_;
   int64_t dropped_moves_ = 0;
