@@ -237,7 +237,8 @@ std::string UnsupportedG(int32_t c) {
 }
 
 bool IsCycle(int m) {
-  return m == 730 || m == 740 || (m >= 810 && m <= 890 && m % 10 == 0);
+  return m == 730 || m == 740 || m == 760 ||
+         (m >= 810 && m <= 890 && m % 10 == 0);
 }
 
 struct Cursor {
@@ -1358,6 +1359,13 @@ absl::Status Interpreter::ApplyGCodes(const Block& b, int* new_motion,
         g80 = true;
         ++g_ignored_[c];
         break;
+      case 760:
+        // LinuxCNC: lathe threading; Fanuc mills: fine boring.
+        if (options_.dialect != Dialect::kFanuc) return Err(UnsupportedG(c));
+        group = kMotion;
+        *new_motion = c;
+        *motion_given = true;
+        break;
       case 0: case 10: case 20: case 30:
       case 730: case 740: case 810: case 820: case 830: case 840: case 850:
       case 860: case 870: case 880: case 890:
@@ -1878,7 +1886,15 @@ absl::Status Interpreter::Arc(const Block& b) {
 absl::Status Interpreter::Cycle(const Block& b, uint32_t* used) {
   const std::string g = GName(motion_);
   *used |= Bit('R') | Bit('Q') | Bit('P') | Bit('L');
-  if (motion_ == 870) *used |= Bit('I') | Bit('J') | Bit('K');
+  const bool fanuc = options_.dialect == Dialect::kFanuc;
+  if (motion_ == 870) {
+    if (fanuc) {
+      return Err("G87 in the Fanuc form (back boring with a Q shift) is not "
+                 "supported");
+    }
+    *used |= Bit('I') | Bit('J') | Bit('K');
+  }
+  if (fanuc) *used |= Bit('K');
   if (plane_ != 17) {
     return Err(absl::StrCat(g, " in the ", plane_ == 18 ? "G18" : "G19",
                             " plane is not supported (canned cycles: G17 "
@@ -1900,6 +1916,14 @@ absl::Status Interpreter::Cycle(const Block& b, uint32_t* used) {
       return Err(absl::StrCat(g, " L", l, " is not a repeat count"));
     }
     repeats = static_cast<int64_t>(l);
+  }
+  if (fanuc && (b.words & Bit('K'))) {
+    // Fanuc's repeat count.
+    const double k = b.value['K' - 'A'];
+    if (!(k >= 1 && k <= 1e6) || k != std::floor(k)) {
+      return Err(absl::StrCat(g, " K", k, " is not a repeat count"));
+    }
+    repeats = static_cast<int64_t>(k);
   }
   const double s = scale();
   double peck = 0;
@@ -1991,6 +2015,9 @@ absl::Status Interpreter::Cycle(const Block& b, uint32_t* used) {
         }
         SWARF_RETURN_IF_ERROR(feed(x, y, bottom));
         break;
+      case 760:
+        // Fanuc fine boring: the Q shift away from the wall before the
+        // rapid out touches no new material, so it is not simulated.
       case 810: case 820: case 860: case 880:
         // Drill (G81), with a dwell (G82); boring with a spindle stop and a
         // rapid out (G86) or a manual retract, taken as straight up (G88).

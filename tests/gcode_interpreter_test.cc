@@ -628,6 +628,22 @@ TEST(DialectTest, FanucSubprogramsWithRepeats) {
   EXPECT_EQ(tp.points()[1].line, 6);
 }
 
+TEST(DialectTest, FanucCycleFormsRepeatWithKAndG76Bores) {
+  GcodeOptions o;
+  o.dialect = Dialect::kFanuc;
+  ExpectPath(MustRun("G21 G0 X0 Y0 Z5\nG91 G99 G81 X2 Y0 Z-3 R-4 K2\n", o),
+             {{0, 0, 5, true}, {2, 0, 5, true}, {2, 0, 1, true},
+              {2, 0, -2, false}, {2, 0, 1, true}, {4, 0, 1, true},
+              {4, 0, -2, false}, {4, 0, 1, true}});
+  ExpectPath(MustRun("G21 G0 X0 Y0 Z5\nG98 G76 X1 Y0 Z-1 R1 Q0.1\n", o),
+             {{0, 0, 5, true}, {1, 0, 5, true}, {1, 0, 1, true},
+              {1, 0, -1, false}, {1, 0, 5, true}});
+  EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z5\nG98 G76 X1 Y0 Z-1 R1 Q0.1\n"),
+              HasSubstr("lathe"));
+  EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z5\nG87 X1 Y0 Z-1 R1 Q1\n", o),
+              HasSubstr("Fanuc form"));
+}
+
 TEST(ModalStateTest, M70SavesAndM72RestoresUnitsAndDistanceMode) {
   const Toolpath tp =
       MustRun("G21 G0 X0 Y0 Z0\nM70\nG20 G91\nG0 X1\nM72\nG0 X1\n");
