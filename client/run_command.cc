@@ -290,6 +290,12 @@ int RunCommand(const std::vector<std::string>& argv) {
     return fail(st, 2);
   }
   GcodeOptions& gopt = tflags.options;
+  // Cutter compensation (G41/G42) needs the radius of the tool it names.
+  gopt.tool_radius = [specs = args->All("tool")](int t) -> std::optional<double> {
+    auto r = ChooseTools(specs, {t});
+    if (!r.ok()) return std::nullopt;
+    return r->at(t);
+  };
   if (auto t = args->Get("arc-tolerance")) {
     if (!absl::SimpleAtod(*t, &gopt.arc_tolerance) ||
         !(gopt.arc_tolerance > 0)) {

@@ -276,6 +276,24 @@ struct Frame {
   int64_t repeats_left = 0;
 };
 
+// Cutter compensation: a move of the programmed path (XY plane) and the
+// tool's path for it.
+struct CompSeg {
+  bool arc = false;
+  bool rapid = false;
+  int64_t line = 0;
+  double s[3], e[3];  // programmed start and end (machine mm)
+  double c[2] = {0, 0};  // arc centre
+  double radius = 0;     // programmed arc radius
+  double sweep = 0;      // signed, radians
+  // The tool's path: a line ts -> te, or an arc about c of radius tr from
+  // angle ta through tsweep; tangent directions of the programmed path at
+  // both ends.
+  double ts[2], te[2];
+  double tr = 0, ta = 0, tsweep = 0;
+  double dir_s[2], dir_e[2];
+};
+
 struct Source {
   std::string name;  // the path for external files; "" for the program
   std::string owned;
@@ -340,6 +358,15 @@ class Interpreter final : public ParameterSource {
   absl::Status Cycle(const Block& b, uint32_t* used);
   absl::Status MoveTo(double x, double y, double z, bool rapid);
   absl::Status Emit(double x, double y, double z, bool rapid);
+  absl::Status ChordArc(int p0, int p1, int p2, double cx, double cy,
+                        double r0, double r1, double a0, double sweep,
+                        double z0, const double end[3], bool rapid);
+  // Cutter compensation (G41/G42, G17 only).
+  absl::Status CompStart(const Block& b, int code);
+  absl::Status CompAdd(CompSeg seg);
+  absl::Status CompFlush();
+  absl::Status CompEmit(const CompSeg& seg);
+  absl::Status CompJoin(CompSeg* a, CompSeg* b);
   void SaveModal(ModalState* s) const {
     *s = {true, inches_, incremental_, arc_absolute_, plane_};
   }
@@ -402,6 +429,12 @@ class Interpreter final : public ParameterSource {
   bool arc_absolute_ = false;  // G90.1
   int plane_ = 17;
   bool retract_r_ = false;     // G99
+  int comp_side_ = 0;          // +1 G41 (tool left), -1 G42, 0 off
+  double comp_r_ = 0;          // mm
+  bool comp_pending_ = false;  // comp_seg_ waits for the next move
+  int64_t emit_line_ = -1;     // >= 0: the line of the points emitted
+  bool comp_entry_ = false;    // the next move is the entry move
+  CompSeg comp_seg_;
   bool home_known_[2] = {false, false};  // G28, G30
   bool home_noted_ = false;
   bool offset_noted_ = false;
@@ -748,6 +781,7 @@ absl::StatusOr<Toolpath> Interpreter::Run(std::string_view text) {
                                               OName(c.kind),
                                               " is never closed"));
       }
+      SWARF_RETURN_IF_ERROR(CompFlush());
       break;
     }
     line_start_ = cur_;
@@ -1281,6 +1315,9 @@ absl::Status Interpreter::Execute(const Block& b) {
     if (m >= 70 && m <= 73) ++m_ignored_[m];
   }
   if (m6) {
+    if (comp_side_ != 0) {
+      return Err("M6 with cutter compensation on (G40 first)");
+    }
     ToolChange();
   }
   if (length_code >= 0) SWARF_RETURN_IF_ERROR(ToolLength(b, length_code, &used));
@@ -1288,6 +1325,10 @@ absl::Status Interpreter::Execute(const Block& b) {
 
   const uint32_t axes = b.words & kAxisWords;
   if (nonmodal >= 0) {
+    if (comp_side_ != 0 && (nonmodal == 280 || nonmodal == 300)) {
+      return Err(absl::StrCat(GName(nonmodal),
+                              " with cutter compensation on (G40 first)"));
+    }
     SWARF_RETURN_IF_ERROR(NonModal(b, nonmodal, &used));
   }
   const bool axes_taken = (used & kAxisWords) != 0;
@@ -1303,6 +1344,10 @@ absl::Status Interpreter::Execute(const Block& b) {
       return Err(absl::StrCat(
           "axis words with no motion mode in effect (",
           motion_ < 0 ? "no G0, G1, G2 or G3 yet" : "G80 cancelled it", ")"));
+    }
+    if (comp_side_ != 0 && (g53 || IsCycle(motion_))) {
+      return Err(absl::StrCat(g53 ? "G53" : GName(motion_),
+                              " with cutter compensation on (G40 first)"));
     }
     if (g53 && motion_ > 10) {
       return Err("G53 needs G0 or G1 (machine-coordinate straight moves)");
@@ -1331,7 +1376,10 @@ absl::Status Interpreter::Execute(const Block& b) {
   }
   if (m98) SWARF_RETURN_IF_ERROR(FanucCall(b));
   if (m99) SWARF_RETURN_IF_ERROR(FanucReturn());
-  if (end) ended_ = true;
+  if (end) {
+    SWARF_RETURN_IF_ERROR(CompFlush());
+    ended_ = true;
+  }
   return absl::OkStatus();
 }
 
@@ -1348,6 +1396,7 @@ absl::Status Interpreter::ApplyGCodes(const Block& b, int* new_motion,
   int coord = -1, plane = -1, units = -1, distance = -1, arc_distance = -1,
       retract = -1;
   bool g80 = false;
+  int comp_code = -1;
   for (int i = 0; i < b.ng; ++i) {
     const int32_t c = b.g[i];
     Group group = kN;
@@ -1418,7 +1467,11 @@ absl::Status Interpreter::ApplyGCodes(const Block& b, int* new_motion,
         break;
       case 400:
         group = kComp;
-        ++g_ignored_[c];
+        comp_code = c;
+        break;
+      case 410: case 420: case 411: case 421:
+        group = kComp;
+        comp_code = c;
         break;
       // State that doesn't move the tip.
       case 80:   // lathe radius mode
@@ -1443,6 +1496,13 @@ absl::Status Interpreter::ApplyGCodes(const Block& b, int* new_motion,
     }
   }
   if (g80 && *new_motion < 0) *new_motion = 800;
+  if (comp_code == 400) {
+    SWARF_RETURN_IF_ERROR(CompFlush());
+    comp_side_ = 0;
+    ++g_ignored_[400];
+  } else if (comp_code >= 0) {
+    SWARF_RETURN_IF_ERROR(CompStart(b, comp_code));
+  }
   if (plane >= 0) plane_ = plane;
   if (units >= 0) {
     inches_ = units == 200;
@@ -1690,6 +1750,17 @@ absl::Status Interpreter::EndPoint(const Block& b, bool machine,
 absl::Status Interpreter::Linear(const Block& b, bool machine, bool rapid) {
   double end[3];
   SWARF_RETURN_IF_ERROR(EndPoint(b, machine, end));
+  if (comp_side_ != 0) {
+    CompSeg seg;
+    seg.rapid = rapid;
+    seg.line = main_line_;
+    for (int a = 0; a < 3; ++a) {
+      seg.s[a] = pos_[a];
+      seg.e[a] = end[a];
+      pos_[a] = end[a];
+    }
+    return CompAdd(seg);
+  }
   const unsigned before = known_;
   for (int a = 0; a < 3; ++a) {
     if (b.words & Bit(kAxisName[a])) known_ |= 1u << a;
@@ -1720,7 +1791,7 @@ absl::Status Interpreter::Emit(double x, double y, double z, bool rapid) {
   }
   ToolpathPoint p;
   p.position = {x, y, z};
-  p.line = static_cast<int32_t>(main_line_);
+  p.line = static_cast<int32_t>(emit_line_ >= 0 ? emit_line_ : main_line_);
   p.tool = tool_;
   p.rapid = rapid;
   p.starts_run = !in_run_;
@@ -1747,6 +1818,10 @@ absl::Status Interpreter::Arc(const Block& b) {
   if (b.words & Bit(bad)) {
     return Err(absl::StrCat(std::string(1, bad), " word in an ", plane_name,
                             " ", gname, " arc"));
+  }
+  if (comp_side_ != 0 && plane_ != 17) {
+    return Err(absl::StrCat(gname, " in the ", plane_name,
+                            " with cutter compensation on (G17 only)"));
   }
   if (!in_run_ || known_ != 7) {
     return Err(absl::StrCat(gname,
@@ -1841,16 +1916,42 @@ absl::Status Interpreter::Arc(const Block& b) {
     if (sweep <= 0) sweep += 2 * kPi;
     sweep += 2 * kPi * static_cast<double>(turns - 1);
   }
-  // Chords of angle `step` deviate from the arc by the sagitta
-  // r (1 - cos(step / 2)) = 2 r sin^2(step / 4) <= tolerance; asin form for
-  // accuracy when tolerance << r. At most a quarter turn per chord.
+  if (comp_side_ != 0) {
+    CompSeg seg;
+    seg.arc = true;
+    seg.line = main_line_;
+    seg.s[0] = x0, seg.s[1] = y0, seg.s[2] = z0;
+    seg.e[0] = x1, seg.e[1] = y1, seg.e[2] = z1;
+    seg.c[0] = cx, seg.c[1] = cy;
+    seg.radius = r0;
+    seg.sweep = sweep;
+    SWARF_RETURN_IF_ERROR(CompAdd(seg));
+  } else {
+    const double e3[3] = {end[p0], end[p1], end[p2]};
+    SWARF_RETURN_IF_ERROR(ChordArc(p0, p1, p2, cx, cy, r0, r1, a0, sweep, z0,
+                                   e3, false));
+  }
+  for (int a = 0; a < 3; ++a) pos_[a] = end[a];
+  return absl::OkStatus();
+}
+
+// Emits an arc in the plane of axes (p0, p1) from angle a0 through `sweep`
+// (radius r0 to r1, linear: a spiral when they differ; the third axis
+// linear from z0), ending exactly at `end` (in plane order). Chords of angle
+// `step` deviate from the arc by the sagitta r (1 - cos(step / 2)) =
+// 2 r sin^2(step / 4) <= tolerance; asin form for accuracy when tolerance
+// << r. At most a quarter turn per chord.
+absl::Status Interpreter::ChordArc(int p0, int p1, int p2, double cx,
+                                   double cy, double r0, double r1, double a0,
+                                   double sweep, double z0, const double end[3],
+                                   bool rapid) {
   const double q = options_.arc_tolerance / (2 * std::max(r0, r1));
   const double step =
       q >= 0.5 ? kPi / 2 : std::min(kPi / 2, 4 * std::asin(std::sqrt(q)));
   const double segments = std::ceil(std::fabs(sweep) / step);
   if (!(segments <=
         static_cast<double>(options_.max_points - path_.point_count()))) {
-    return Err(absl::StrCat(gname, " arc needs ", segments,
+    return Err(absl::StrCat("an arc needs ", segments,
                             " points: more than max_points (",
                             options_.max_points, ")"));
   }
@@ -1859,23 +1960,24 @@ absl::Status Interpreter::Arc(const Block& b) {
   for (int64_t k = 1; k < n; ++k) {
     const double t = static_cast<double>(k) / static_cast<double>(n);
     const double a = a0 + sweep * t;
-    const double r = r0 + (r1 - r0) * t;  // spiral when r1 != r0
+    const double r = r0 + (r1 - r0) * t;
     pt[p0] = cx + r * std::cos(a);
     pt[p1] = cy + r * std::sin(a);
-    pt[p2] = z0 + (z1 - z0) * t;
+    pt[p2] = z0 + (end[2] - z0) * t;
     // The arc may bulge past the bound its end points keep.
     if (!(std::fabs(pt[p0]) <= kMaxCoordinateMm &&
           std::fabs(pt[p1]) <= kMaxCoordinateMm)) {
-      return Err(absl::StrCat(gname, " arc leaves the range of +-",
+      return Err(absl::StrCat("an arc leaves the range of +-",
                               kMaxCoordinateMm, " mm at (", pt[0], ", ", pt[1],
                               ", ", pt[2], ")"));
     }
-    SWARF_RETURN_IF_ERROR(Emit(pt[0], pt[1], pt[2], false));
+    SWARF_RETURN_IF_ERROR(Emit(pt[0], pt[1], pt[2], rapid));
   }
-  // The programmed end, exactly.
-  SWARF_RETURN_IF_ERROR(Emit(end[0], end[1], end[2], false));
-  for (int a = 0; a < 3; ++a) pos_[a] = end[a];
-  return absl::OkStatus();
+  // The end, exactly.
+  pt[p0] = end[0];
+  pt[p1] = end[1];
+  pt[p2] = end[2];
+  return Emit(pt[0], pt[1], pt[2], rapid);
 }
 
 // Canned cycles, after LinuxCNC (XY plane): from the current height, up to
@@ -2046,6 +2148,291 @@ absl::Status Interpreter::Cycle(const Block& b, uint32_t* used) {
     SWARF_RETURN_IF_ERROR(rapid(x, y, clear));
   }
   return absl::OkStatus();
+}
+
+// ------------------------------------------------------------ compensation
+//
+// As LinuxCNC: the tool runs at its radius left (G41) or right (G42) of the
+// programmed path in the XY plane. The first move after G41/G42 (the entry,
+// a straight line) ends at its programmed end offset perpendicular to it;
+// the move after G40 (the exit) starts from the last offset point. At a
+// convex corner the tool goes around the corner on an arc of its radius; at
+// a concave corner both offset moves end where they meet, and a corner the
+// tool cannot reach (a move shorter than the radius needs) is an error
+// naming its line. Z follows each move linearly. Each move waits for the
+// next to know its corner.
+
+absl::Status Interpreter::CompStart(const Block& b, int code) {
+  if (comp_side_ != 0) {
+    return Err(absl::StrCat(GName(code),
+                            " with cutter compensation already on (G40 "
+                            "first)"));
+  }
+  if (plane_ != 17) {
+    return Err(absl::StrCat(GName(code),
+                            ": cutter compensation only in the XY plane "
+                            "(G17)"));
+  }
+  if (known_ != 7) {
+    return Err(absl::StrCat(GName(code),
+                            " before the position is known (X, Y and Z)"));
+  }
+  double r;
+  if (code == 411 || code == 421) {
+    if (!(b.words & Bit('D'))) return Err(GName(code) + " needs D (diameter)");
+    r = b.value['D' - 'A'] * scale() / 2;
+  } else {
+    int tool = tool_;
+    if (b.words & Bit('D')) {
+      const double d = b.value['D' - 'A'];
+      if (!(d >= 0 && d <= 65535) || d != std::floor(d)) {
+        return Err(absl::StrCat(GName(code), " D", d,
+                                " is not a tool number"));
+      }
+      tool = static_cast<int>(d);
+    }
+    std::optional<double> known;
+    if (tool == 0) {
+      known = 0.0;  // D0: no compensation, as LinuxCNC
+    } else if (options_.tool_radius) {
+      known = options_.tool_radius(tool);
+    }
+    if (!known.has_value()) {
+      return Err(absl::StrCat(GName(code), ": the radius of tool ", tool,
+                              " is unknown (give --tool ", tool, "=...)"));
+    }
+    r = *known;
+  }
+  if (!(r >= 0 && r <= 1e4)) {
+    return Err(absl::StrCat(GName(code), ": tool radius ", r,
+                            " mm is out of range"));
+  }
+  ++letter_ignored_['D' - 'A'];  // counted: the word has no move of its own
+  comp_side_ = code == 410 || code == 411 ? 1 : -1;
+  comp_r_ = r;
+  comp_entry_ = true;
+  comp_pending_ = false;
+  ++g_ignored_[code];
+  return absl::OkStatus();
+}
+
+absl::Status Interpreter::CompAdd(CompSeg seg) {
+  const double dx = seg.e[0] - seg.s[0], dy = seg.e[1] - seg.s[1];
+  const double r = comp_r_ * comp_side_;  // signed: + left
+  if (!seg.arc) {
+    const double len = std::hypot(dx, dy);
+    if (len < 1e-12) {
+      // A move along Z only: the tool stays where it is in XY.
+      SWARF_RETURN_IF_ERROR(CompFlush());
+      double here[2] = {seg.s[0], seg.s[1]};
+      if (!path_.points().empty()) {
+        here[0] = path_.points().back().position.x;
+        here[1] = path_.points().back().position.y;
+      }
+      return Emit(here[0], here[1], seg.e[2], seg.rapid);
+    }
+    seg.dir_s[0] = seg.dir_e[0] = dx / len;
+    seg.dir_s[1] = seg.dir_e[1] = dy / len;
+    const double nx = -dy / len * r, ny = dx / len * r;
+    seg.ts[0] = seg.s[0] + nx;
+    seg.ts[1] = seg.s[1] + ny;
+    seg.te[0] = seg.e[0] + nx;
+    seg.te[1] = seg.e[1] + ny;
+    if (comp_entry_) {
+      // The entry: from where the tool is to the offset end.
+      seg.ts[0] = seg.s[0];
+      seg.ts[1] = seg.s[1];
+    }
+  } else {
+    if (comp_entry_) {
+      return Err("the entry move after G41/G42 must be a straight line");
+    }
+    const double sign = seg.sweep > 0 ? 1 : -1;
+    seg.tr = seg.radius - r * sign;
+    if (!(seg.tr >= kRadiusTolerance)) {
+      return Err(absl::StrCat("arc of radius ", seg.radius,
+                              " mm is too small for the compensated tool "
+                              "radius ",
+                              comp_r_, " mm on its inside"));
+    }
+    seg.ta = std::atan2(seg.s[1] - seg.c[1], seg.s[0] - seg.c[0]);
+    seg.tsweep = seg.sweep;
+    const double a1 = seg.ta + seg.sweep;
+    seg.ts[0] = seg.c[0] + seg.tr * std::cos(seg.ta);
+    seg.ts[1] = seg.c[1] + seg.tr * std::sin(seg.ta);
+    seg.te[0] = seg.c[0] + seg.tr * std::cos(a1);
+    seg.te[1] = seg.c[1] + seg.tr * std::sin(a1);
+    seg.dir_s[0] = -std::sin(seg.ta) * sign;
+    seg.dir_s[1] = std::cos(seg.ta) * sign;
+    seg.dir_e[0] = -std::sin(a1) * sign;
+    seg.dir_e[1] = std::cos(a1) * sign;
+  }
+  comp_entry_ = false;
+  if (comp_pending_) {
+    SWARF_RETURN_IF_ERROR(CompJoin(&comp_seg_, &seg));
+  }
+  comp_seg_ = seg;
+  comp_pending_ = true;
+  return absl::OkStatus();
+}
+
+// Intersections of the tool paths of a and b near the corner: lines as
+// infinite lines, arcs as circles.
+int Intersect(const CompSeg& a, const CompSeg& b, double out[2][2]) {
+  if (!a.arc && !b.arc) {
+    const double ux = a.te[0] - a.ts[0], uy = a.te[1] - a.ts[1];
+    const double vx = b.te[0] - b.ts[0], vy = b.te[1] - b.ts[1];
+    const double den = ux * vy - uy * vx;
+    if (std::fabs(den) < 1e-300) return 0;
+    const double t =
+        ((b.ts[0] - a.ts[0]) * vy - (b.ts[1] - a.ts[1]) * vx) / den;
+    out[0][0] = a.ts[0] + t * ux;
+    out[0][1] = a.ts[1] + t * uy;
+    return 1;
+  }
+  // A circle (c, r) against a line (p, d) or a circle.
+  const CompSeg& circ = a.arc ? a : b;
+  const CompSeg& other = a.arc ? b : a;
+  if (!other.arc) {
+    const double dx = other.te[0] - other.ts[0], dy = other.te[1] - other.ts[1];
+    const double len = std::hypot(dx, dy);
+    const double ux = dx / len, uy = dy / len;
+    const double fx = other.ts[0] - circ.c[0], fy = other.ts[1] - circ.c[1];
+    const double bq = fx * ux + fy * uy;
+    const double cq = fx * fx + fy * fy - circ.tr * circ.tr;
+    const double disc = bq * bq - cq;
+    if (disc < 0) return 0;
+    const double sq = std::sqrt(disc);
+    for (int k = 0; k < 2; ++k) {
+      const double t = -bq + (k == 0 ? -sq : sq);
+      out[k][0] = other.ts[0] + t * ux;
+      out[k][1] = other.ts[1] + t * uy;
+    }
+    return 2;
+  }
+  const double dx = b.c[0] - a.c[0], dy = b.c[1] - a.c[1];
+  const double d = std::hypot(dx, dy);
+  if (d < 1e-12 || d > a.tr + b.tr || d < std::fabs(a.tr - b.tr)) return 0;
+  const double l = (a.tr * a.tr - b.tr * b.tr + d * d) / (2 * d);
+  const double h = std::sqrt(std::max(0.0, a.tr * a.tr - l * l));
+  const double mx = a.c[0] + l * dx / d, my = a.c[1] + l * dy / d;
+  out[0][0] = mx - h * dy / d;
+  out[0][1] = my + h * dx / d;
+  out[1][0] = mx + h * dy / d;
+  out[1][1] = my - h * dx / d;
+  return 2;
+}
+
+// Where p lies along a segment's tool path: 0 at its start, 1 at its end
+// (lines: the parameter; arcs: the fraction of the sweep).
+double Along(const CompSeg& s, const double p[2]) {
+  if (!s.arc) {
+    const double ux = s.te[0] - s.ts[0], uy = s.te[1] - s.ts[1];
+    const double len2 = ux * ux + uy * uy;
+    return len2 > 0 ? ((p[0] - s.ts[0]) * ux + (p[1] - s.ts[1]) * uy) / len2
+                    : 0;
+  }
+  double a = std::atan2(p[1] - s.c[1], p[0] - s.c[0]) - s.ta;
+  // Into the sweep's direction, [0, 2 pi).
+  if (s.tsweep > 0) {
+    a = std::fmod(a, 2 * kPi);
+    if (a < 0) a += 2 * kPi;
+  } else {
+    a = std::fmod(-a, 2 * kPi);
+    if (a < 0) a += 2 * kPi;
+  }
+  return a / std::fabs(s.tsweep);
+}
+
+absl::Status Interpreter::CompJoin(CompSeg* a, CompSeg* b) {
+  const double cross = a->dir_e[0] * b->dir_s[1] - a->dir_e[1] * b->dir_s[0];
+  const double dot = a->dir_e[0] * b->dir_s[0] + a->dir_e[1] * b->dir_s[1];
+  const double gap = std::hypot(b->ts[0] - a->te[0], b->ts[1] - a->te[1]);
+  if (gap < 1e-9 || (std::fabs(cross) < 1e-9 && dot > 0)) {
+    return CompEmit(*a);  // tangent
+  }
+  if (comp_side_ * cross < 0 || (std::fabs(cross) < 1e-9 && dot < 0)) {
+    // Convex: around the corner on an arc of the tool's radius.
+    SWARF_RETURN_IF_ERROR(CompEmit(*a));
+    const double px = a->e[0], py = a->e[1];
+    const double a0 = std::atan2(a->te[1] - py, a->te[0] - px);
+    const double a1 = std::atan2(b->ts[1] - py, b->ts[0] - px);
+    double sweep = a1 - a0;
+    if (comp_side_ > 0) {
+      while (sweep > 0) sweep -= 2 * kPi;
+    } else {
+      while (sweep < 0) sweep += 2 * kPi;
+    }
+    const double end[3] = {b->ts[0], b->ts[1], a->e[2]};
+    emit_line_ = b->line;  // the corner belongs to the move after it
+    absl::Status st = ChordArc(0, 1, 2, px, py, comp_r_, comp_r_, a0, sweep,
+                               a->e[2], end, b->rapid);
+    emit_line_ = -1;
+    return st;
+  }
+  // Concave: both end where they meet, nearest the corner.
+  double x[2][2];
+  const int n = Intersect(*a, *b, x);
+  int best = -1;
+  double best_d = INFINITY;
+  for (int k = 0; k < n; ++k) {
+    const double ta = Along(*a, x[k]), tb = Along(*b, x[k]);
+    if (!(ta >= -1e-9 && ta <= 1 + 1e-9 && tb >= -1e-9 && tb <= 1 + 1e-9)) {
+      continue;
+    }
+    const double d = std::hypot(x[k][0] - a->e[0], x[k][1] - a->e[1]);
+    if (d < best_d) {
+      best_d = d;
+      best = k;
+    }
+  }
+  if (best < 0) {
+    return LineError(b->line,
+                     absl::StrCat("cutter compensation: the tool (radius ",
+                                  comp_r_,
+                                  " mm) cannot reach the concave corner "
+                                  "between line ",
+                                  a->line, " and this one"));
+  }
+  const double* p = x[best];
+  const double fa = std::clamp(Along(*a, p), 0.0, 1.0);
+  const double fb = std::clamp(Along(*b, p), 0.0, 1.0);
+  a->te[0] = p[0];
+  a->te[1] = p[1];
+  a->e[2] = a->s[2] + (a->e[2] - a->s[2]) * fa;
+  if (a->arc) a->tsweep *= fa;
+  b->ts[0] = p[0];
+  b->ts[1] = p[1];
+  if (b->arc) {
+    b->ta += b->tsweep * fb;
+    b->tsweep *= 1 - fb;
+  }
+  return CompEmit(*a);
+}
+
+// Emits a move's tool path; its points carry the move's line (it is
+// emitted when the next move, on a later line, is known).
+absl::Status Interpreter::CompEmit(const CompSeg& seg) {
+  emit_line_ = seg.line;
+  absl::Status st;
+  if (!seg.arc) {
+    st = Emit(seg.te[0], seg.te[1], seg.e[2], seg.rapid);
+  } else {
+    const double end[3] = {seg.te[0], seg.te[1], seg.e[2]};
+    const double z0 = path_.points().empty()
+                          ? seg.s[2]
+                          : path_.points().back().position.z;
+    st = ChordArc(0, 1, 2, seg.c[0], seg.c[1], seg.tr, seg.tr, seg.ta,
+                  seg.tsweep, z0, end, seg.rapid);
+  }
+  emit_line_ = -1;
+  return st;
+}
+
+absl::Status Interpreter::CompFlush() {
+  if (!comp_pending_) return absl::OkStatus();
+  comp_pending_ = false;
+  return CompEmit(comp_seg_);
 }
 
 }  // namespace

@@ -39,6 +39,7 @@
 #define SWARF_GCODE_TOOLPATH_H_
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
@@ -170,6 +171,10 @@ struct GcodeOptions {
   // subroutines are errors).
   std::string subroutine_dir;
   Dialect dialect = Dialect::kLinuxCnc;
+  // The radius (mm) of tool number n, for cutter compensation (G41/G42
+  // D n, or the current tool); nullopt or unset: unknown (then G41/G42
+  // are errors; G41.1/G42.1 give the diameter themselves).
+  std::function<std::optional<double>(int tool)> tool_radius;
 };
 
 // Parses a G-code program (rules above). Tool numbers: the T of the last

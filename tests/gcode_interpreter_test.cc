@@ -2,10 +2,12 @@
 // expressions, O-word control flow, arcs in every plane, offsets, homes,
 // canned cycles, dialects, and the moves it must not drop silently; each
 // against tool-tip positions computed by hand.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -546,6 +548,84 @@ TEST(CycleTest, BadCyclesNameTheLine) {
   EXPECT_THAT(ErrorOf("G21 G0 X0 Y0\nG81 X0 Y0 Z-1 R1\n"),
               HasSubstr("while Z is unknown"));
   EXPECT_THAT(ErrorOf(s + "G87 X1 Y0 Z-3 R1 I1\n"), HasSubstr("I, J and K"));
+}
+
+// ------------------------------------------------------------ compensation
+
+// Distance from p to the boundary of the square [0, 10]^2.
+double ToSquare(double x, double y) {
+  const double dx = std::max({-x, x - 10, 0.0}), dy = std::max({-y, y - 10, 0.0});
+  if (dx > 0 || dy > 0) return std::hypot(dx, dy);
+  return std::min({x, 10 - x, y, 10 - y});
+}
+
+TEST(CompensationTest, InsideASquareTheCornersAreCut) {
+  // G41 going counterclockwise: the tool (r 1) inside; concave corners.
+  const Toolpath tp = MustRun(
+      "G21 G0 X-5 Y0 Z1\nG1 Z-1\nG41.1 D2\nG1 X0 Y0\nX10\nY10\nX0\nY0\n"
+      "G40\nG1 X-5\n");
+  ExpectNear(Xyz(tp), {{-5, 0, 1}, {-5, 0, -1}, {0, 1, -1}, {9, 1, -1},
+                       {9, 9, -1}, {1, 9, -1}, {1, 0, -1}, {-5, 0, -1}});
+}
+
+TEST(CompensationTest, AroundASquareTheCornersAreArcs) {
+  // G42 counterclockwise: the tool outside, around each corner on an arc of
+  // its radius: every point of the contour is 1.5 from the square.
+  GcodeOptions o;
+  o.tool_radius = [](int t) -> std::optional<double> {
+    if (t == 3) return 1.5;
+    return std::nullopt;
+  };
+  const Toolpath tp = MustRun(
+      "G21 T3 M6\nG0 X-5 Y-5 Z1\nG1 Z-1\nG42 D3\nG1 X0 Y0\nX10\nY10\nX0\n"
+      "Y0\nG40\nG1 X-5 Y-5\n",
+      o);
+  int on_contour = 0;
+  for (size_t i = 0; i < tp.points().size(); ++i) {
+    const ToolpathPoint& p = tp.points()[i];
+    if (p.line < 6 || p.line > 9) continue;
+    EXPECT_NEAR(ToSquare(p.position.x, p.position.y), 1.5, 1e-9) << i;
+    ++on_contour;
+  }
+  EXPECT_GT(on_contour, 20);  // the corner arcs are chorded
+  // The corner at (10, 0): from (10, -1.5) round to (11.5, 0).
+  bool seen = false;
+  for (const ToolpathPoint& p : tp.points()) {
+    seen |= std::fabs(p.position.x - 11.5) < 1e-12 && p.position.y == 0;
+  }
+  EXPECT_TRUE(seen);
+  EXPECT_THAT(ErrorOf("G21 T3 M6\nG0 X0 Y0 Z0\nG42 D3\n"),
+              HasSubstr("the radius of tool 3 is unknown"));
+}
+
+TEST(CompensationTest, InsideACircleTheToolRunsOnTheSmallerRadius) {
+  const Toolpath tp = MustRun(
+      "G21 G0 X0 Y0 Z1\nG1 Z-1\nG41.1 D2\nG1 X10 Y0\nG3 X10 Y0 I-10 J0\n"
+      "G40 G1 X0 Y0\n");
+  const double t = 9 / std::sqrt(101.0);  // the entry meets the circle
+  ASSERT_GE(tp.point_count(), 5);
+  ExpectNear({Xyz(tp)[2]}, {{10 * t, t, -1}}, 1e-12);
+  int on_circle = 0;
+  for (const ToolpathPoint& p : tp.points()) {
+    if (p.line != 5) continue;
+    EXPECT_NEAR(std::hypot(p.position.x, p.position.y), 9, 1e-9);
+    ++on_circle;
+  }
+  EXPECT_GT(on_circle, 100);
+  ExpectNear({Xyz(tp)[tp.points().size() - 2]}, {{9, 0, -1}}, 1e-9);
+  ExpectNear({Xyz(tp).back()}, {{0, 0, -1}});
+  // An arc smaller than the tool on its inside, and a corner the tool
+  // can't reach, are errors naming the line.
+  EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z0\nG41.1 D4\nG1 X1\nG3 X1 Y2 J1\n"),
+              StartsWith("line 4: arc of radius 1 mm is too small"));
+  EXPECT_THAT(ErrorOf("G21 G0 X-5 Y0 Z0\nG41.1 D4\nG1 X0 Y0\nX10\nY1\nX0\n"
+                      "G40\n"),
+              StartsWith("line 5: cutter compensation: the tool (radius 2 mm) "
+                         "cannot reach the concave corner between line 4"));
+  EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z0\nG41.1 D2\nG3 X2 Y0 I1\n"),
+              HasSubstr("entry move after G41/G42 must be a straight line"));
+  EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z0\nG41.1 D2\nG1 X1\nM6 T2\n"),
+              HasSubstr("M6 with cutter compensation on"));
 }
 
 // ------------------------------------------------------------ never silent

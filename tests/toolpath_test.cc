@@ -529,8 +529,8 @@ TEST(GcodeTest, MaxPoints) {
 
 TEST(GcodeErrorTest, UnsupportedThingsNameTheLine) {
   const std::string s = "G21 G0 X0 Y0 Z0\n";  // line 1
-  ExpectError(s + "G41 D1\n", 2, "G41 (cutter radius compensation)");
-  ExpectError(s + "G42.1 D2\n", 2, "G42.1 (cutter radius compensation)");
+  ExpectError(s + "G41 D1\n", 2, "G41: the radius of tool 1 is unknown");
+  ExpectError(s + "G42.1\n", 2, "G42.1 needs D");
   ExpectError(s + "G76 X0 Z-1 P1\n", 2, "G76 (threading cycle) is a lathe");
   ExpectError(s + "G5.2 X1 Y1\n", 2, "G5.2 (spline)");
   ExpectError(s + "G38.2 Z-10\n", 2, "G38.2 (probing)");
