@@ -65,16 +65,25 @@ std::string SyntheticGcode(int64_t lines) {
   return s;
 }
 
-// Straight-line CAM output: one G1 then modal X Y Z words, 3 decimals.
-std::string StraightGcode(int64_t lines) {
-  std::string s = "G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F1000\n";
+// A raster of tip positions, 400 per row 0.25 mm apart, the depth varying:
+// `header`, then one line per point from index `first`, printed by `format`
+// from x, y, z.
+std::string Raster(int64_t lines, const char* header, const char* format,
+                   int64_t first) {
+  std::string s = header;
   char buf[96];
-  for (int64_t i = 3; i < lines; ++i) {
-    std::snprintf(buf, sizeof buf, "X%.3f Y%.3f Z%.3f\n", (i % 400) * 0.25,
-                  (i / 400) * 0.25, -1 - 0.001 * (i % 997));
+  for (int64_t i = first; i < lines; ++i) {
+    std::snprintf(buf, sizeof buf, format, (i % 400) * 0.25, (i / 400) * 0.25,
+                  -1 - 0.001 * (i % 997));
     s += buf;
   }
   return s;
+}
+
+// Straight-line CAM output: one G1 then modal X Y Z words, 3 decimals.
+std::string StraightGcode(int64_t lines) {
+  return Raster(lines, "G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F1000\n",
+                "X%.3f Y%.3f Z%.3f\n", 3);
 }
 
 // A parameter-heavy program: the same kind of raster computed by nested
@@ -96,14 +105,7 @@ constexpr char kParametricRaster[] =
     "M2\n";
 
 std::string SyntheticXyz(int64_t lines) {
-  std::string s = "x,y,z\n";
-  char buf[64];
-  for (int64_t i = 1; i < lines; ++i) {
-    std::snprintf(buf, sizeof buf, "%.4f,%.4f,%.4f\n", (i % 400) * 0.25,
-                  (i / 400) * 0.25, -1 - 0.001 * (i % 997));
-    s += buf;
-  }
-  return s;
+  return Raster(lines, "x,y,z\n", "%.4f,%.4f,%.4f\n", 1);
 }
 
 void Run(benchmark::State& state, const std::string& text, bool gcode) {
