@@ -1,37 +1,44 @@
-// Toolpath input: G-code for 3-axis mills (LinuxCNC / Fanuc style, as CAM
-// post-processors write it) and CSV/XYZ files of tool-tip positions, parsed
-// into a polyline of tool-tip points in millimetres.
+// Toolpath input: G-code for 3-axis mills, run by an RS274/NGC interpreter
+// (the LinuxCNC dialect; gcode/interpreter.cc), and CSV/XYZ files of
+// tool-tip positions, parsed into a polyline of tool-tip points in mm.
 //
-// G-code rules (the full list is in toolpath.cc):
+// G-code rules (every G, M and O word: the README's G-code table):
 // - Start position. A program starts from an unknown machine position. Each
 //   axis is unknown until a word gives it; moves before X, Y and Z are all
 //   known only set the known axes and produce no point. The polyline starts
 //   at the first position where all three are known. Incremental moves (G91)
-//   of an unknown axis and arcs before the start are errors.
+//   of an unknown axis and arcs before the start are errors. A feed move
+//   whose start or end is unknown is dropped and counted
+//   (Toolpath::dropped_moves); rapids from an unknown position only
+//   position the machine.
 // - Tool changes. M6 may move the machine to a tool-change position we don't
-//   know, so it makes all axes unknown again; the next fully known position
-//   starts a new run (ToolpathPoint::starts_run). No move joins two runs.
+//   know, so it makes all axes unknown again (so do G28/G30 to an unknown
+//   home); the next fully known position starts a new run
+//   (ToolpathPoint::starts_run). No move joins two runs.
 // - Units: G21 mm (the default when neither G20 nor G21 is given, with a
-//   note), G20 inches (x25.4). G90/G91 absolute/incremental axis words;
-//   G90.1/G91.1 absolute/incremental I,J (default incremental).
-// - Arcs (G2/G3) only in the XY plane (G17), by I/J (start == end: a full
-//   circle) or R (negative: the long arc; full circle with R is an error),
-//   optionally helical (Z linear in angle) and with P turns. They become
-//   chords within GcodeOptions::arc_tolerance of the true arc; the last
-//   point is the programmed end bit for bit.
-// - Words that don't move the tool (F, S, H, D, M3, M8, G17, G40, G43, G49,
-//   G54, G80, G94, ...) are counted in Toolpath::ignored(); with G43/G49
-//   ignored, positions are taken as the tip throughout. Anything that
-//   would change the tool's path and isn't simulated (G28, G41/G42, canned
-//   cycles, G92, G53, G18/G19 arcs, A/B/C axes, subprograms, parameters, ...)
-//   is an InvalidArgument error "line N: ..." naming the word: never a guess.
+//   note), G20 inches (x25.4). G90/G91, G90.1/G91.1.
+// - Parameters, expressions (gcode/expression.h), O-word subroutines and
+//   control flow (external o<name> files from
+//   GcodeOptions::subroutine_dir), offsets (G10 L2/L20, G52, G54-G59.3,
+//   G92.x, G53, G43.1), G28/G30, canned cycles G73 G74 G81-G89 with
+//   G98/G99, arcs in G17/G18/G19 (I/J/K or R, helical, P turns; chords
+//   within GcodeOptions::arc_tolerance, the last point the programmed end
+//   bit for bit), cutter compensation G41/G42 in G17.
+// - Words that don't move the tool (F, S, H, M3, M8, G17, G40, G43, G49,
+//   G54, G80, G94, ...) are counted in Toolpath::ignored(). Anything that
+//   would change the tool's path and isn't simulated (G33, G38.x, G76 in
+//   the LinuxCNC dialect, A/B/C axes, ...) is an InvalidArgument error
+//   "line N: ..." naming the word: never a guess. Errors in an external
+//   subroutine file read "line N of FILE (called from line M): ...".
 // - Reading stops at M2/M30, or at the second '%' when the program starts
-//   with one.
+//   with one. Executing more than GcodeOptions::max_blocks blocks, or
+//   nesting calls deeper than max_call_depth, is an error.
 // - A move that doesn't change the position (in either format) adds no
 //   point.
 //
-// Positions are the tool tip, absolute program coordinates (the active
-// work offset, e.g. G54, is the origin).
+// Positions are the tool tip in machine coordinates; every offset is zero
+// until the program sets one, so a program without offsets gets its own
+// coordinates.
 //
 // Thread safety: the functions are reentrant; a Toolpath is a value (const
 // methods may run concurrently).
