@@ -72,7 +72,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   GcodeOptions options;
   options.max_points = kMaxPoints;
   // Endless loops and recursion stop here, quickly.
-  options.max_blocks = 1 << 16;
+  options.max_blocks = 1 << 12;
   options.max_call_depth = 20;
   auto gcode = ParseGcode(text, options);
   if (gcode.ok()) {
