@@ -756,8 +756,13 @@ absl::StatusOr<Toolpath> Interpreter::Run(std::string_view text) {
   files_.emplace_back();
   files_[0].text = text.substr(begin - text.data());
   frames_.emplace_back();
-  // A guess at the point count (~16 bytes per line); the vector grows past.
-  path_.Reserve(std::min<int64_t>(text.size() / 16, options_.max_points));
+  // A guess at the point count: a point per line (straight-line CAM
+  // output) and a fifth more for arcs, within what Trim() keeps, so that
+  // neither a reallocation nor a trim copies the points (copies fault in
+  // fresh pages: the slowest part of parsing, see docs/benchmarks.md);
+  // loops and long arcs grow the vector past it.
+  const int64_t lines = std::count(text.begin(), text.end(), '\n') + 1;
+  path_.Reserve(std::min<int64_t>(lines + lines / 5, options_.max_points));
 
   Block& block = block_;
   bool seen_content = false;   // a non-blank line was read
@@ -1386,6 +1391,12 @@ absl::Status Interpreter::Execute(const Block& b) {
 absl::Status Interpreter::ApplyGCodes(const Block& b, int* new_motion,
                                       int* nonmodal, bool* g53,
                                       int* length_code, bool* motion_given) {
+  // The common case first: "G1 X.. Y.." (CAM output repeats the code).
+  if (b.ng == 1 && (b.g[0] == 0 || b.g[0] == 10)) {
+    *new_motion = b.g[0];
+    *motion_given = true;
+    return absl::OkStatus();
+  }
   // Two codes of one modal group on a line contradict each other.
   enum Group {
     kMotion, kPlane, kUnits, kDistance, kArcDistance, kOffset, kLength,

@@ -63,6 +63,11 @@ void Toolpath::Append(const ToolpathPoint& p) {
     z_bounds_.hi = std::max(z_bounds_.hi, pt.position.z);
   }
   if (pt.starts_run) ++runs_;
+  if (points_.size() == points_.capacity()) {
+    // Grow by a quarter, not twice: then Trim() keeps what it gets instead
+    // of copying millions of points once more.
+    points_.reserve(points_.size() + std::max<size_t>(points_.size() / 4, 1024));
+  }
   points_.push_back(pt);
 }
 
@@ -139,6 +144,9 @@ std::string Toolpath::IgnoredSummary() const {
 absl::StatusOr<Toolpath> ParseXyz(std::string_view text, int64_t max_points) {
   static constexpr char kAxis[3] = {'x', 'y', 'z'};
   Toolpath path;
+  // A point per line at most.
+  path.Reserve(std::min<int64_t>(
+      std::count(text.begin(), text.end(), '\n') + 1, max_points));
   const char* p = SkipBom(text.data(), text.data() + text.size());
   const char* const end = text.data() + text.size();
   int64_t line = 0;

@@ -133,9 +133,10 @@ class Toolpath {
   static constexpr size_t kFirstDropped = 10;
   void AddDropped(int32_t line, unsigned missing_axes_mask);
   void Reserve(int64_t points) { points_.reserve(points); }
-  // Gives back capacity beyond a quarter over the size.
+  // Gives back capacity beyond half the size over it (a trim copies every
+  // point into freshly faulted memory: slow, so only for a large waste).
   void Trim() {
-    if (points_.capacity() > points_.size() + points_.size() / 4) {
+    if (points_.capacity() > points_.size() + points_.size() / 2) {
       points_.shrink_to_fit();
     }
   }
