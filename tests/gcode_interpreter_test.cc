@@ -537,6 +537,37 @@ TEST(CycleTest, BoringTappingAndBackBoring) {
               {1.5, 0, 5, true}, {1, 0, 5, true}});
 }
 
+TEST(CycleTest, BoltCircleFromASubroutineInALoop) {
+  // A LinuxCNC-style program: four holes on a circle of radius 10, each a
+  // G81 in a subroutine called from a while loop with the angle.
+  const Toolpath tp = MustRun(
+      "G21 G90 G17\n"
+      "#<_r> = 10\n"
+      "#<n> = 4\n"
+      "o<hole> sub\n"
+      "  G98 G81 X[#<_r> * cos[#1]] Y[#<_r> * sin[#1]] Z-2 R1\n"
+      "o<hole> endsub\n"
+      "G0 X0 Y0 Z5\n"
+      "#<i> = 0\n"
+      "o10 while [#<i> LT #<n>]\n"
+      "  o<hole> call [#<i> * 360 / #<n>]\n"
+      "  #<i> = [#<i> + 1]\n"
+      "o10 endwhile\n"
+      "G80\nM2\n");
+  std::vector<Pt> want = {{0, 0, 5, true}};
+  const double holes[4][2] = {{10, 0}, {0, 10}, {-10, 0}, {0, -10}};
+  for (const auto& h : holes) {
+    want.push_back({h[0], h[1], 5, true});
+    want.push_back({h[0], h[1], 1, true});
+    want.push_back({h[0], h[1], -2, false});
+    want.push_back({h[0], h[1], 5, true});
+  }
+  ExpectPath(tp, want);
+  for (size_t i = 1; i < tp.points().size(); ++i) {
+    EXPECT_EQ(tp.points()[i].line, 5);  // the subroutine's line
+  }
+}
+
 TEST(CycleTest, BadCyclesNameTheLine) {
   const std::string s = "G21 G0 X0 Y0 Z5\n";
   EXPECT_THAT(ErrorOf(s + "G81 X0 Y0 Z-1\n"),
