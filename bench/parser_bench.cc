@@ -6,9 +6,9 @@
 #include <cstdio>
 #include <string>
 
-#include "core/toolpath.h"
+#include "gcode/toolpath.h"
 
-namespace swarf {
+namespace swarf::gcode {
 namespace {
 
 std::string ReadFile(const std::string& path) {
@@ -65,15 +65,47 @@ std::string SyntheticGcode(int64_t lines) {
   return s;
 }
 
-std::string SyntheticXyz(int64_t lines) {
-  std::string s = "x,y,z\n";
-  char buf[64];
-  for (int64_t i = 1; i < lines; ++i) {
-    std::snprintf(buf, sizeof buf, "%.4f,%.4f,%.4f\n", (i % 400) * 0.25,
-                  (i / 400) * 0.25, -1 - 0.001 * (i % 997));
+// A raster of tip positions, 400 per row 0.25 mm apart, the depth varying:
+// `header`, then one line per point from index `first`, printed by `format`
+// from x, y, z.
+std::string Raster(int64_t lines, const char* header, const char* format,
+                   int64_t first) {
+  std::string s = header;
+  char buf[96];
+  for (int64_t i = first; i < lines; ++i) {
+    std::snprintf(buf, sizeof buf, format, (i % 400) * 0.25, (i / 400) * 0.25,
+                  -1 - 0.001 * (i % 997));
     s += buf;
   }
   return s;
+}
+
+// Straight-line CAM output: one G1 then modal X Y Z words, 3 decimals.
+std::string StraightGcode(int64_t lines) {
+  return Raster(lines, "G21 G90 G17\nG0 X0 Y0 Z5\nG1 Z-1 F1000\n",
+                "X%.3f Y%.3f Z%.3f\n", 3);
+}
+
+// A parameter-heavy program: the same kind of raster computed by nested
+// while loops with named parameters and expressions (a sine relief), 400 x
+// 400 points: 3 blocks per point.
+constexpr char kParametricRaster[] =
+    "G21 G90 G17\n"
+    "#<step> = 0.25\n"
+    "#<y> = 0\n"
+    "G0 X0 Y0 Z5\n"
+    "o1 while [#<y> LT 100]\n"
+    "  #<x> = 0\n"
+    "  o2 while [#<x> LT 100]\n"
+    "    G1 X#<x> Y#<y> Z[-1 - 0.5 * sin[#<x> * 3.6] * cos[#<y> * 3.6]]\n"
+    "    #<x> = [#<x> + #<step>]\n"
+    "  o2 endwhile\n"
+    "  #<y> = [#<y> + #<step>]\n"
+    "o1 endwhile\n"
+    "M2\n";
+
+std::string SyntheticXyz(int64_t lines) {
+  return Raster(lines, "x,y,z\n", "%.4f,%.4f,%.4f\n", 1);
 }
 
 void Run(benchmark::State& state, const std::string& text, bool gcode) {
@@ -82,7 +114,7 @@ void Run(benchmark::State& state, const std::string& text, bool gcode) {
     return;
   }
   const int64_t lines = CountLines(text);
-  int64_t points = 0;
+  int64_t points = 0, blocks = 0;
   for (auto _ : state) {
     absl::StatusOr<Toolpath> tp = gcode ? ParseGcode(text) : ParseXyz(text);
     if (!tp.ok()) {
@@ -90,12 +122,16 @@ void Run(benchmark::State& state, const std::string& text, bool gcode) {
       return;
     }
     points = tp->point_count();
+    blocks = tp->blocks_executed();
     benchmark::DoNotOptimize(tp);
   }
   state.counters["lines/s"] =
       benchmark::Counter(static_cast<double>(lines * state.iterations()),
                          benchmark::Counter::kIsRate);
   state.counters["lines"] = static_cast<double>(lines);
+  state.counters["blocks/s"] = benchmark::Counter(
+      static_cast<double>(blocks * state.iterations()),
+      benchmark::Counter::kIsRate);
   state.counters["points"] = static_cast<double>(points);
   state.SetBytesProcessed(static_cast<int64_t>(text.size()) *
                           state.iterations());
@@ -117,6 +153,21 @@ BENCHMARK(BM_SyntheticGcode)
     ->Name("Synthetic/gcode_1M_lines")
     ->Unit(benchmark::kMillisecond);
 
+void BM_StraightGcode(benchmark::State& state) {
+  static const std::string text = StraightGcode(1'000'000);
+  Run(state, text, true);
+}
+BENCHMARK(BM_StraightGcode)
+    ->Name("Synthetic/gcode_straight_1M_lines")
+    ->Unit(benchmark::kMillisecond);
+
+void BM_Parametric(benchmark::State& state) {
+  Run(state, kParametricRaster, true);
+}
+BENCHMARK(BM_Parametric)
+    ->Name("Synthetic/gcode_parametric_400x400")
+    ->Unit(benchmark::kMillisecond);
+
 void BM_SyntheticXyz(benchmark::State& state) {
   static const std::string text = SyntheticXyz(1'000'000);
   Run(state, text, false);
@@ -126,6 +177,6 @@ BENCHMARK(BM_SyntheticXyz)
     ->Unit(benchmark::kMillisecond);
 
 }  // namespace
-}  // namespace swarf
+}  // namespace swarf::gcode
 
 BENCHMARK_MAIN();

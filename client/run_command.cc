@@ -24,16 +24,24 @@
 #include "client/connection.h"
 #include "client/json_writer.h"
 #include "client/run_report.h"
-#include "core/toolpath.h"
+#include "client/toolpath_flags.h"
+#include "gcode/toolpath.h"
 #include "server/convert.h"
 
 namespace swarf::cli {
+
+using gcode::GcodeOptions;
+using gcode::ReadToolpathFile;
+using gcode::Toolpath;
+using gcode::ToolpathPoint;
+
 namespace {
 
-constexpr char kUsage[] =
+const std::string kUsage =
     "usage: swarf run FILE [options]\n"
-    "Simulates a toolpath (G-code .nc/.ngc/.gcode/.tap/.cnc, or x,y,z lines\n"
-    ".csv/.xyz/.txt; positions are the tool tip, mm) and reports the result.\n"
+    "Simulates a toolpath (G-code, RS274/NGC as LinuxCNC runs it, or x,y,z\n"
+    "lines; the format by content; positions are the tool tip, mm) and\n"
+    "reports the result.\n"
     "options:\n"
     "  --tool ball:d=D | ball:r=R   the ball-end cutter (mm); for programs\n"
     "                               with several tools: --tool N=ball:d=D each\n"
@@ -54,7 +62,8 @@ constexpr char kUsage[] =
     "  --subdivide N                STL: split each element N x N using the\n"
     "                               scheme's patches (default 1)\n"
     "  --batch N                    moves per batch sent (default 20000)\n"
-    "  --json                       print the stats document instead\n";
+    "  --json                       print the stats document instead\n"
+    "G-code:\n" + std::string(kToolpathUsage);
 
 struct ToolChoice {
   double radius = 0;
@@ -255,7 +264,8 @@ int RunCommand(const std::vector<std::string>& argv) {
                                    "server", "out",           "subdivide",
                                    "batch"};
   valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
-  auto args = Args::Parse(argv, valued, {"json", "help", "quiet"});
+  valued.insert(std::begin(kToolpathFlags), std::end(kToolpathFlags));
+  auto args = Args::Parse(argv, valued, {"json", "help", "quiet", kStrictFlag});
   auto fail = [](const absl::Status& s, int code) {
     std::cerr << "swarf run: " << s.message() << "\n";
     return code;
@@ -276,7 +286,17 @@ int RunCommand(const std::vector<std::string>& argv) {
   const bool json = args->Has("json");
 
   // Parse.
-  GcodeOptions gopt;
+  ToolpathFlags tflags;
+  if (absl::Status st = ReadToolpathFlags(*args, &tflags); !st.ok()) {
+    return fail(st, 2);
+  }
+  GcodeOptions& gopt = tflags.options;
+  // Cutter compensation (G41/G42) needs the radius of the tool it names.
+  gopt.tool_radius = [specs = args->All("tool")](int t) -> std::optional<double> {
+    auto r = ChooseTools(specs, {t});
+    if (!r.ok()) return std::nullopt;
+    return r->at(t);
+  };
   if (auto t = args->Get("arc-tolerance")) {
     if (!absl::SimpleAtod(*t, &gopt.arc_tolerance) ||
         !(gopt.arc_tolerance > 0)) {
@@ -299,15 +319,13 @@ int RunCommand(const std::vector<std::string>& argv) {
   if (batch_points < 2) return fail(absl::InvalidArgumentError("--batch must be >= 2"), 2);
 
   const auto t_parse = std::chrono::steady_clock::now();
-  auto path = ReadToolpathFile(file, gopt);
-  if (!path.ok()) {
-    std::cerr << "swarf run: " << file << ": " << path.status().message()
-              << "\n";
-    return 1;
-  }
+  auto path = ReadToolpathFile(file, gopt, tflags.format);
+  if (!path.ok()) return fail(path.status(), 1);  // names the file
   const double parse_s = Since(t_parse);
   if (path->move_count() < 1) {
-    std::cerr << "swarf run: " << file << ": no moves\n";
+    std::cerr << "swarf run: " << file << ": no moves";
+    if (path->dropped_moves() > 0) std::cerr << "; " << path->DroppedSummary();
+    std::cerr << "\n";
     return 1;
   }
   if (!json) {
@@ -324,6 +342,21 @@ int RunCommand(const std::vector<std::string>& argv) {
   for (const auto& [t, r] : *tools) max_radius = std::max(max_radius, r);
   auto stock = ChooseStock(*args, *path, max_radius);
   if (!stock.ok()) return fail(stock.status(), 2);
+  RunReport report;
+  {
+    std::vector<std::string> warnings;
+    absl::Status checked =
+        CheckToolpath(*path, tflags.strict, args->Has("stock") ? &*stock : nullptr,
+                      &report, &warnings);
+    if (!checked.ok()) {
+      return fail(absl::InvalidArgumentError(
+                      absl::StrCat(file, ": ", checked.message())),
+                  1);
+    }
+    if (!json) {
+      for (const std::string& w : warnings) std::cerr << "swarf run: " << w << "\n";
+    }
+  }
 
   // Session.
   auto copt = ConnectionOptionsFrom(*args);
@@ -379,7 +412,6 @@ int RunCommand(const std::vector<std::string>& argv) {
   if (!streamed.ok()) return fail(streamed, 1);
 
   // Outputs.
-  RunReport report;
   report.file = file;
   report.moves = path->move_count();
   report.lines = path->source_lines();

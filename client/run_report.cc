@@ -209,6 +209,15 @@ std::string StatsJson(const RunReport& r) {
         .EndObject();
   }
   if (!r.ignored.empty()) j.Key("ignored").String(r.ignored);
+  j.Key("dropped_moves").Int(r.dropped_moves);
+  if (!r.dropped.empty()) j.Key("dropped").String(r.dropped);
+  if (!r.outside_stock.empty()) {
+    j.Key("outside_stock").BeginObject()
+        .Key("mm").Double(r.outside_mm)
+        .Key("line").Int(r.outside_line)
+        .Key("message").String(r.outside_stock)
+        .EndObject();
+  }
   j.Key("files").BeginArray();
   for (const std::string& f : r.files) j.String(f);
   j.EndArray();

@@ -17,6 +17,13 @@ namespace swarf::cli {
 
 struct RunReport {
   std::string file, server, ignored;
+  // Feed moves the interpreter dropped (an axis unknown) and its summary
+  // naming the first lines; how far (mm) the tip leaves the stock's XY
+  // rectangle at worst, on which line, and the summary (empty: it doesn't).
+  int64_t dropped_moves = 0;
+  std::string dropped, outside_stock;
+  double outside_mm = 0;
+  int64_t outside_line = 0;
   int64_t moves = 0, lines = 0, nodes_lowered = 0;
   StockSpec stock;
   SchemeKind scheme = SchemeKind::kGuarded;

@@ -6,20 +6,26 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
+#include <sstream>
 #include <map>
 #include <string>
 #include <tuple>
 #include <vector>
 
+#include <unistd.h>
+
 #include "client/commands.h"
 #include "client/png_image.h"
-#include "core/toolpath.h"
+#include "gcode/toolpath.h"
 #include "google/protobuf/struct.pb.h"
 #include "google/protobuf/util/json_util.h"
 #include "gtest/gtest.h"
 
 namespace swarf::cli {
 namespace {
+
+using gcode::ReadToolpathFile;
 
 struct Stl {
   std::vector<std::array<float, 9>> triangles;  // 3 vertices each
@@ -136,6 +142,57 @@ TEST_P(RunE2eTest, CorpusJobRunsAndItsOutputsAreValid) {
   EXPECT_EQ(below, 0) << "machined below the lowest tool tip";
   EXPECT_LT(min_z, lowest_tip);  // the bottom plane
   std::filesystem::remove_all(out);
+}
+
+// Never silent: moves the interpreter drops and a cut leaving the stock are
+// reported in stats.json; --strict turns dropped moves into an error; an
+// error names the file once.
+TEST(RunE2eNeverSilentTest, DroppedMovesCutsOutsideAndErrors) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() /
+      ("swarf-e2e-silent-" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string prog = (dir / "m6.txt").string();  // G-code by content
+  {
+    std::ofstream f(prog);
+    f << "G21\nT1 M6\nG0 X0 Y0 Z5\nG1 Z-1\nX5\nT2 M6\nG1 X20\nG0 Z5\n"
+         "G1 X3 Y3 Z-1\nX4\n";
+  }
+  const std::string out = (dir / "out").string();
+  ASSERT_EQ(RunCommand({prog, "--tool", "ball:d=1", "--stock", "0,0,4,4,0",
+                        "--spacing", "0.25", "--out", out, "--quiet"}),
+            0);
+  const google::protobuf::Struct stats = ReadJson(out + "/stats.json");
+  const auto& f = stats.fields();
+  EXPECT_EQ(f.at("dropped_moves").number_value(), 2);
+  EXPECT_EQ(f.at("dropped").string_value(),
+            "dropped 2 feed moves with an unknown start or end (not "
+            "simulated): line 7 (YZ unknown), line 9 (Y unknown)");
+  const auto& outside = f.at("outside_stock").struct_value().fields();
+  EXPECT_EQ(outside.at("mm").number_value(), 1);  // X5 on a stock to X4
+  EXPECT_EQ(outside.at("line").number_value(), 5);
+
+  std::stringstream err;
+  std::streambuf* old = std::cerr.rdbuf(err.rdbuf());
+  const int strict = RunCommand({prog, "--tool", "ball:d=1", "--strict",
+                                 "--quiet"});
+  const std::string bad = (dir / "bad.nc").string();
+  {
+    std::ofstream b(bad);
+    b << "G21 G0 X0 Y0 Z0\nG1 X1 Y[1/0]\n";
+  }
+  const int broken = RunCommand({bad, "--tool", "ball:d=1", "--quiet"});
+  std::cerr.rdbuf(old);
+  EXPECT_EQ(strict, 1);
+  EXPECT_EQ(broken, 1);
+  EXPECT_NE(err.str().find("swarf run: " + prog + ": dropped 2 feed moves"),
+            std::string::npos)
+      << err.str();
+  EXPECT_NE(err.str().find("swarf run: " + bad + ": line 2: division by zero\n"),
+            std::string::npos)
+      << err.str();
+  EXPECT_EQ(err.str().find(bad + ": " + bad), std::string::npos) << err.str();
+  std::filesystem::remove_all(dir);
 }
 
 INSTANTIATE_TEST_SUITE_P(

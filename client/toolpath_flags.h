@@ -1,0 +1,53 @@
+// The `swarf run` flags that configure the G-code interpreter, and the
+// checks of a parsed toolpath that must never stay silent (dropped moves,
+// a cut that leaves the stock).
+#ifndef SWARF_CLIENT_TOOLPATH_FLAGS_H_
+#define SWARF_CLIENT_TOOLPATH_FLAGS_H_
+
+#include <optional>
+#include <string>
+
+#include "absl/status/status.h"
+#include "client/args.h"
+#include "client/run_report.h"
+#include "core/stock.h"
+#include "gcode/toolpath.h"
+
+namespace swarf::cli {
+
+// Valued flags: --format --dialect --home --max-blocks (--arc-tolerance is
+// run_command's); the boolean one: --strict.
+inline constexpr const char* kToolpathFlags[] = {"format", "dialect", "home",
+                                                 "max-blocks"};
+inline constexpr char kStrictFlag[] = "strict";
+inline constexpr char kToolpathUsage[] =
+    "  --format gcode|xyz           the file's format (default: by content)\n"
+    "  --dialect linuxcnc|fanuc|grbl  G-code dialect (default linuxcnc;\n"
+    "                               fanuc: M98/M99; grbl: '$' lines ignored)\n"
+    "  --home X,Y,Z                 the G28/G30 position (machine mm);\n"
+    "                               default unknown\n"
+    "  --max-blocks N               stop after N executed blocks (default\n"
+    "                               200M: an endless loop is an error)\n"
+    "  --strict                     dropped moves are an error\n";
+
+struct ToolpathFlags {
+  gcode::GcodeOptions options;
+  std::optional<gcode::ToolpathFormat> format;
+  bool strict = false;
+};
+
+// Reads the flags above into `flags` (options keep what they hold for
+// flags not given). InvalidArgument naming the flag.
+absl::Status ReadToolpathFlags(const Args& args, ToolpathFlags* flags);
+
+// The never-silent checks after parsing: dropped moves (an error under
+// --strict), and, against an explicit stock, a cut leaving the stock's XY
+// rectangle. Fills the report's fields; warnings go to `warn` (one line
+// each, without the "swarf run: " prefix).
+absl::Status CheckToolpath(const gcode::Toolpath& path, bool strict,
+                           const StockSpec* explicit_stock, RunReport* report,
+                           std::vector<std::string>* warn);
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_TOOLPATH_FLAGS_H_

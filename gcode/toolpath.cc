@@ -1,0 +1,329 @@
+#include "gcode/toolpath.h"
+
+#include <algorithm>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <numbers>
+#include <string>
+#include <system_error>
+#include <utility>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "gcode/text.h"
+
+namespace swarf::gcode {
+namespace {
+
+constexpr double kMaxCoordinateMm = 1e9;
+
+// The rank of an ignored word in the summary: G-codes, M-codes (by number),
+// other letters, then the rest.
+struct WordKey {
+  int rank;
+  double number;
+  const std::string* word;
+};
+
+WordKey KeyOf(const std::string& w) {
+  const char c = w.empty() ? 0 : w[0];
+  int rank = c == 'G' ? 0 : c == 'M' ? 1 : (c >= 'A' && c <= 'Z') ? 2 : 3;
+  double number = 0;
+  if (rank < 2 && w.size() > 1) {
+    std::from_chars(w.data() + 1, w.data() + w.size(), number);
+  }
+  return {rank, number, &w};
+}
+
+}  // namespace
+
+void Toolpath::Append(const ToolpathPoint& p) {
+  ToolpathPoint pt = p;
+  if (points_.empty()) {
+    pt.starts_run = true;
+    x_bounds_ = {pt.position.x, pt.position.x};
+    y_bounds_ = {pt.position.y, pt.position.y};
+    z_bounds_ = {pt.position.z, pt.position.z};
+  } else {
+    const Vec3& last = points_.back().position;
+    if (!pt.starts_run && last.x == pt.position.x && last.y == pt.position.y &&
+        last.z == pt.position.z) {
+      return;
+    }
+    x_bounds_.lo = std::min(x_bounds_.lo, pt.position.x);
+    x_bounds_.hi = std::max(x_bounds_.hi, pt.position.x);
+    y_bounds_.lo = std::min(y_bounds_.lo, pt.position.y);
+    y_bounds_.hi = std::max(y_bounds_.hi, pt.position.y);
+    z_bounds_.lo = std::min(z_bounds_.lo, pt.position.z);
+    z_bounds_.hi = std::max(z_bounds_.hi, pt.position.z);
+  }
+  if (pt.starts_run) ++runs_;
+  if (points_.size() == points_.capacity()) {
+    // Grow by a quarter, not twice: then Trim() keeps what it gets instead
+    // of copying millions of points once more.
+    points_.reserve(points_.size() + std::max<size_t>(points_.size() / 4, 1024));
+  }
+  points_.push_back(pt);
+}
+
+void Toolpath::CountIgnored(const std::string& word, int64_t n) {
+  ignored_[word] += n;
+}
+
+void Toolpath::AddDropped(int32_t line, unsigned missing_axes_mask) {
+  ++dropped_moves_;
+  if (first_dropped_.size() >= kFirstDropped) return;
+  DroppedMove d;
+  d.line = line;
+  int n = 0;
+  for (int a = 0; a < 3; ++a) {
+    if (missing_axes_mask & (1u << a)) d.missing[n++] = "XYZ"[a];
+  }
+  first_dropped_.push_back(d);
+}
+
+std::string Toolpath::DroppedSummary() const {
+  if (dropped_moves_ == 0) return "";
+  std::string out = absl::StrCat(
+      "dropped ", dropped_moves_, dropped_moves_ == 1 ? " feed move" : " feed moves",
+      " with an unknown start or end (not simulated): ");
+  for (size_t i = 0; i < first_dropped_.size(); ++i) {
+    absl::StrAppend(&out, i == 0 ? "" : ", ", "line ", first_dropped_[i].line,
+                    " (", first_dropped_[i].missing, " unknown)");
+  }
+  if (dropped_moves_ > static_cast<int64_t>(first_dropped_.size())) {
+    absl::StrAppend(&out, ", ...");
+  }
+  return out;
+}
+
+int64_t Toolpath::ignored_total() const {
+  int64_t total = 0;
+  for (const auto& [word, n] : ignored_) total += n;
+  return total;
+}
+
+std::vector<int> Toolpath::Tools() const {
+  std::vector<int> tools;
+  int last = -1;
+  for (const ToolpathPoint& p : points_) {
+    if (p.tool == last) continue;
+    last = p.tool;
+    if (std::find(tools.begin(), tools.end(), last) == tools.end()) {
+      tools.push_back(last);
+    }
+  }
+  return tools;
+}
+
+std::string Toolpath::IgnoredSummary() const {
+  if (ignored_.empty()) return "";
+  std::vector<WordKey> keys;
+  for (const auto& [word, n] : ignored_) keys.push_back(KeyOf(word));
+  std::sort(keys.begin(), keys.end(), [](const WordKey& a, const WordKey& b) {
+    if (a.rank != b.rank) return a.rank < b.rank;
+    if (a.number != b.number) return a.number < b.number;
+    return *a.word < *b.word;
+  });
+  const int64_t total = ignored_total();
+  std::string out =
+      absl::StrCat("ignored ", total, total == 1 ? " word" : " words",
+                   " that don't move the tool:");
+  for (size_t i = 0; i < keys.size(); ++i) {
+    absl::StrAppend(&out, i == 0 ? " " : ", ", *keys[i].word, " x",
+                    ignored_.at(*keys[i].word));
+  }
+  return out;
+}
+
+absl::StatusOr<Toolpath> ParseXyz(std::string_view text, int64_t max_points) {
+  static constexpr char kAxis[3] = {'x', 'y', 'z'};
+  Toolpath path;
+  // A point per line at most.
+  path.Reserve(std::min<int64_t>(
+      std::count(text.begin(), text.end(), '\n') + 1, max_points));
+  const char* p = SkipBom(text.data(), text.data() + text.size());
+  const char* const end = text.data() + text.size();
+  int64_t line = 0;
+  bool first_content = true;  // the line that may be a header
+  while (p < end) {
+    ++line;
+    const char* eol = static_cast<const char*>(std::memchr(p, '\n', end - p));
+    if (eol == nullptr) eol = end;
+    const char* s = SkipBlanks(p, eol);
+    p = eol < end ? eol + 1 : end;
+    if (s == eol || *s == '#') continue;
+    if (line > std::numeric_limits<int32_t>::max()) {
+      return LineError(line, "too many lines");
+    }
+    double v[3];
+    bool header = false;
+    for (int k = 0; k < 3; ++k) {
+      if (k > 0) {
+        // Blanks and/or one comma between values.
+        const char* before = s;
+        s = SkipBlanks(s, eol);
+        if (s < eol && *s == ',') s = SkipBlanks(s + 1, eol);
+        if (s == before || s == eol || *s == '#') {
+          return LineError(line, absl::StrCat("expected 3 values (x y z), "
+                                              "got ",
+                                              k));
+        }
+      }
+      const char* t = s < eol && *s == '+' && s + 1 < eol && s[1] != '-'
+                          ? s + 1
+                          : s;  // from_chars rejects a leading '+'
+      const auto r = std::from_chars(t, eol, v[k]);
+      if (r.ec == std::errc::result_out_of_range) {
+        return LineError(
+            line, absl::StrCat(std::string(1, kAxis[k]), " is out of range"));
+      }
+      if (r.ec != std::errc()) {
+        if (k == 0 && first_content) {
+          header = true;
+          break;
+        }
+        return LineError(
+            line, absl::StrCat(std::string(1, kAxis[k]), " is not a number at ",
+                               CharName(*s)));
+      }
+      if (!(std::fabs(v[k]) <= kMaxCoordinateMm)) {
+        return LineError(line, absl::StrCat(std::string(1, kAxis[k]), " = ",
+                                            v[k], " is out of range"));
+      }
+      s = r.ptr;
+    }
+    first_content = false;
+    if (header) continue;
+    s = SkipBlanks(s, eol);
+    if (s < eol && *s == ',') s = SkipBlanks(s + 1, eol);
+    if (s < eol && *s != '#') {
+      return LineError(line, absl::StrCat("unexpected ", CharName(*s),
+                                          " after x y z (3 values per "
+                                          "line)"));
+    }
+    if (path.point_count() >= max_points) {
+      return LineError(
+          line, absl::StrCat("more than ", max_points, " points (max_points)"));
+    }
+    ToolpathPoint pt;
+    pt.position = {v[0], v[1], v[2]};
+    pt.line = static_cast<int32_t>(line);
+    path.Append(pt);
+  }
+  path.set_source_lines(line);
+  path.Trim();
+  return path;
+}
+
+absl::StatusOr<ToolpathFormat> ToolpathFormatForPath(std::string_view path) {
+  const size_t slash = path.find_last_of("/\\");
+  const std::string_view name =
+      slash == std::string_view::npos ? path : path.substr(slash + 1);
+  const size_t dot = name.rfind('.');
+  std::string ext;
+  if (dot != std::string_view::npos) {
+    for (char c : name.substr(dot + 1)) {
+      ext += static_cast<char>(c >= 'A' && c <= 'Z' ? c + ('a' - 'A') : c);
+    }
+  }
+  for (const char* g : {"nc", "ngc", "gcode", "tap", "cnc"}) {
+    if (ext == g) return ToolpathFormat::kGcode;
+  }
+  for (const char* x : {"csv", "xyz", "txt"}) {
+    if (ext == x) return ToolpathFormat::kXyz;
+  }
+  return absl::InvalidArgumentError(absl::StrCat(
+      "unknown toolpath file extension '", ext,
+      "': G-code is .nc .ngc .gcode .tap .cnc; tip positions are .csv .xyz "
+      ".txt"));
+}
+
+absl::StatusOr<Toolpath> ParseToolpath(std::string_view text,
+                                       ToolpathFormat format,
+                                       const GcodeOptions& options) {
+  if (format == ToolpathFormat::kXyz) return ParseXyz(text, options.max_points);
+  return ParseGcode(text, options);
+}
+
+Excursion FarthestOutside(const Toolpath& path, double x0, double y0,
+                          double x1, double y1, double top) {
+  Excursion e;
+  const std::vector<ToolpathPoint>& pts = path.points();
+  for (size_t i = 0; i < pts.size(); ++i) {
+    const ToolpathPoint& p = pts[i];
+    if (p.rapid || p.starts_run || !(p.position.z < top)) continue;
+    const double dx = std::max({x0 - p.position.x, p.position.x - x1, 0.0});
+    const double dy = std::max({y0 - p.position.y, p.position.y - y1, 0.0});
+    const double d = std::hypot(dx, dy);
+    if (d > e.distance) {
+      e.distance = d;
+      e.index = static_cast<int64_t>(i);
+    }
+  }
+  return e;
+}
+
+ToolpathFormat DetectToolpathFormat(std::string_view text) {
+  const char* p = SkipBom(text.data(), text.data() + text.size());
+  const char* const end = text.data() + text.size();
+  while (p < end) {
+    const char* eol = static_cast<const char*>(std::memchr(p, '\n', end - p));
+    if (eol == nullptr) eol = end;
+    const char* q = SkipBlanks(p, eol);
+    p = eol < end ? eol + 1 : end;
+    // Blank lines, G-code comments and XYZ '#' comments (but "#1=..." and
+    // "#<x>=..." are G-code parameter settings).
+    if (q == eol || OnlyComments(q, eol)) continue;
+    if (*q == '#') {
+      const char* r = SkipBlanks(q + 1, eol);
+      if (r < eol && (IsDigit(*r) || *r == '<' || *r == '[' || *r == '#')) {
+        return ToolpathFormat::kGcode;
+      }
+      continue;
+    }
+    if (IsDigit(*q) || *q == '-' || *q == '+' || *q == '.') {
+      return ToolpathFormat::kXyz;
+    }
+    // A header: only x, y, z (any case) between blanks and commas.
+    bool header = true, letters = false;
+    for (const char* r = q; r < eol && header; ++r) {
+      const char c = Lower(*r);
+      if (c == 'x' || c == 'y' || c == 'z') {
+        letters = true;
+      } else if (!(IsBlank(c) || c == ',' || c == ';')) {
+        header = false;
+      }
+    }
+    // "X Y Z" alone is not a G-code block (words need numbers).
+    return header && letters ? ToolpathFormat::kXyz : ToolpathFormat::kGcode;
+  }
+  return ToolpathFormat::kGcode;
+}
+
+absl::StatusOr<Toolpath> ReadToolpathFile(const std::string& path,
+                                          const GcodeOptions& options,
+                                          std::optional<ToolpathFormat> format) {
+  const auto prefixed = [&path](const absl::Status& st) {
+    return absl::Status(st.code(), absl::StrCat(path, ": ", st.message()));
+  };
+  absl::StatusOr<std::string> data = ReadWholeFile(path);
+  if (!data.ok()) return prefixed(data.status());
+  GcodeOptions opt = options;
+  if (opt.subroutine_dir.empty()) {
+    const size_t slash = path.find_last_of('/');
+    opt.subroutine_dir = slash == std::string::npos ? "." : path.substr(0, slash);
+    if (opt.subroutine_dir.empty()) opt.subroutine_dir = "/";
+  }
+  absl::StatusOr<Toolpath> tp = ParseToolpath(
+      *data, format.value_or(DetectToolpathFormat(*data)), opt);
+  if (!tp.ok()) return prefixed(tp.status());
+  return tp;
+}
+
+}  // namespace swarf::gcode

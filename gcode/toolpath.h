@@ -1,0 +1,240 @@
+// Toolpath input: G-code for 3-axis mills, run by an RS274/NGC interpreter
+// (the LinuxCNC dialect; gcode/interpreter.cc), and CSV/XYZ files of
+// tool-tip positions, parsed into a polyline of tool-tip points in mm.
+//
+// G-code rules (every G, M and O word: the README's G-code table):
+// - Start position. A program starts from an unknown machine position. Each
+//   axis is unknown until a word gives it; moves before X, Y and Z are all
+//   known only set the known axes and produce no point. The polyline starts
+//   at the first position where all three are known. Incremental moves (G91)
+//   of an unknown axis and arcs before the start are errors. A feed move
+//   whose start or end is unknown is dropped and counted
+//   (Toolpath::dropped_moves); rapids from an unknown position only
+//   position the machine.
+// - Tool changes. M6 may move the machine to a tool-change position we don't
+//   know, so it makes all axes unknown again (so do G28/G30 to an unknown
+//   home); the next fully known position starts a new run
+//   (ToolpathPoint::starts_run). No move joins two runs.
+// - Units: G21 mm (the default when neither G20 nor G21 is given, with a
+//   note), G20 inches (x25.4). G90/G91, G90.1/G91.1.
+// - Parameters, expressions (gcode/expression.h), O-word subroutines and
+//   control flow (external o<name> files from
+//   GcodeOptions::subroutine_dir), offsets (G10 L2/L20, G52, G54-G59.3,
+//   G92.x, G53, G43.1), G28/G30, canned cycles G73 G74 G81-G89 with
+//   G98/G99, arcs in G17/G18/G19 (I/J/K or R, helical, P turns; chords
+//   within GcodeOptions::arc_tolerance, the last point the programmed end
+//   bit for bit), cutter compensation G41/G42 in G17.
+// - Words that don't move the tool (F, S, H, M3, M8, G17, G40, G43, G49,
+//   G54, G80, G94, ...) are counted in Toolpath::ignored(). Anything that
+//   would change the tool's path and isn't simulated (G33, G38.x, G76 in
+//   the LinuxCNC dialect, A/B/C axes, ...) is an InvalidArgument error
+//   "line N: ..." naming the word: never a guess. Errors in an external
+//   subroutine file read "line N of FILE (called from line M): ...".
+// - Reading stops at M2/M30, or at the second '%' when the program starts
+//   with one. Executing more than GcodeOptions::max_blocks blocks, or
+//   nesting calls deeper than max_call_depth, is an error.
+// - A move that doesn't change the position (in either format) adds no
+//   point.
+//
+// Positions are the tool tip in machine coordinates; every offset is zero
+// until the program sets one, so a program without offsets gets its own
+// coordinates.
+//
+// Thread safety: the functions are reentrant; a Toolpath is a value (const
+// methods may run concurrently).
+#ifndef SWARF_GCODE_TOOLPATH_H_
+#define SWARF_GCODE_TOOLPATH_H_
+
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/geometry.h"
+
+namespace swarf::gcode {
+
+// One tool-tip position. 32 bytes: toolpaths hold millions of points.
+struct ToolpathPoint {
+  Vec3 position;       // tool tip, mm, absolute program coordinates
+  int32_t line = 0;    // 1-based source line that produced the point
+  uint16_t tool = 0;   // tool in effect (see ParseGcode); 0: none selected
+  bool rapid = false;  // the move ending here is a rapid (G0)
+  // No move reaches this point: the first point, or the first after a tool
+  // change. The move to point i (i > 0) is points[i-1] -> points[i] unless
+  // points[i].starts_run.
+  bool starts_run = false;
+};
+static_assert(sizeof(ToolpathPoint) == 32);
+
+// A parsed toolpath: points in program order plus what the parser ignored.
+class Toolpath {
+ public:
+  const std::vector<ToolpathPoint>& points() const { return points_; }
+  int64_t point_count() const { return static_cast<int64_t>(points_.size()); }
+  // Straight moves: consecutive points within a run.
+  int64_t move_count() const { return point_count() - runs_; }
+  int64_t run_count() const { return runs_; }
+
+  // Bounds of all points, rapids and retracts included (mm); empty
+  // intervals when there are no points.
+  const Interval& x_bounds() const { return x_bounds_; }
+  const Interval& y_bounds() const { return y_bounds_; }
+  const Interval& z_bounds() const { return z_bounds_; }
+
+  // Distinct tool numbers of the points, in order of first use.
+  std::vector<int> Tools() const;
+
+  // Source lines read (up to the program end).
+  int64_t source_lines() const { return source_lines_; }
+  // Blocks executed (G-code: lines with words, loops and calls unrolled).
+  int64_t blocks_executed() const { return blocks_executed_; }
+  void set_blocks_executed(int64_t n) { blocks_executed_ = n; }
+
+  // Words accepted without effect on the tool path, by word: "F", "S",
+  // "H", "M3" (M03 counts as M3), "G43", "G90.1"-style codes, "O" (program
+  // number), "/" (block delete mark, the block is executed).
+  const std::map<std::string, int64_t>& ignored() const { return ignored_; }
+  int64_t ignored_total() const;
+  // One line for the user, e.g. "ignored 5 words that don't move the tool:
+  // G17 x1, M3 x1, F x2, S x1"; empty when nothing was ignored.
+  std::string IgnoredSummary() const;
+
+  // Remarks to show once, e.g. "no G20/G21: millimetres assumed".
+  const std::vector<std::string>& notes() const { return notes_; }
+
+  // Moves the interpreter could not simulate because an axis was unknown
+  // (feeds after M6 or G28 to an unknown home before X, Y and Z are known
+  // again, or with an axis never given), and the first of them.
+  struct DroppedMove {
+    int32_t line = 0;
+    char missing[4] = {};  // the unknown axes, e.g. "Z" or "XYZ"
+  };
+  int64_t dropped_moves() const { return dropped_moves_; }
+  const std::vector<DroppedMove>& first_dropped() const {
+    return first_dropped_;
+  }
+  // "dropped 3 feed moves with an unknown axis: line 4 (Z unknown), ...";
+  // empty when none.
+  std::string DroppedSummary() const;
+
+  // Building (the parsers; tests). Append drops a point that repeats the
+  // previous point's position within a run: a zero-length move sweeps
+  // nothing.
+  void Append(const ToolpathPoint& p);
+  void CountIgnored(const std::string& word, int64_t n = 1);
+  void AddNote(std::string note) { notes_.push_back(std::move(note)); }
+  void set_source_lines(int64_t n) { source_lines_ = n; }
+  // Keeps the first kFirstDropped.
+  static constexpr size_t kFirstDropped = 10;
+  void AddDropped(int32_t line, unsigned missing_axes_mask);
+  void Reserve(int64_t points) { points_.reserve(points); }
+  // Gives back capacity beyond half the size over it (a trim copies every
+  // point into freshly faulted memory: slow, so only for a large waste).
+  void Trim() {
+    if (points_.capacity() > points_.size() + points_.size() / 2) {
+      points_.shrink_to_fit();
+    }
+  }
+
+ private:
+  std::vector<ToolpathPoint> points_;
+  int64_t runs_ = 0;
+  Interval x_bounds_, y_bounds_, z_bounds_;
+  int64_t source_lines_ = 0;
+  int64_t blocks_executed_ = 0;
+  std::map<std::string, int64_t> ignored_;
+  std::vector<std::string> notes_;
+  int64_t dropped_moves_ = 0;
+  std::vector<DroppedMove> first_dropped_;
+};
+
+enum class Dialect {
+  kLinuxCnc,  // RS274/NGC as LinuxCNC documents it (the default)
+  kFanuc,     // + M98/M99 subprograms (O-numbered programs in the file)
+  kGrbl,      // + '$' setting lines ignored with a note
+};
+
+struct GcodeOptions {
+  // Largest distance between an arc and its chords (mm); in [1e-6, 10].
+  double arc_tolerance = 0.001;
+  // More points is an error (memory: 32 bytes per point).
+  int64_t max_points = 100'000'000;
+  // More executed blocks (lines, loops and calls unrolled) is an error: a
+  // program that loops forever stops here.
+  int64_t max_blocks = 200'000'000;
+  // Deeper subroutine nesting is an error.
+  int max_call_depth = 100;
+  // The G28 and G30 positions (machine coordinates, mm) until the program
+  // sets them with G28.1/G30.1; unknown when unset (G28/G30 then make the
+  // axes they move unknown, like a tool change).
+  bool home_known = false;
+  double home[3] = {0, 0, 0};
+  // Where external subroutine files (o<name> call -> name.ngc) are looked
+  // up: the program's directory. Empty: none (calls of undefined
+  // subroutines are errors).
+  std::string subroutine_dir;
+  Dialect dialect = Dialect::kLinuxCnc;
+  // The radius (mm) of tool number n, for cutter compensation (G41/G42
+  // D n, or the current tool); nullopt or unset: unknown (then G41/G42
+  // are errors; G41.1/G42.1 give the diameter themselves).
+  std::function<std::optional<double>(int tool)> tool_radius;
+};
+
+// Parses a G-code program (rules above). Tool numbers: the T of the last
+// M6, or, before any M6, the last T word (programs that select tools with T
+// alone); 0 when none; T above 65535 is an error. InvalidArgument
+// "line N: ..." on any error, or for bad options.
+absl::StatusOr<Toolpath> ParseGcode(std::string_view text,
+                                    const GcodeOptions& options = {});
+
+// Parses tool-tip positions in mm, one "x y z" per line, separated by
+// commas and/or blanks (spaces, tabs). Blank lines and '#' comments (whole
+// or trailing) are skipped; the first non-comment line may be a header
+// (when it doesn't start with a number). One run, tool 0, no rapids.
+// InvalidArgument "line N: ..." for anything else.
+absl::StatusOr<Toolpath> ParseXyz(std::string_view text,
+                                  int64_t max_points = 100'000'000);
+
+// Where a toolpath's cut leaves a stock's XY rectangle [x0, x1] x [y0, y1]:
+// over the ends of feed moves below `top`, the largest XY distance outside
+// the rectangle (mm) and that point's index; {0, -1} when none is outside.
+struct Excursion {
+  double distance = 0;
+  int64_t index = -1;
+};
+Excursion FarthestOutside(const Toolpath& path, double x0, double y0,
+                          double x1, double y1, double top);
+
+enum class ToolpathFormat { kGcode, kXyz };
+
+// By extension, case-insensitive: .nc .ngc .gcode .tap .cnc -> kGcode;
+// .csv .xyz .txt -> kXyz. InvalidArgument naming the supported ones else.
+absl::StatusOr<ToolpathFormat> ToolpathFormatForPath(std::string_view path);
+
+// By content: the first line that is neither blank nor a comment decides.
+// Numbers ("1.5, 2, -0.3"), or a header of letters x, y, z between
+// separators, make kXyz; anything else (words such as G0, N10, %, O100,
+// #1=2) kGcode. An empty or comment-only text: kGcode.
+ToolpathFormat DetectToolpathFormat(std::string_view text);
+
+absl::StatusOr<Toolpath> ParseToolpath(std::string_view text,
+                                       ToolpathFormat format,
+                                       const GcodeOptions& options = {});
+
+// Reads and parses a file, the format from `format` when given, else from
+// its content (DetectToolpathFormat). External subroutines are looked up in
+// the file's directory unless options.subroutine_dir is set. Errors are
+// prefixed with the path once: "<path>: line N: ...". NotFound when the file
+// can't be opened.
+absl::StatusOr<Toolpath> ReadToolpathFile(
+    const std::string& path, const GcodeOptions& options = {},
+    std::optional<ToolpathFormat> format = std::nullopt);
+
+}  // namespace swarf::gcode
+
+#endif  // SWARF_GCODE_TOOLPATH_H_
