@@ -490,6 +490,45 @@ TEST_P(ApiTest, RequestsAtEveryDocumentedMaximum) {
   }
 }
 
+// Marks are computed before their size is known: an answer over the limit
+// becomes that request's error, and GetCuttingMarks (a message per mark)
+// still serves them.
+TEST_P(ApiTest, MarksOverTheMessageLimitAreThatRequestsError) {
+  Limits limits;
+  limits.max_message_bytes = 1 << 20;
+  limits.max_batch_points = 40000;
+  ASSERT_NO_FATAL_FAILURE(StartServer(limits));
+  pb::CreateSessionRequest req = SmallRequest("marks");
+  SetStock({0, 0, 40, 40, 0, 400, 400}, &req);
+  ASSERT_TRUE(Create(req).ok());
+  // A raster of 150 passes 0.25 mm apart: a crease between every two.
+  std::vector<double> xyz;
+  for (int pass = 0; pass < 150; ++pass) {
+    const double y = 1 + 0.25 * pass;
+    xyz.insert(xyz.end(), {pass % 2 ? 39.0 : 1.0, y, -0.3});
+    xyz.insert(xyz.end(), {pass % 2 ? 1.0 : 39.0, y, -0.3});
+  }
+  pb::SimulateRequest marks;
+  marks.mutable_marks()->set_request_id(9);
+  const auto rs = Exchange("marks", {MovesRequest(1, kTool, xyz), marks,
+                                     MovesRequest(2, kTool, Line(2, 39, -0.1))});
+  ASSERT_EQ(rs.size(), 3u);
+  ASSERT_TRUE(rs[1].has_error()) << rs[1].ByteSizeLong();
+  EXPECT_EQ(rs[1].error().code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_EQ(rs[1].error().kind(), pb::REQUEST_KIND_MARKS);
+  EXPECT_EQ(rs[1].error().request_id(), 9u);
+  EXPECT_TRUE(rs[2].has_ack());
+  grpc::ClientContext ctx;
+  ForSession(&ctx, "marks");
+  pb::GetCuttingMarksRequest mr;
+  auto reader = stub_->GetCuttingMarks(&ctx, mr);
+  size_t bytes = 0, lines = 0;
+  for (pb::Polyline p; reader->Read(&p); ++lines) bytes += p.ByteSizeLong();
+  EXPECT_TRUE(reader->Finish().ok());
+  EXPECT_GT(bytes, size_t{1} << 20);  // all of them: more than one message
+  EXPECT_GT(lines, 100u);
+}
+
 TEST_P(ApiTest, StreamsAtTheLimitOpenAndOnePastIsRefused) {
   Limits limits;
   limits.max_streams_per_client = 2;
