@@ -21,7 +21,8 @@ np.save("bear-heights.npy", h.z)  # [j, i] at (h.x[i], h.y[j]), mm
 try:
     import matplotlib; matplotlib.use("Agg"); import matplotlib.pyplot as plt
     plt.imshow(h.z, origin="lower", cmap="gray", extent=(h.x[0], h.x[-1], h.y[0], h.y[-1]))
-    for m in marks: plt.plot(m.xyz[:, 0], m.xyz[:, 1], "r-", lw=0.2)
+    xy = np.concatenate([np.vstack([m.xyz[:, :2], [np.nan, np.nan]]) for m in marks])
+    plt.plot(xy[:, 0], xy[:, 1], "r-", lw=0.2)  # NaN rows split the marks
     plt.savefig("bear-marks.png", dpi=200)
 except ImportError:
     print(f"{len(marks)} marks; install python3-matplotlib for bear-marks.png")

@@ -190,7 +190,12 @@ class Client:
                  private_key: Union[None, str, bytes] = None,
                  timeout: float = 60.0) -> None:
         options = [("grpc.max_receive_message_length", -1),
-                   ("grpc.max_send_message_length", -1)]
+                   ("grpc.max_send_message_length", -1),
+                   # A restarted server is found again within 2 s, not
+                   # after gRPC's default backoff of up to 2 minutes.
+                   ("grpc.initial_reconnect_backoff_ms", 100),
+                   ("grpc.min_reconnect_backoff_ms", 100),
+                   ("grpc.max_reconnect_backoff_ms", 2000)]
         if tls:
             creds = grpc.ssl_channel_credentials(
                 _read(root_certificates), _read(private_key),
@@ -242,10 +247,12 @@ class Client:
         self.close()
 
     def health(self, timeout: float = 5.0) -> bool:
-        """Whether the server answers (GetSession-free: ListSessions)."""
+        """Whether the server answers within `timeout` seconds (waiting for
+        it to come up; a ListSessions call, so the token is checked too)."""
         try:
             self._stub.ListSessions(pb.ListSessionsRequest(),
-                                    metadata=self._md(), timeout=timeout)
+                                    metadata=self._md(), timeout=timeout,
+                                    wait_for_ready=True)
             return True
         except grpc.RpcError:
             return False
@@ -533,12 +540,18 @@ class Session:
 
     # -- reads
 
-    def _tiles(self, region: Optional[Sequence[float]], precision: Any,
+    def _tiles(self, window: Tuple[int, int, int, int], precision: Any,
                derivatives: bool, owners: bool) -> Iterator[Any]:
+        """The tiles holding the nodes [i0, i1) x [j0, j1), chosen by index
+        so that no rounding of a region's edge can leave one out."""
+        i0, i1, j0, j1 = window
         sel = pb.TileSelection()
-        rect = _rect(region)
-        if rect is not None:
-            sel.region.CopyFrom(rect)
+        if (i0, i1, j0, j1) != (0, self.nx + 1, 0, self.ny + 1):
+            if i0 >= i1 or j0 >= j1:
+                return iter(())
+            for ty in range(j0 // TILE_SIZE, (j1 - 1) // TILE_SIZE + 1):
+                for tx in range(i0 // TILE_SIZE, (i1 - 1) // TILE_SIZE + 1):
+                    sel.tiles.add(tx=tx, ty=ty)
         req = pb.GetTilesRequest(session_id=self.id, selection=sel,
                                  precision=precision,
                                  include_derivatives=derivatives,
@@ -571,10 +584,10 @@ class Session:
         if precision not in ("double", "float"):
             raise ValueError("precision must be 'double' or 'float'")
         dbl = precision == "double"
-        i0, i1, j0, j1 = self._node_window(region)
+        i0, i1, j0, j1 = window = self._node_window(region)
         z = np.empty((j1 - j0, i1 - i0), np.float64 if dbl else np.float32)
         own = np.empty(z.shape, np.int32) if owners else None
-        for t in self._tiles(region, pb.PRECISION_DOUBLE if dbl else
+        for t in self._tiles(window, pb.PRECISION_DOUBLE if dbl else
                              pb.PRECISION_FLOAT, False, owners):
             vals = np.asarray(t.heights_d if dbl else t.heights_f,
                               z.dtype).reshape(t.ny, t.nx)
@@ -596,12 +609,12 @@ class Session:
     def jets(self, region: Optional[Sequence[float]] = None) -> Jets:
         """Heights and derivatives per node (taylor sessions; a zmap
         session raises FAILED_PRECONDITION)."""
-        i0, i1, j0, j1 = self._node_window(region)
+        i0, i1, j0, j1 = window = self._node_window(region)
         shape = (j1 - j0, i1 - i0)
         out = {"w": np.empty(shape, np.float64)}
         for name in ("wx", "wy", "wxx", "wxy", "wyy"):
             out[name] = np.empty(shape, np.float32)
-        for t in self._tiles(region, pb.PRECISION_DOUBLE, True, False):
+        for t in self._tiles(window, pb.PRECISION_DOUBLE, True, False):
             for name, arr in out.items():
                 src = t.heights_d if name == "w" else getattr(t, name)
                 self._paste(arr, np.asarray(src, arr.dtype).reshape(

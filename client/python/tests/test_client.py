@@ -4,6 +4,7 @@ server, every error path, and messages past gRPC's 4 MiB default."""
 
 import pathlib
 import subprocess
+import sys
 import threading
 import time
 
@@ -55,6 +56,11 @@ def test_five_balls_equal_the_core_bit_for_bit(client, five_balls_reference,
         np.testing.assert_array_equal(part.x, np.arange(20.0, 61.0))
         assert set(np.unique(part.owners)) <= {-1, 0, 1, 2, 3, 4}
         assert part.owners[50 - 25, 50 - 20] == 0
+        # Edges on tile boundaries (node 64 starts tile 1) and a point.
+        edge = s.heights(region=(64, 0, 100, 64))
+        np.testing.assert_array_equal(bits(edge.z), bits(ref[0:65, 64:101]))
+        one = s.heights(region=(63.5, 64, 64.5, 64))
+        np.testing.assert_array_equal(bits(one.z), bits(ref[64:65, 64:65]))
         # float32 heights are the doubles rounded.
         f = s.heights(precision="float")
         np.testing.assert_array_equal(f.z, ref.astype(np.float32))
@@ -223,3 +229,20 @@ def test_messages_past_the_4_mib_default(client):
                               np.full(200_000, 50.0)])
         p = s.probe(xy)
         assert p.heights.shape == (200_000,) and p.normals.shape == (200_000, 3)
+
+
+def test_the_frontend_example_simulates_bear(swarfd, tmp_path):
+    """examples/python/frontend.py on bear.nc: heights saved, as deep as
+    the program's deepest tip."""
+    root = pathlib.Path(__file__).resolve().parents[3]
+    nc = root.parent / "shared" / "corpus" / "bear.nc"
+    assert nc.is_file(), f"the corpus is read in place: {nc}"
+    done = subprocess.run(
+        [sys.executable, str(root / "examples" / "python" / "frontend.py"),
+         str(nc), swarfd.target], cwd=tmp_path, capture_output=True,
+        text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "moves_applied=15158" in done.stdout
+    h = np.load(tmp_path / "bear-heights.npy")
+    assert h.shape == (801, 801)
+    assert h.min() == -17.368 and h.max() <= 0
