@@ -104,28 +104,7 @@ absl::Status MapFits(int32_t cols, int32_t rows, int64_t limit) {
                                   " cells"));
 }
 
-// The request id a stream response answers.
-uint64_t RequestIdOf(const pb::SimulateResponse& r) {
-  switch (r.response_case()) {
-    case pb::SimulateResponse::kAck:
-      return r.ack().seq();
-    case pb::SimulateResponse::kTile:
-      return r.tile().request_id();
-    case pb::SimulateResponse::kStats:
-      return r.stats().request_id();
-    case pb::SimulateResponse::kPolylines:
-      return r.polylines().request_id();
-    case pb::SimulateResponse::kError:
-      return r.error().request_id();
-    case pb::SimulateResponse::kTilesDone:
-      return r.tiles_done().request_id();
-    case pb::SimulateResponse::RESPONSE_NOT_SET:
-      break;
-  }
-  return 0;
-}
-
-// The kind of request a RequestError answers, from the request...
+// The kind of request a RequestError answers.
 pb::RequestKind KindOf(pb::SimulateRequest::RequestCase c) {
   switch (c) {
     case pb::SimulateRequest::kMoves:
@@ -144,24 +123,26 @@ pb::RequestKind KindOf(pb::SimulateRequest::RequestCase c) {
   return pb::REQUEST_KIND_UNSPECIFIED;
 }
 
-// ... or from the answer it replaces.
-pb::RequestKind KindOf(const pb::SimulateResponse& r) {
+// The id and kind of the request a stream response answers (to replace it
+// with a RequestError).
+std::pair<uint64_t, pb::RequestKind> RequestOf(const pb::SimulateResponse& r) {
   switch (r.response_case()) {
     case pb::SimulateResponse::kAck:
-      return pb::REQUEST_KIND_MOVES;
+      return {r.ack().seq(), pb::REQUEST_KIND_MOVES};
     case pb::SimulateResponse::kTile:
+      return {r.tile().request_id(), pb::REQUEST_KIND_TILES};
     case pb::SimulateResponse::kTilesDone:
-      return pb::REQUEST_KIND_TILES;
+      return {r.tiles_done().request_id(), pb::REQUEST_KIND_TILES};
     case pb::SimulateResponse::kStats:
-      return pb::REQUEST_KIND_STATS;
+      return {r.stats().request_id(), pb::REQUEST_KIND_STATS};
     case pb::SimulateResponse::kPolylines:
-      return pb::REQUEST_KIND_MARKS;
+      return {r.polylines().request_id(), pb::REQUEST_KIND_MARKS};
     case pb::SimulateResponse::kError:
-      return r.error().kind();
+      return {r.error().request_id(), r.error().kind()};
     case pb::SimulateResponse::RESPONSE_NOT_SET:
       break;
   }
-  return pb::REQUEST_KIND_UNSPECIFIED;
+  return {0, pb::REQUEST_KIND_UNSPECIFIED};
 }
 
 // Runs `work` on the executor and finishes the unary call with its status.
@@ -562,8 +543,7 @@ class SimulateReactor
       absl::Status fits =
           FitsMessage(r.ByteSizeLong(), limit, "the answer to this request");
       if (!fits.ok()) {
-        const uint64_t id = RequestIdOf(r);
-        const pb::RequestKind kind = KindOf(r);
+        const auto [id, kind] = RequestOf(r);
         r.Clear();
         pb::RequestError* e = r.mutable_error();
         e->set_request_id(id);

@@ -275,12 +275,7 @@ class BadInputTest : public ::testing::Test {
     auto s = SwarfServer::Start(o);
     ASSERT_TRUE(s.ok()) << s.status();
     server_ = *std::move(s);
-    grpc::ChannelArguments args;
-    args.SetMaxReceiveMessageSize(-1);
-    args.SetMaxSendMessageSize(-1);
-    channel_ = grpc::CreateCustomChannel(
-        absl::StrCat("127.0.0.1:", server_->port()),
-        grpc::InsecureChannelCredentials(), args);
+    channel_ = ::swarf::testing::UnlimitedChannel(server_->port());
     stub_ = pb::Swarf::NewStub(channel_);
     ASSERT_NO_FATAL_FAILURE(StartWitness());
   }
