@@ -309,14 +309,52 @@ class Client:
         return [s.session_id for s in resp.sessions]
 
 
+def _varint(v: int) -> bytes:
+    v &= (1 << 64) - 1  # negative int32/int64: ten bytes, two's complement
+    out = bytearray()
+    while True:
+        b = v & 0x7F
+        v >>= 7
+        if v:
+            out.append(b | 0x80)
+        else:
+            out.append(b)
+            return bytes(out)
+
+
+@dataclasses.dataclass(frozen=True)
+class _Batch:
+    seq: int
+    data: bytes  # a serialized SimulateRequest{moves}
+
+
+def _batch(seq: int, tool_id: int, xyz: FloatArray, rapid: bool,
+           reposition: bool) -> _Batch:
+    """A SimulateRequest of one MoveBatch, serialized straight from the
+    array (the same bytes protobuf writes; about 10x faster for large
+    batches, and no Python objects per point)."""
+    points = np.ascontiguousarray(xyz, dtype="<f8").tobytes()
+    body = b"".join([
+        b"\x08", _varint(seq),                          # seq = 1
+        b"\x10" + _varint(tool_id) if tool_id else b"",  # tool_id = 2
+        b"\x1a", _varint(len(points)), points,           # xyz = 3, packed
+        b"\x20\x01" if rapid else b"",                   # rapid = 4
+        b"\x28\x01" if reposition else b"",              # reposition = 5
+    ])
+    return _Batch(seq, b"\x0a" + _varint(len(body)) + body)  # moves = 1
+
+
 class _Stream:
-    """One Simulate stream: requests go through a queue that gRPC's sending
-    thread drains, responses are read by the caller."""
+    """One Simulate stream: requests (serialized) go through a queue that
+    gRPC's sending thread drains, responses are read by the caller."""
 
     def __init__(self, client: Client, session_id: str) -> None:
         self._queue: "queue.Queue[Any]" = queue.Queue()
-        self._call = client._stub.Simulate(
-            self._requests(), metadata=client._md(session_id))
+        simulate = client._channel.stream_stream(
+            "/swarf.v1.Swarf/Simulate", request_serializer=None,
+            response_deserializer=pb.SimulateResponse.FromString)
+        self._call = simulate(self._requests(),
+                              metadata=client._md(session_id))
 
     def _requests(self) -> Iterator[Any]:
         while True:
@@ -325,7 +363,7 @@ class _Stream:
                 return
             yield req
 
-    def send(self, req: Any) -> None:
+    def send(self, req: bytes) -> None:
         self._queue.put(req)
 
     def recv(self) -> Any:
@@ -446,13 +484,10 @@ class Session:
         if batch_points < 1:
             raise ValueError("batch_points must be at least 1")
         tool_id = tool if tool is not None else self._info.tools[0].id
-        batches = []
-        for k, start in enumerate(range(0, len(xyz), batch_points)):
-            seq = self._next_seq + k
-            batches.append(pb.SimulateRequest(moves=pb.MoveBatch(
-                seq=seq, tool_id=tool_id,
-                xyz=xyz[start:start + batch_points].ravel().tolist(),
-                rapid=rapid, reposition=reposition and start == 0)))
+        batches = [
+            _batch(self._next_seq + k, tool_id, xyz[start:start + batch_points],
+                   rapid, reposition and start == 0)
+            for k, start in enumerate(range(0, len(xyz), batch_points))]
         return self._send_batches(batches)
 
     def _open(self) -> _Stream:
@@ -465,8 +500,8 @@ class Session:
             self._stream.close()
             self._stream = None
 
-    def _send_batches(self, batches: List[Any]) -> SendResult:
-        pending: List[Any] = []  # sent, not acknowledged, in seq order
+    def _send_batches(self, batches: List[_Batch]) -> SendResult:
+        pending: List[_Batch] = []  # sent, not acknowledged, in seq order
         todo = list(batches)
         lowered = 0
         resumed = 0
@@ -476,9 +511,9 @@ class Session:
             try:
                 stream = self._open()
                 while todo and len(pending) < self.window:
-                    req = todo.pop(0)
-                    stream.send(req)
-                    pending.append(req)
+                    batch = todo.pop(0)
+                    stream.send(batch.data)
+                    pending.append(batch)
                 resp = stream.recv()
             except (grpc.RpcError, StopIteration) as e:
                 code = (e.code() if isinstance(e, grpc.RpcError)
@@ -494,14 +529,14 @@ class Session:
                         SwarfError(code, "the stream ended") from None
                 last = self._wait_for_server(deadline)
                 # Applied before the drop: acknowledged by the server's state.
-                todo = [r for r in pending + todo if r.moves.seq > last]
+                todo = [b for b in pending + todo if b.seq > last]
                 pending = []
                 resumed += 1
                 continue
             deadline = None
             if resp.HasField("ack"):
                 ack = resp.ack
-                while pending and pending[0].moves.seq <= ack.seq:
+                while pending and pending[0].seq <= ack.seq:
                     pending.pop(0)
                 lowered += ack.nodes_lowered
                 last_ack = ack
@@ -512,7 +547,7 @@ class Session:
                 self.refresh()
                 self._next_seq = self.last_seq + 1
                 raise _from_request_error(resp.error)
-        self._next_seq = batches[-1].moves.seq + 1 if batches else self._next_seq
+        self._next_seq = batches[-1].seq + 1 if batches else self._next_seq
         return SendResult(
             last_seq=self._next_seq - 1, batches=len(batches),
             moves_applied=last_ack.moves_applied if last_ack else

@@ -246,3 +246,20 @@ def test_the_frontend_example_simulates_bear(swarfd, tmp_path):
     h = np.load(tmp_path / "bear-heights.npy")
     assert h.shape == (801, 801)
     assert h.min() == -17.368 and h.max() <= 0
+
+
+@pytest.mark.parametrize("seq,tool,rapid,reposition,points", [
+    (1, 1, False, False, 1), (300, -7, True, False, 5),
+    (2**40 + 3, 2**31 - 1, False, True, 40_000), (7, 0, True, True, 2)])
+def test_batches_are_serialized_as_protobuf_does(seq, tool, rapid,
+                                                 reposition, points):
+    from swarf_client import client as impl
+    from swarf_client._proto import swarf_pb2 as pb
+
+    xyz = np.random.default_rng(seq).normal(size=(points, 3)) * 1e3
+    xyz[0, 0] = -0.0
+    want = pb.SimulateRequest(moves=pb.MoveBatch(
+        seq=seq, tool_id=tool, xyz=xyz.ravel().tolist(), rapid=rapid,
+        reposition=reposition)).SerializeToString()
+    got = impl._batch(seq, tool, xyz, rapid, reposition)
+    assert got.seq == seq and got.data == want
