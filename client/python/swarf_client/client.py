@@ -17,7 +17,7 @@ import time
 from typing import (Any, Dict, Iterable, Iterator, List, Mapping, Optional,
                     Sequence, Tuple, Union)
 
-import grpc
+import grpc  # type: ignore[import]  # grpcio ships no type hints
 import numpy as np
 import numpy.typing as npt
 
@@ -646,7 +646,7 @@ class Session:
         session raises FAILED_PRECONDITION)."""
         i0, i1, j0, j1 = window = self._node_window(region)
         shape = (j1 - j0, i1 - i0)
-        out = {"w": np.empty(shape, np.float64)}
+        out: Dict[str, npt.NDArray[Any]] = {"w": np.empty(shape, np.float64)}
         for name in ("wx", "wy", "wxx", "wxy", "wyy"):
             out[name] = np.empty(shape, np.float32)
         for t in self._tiles(window, pb.PRECISION_DOUBLE, True, False):
