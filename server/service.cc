@@ -638,7 +638,10 @@ class SimulateReactor
         b.seq(), b.tool_id(), std::span<const double>(b.xyz().data(), b.xyz_size()),
         registry_->limits().max_batch_points, b.reposition());
     if (!r.ok()) {
-      if (r.status().code() == absl::StatusCode::kFailedPrecondition) {
+      // A gap, or another batch under an acknowledged seq: what follows on
+      // this stream continues a history the session does not have.
+      if (r.status().code() == absl::StatusCode::kFailedPrecondition ||
+          r.status().code() == absl::StatusCode::kAlreadyExists) {
         spdlog::warn("session {}: {}", session_->id(),
                      std::string(r.status().message()));
         absl::MutexLock l(&mu_);

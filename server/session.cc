@@ -376,9 +376,8 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
       // an acknowledged seq is a client bug or a second writer.
       return absl::AlreadyExistsError(absl::StrCat(
           "moves.seq ", seq, " was already acknowledged with other moves "
-          "(tool, reposition or xyz differ); the session is at seq ",
-          last_seq_, ": resend the same batch or continue from ",
-          last_seq_ + 1));
+          "(tool, reposition or xyz differ): a second writer, or a client "
+          "that lost track; the session is at seq ", last_seq_));
     }
     r.duplicate = true;
     r.moves_applied = wp_->move_count();

@@ -516,17 +516,18 @@ class Session:
                     pending.append(batch)
                 resp = stream.recv()
             except (grpc.RpcError, StopIteration) as e:
-                code = (e.code() if isinstance(e, grpc.RpcError)
-                        else grpc.StatusCode.UNAVAILABLE)
+                err = (_from_rpc(e) if isinstance(e, grpc.RpcError) else
+                       SwarfError(grpc.StatusCode.UNAVAILABLE,
+                                  "the stream ended"))
                 self._drop_stream()
-                if code not in _RESUMABLE:
-                    raise _from_rpc(e) if isinstance(e, grpc.RpcError) else \
-                        SwarfError(code, "the stream ended") from None
                 now = time.monotonic()
                 deadline = deadline or now + self.resume_timeout
-                if now > deadline:
-                    raise _from_rpc(e) if isinstance(e, grpc.RpcError) else \
-                        SwarfError(code, "the stream ended") from None
+                if err.code not in _RESUMABLE or now > deadline:
+                    # A gap, another writer (ALREADY_EXISTS), a deleted
+                    # session...: the next send starts from the server's
+                    # state.
+                    self._resync()
+                    raise err from None
                 last = self._wait_for_server(deadline)
                 # Applied before the drop: acknowledged by the server's state.
                 todo = [b for b in pending + todo if b.seq > last]
@@ -544,8 +545,7 @@ class Session:
                 # The batch was not applied; the ones sent after it would
                 # leave a gap: start over from the server's state next time.
                 self._drop_stream()
-                self.refresh()
-                self._next_seq = self.last_seq + 1
+                self._resync()
                 raise _from_request_error(resp.error)
         self._next_seq = batches[-1].seq + 1 if batches else self._next_seq
         return SendResult(
@@ -553,6 +553,14 @@ class Session:
             moves_applied=last_ack.moves_applied if last_ack else
             self.moves_applied, nodes_lowered=lowered,
             version=last_ack.version if last_ack else 0, resumed=resumed)
+
+    def _resync(self) -> None:
+        """The next batch follows the server's last applied one."""
+        try:
+            self.refresh()
+            self._next_seq = self.last_seq + 1
+        except SwarfError:
+            pass  # the caller raises the error that brought it here
 
     def _wait_for_server(self, deadline: float) -> int:
         """The session's last_seq once the server answers again."""

@@ -180,14 +180,17 @@ def test_error_paths(client):
         assert "moves.tool_id" in e.value.message
         # Nothing was consumed: seq 1 is still free.
         assert s.send(line).last_seq == 1
-        # A second writer on the same session resending seq 2 with other
-        # moves: ALREADY_EXISTS, not a silent duplicate.
+        # A second writer on the same session sending seq 2 (and 3) with
+        # other moves: ALREADY_EXISTS, not a silent duplicate, and nothing
+        # of it applied.
         other = client.session("errors")
         s.send(line)
         with pytest.raises(SwarfError) as e:
-            other.send([[2, 2, -0.1], [8, 8, -0.1]])
+            other.send([[2, 2, -0.1], [8, 8, -0.1], [5, 5, -0.1]],
+                       batch_points=2)
         assert e.value.code == grpc.StatusCode.ALREADY_EXISTS
-        assert e.value.request_id == 2
+        assert "moves.seq 2" in e.value.message
+        assert other.refresh().last_seq == 2
         # It resynchronised: its next send is seq 3.
         assert other.send([[2, 2, -0.1]]).last_seq == 3
         with pytest.raises(SwarfError) as e:
