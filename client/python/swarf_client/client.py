@@ -176,6 +176,9 @@ class Client:
         the server (system roots when None); certificate_chain and
         private_key present a client certificate.
       timeout: seconds for each unary call.
+      wait_for_ready: a call made while the server cannot be reached (not
+        started yet, restarting, a connection attempt that timed out) waits
+        for it up to `timeout` instead of failing at once with UNAVAILABLE.
 
     Messages from the server may be as large as its --max_message_mb: the
     channel accepts any size, and what the client sends (batches, probes)
@@ -188,7 +191,7 @@ class Client:
                  root_certificates: Union[None, str, bytes] = None,
                  certificate_chain: Union[None, str, bytes] = None,
                  private_key: Union[None, str, bytes] = None,
-                 timeout: float = 60.0) -> None:
+                 timeout: float = 60.0, wait_for_ready: bool = True) -> None:
         options = [("grpc.max_receive_message_length", -1),
                    ("grpc.max_send_message_length", -1),
                    # A restarted server is found again within 2 s, not
@@ -206,6 +209,7 @@ class Client:
         self._stub = pb_grpc.SwarfStub(self._channel)
         self._token = token
         self.timeout = timeout
+        self.wait_for_ready = wait_for_ready
         self.target = target
 
     # -- plumbing
@@ -218,12 +222,11 @@ class Client:
             md.append(("authorization", f"Bearer {self._token}"))
         return md
 
-    def _call(self, method: str, request: Any, session_id: str = "",
-              wait_for_ready: bool = False) -> Any:
+    def _call(self, method: str, request: Any, session_id: str = "") -> Any:
         try:
             return getattr(self._stub, method)(
                 request, metadata=self._md(session_id), timeout=self.timeout,
-                wait_for_ready=wait_for_ready)
+                wait_for_ready=self.wait_for_ready)
         except grpc.RpcError as e:
             raise _from_rpc(e) from None
 
@@ -231,7 +234,8 @@ class Client:
                 session_id: str) -> Iterator[Any]:
         try:
             yield from getattr(self._stub, method)(
-                request, metadata=self._md(session_id), timeout=self.timeout)
+                request, metadata=self._md(session_id), timeout=self.timeout,
+                wait_for_ready=self.wait_for_ready)
         except grpc.RpcError as e:
             raise _from_rpc(e) from None
 
