@@ -1,6 +1,9 @@
 // swarf table: the paper's Tables 1 and 2 (both instances, both schemes).
 #include <algorithm>
+#include <bit>
 #include <chrono>
+#include <fstream>
+#include <optional>
 #include <cstdio>
 #include <iostream>
 #include <string>
@@ -20,11 +23,14 @@ namespace {
 
 constexpr char kUsage[] =
     "usage: swarf table [--instance five-balls|five-cylinders] [--mesh N]\n"
-    "                   [--runs N] [--json]\n"
+    "                   [--runs N] [--json] [--heights DIR]\n"
     "Prints the paper's Tables 1 and 2: for each instance, mesh (default 100\n"
     "and 1000) and scheme, the nodes, parameters, error against the exact\n"
     "surface (21 samples per element) and the time to apply the moves\n"
-    "(median of --runs runs; default 11 for meshes up to 200, else 5).\n";
+    "(median of --runs runs; default 11 for meshes up to 200, else 5).\n"
+    "--heights DIR also writes each grid's node heights, exactly as\n"
+    "simulated, to DIR/<instance>-<mesh>-<scheme>.npy (float64, shape\n"
+    "(mesh + 1, mesh + 1), indexed [j, i]): a reference for clients.\n";
 
 struct Row {
   std::string instance;
@@ -35,8 +41,38 @@ struct Row {
   double seconds;
 };
 
+// Writes the node heights w[j][i] as a NumPy .npy file (format 1.0,
+// little-endian float64, C order).
+absl::Status WriteHeightsNpy(const Workpiece& wp, const std::string& path) {
+  const int32_t rows = wp.grid().ny() + 1, cols = wp.grid().nx() + 1;
+  std::string header = absl::StrCat(
+      "{'descr': '<f8', 'fortran_order': False, 'shape': (", rows, ", ", cols,
+      "), }");
+  // Magic (6) + version (2) + length (2) + header + '\n', a multiple of 64.
+  header.append(63 - (10 + header.size()) % 64, ' ');
+  header.push_back('\n');
+  std::ofstream out(path, std::ios::binary);
+  const uint16_t len = static_cast<uint16_t>(header.size());
+  out.write("\x93NUMPY\x01\x00", 8);
+  const char len_le[2] = {static_cast<char>(len & 0xff),
+                          static_cast<char>(len >> 8)};
+  out.write(len_le, 2);
+  out << header;
+  static_assert(std::endian::native == std::endian::little);
+  for (int32_t j = 0; j < rows; ++j) {
+    for (int32_t i = 0; i < cols; ++i) {
+      const double w = wp.Node(i, j).jet.w;
+      out.write(reinterpret_cast<const char*>(&w), sizeof w);
+    }
+  }
+  out.close();
+  if (!out) return absl::UnavailableError(absl::StrCat("cannot write ", path));
+  return absl::OkStatus();
+}
+
 absl::StatusOr<Row> MeasureRow(const Instance& inst, int mesh,
-                               SchemeKind scheme, int runs) {
+                               SchemeKind scheme, int runs,
+                               const std::optional<std::string>& heights_dir) {
   std::vector<double> times;
   std::unique_ptr<Workpiece> wp;
   for (int k = 0; k < runs; ++k) {
@@ -50,6 +86,12 @@ absl::StatusOr<Row> MeasureRow(const Instance& inst, int mesh,
     times.push_back(std::chrono::duration<double>(t1 - t0).count());
   }
   std::sort(times.begin(), times.end());
+  if (heights_dir.has_value()) {
+    const std::string path =
+        absl::StrCat(*heights_dir, "/", inst.name, "-", mesh, "-",
+                     std::string(GetScheme(scheme).name()), ".npy");
+    if (absl::Status s = WriteHeightsNpy(*wp, path); !s.ok()) return s;
+  }
   auto err = MeasureError(*wp);
   if (!err.ok()) return err.status();
   Row row;
@@ -127,7 +169,8 @@ void PrintText(const std::vector<Row>& rows) {
 }  // namespace
 
 int TableCommand(const std::vector<std::string>& argv) {
-  auto args = Args::Parse(argv, {"instance", "mesh", "runs"}, {"json", "help"});
+  auto args = Args::Parse(argv, {"instance", "mesh", "runs", "heights"},
+                          {"json", "help"});
   if (!args.ok()) {
     std::cerr << "swarf table: " << args.status().message() << "\n" << kUsage;
     return 2;
@@ -170,7 +213,7 @@ int TableCommand(const std::vector<std::string>& argv) {
           return 2;
         }
         const int n = runs->value_or(m <= 200 ? 11 : 5);
-        auto row = MeasureRow(*inst, m, scheme, n);
+        auto row = MeasureRow(*inst, m, scheme, n, args->Get("heights"));
         if (!row.ok()) {
           std::cerr << "swarf table: " << row.status().message() << "\n";
           return 1;

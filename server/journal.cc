@@ -113,6 +113,13 @@ uint32_t Crc32c(const void* data, size_t size, uint32_t crc) {
   return Crc32cPortable(data, size, crc);
 }
 
+uint32_t BatchDigest(int32_t tool_id, bool reposition,
+                     std::span<const double> xyz) {
+  // The journal row's checksum without the seq (which the caller matches).
+  return BatchCrc(0, tool_id, reposition, xyz.data(),
+                  xyz.size() * sizeof(double));
+}
+
 absl::StatusOr<std::unique_ptr<Journal>> Journal::Create(
     const std::string& path, const std::string& definition,
     const std::string& owner, JournalSync sync) {
@@ -232,8 +239,13 @@ absl::Status Journal::Append(uint64_t seq, int32_t tool_id, bool reposition,
   sqlite3_bind_int64(insert_, 1, static_cast<sqlite3_int64>(seq));
   sqlite3_bind_int(insert_, 2, tool_id);
   sqlite3_bind_int(insert_, 3, reposition ? 1 : 0);
-  sqlite3_bind_blob(insert_, 4, xyz.data(), static_cast<int>(bytes),
-                    SQLITE_STATIC);
+  if (bytes == 0) {
+    // A null pointer would bind NULL, which the NOT NULL column refuses.
+    sqlite3_bind_zeroblob(insert_, 4, 0);
+  } else {
+    sqlite3_bind_blob(insert_, 4, xyz.data(), static_cast<int>(bytes),
+                      SQLITE_STATIC);
+  }
   sqlite3_bind_int64(insert_, 5,
                      BatchCrc(seq, tool_id, reposition, xyz.data(), bytes));
   const int rc = sqlite3_step(insert_);

@@ -36,6 +36,11 @@ uint32_t Crc32c(const void* data, size_t size, uint32_t crc = 0);
 // The same by table lookup, without the CPU's instruction (for tests).
 uint32_t Crc32cPortable(const void* data, size_t size, uint32_t crc = 0);
 
+// A digest of a batch's contents (tool, reposition flag, points), to tell a
+// resent batch from a different one under the same seq.
+uint32_t BatchDigest(int32_t tool_id, bool reposition,
+                     std::span<const double> xyz);
+
 class Journal {
  public:
   struct Batch {

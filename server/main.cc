@@ -7,6 +7,8 @@
 #include "absl/flags/flag.h"
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
+#include "absl/flags/usage_config.h"
+#include "absl/strings/match.h"
 #include "server/server.h"
 #include "spdlog/spdlog.h"
 
@@ -70,6 +72,14 @@ std::string ReplicaName() {
 
 int main(int argc, char** argv) {
   absl::SetProgramUsageMessage("swarfd [flags]: the swarf simulation server");
+  // absl lists only the flags of a file named like the program (swarfd.cc);
+  // ours are here, so --help and --helpshort must be told.
+  absl::FlagsUsageConfig usage;
+  usage.contains_help_flags = [](absl::string_view file) {
+    return absl::EndsWith(file, "server/main.cc");
+  };
+  usage.contains_helpshort_flags = usage.contains_help_flags;
+  absl::SetFlagsUsageConfig(usage);
   absl::ParseCommandLine(argc, argv);
   spdlog::set_level(spdlog::level::from_str(absl::GetFlag(FLAGS_log_level)));
 

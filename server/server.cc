@@ -22,6 +22,17 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
         "max_message_bytes must be at least ", kMinMessageBytes,
         " (a tile with derivatives is about 131 KB)"));
   }
+  // A batch at the point limit must fit in one message, or a client that
+  // obeys the documented limit would have its stream ended by the transport.
+  const int64_t full_batch = FullBatchMessageBytes(options.limits.max_batch_points);
+  if (options.limits.max_batch_points < 1 ||
+      full_batch > options.limits.max_message_bytes) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "max_batch_points ", options.limits.max_batch_points,
+        " must be at least 1, and a batch that large (", full_batch,
+        " bytes) must fit max_message_bytes ",
+        options.limits.max_message_bytes));
+  }
   auto tokens = TokenStore::Open(options.auth_tokens_file);
   if (!tokens.ok()) return tokens.status();
   if (!options.listen.empty() && !IsLoopback(options.listen) &&
@@ -102,7 +113,10 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
     return absl::UnavailableError(
         absl::StrCat("cannot listen on ", options.listen));
   }
+  // Probes may name the service (Kubernetes' grpc probe `service`) or not.
   s->server_->GetHealthCheckService()->SetServingStatus(true);
+  s->server_->GetHealthCheckService()->SetServingStatus(
+      ::swarf::v1::Swarf::service_full_name(), true);
   const double idle = options.limits.idle_evict_seconds;
   if (!options.persistence.data_dir.empty() && idle > 0) {
     SwarfServer* self = s.get();
@@ -119,6 +133,12 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
     });
   }
   return s;
+}
+
+int64_t FullBatchMessageBytes(int64_t points) {
+  // 24 bytes a point, the field's length and the batch's other fields
+  // (seq, tool, flags, oneof framing): 64 bytes is ample.
+  return 24 * points + 64;
 }
 
 bool IsLoopback(const std::string& listen) {
@@ -149,7 +169,7 @@ void SwarfServer::Shutdown(absl::Duration deadline) {
     stopping_ = true;
   }
   if (evictor_.joinable()) evictor_.join();
-  server_->GetHealthCheckService()->SetServingStatus(false);
+  server_->GetHealthCheckService()->SetServingStatus(false);  // every name
   server_->Shutdown(std::chrono::system_clock::now() +
                     absl::ToChronoSeconds(deadline));
   server_->Wait();

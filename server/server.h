@@ -39,6 +39,11 @@ struct ServerOptions {
   std::string trusted_proxies;
 };
 
+// The largest serialized SimulateRequest of a batch of `points` points
+// (bytes, an upper bound); Start refuses limits where it exceeds
+// max_message_bytes.
+int64_t FullBatchMessageBytes(int64_t points);
+
 // Whether a listen address (host:port) is on the loopback interface.
 bool IsLoopback(const std::string& listen);
 

@@ -15,6 +15,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/synchronization/mutex.h"
+#include "core/valuation.h"
 #include "server/convert.h"
 #include "server/status_util.h"
 #include "spdlog/spdlog.h"
@@ -79,6 +80,69 @@ int64_t PeakMemoryBytes() {
     }
   }
   return 0;
+}
+
+// RESOURCE_EXHAUSTED unless an answer of `bytes` fits the server's message
+// limit: the caller answers with this status instead of a message the
+// transport would refuse (which would end a stream).
+absl::Status FitsMessage(size_t bytes, int64_t limit, absl::string_view what) {
+  if (static_cast<int64_t>(bytes) <= limit) return absl::OkStatus();
+  return absl::ResourceExhaustedError(absl::StrCat(
+      what, " would be a message of ", bytes,
+      " bytes, over the server's limit of ", limit,
+      " (--max_message_mb): ask for a smaller region or map"));
+}
+
+// The error map's size is known before it is computed: refuse early.
+absl::Status MapFits(int32_t cols, int32_t rows, int64_t limit) {
+  if (cols <= 0 || rows <= 0 || int64_t{cols} * rows > kMaxMapCells) {
+    return absl::OkStatus();  // bad input: ComputeStats names the fields
+  }
+  // 4 bytes a cell, plus the statistics and framing.
+  return FitsMessage(4 * static_cast<size_t>(cols) * rows + 256, limit,
+                     absl::StrCat("an error map of ", cols, " x ", rows,
+                                  " cells"));
+}
+
+// The kind of request a RequestError answers.
+pb::RequestKind KindOf(pb::SimulateRequest::RequestCase c) {
+  switch (c) {
+    case pb::SimulateRequest::kMoves:
+      return pb::REQUEST_KIND_MOVES;
+    case pb::SimulateRequest::kTiles:
+      return pb::REQUEST_KIND_TILES;
+    case pb::SimulateRequest::kStats:
+      return pb::REQUEST_KIND_STATS;
+    case pb::SimulateRequest::kMarks:
+      return pb::REQUEST_KIND_MARKS;
+    case pb::SimulateRequest::kSubscribe:
+      return pb::REQUEST_KIND_SUBSCRIBE;
+    case pb::SimulateRequest::REQUEST_NOT_SET:
+      break;
+  }
+  return pb::REQUEST_KIND_UNSPECIFIED;
+}
+
+// The id and kind of the request a stream response answers (to replace it
+// with a RequestError).
+std::pair<uint64_t, pb::RequestKind> RequestOf(const pb::SimulateResponse& r) {
+  switch (r.response_case()) {
+    case pb::SimulateResponse::kAck:
+      return {r.ack().seq(), pb::REQUEST_KIND_MOVES};
+    case pb::SimulateResponse::kTile:
+      return {r.tile().request_id(), pb::REQUEST_KIND_TILES};
+    case pb::SimulateResponse::kTilesDone:
+      return {r.tiles_done().request_id(), pb::REQUEST_KIND_TILES};
+    case pb::SimulateResponse::kStats:
+      return {r.stats().request_id(), pb::REQUEST_KIND_STATS};
+    case pb::SimulateResponse::kPolylines:
+      return {r.polylines().request_id(), pb::REQUEST_KIND_MARKS};
+    case pb::SimulateResponse::kError:
+      return {r.error().request_id(), r.error().kind()};
+    case pb::SimulateResponse::RESPONSE_NOT_SET:
+      break;
+  }
+  return {0, pb::REQUEST_KIND_UNSPECIFIED};
 }
 
 // Runs `work` on the executor and finishes the unary call with its status.
@@ -473,6 +537,21 @@ class SimulateReactor
       done->set_tiles(job_count);
     }
     if (req.has_value()) Handle(*req, &responses);
+    // Never a message over the limit: the transport would end the stream.
+    const int64_t limit = registry_->limits().max_message_bytes;
+    for (pb::SimulateResponse& r : responses) {
+      absl::Status fits =
+          FitsMessage(r.ByteSizeLong(), limit, "the answer to this request");
+      if (!fits.ok()) {
+        const auto [id, kind] = RequestOf(r);
+        r.Clear();
+        pb::RequestError* e = r.mutable_error();
+        e->set_request_id(id);
+        e->set_kind(kind);
+        e->set_code(static_cast<int32_t>(fits.code()));
+        e->set_message(std::string(fits.message()));
+      }
+    }
     Act act;
     {
       absl::MutexLock l(&mu_);
@@ -493,8 +572,20 @@ class SimulateReactor
     e->set_message(std::string(s.message()));
   }
 
+  // Answers one request; its errors say what kind of request it was.
   void Handle(const pb::SimulateRequest& req,
               std::vector<pb::SimulateResponse>* out) {
+    const size_t first = out->size();
+    Dispatch(req, out);
+    for (size_t k = first; k < out->size(); ++k) {
+      if ((*out)[k].has_error()) {
+        (*out)[k].mutable_error()->set_kind(KindOf(req.request_case()));
+      }
+    }
+  }
+
+  void Dispatch(const pb::SimulateRequest& req,
+                std::vector<pb::SimulateResponse>* out) {
     switch (req.request_case()) {
       case pb::SimulateRequest::kMoves:
         return HandleMoves(req.moves(), out);
@@ -502,6 +593,12 @@ class SimulateReactor
         return HandleTiles(req.tiles(), out);
       case pb::SimulateRequest::kStats: {
         const pb::StatsRequest& r = req.stats();
+        if (absl::Status fits =
+                MapFits(r.map_cols(), r.map_rows(),
+                        registry_->limits().max_message_bytes);
+            !fits.ok()) {
+          return Error(r.request_id(), fits, out);
+        }
         auto stats = session_->Read([&](const Workpiece& wp) {
           return ComputeStats(wp, r.has_region() ? &r.region() : nullptr,
                               r.samples_per_edge(), r.map_cols(),
@@ -541,7 +638,10 @@ class SimulateReactor
         b.seq(), b.tool_id(), std::span<const double>(b.xyz().data(), b.xyz_size()),
         registry_->limits().max_batch_points, b.reposition());
     if (!r.ok()) {
-      if (r.status().code() == absl::StatusCode::kFailedPrecondition) {
+      // A gap, or another batch under an acknowledged seq: what follows on
+      // this stream continues a history the session does not have.
+      if (r.status().code() == absl::StatusCode::kFailedPrecondition ||
+          r.status().code() == absl::StatusCode::kAlreadyExists) {
         spdlog::warn("session {}: {}", session_->id(),
                      std::string(r.status().message()));
         absl::MutexLock l(&mu_);
@@ -803,12 +903,22 @@ grpc::ServerUnaryReactor* SwarfService::GetErrorStats(
   return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
     auto session = SessionOf(registry_, tokens_, ctx, req->session_id());
     if (!session.ok()) return session.status();
+    const int64_t limit = registry_->limits().max_message_bytes;
+    if (absl::Status fits = MapFits(req->map_cols(), req->map_rows(), limit);
+        !fits.ok()) {
+      return fits;
+    }
     auto stats = (*session)->Read([&](const Workpiece& wp) {
       return ComputeStats(wp, req->has_region() ? &req->region() : nullptr,
                           req->samples_per_edge(), req->map_cols(),
                           req->map_rows());
     });
     if (!stats.ok()) return stats.status();
+    if (absl::Status fits = FitsMessage(stats->ByteSizeLong(), limit,
+                                        "the error statistics");
+        !fits.ok()) {
+      return fits;
+    }
     *resp = *std::move(stats);
     return absl::OkStatus();
   });
@@ -829,6 +939,14 @@ grpc::ServerWriteReactor<pb::Polyline>* SwarfService::GetCuttingMarks(
                               req->min_angle_deg());
         });
         if (!marks.ok()) return marks.status();
+        for (pb::Polyline& p : *marks) {
+          if (absl::Status fits = FitsMessage(
+                  p.ByteSizeLong(), registry->limits().max_message_bytes,
+                  "a cutting mark");
+              !fits.ok()) {
+            return fits;
+          }
+        }
         for (pb::Polyline& p : *marks) out->push_back(std::move(p));
         return false;
       });
@@ -843,6 +961,14 @@ grpc::ServerUnaryReactor* SwarfService::Probe(
     auto probe = (*session)->Read(
         [&](const Workpiece& wp) { return ComputeProbe(wp, *req); });
     if (!probe.ok()) return probe.status();
+    if (absl::Status fits =
+            FitsMessage(probe->ByteSizeLong(),
+                        registry_->limits().max_message_bytes,
+                        absl::StrCat("the answer for ", req->xy_size() / 2,
+                                     " points"));
+        !fits.ok()) {
+      return fits;
+    }
     *resp = *std::move(probe);
     return absl::OkStatus();
   });

@@ -135,6 +135,7 @@ absl::StatusOr<std::string> Session::ReplayLocked(
   wp_ = *std::move(wp);
   last_seq_ = 0;
   last_position_.reset();
+  digests_.clear();
   snapshot_moves_ = 0;
   *unusable = false;
   int64_t replayed = 0;
@@ -153,6 +154,7 @@ absl::StatusOr<std::string> Session::ReplayLocked(
     if (absl::Status s = wp_->Record(moves); !s.ok()) return s;
     last_seq_ = b.seq;
     last_position_ = end;
+    digests_.push_back(BatchDigest(b.tool_id, b.reposition, b.xyz));
     if (b.seq == snapshot->seq) {
       if (absl::Status s = LoadSnapshot(snapshots_.path, *snapshot, wp_.get());
           !s.ok()) {
@@ -253,6 +255,12 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
                                                 bool reposition) {
   if (seq == 0) {
     return absl::InvalidArgumentError("moves.seq must start at 1");
+  }
+  if (xyz.empty()) {
+    // Journaled or not: an empty batch moves nothing and would consume a
+    // seq, so it is refused the same way everywhere.
+    return absl::InvalidArgumentError(
+        "moves.xyz is empty: a batch needs at least one (x, y, z) point");
   }
   if (xyz.size() % 3 != 0) {
     return absl::InvalidArgumentError(
@@ -360,7 +368,16 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
                                                  bool journal) const {
   BatchResult r;
   r.seq = seq;
+  const uint32_t digest = BatchDigest(tool.id, reposition, xyz);
   if (seq <= last_seq_) {
+    if (seq <= digests_.size() && digests_[seq - 1] != digest) {
+      // Resending is only safe with the same moves: a differing batch under
+      // an acknowledged seq is a client bug or a second writer.
+      return absl::AlreadyExistsError(absl::StrCat(
+          "moves.seq ", seq, " was already acknowledged with other moves "
+          "(tool, reposition or xyz differ): a second writer, or a client "
+          "that lost track; the session is at seq ", last_seq_));
+    }
     r.duplicate = true;
     r.moves_applied = wp_->move_count();
     r.version = wp_->version();
@@ -377,7 +394,13 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
   if (journal && journal_ != nullptr) {
     if (absl::Status s = journal_->Append(seq, tool.id, reposition, xyz);
         !s.ok()) {
-      return absl::UnavailableError(s.message());
+      // The storage's own words stay in the log: clients get what happened.
+      spdlog::error("session {}: batch {}: {}", spec_.id, seq,
+                    std::string(s.message()));
+      return absl::UnavailableError(absl::StrCat(
+          "session ", spec_.id, ": batch ", seq,
+          " could not be written to the server's journal (a storage error, "
+          "logged on the server); nothing was applied"));
     }
   }
   auto applied = wp_->Apply(moves);
@@ -387,6 +410,7 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
   }
   last_seq_ = seq;
   last_position_ = pos;
+  digests_.push_back(digest);
   r.moves_applied = wp_->move_count();
   r.nodes_lowered = applied->nodes_lowered;
   r.version = applied->version;

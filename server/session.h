@@ -107,10 +107,12 @@ class Session {
 
   // Applies batch `seq`: the tip polyline xyz (x, y, z triples) continuing
   // from the last position, cut with tool `tool_id`. seq <= last applied:
-  // a duplicate, acknowledged without applying. seq > last + 1:
-  // FailedPrecondition. Bad values: InvalidArgument naming the field, and
-  // nothing applied. Batches of more than max_points points:
-  // InvalidArgument.
+  // a duplicate, acknowledged without applying, when its tool, reposition
+  // and points are those first applied under that seq (BatchDigest), else
+  // AlreadyExists. seq > last + 1: FailedPrecondition. Bad values (an empty
+  // batch too): InvalidArgument naming the field, and nothing applied.
+  // Batches of more than max_points points: InvalidArgument. A journal
+  // that cannot be written: Unavailable (details only in the log).
   // With `reposition`, the first point only places the tool.
   absl::StatusOr<BatchResult> ApplyBatch(uint64_t seq, int32_t tool_id,
                                          std::span<const double> xyz,
@@ -182,6 +184,9 @@ class Session {
   bool deleted_ ABSL_GUARDED_BY(mu_) = false;
   mutable uint64_t last_seq_ ABSL_GUARDED_BY(mu_) = 0;
   mutable std::optional<Vec3> last_position_ ABSL_GUARDED_BY(mu_);
+  // BatchDigest of every applied batch, [seq - 1]: a resent seq must carry
+  // the same moves (4 bytes a batch; rebuilt from the journal on restore).
+  mutable std::vector<uint32_t> digests_ ABSL_GUARDED_BY(mu_);
   SnapshotPolicy snapshots_;  // set once, before the session is shared
   // Serialises snapshot writers (which hold mu_ shared only).
   mutable absl::Mutex snapshot_mu_ ABSL_ACQUIRED_AFTER(mu_);

@@ -1555,6 +1555,7 @@ TEST_F(ServerTest, ResourceExhaustedAtEachLimit) {
   {
     Limits limits;
     limits.max_message_bytes = 1 << 20;  // the server's floor
+    limits.max_batch_points = 40000;      // a full batch still fits
     ASSERT_NO_FATAL_FAILURE(StartServer(limits));
     ASSERT_TRUE(Create(SmallRequest("big")).ok());
     std::vector<double> xyz;
@@ -1616,6 +1617,11 @@ TEST_F(ServerTest, HealthServingAndReplicaMetadata) {
   grpc::Status st = HealthCheck(channel_, "", &resp);
   ASSERT_TRUE(st.ok()) << st.error_message();
   // HealthCheckResponse{status: SERVING (1)}.
+  EXPECT_EQ(resp, std::string("\x08\x01", 2));
+  // Probes that name the service (Kubernetes' grpc probe `service`).
+  resp.clear();
+  st = HealthCheck(channel_, "swarf.v1.Swarf", &resp);
+  ASSERT_TRUE(st.ok()) << st.error_message();
   EXPECT_EQ(resp, std::string("\x08\x01", 2));
   st = HealthCheck(channel_, "no.such.Service", &resp);
   EXPECT_EQ(st.error_code(), grpc::StatusCode::NOT_FOUND);

@@ -1,5 +1,6 @@
 #include "tests/sim_stream.h"
 
+#include <string>
 #include <utility>
 
 #include "server/service.h"
@@ -7,6 +8,14 @@
 namespace swarf::testing {
 
 namespace pb = ::swarf::v1;
+
+std::shared_ptr<grpc::Channel> UnlimitedChannel(int port) {
+  grpc::ChannelArguments args;
+  args.SetMaxReceiveMessageSize(-1);
+  args.SetMaxSendMessageSize(-1);
+  return grpc::CreateCustomChannel("127.0.0.1:" + std::to_string(port),
+                                   grpc::InsecureChannelCredentials(), args);
+}
 
 void SetDeadline(grpc::ClientContext* ctx) {
   ctx->set_deadline(std::chrono::system_clock::now() + kTimeout);

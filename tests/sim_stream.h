@@ -23,6 +23,10 @@ namespace swarf::testing {
 // Bound on every call and wait, so that a hang fails instead of blocking.
 inline constexpr auto kTimeout = std::chrono::seconds(60);
 
+// A channel to 127.0.0.1:port that sends and receives messages of any
+// size (the server's limits are what a test exercises).
+std::shared_ptr<grpc::Channel> UnlimitedChannel(int port);
+
 // Sets the call's deadline to kTimeout from now.
 void SetDeadline(grpc::ClientContext* ctx);
 

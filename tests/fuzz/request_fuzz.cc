@@ -234,9 +234,14 @@ void FuzzBatch(Session& s, const pb::MoveBatch& b) {
     FUZZ_CHECK(SameState(before, after));
     const absl::StatusCode c = r.status().code();
     FUZZ_CHECK(c == absl::StatusCode::kInvalidArgument ||
-               c == absl::StatusCode::kFailedPrecondition);
+               c == absl::StatusCode::kFailedPrecondition ||
+               c == absl::StatusCode::kAlreadyExists);
     if (c == absl::StatusCode::kFailedPrecondition) {
       FUZZ_CHECK(b.seq() > before.last_seq + 1);
+    }
+    // Another batch under an acknowledged seq.
+    if (c == absl::StatusCode::kAlreadyExists) {
+      FUZZ_CHECK(b.seq() >= 1 && b.seq() <= before.last_seq);
     }
     return;
   }

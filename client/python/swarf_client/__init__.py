@@ -1,0 +1,20 @@
+"""swarf_client: a Python client of swarf, the NC milling simulation service.
+
+    import numpy as np
+    import swarf_client
+
+    with swarf_client.Client("127.0.0.1:50051") as client:
+        with client.create_session((0, 0, 100, 100, 0), spacing=0.5,
+                                   tools={1: 3.0}, delete_on_exit=True) as s:
+            s.send(np.array([[10, 50, 5], [10, 50, -2], [90, 50, -2]]))
+            h = s.heights()          # h.z[j, i] at (h.x[i], h.y[j]), mm
+
+Millimetres and degrees throughout; moves are tool-TIP positions. Errors
+are SwarfError carrying the gRPC status code.
+"""
+
+from .client import (TILE_SIZE, Client, ErrorStats, Heights, Jets, Mark,
+                     ProbeResult, SendResult, Session, SwarfError)
+
+__all__ = ["Client", "Session", "SwarfError", "SendResult", "Heights",
+           "Jets", "ErrorStats", "Mark", "ProbeResult", "TILE_SIZE"]
