@@ -112,6 +112,13 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
                              const OutputOptions& options, RunReport* report) {
   const bool files = !options.dir.empty();
   const StockSpec& stock = report->stock;
+  auto t0 = std::chrono::steady_clock::now();
+  auto step = [&](const char* name) {
+    const auto now = std::chrono::steady_clock::now();
+    report->output_steps.emplace_back(
+        name, std::chrono::duration<double>(now - t0).count());
+    t0 = now;
+  };
   auto stats = Retrying<pb::ErrorStats>(
       "the error statistics", [&]() -> absl::StatusOr<pb::ErrorStats> {
         auto ctx = conn.Context(id, 3600);
@@ -130,6 +137,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
       });
   if (!stats.ok()) return stats.status();
   report->error = *std::move(stats);
+  step("error_stats");
   std::vector<MarkPolyline> marks;
   if (report->scheme == SchemeKind::kTaylor) {
     auto m = Retrying<std::vector<MarkPolyline>>(
@@ -137,6 +145,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     if (!m.ok()) return m.status();
     marks = *std::move(m);
     report->marks = Summarize(marks);
+    step("marks");
   }
   if (!files) return absl::OkStatus();
 
@@ -150,6 +159,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     return FetchGrid(conn, id, stock, report->scheme);
   });
   if (!grid.ok()) return grid.status();
+  step("tiles");
   ErrorRaster raster;
   raster.region = {stock.x0, stock.y0, stock.x1, stock.y1};
   raster.cols = report->error.map_cols();
@@ -162,7 +172,11 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
                                  raster.cols > 0 ? &raster : nullptr,
                                  report->marks ? &marks : nullptr, out);
   if (!written.ok()) return written.status();
-  for (const WrittenFile& f : *written) report->files.push_back(f.path);
+  for (const WrittenFile& f : *written) {
+    report->files.push_back(f.path);
+    report->output_steps.emplace_back(
+        std::filesystem::path(f.path).filename().string(), f.seconds);
+  }
   report->files.push_back(
       (std::filesystem::path(options.dir) / "stats.json").string());
   return absl::OkStatus();
@@ -186,8 +200,12 @@ std::string StatsJson(const RunReport& r) {
   j.Key("seconds").BeginObject()
       .Key("parse").Double(r.parse_seconds)
       .Key("simulate").Double(r.simulate_seconds)
-      .Key("outputs").Double(r.output_seconds)
-      .EndObject();
+      .Key("outputs").Double(r.output_seconds);
+  j.Key("output_steps").BeginObject();
+  for (const auto& [name, seconds] : r.output_steps) {
+    j.Key(name).Double(seconds);
+  }
+  j.EndObject().EndObject();
   j.Key("moves_per_second")
       .Double(r.simulate_seconds > 0 ? r.moves / r.simulate_seconds : 0);
   j.Key("error").BeginObject()

@@ -6,6 +6,8 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "absl/status/status.h"
 #include "client/connection.h"
@@ -26,6 +28,9 @@ struct RunReport {
   // Cutting marks (taylor only).
   std::optional<MarkSummary> marks;
   std::vector<std::string> files;  // written, in order
+  // Each output step and its wall time (s), in order: the error statistics,
+  // the marks and the tiles fetched, then every file built and written.
+  std::vector<std::pair<std::string, double>> output_steps;
 };
 
 struct OutputOptions {

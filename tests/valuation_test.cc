@@ -12,6 +12,7 @@
 #include "absl/status/status.h"
 #include "gtest/gtest.h"
 #include "core/instances.h"
+#include "core/thread_pool.h"
 #include "core/workpiece.h"
 
 namespace swarf {
@@ -204,6 +205,101 @@ TEST(MeasureErrorTest, MatchesIndependentComputation) {
     if (scheme == SchemeKind::kZmap) {
       EXPECT_NEAR(at, stats->max_error, 1e-12);
     }
+  }
+}
+
+// Any pool gives the same bits: statistics, place of the max and map. And
+// they equal a plain serial loop that takes the exact surface over every
+// move (no corner-owner bound, no skipped moves, scalar Height) and sums
+// the samples in the order the contract states: by bin, then element, then
+// sample.
+TEST(MeasureErrorTest, ParallelEqualsSerialBitForBit) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> ux(-2, 42), uy(-2, 32), uz(-1.5, 0.3),
+      rad(0.3, 2);
+  std::vector<Move> moves;
+  for (int k = 0; k < 300; ++k) {
+    moves.push_back({{ux(rng), uy(rng), uz(rng)}, {ux(rng), uy(rng), uz(rng)},
+                     rad(rng)});
+  }
+  // 100 x 75 elements: 7 x 5 bins, the last ones partial.
+  const StockSpec spec{0, 0, 40, 30, 0, 100, 75};
+  ValuationOptions opt;
+  opt.map_cols = 37;
+  opt.map_rows = 23;
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(GetScheme(scheme).name());
+    auto wp = Cut(spec, scheme, moves);
+    ThreadPool one(1), four(4);
+    opt.pool = &one;
+    const ErrorStats serial = *MeasureError(*wp, opt);
+    for (ThreadPool* pool : {&four, static_cast<ThreadPool*>(nullptr)}) {
+      opt.pool = pool;
+      const ErrorStats parallel = *MeasureError(*wp, opt);
+      EXPECT_EQ(parallel.samples, serial.samples);
+      EXPECT_EQ(parallel.max_error, serial.max_error);
+      EXPECT_EQ(parallel.mean_error, serial.mean_error);
+      EXPECT_EQ(parallel.rms_error, serial.rms_error);
+      EXPECT_EQ(parallel.max_x, serial.max_x);
+      EXPECT_EQ(parallel.max_y, serial.max_y);
+      EXPECT_EQ(parallel.map, serial.map);
+    }
+
+    const GridGeometry grid(spec);
+    const int32_t bx = (spec.nx + 15) / 16, by = (spec.ny + 15) / 16;
+    const double cell_x = 40.0 / opt.map_cols, cell_y = 30.0 / opt.map_rows;
+    std::vector<float> map(opt.map_cols * opt.map_rows, 0.0f);
+    double sum = 0, sum_sq = 0, max = -1, max_x = 0, max_y = 0;
+    int64_t n = 0;
+    for (int32_t b = 0; b < bx * by; ++b) {
+      double bsum = 0, bsum_sq = 0;
+      for (int32_t ej = b / bx * 16; ej < std::min(b / bx * 16 + 16, spec.ny);
+           ++ej) {
+        for (int32_t ei = b % bx * 16;
+             ei < std::min(b % bx * 16 + 16, spec.nx); ++ei) {
+          const ElementCorners e = wp->Corners(ei, ej);
+          for (int sj = 0; sj < 5; ++sj) {
+            for (int si = 0; si < 5; ++si) {
+              if ((si == 0 || si == 4) && (sj == 0 || sj == 4)) continue;
+              const double x = e.x0 + (e.x1 - e.x0) * si / 4;
+              const double y = e.y0 + (e.y1 - e.y0) * sj / 4;
+              double exact = spec.z_top;
+              for (const Move& m : moves) {
+                exact = std::min(
+                    exact, BallSweep(m.from, m.to, m.radius).Height(x, y));
+              }
+              const double err =
+                  std::fabs(wp->scheme().Reconstruct(e, x, y) - exact);
+              bsum += err;
+              bsum_sq += err * err;
+              ++n;
+              if (err > max) {
+                max = err;
+                max_x = x;
+                max_y = y;
+              }
+              const int cx = std::clamp(static_cast<int>(x / cell_x), 0,
+                                        opt.map_cols - 1);
+              const int cy = std::clamp(static_cast<int>(y / cell_y), 0,
+                                        opt.map_rows - 1);
+              float& cell = map[cy * opt.map_cols + cx];
+              cell = std::max(cell, static_cast<float>(err));
+            }
+          }
+        }
+      }
+      sum += bsum;
+      sum_sq += bsum_sq;
+    }
+    ASSERT_EQ(grid.nx(), spec.nx);
+    EXPECT_EQ(serial.samples, n);
+    EXPECT_EQ(serial.max_error, max);
+    EXPECT_EQ(serial.max_x, max_x);
+    EXPECT_EQ(serial.max_y, max_y);
+    EXPECT_EQ(serial.mean_error, sum / n);
+    EXPECT_EQ(serial.rms_error, std::sqrt(sum_sq / n));
+    EXPECT_EQ(serial.map, map);
+    EXPECT_GT(max, 0.1);
   }
 }
 
