@@ -218,12 +218,12 @@ TEST(MeasureErrorTest, ParallelEqualsSerialBitForBit) {
   std::uniform_real_distribution<double> ux(-2, 42), uy(-2, 32), uz(-1.5, 0.3),
       rad(0.3, 2);
   std::vector<Move> moves;
-  for (int k = 0; k < 300; ++k) {
+  for (int k = 0; k < 100; ++k) {
     moves.push_back({{ux(rng), uy(rng), uz(rng)}, {ux(rng), uy(rng), uz(rng)},
                      rad(rng)});
   }
-  // 100 x 75 elements: 7 x 5 bins, the last ones partial.
-  const StockSpec spec{0, 0, 40, 30, 0, 100, 75};
+  // 56 x 40 elements: 4 x 3 bins, the last ones partial.
+  const StockSpec spec{0, 0, 40, 30, 0, 56, 40};
   ValuationOptions opt;
   opt.map_cols = 37;
   opt.map_rows = 23;
