@@ -53,6 +53,14 @@ constexpr char kUsage[] =
     "  --subdivide N                STL: split each element N x N using the\n"
     "                               scheme's patches (default 1)\n"
     "  --batch N                    moves per batch sent (default 20000)\n"
+    "  --mesh-tolerance T           STL/VRML: largest vertical distance to\n"
+    "                               the full-resolution surface (mm,\n"
+    "                               default 0.005; 0: every element)\n"
+    "  --marks-min-angle A          marks files: drop vertices where the\n"
+    "                               surfaces meet under A degrees (default\n"
+    "                               1; rims on the stock top always stay)\n"
+    "  --marks-min-length L         ...and pieces shorter than L mm\n"
+    "                               (default 0.2)\n"
     "  --json                       print the stats document instead\n";
 
 struct ToolChoice {
@@ -254,6 +262,7 @@ int RunCommand(const std::vector<std::string>& argv) {
                                    "server", "out",           "subdivide",
                                    "batch"};
   valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
+  valued.insert(std::begin(kOutputFlags), std::end(kOutputFlags));
   auto args = Args::Parse(argv, valued, {"json", "help", "quiet"});
   auto fail = [](const absl::Status& s, int code) {
     std::cerr << "swarf run: " << s.message() << "\n";
@@ -393,6 +402,9 @@ int RunCommand(const std::vector<std::string>& argv) {
   OutputOptions oopt;
   if (auto out = args->Get("out")) oopt.dir = *out;
   oopt.subdivide = subdivide->value_or(1);
+  if (absl::Status s = ParseOutputFlags(*args, &oopt); !s.ok()) {
+    return fail(s, 2);
+  }
   absl::Status written = CollectAndWrite(**conn, id, oopt, &report);
   report.output_seconds = Since(t_out);
   if (!written.ok()) return fail(written, 1);

@@ -19,7 +19,8 @@ double Since(Clock::time_point t0) {
 
 absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     const std::string& dir, const SurfaceGrid& grid, const ErrorRaster* error,
-    const std::vector<MarkPolyline>* marks, const RunOutputOptions& options) {
+    const std::vector<MarkPolyline>* marks, const RunOutputOptions& options,
+    RunOutputSummary* summary) {
   std::vector<WrittenFile> written;
   const std::string base = dir.empty() || dir.back() == '/' ? dir : dir + "/";
   auto done = [&](const std::string& name, Clock::time_point t0) {
@@ -75,8 +76,20 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
   }
 
   t0 = Clock::now();
-  absl::StatusOr<TriangleMesh> mesh = BuildSurfaceMesh(grid, options.mesh);
+  SurfaceMeshOptions full_options = options.mesh;
+  full_options.tolerance = 0;
+  absl::StatusOr<TriangleMesh> mesh = BuildSurfaceMesh(grid, full_options);
   if (!mesh.ok()) return mesh.status();
+  const int64_t full_triangles = static_cast<int64_t>(mesh->triangles.size());
+  if (options.mesh.tolerance != 0) {
+    mesh = SimplifySurfaceMesh(*mesh, options.mesh.tolerance);
+    if (!mesh.ok()) return mesh.status();
+  }
+  if (summary != nullptr) {
+    summary->full_mesh_triangles = full_triangles;
+    summary->mesh_triangles = static_cast<int64_t>(mesh->triangles.size());
+    summary->mesh_deviation = mesh->max_deviation;
+  }
   if (absl::Status st = WriteStl(*mesh, base + "surface.stl"); !st.ok()) {
     return st;
   }

@@ -18,7 +18,7 @@ struct RunOutputOptions {
   ReliefOptions relief;
   ErrorMapOptions error;
   MarksPictureOptions marks;
-  SurfaceMeshOptions mesh;
+  SurfaceMeshOptions mesh;  // its tolerance > 0: the adaptive mesh
   bool vrml_colors = true;  // per-vertex height colours in surface.wrl
 };
 
@@ -28,6 +28,13 @@ struct WrittenFile {
   double seconds = 0;
 };
 
+// What the meshes came to.
+struct RunOutputSummary {
+  int64_t mesh_triangles = 0;       // in surface.stl / surface.wrl
+  int64_t full_mesh_triangles = 0;  // the full-resolution lattice's
+  double mesh_deviation = 0;        // measured, mm (SimplifySurfaceMesh)
+};
+
 // Writes into the existing directory `dir`, in this order: relief.png;
 // error.png when `error` is given; marks.png, marks.svg and marks.json when
 // `marks` is given; surface.stl and surface.wrl. Stops at the first error
@@ -35,7 +42,7 @@ struct WrittenFile {
 absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     const std::string& dir, const SurfaceGrid& grid, const ErrorRaster* error,
     const std::vector<MarkPolyline>* marks,
-    const RunOutputOptions& options = {});
+    const RunOutputOptions& options = {}, RunOutputSummary* summary = nullptr);
 
 }  // namespace swarf::cli
 

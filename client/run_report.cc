@@ -1,6 +1,7 @@
 #include "client/run_report.h"
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <cstdio>
 #include <functional>
@@ -9,6 +10,7 @@
 #include <fstream>
 #include <system_error>
 
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "client/json_writer.h"
@@ -108,6 +110,29 @@ std::string Rate(double per_s) {
 
 }  // namespace
 
+absl::Status ParseOutputFlags(const Args& args, OutputOptions* out) {
+  auto number = [&](const char* flag, double* v) -> absl::Status {
+    const auto text = args.Get(flag);
+    if (!text) return absl::OkStatus();
+    if (!absl::SimpleAtod(*text, v) || !std::isfinite(*v) || *v < 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--", flag, " must be a number >= 0, got \"", *text,
+                       "\""));
+    }
+    return absl::OkStatus();
+  };
+  if (absl::Status s = number("mesh-tolerance", &out->mesh_tolerance);
+      !s.ok()) {
+    return s;
+  }
+  if (absl::Status s =
+          number("marks-min-angle", &out->marks_display.min_angle_deg);
+      !s.ok()) {
+    return s;
+  }
+  return number("marks-min-length", &out->marks_display.min_length);
+}
+
 absl::Status CollectAndWrite(Connection& conn, const std::string& id,
                              const OutputOptions& options, RunReport* report) {
   const bool files = !options.dir.empty();
@@ -168,9 +193,17 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
                           report->error.map_max_error().end());
   RunOutputOptions out;
   out.mesh.subdivision = std::max(1, options.subdivide);
+  out.mesh.tolerance = options.mesh_tolerance;
+  report->mesh_tolerance = options.mesh_tolerance;
+  report->marks_display = options.marks_display;
+  if (report->marks) {
+    marks = FilterMarks(marks, options.marks_display);
+    report->marks_shown = Summarize(marks);
+  }
   auto written = WriteRunOutputs(options.dir, *grid,
                                  raster.cols > 0 ? &raster : nullptr,
-                                 report->marks ? &marks : nullptr, out);
+                                 report->marks ? &marks : nullptr, out,
+                                 &report->mesh);
   if (!written.ok()) return written.status();
   for (const WrittenFile& f : *written) {
     report->files.push_back(f.path);
@@ -222,7 +255,25 @@ std::string StatsJson(const RunReport& r) {
         .Key("vertices").Int(r.marks->vertices)
         .Key("total_length").Double(r.marks->total_length)
         .Key("angle_deg").BeginArray().Double(r.marks->min_angle_deg)
-        .Double(r.marks->max_angle_deg).EndArray()
+        .Double(r.marks->max_angle_deg).EndArray();
+    if (r.marks_shown) {
+      // What marks.json/svg/png show (FilterMarks).
+      j.Key("shown").BeginObject()
+          .Key("min_angle_deg").Double(r.marks_display.min_angle_deg)
+          .Key("min_length").Double(r.marks_display.min_length)
+          .Key("polylines").Int(r.marks_shown->polylines)
+          .Key("vertices").Int(r.marks_shown->vertices)
+          .Key("total_length").Double(r.marks_shown->total_length)
+          .EndObject();
+    }
+    j.EndObject();
+  }
+  if (r.mesh.mesh_triangles > 0) {
+    j.Key("mesh").BeginObject()
+        .Key("tolerance").Double(r.mesh_tolerance)
+        .Key("max_deviation").Double(r.mesh.mesh_deviation)
+        .Key("triangles").Int(r.mesh.mesh_triangles)
+        .Key("full_triangles").Int(r.mesh.full_mesh_triangles)
         .EndObject();
   }
   if (!r.ignored.empty()) j.Key("ignored").String(r.ignored);
@@ -258,6 +309,22 @@ std::string Summary(const RunReport& r) {
                           "degrees between the surfaces\n",
                           r.marks->polylines, r.marks->total_length,
                           r.marks->min_angle_deg, r.marks->max_angle_deg);
+  }
+  if (r.marks_shown) {
+    absl::StrAppendFormat(&s,
+                          "  shown    %d marks polylines (%.1f mm) at %g "
+                          "degrees and %g mm or more\n",
+                          r.marks_shown->polylines,
+                          r.marks_shown->total_length,
+                          r.marks_display.min_angle_deg,
+                          r.marks_display.min_length);
+  }
+  if (r.mesh.mesh_triangles > 0) {
+    absl::StrAppendFormat(&s,
+                          "  mesh     %d triangles (full lattice %d), max "
+                          "vertical deviation %.3g mm (tolerance %g mm)\n",
+                          r.mesh.mesh_triangles, r.mesh.full_mesh_triangles,
+                          r.mesh.mesh_deviation, r.mesh_tolerance);
   }
   if (!r.files.empty()) {
     absl::StrAppend(&s, "  wrote   ");

@@ -196,6 +196,7 @@ absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
     }
     mesh.triangles.push_back({ce, b(big_nx - 1, big_ny), b(big_nx, big_ny)});
   }
+  if (options.tolerance != 0) return SimplifySurfaceMesh(mesh, options.tolerance);
   return mesh;
 }
 
