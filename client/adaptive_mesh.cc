@@ -1,17 +1,21 @@
 // Error-bounded adaptive triangulation of the top lattice (see
 // SimplifySurfaceMesh in surface_mesh.h).
 //
-// Leaves are squares of 2^k lattice cells found top down: a block whose two
-// corner triangles stay within the tolerance of the full-resolution surface
-// is kept, else split in four. Each leaf is then triangulated conformingly:
-// with two triangles when no smaller neighbour put a vertex on its sides,
-// else as a fan from its centre vertex through every vertex on its sides.
-// Every leaf's triangles are measured against the full-resolution surface
-// (both piecewise linear, so the largest vertical gap lies at a lattice
-// vertex or where a coarse edge crosses a fine one: all are checked); a leaf
-// over the tolerance is split and everything retriangulated, until none is.
-// Single cells are the full-resolution triangles, so this ends.
+// Leaves are rectangles of 2^a x 2^b lattice cells found top down (a k-d
+// tree: ridges and scallops along a pass get long thin leaves): a block
+// whose two corner triangles stay within the tolerance of the
+// full-resolution surface is kept, else halved across x or y, whichever
+// fits better. Each leaf is then triangulated conformingly: with two
+// triangles when no smaller neighbour put a vertex on its sides, else by
+// clipping ears off the polygon of its corners and side vertices. Every
+// leaf's triangles are measured against the full-resolution surface (both
+// piecewise linear, so the largest vertical gap lies at a lattice vertex or
+// where a coarse edge crosses a fine one: all are checked); a leaf over the
+// tolerance is split and everything retriangulated, until none is. Single
+// cells are the full-resolution triangles, so this ends.
 #include <algorithm>
+#include <array>
+#include <cstddef>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
@@ -124,20 +128,96 @@ class Lattice {
 };
 
 struct Leaf {
-  int64_t i0, j0, size;
+  int64_t i0, j0, w, h;  // cells [i0, i0 + w) x [j0, j0 + h)
 };
 
-// The two corner triangles of a square, split along the diagonal whose ends
+// The two corner triangles of a leaf, split along the diagonal whose ends
 // differ less in height (as the full-resolution cells are).
 void CornerTriangles(const Lattice& l, const Leaf& f, std::vector<P>* out) {
-  const P a{f.i0, f.j0}, b{f.i0 + f.size, f.j0},
-      c{f.i0 + f.size, f.j0 + f.size}, d{f.i0, f.j0 + f.size};
+  const P a{f.i0, f.j0}, b{f.i0 + f.w, f.j0}, c{f.i0 + f.w, f.j0 + f.h},
+      d{f.i0, f.j0 + f.h};
   if (std::fabs(l.Z(a.i, a.j) - l.Z(c.i, c.j)) <=
       std::fabs(l.Z(b.i, b.j) - l.Z(d.i, d.j))) {
     out->insert(out->end(), {a, b, c, a, c, d});
   } else {
     out->insert(out->end(), {a, b, d, b, c, d});
   }
+}
+
+double CornerDeviation(const Lattice& l, const Leaf& f) {
+  std::vector<P> t;
+  CornerTriangles(l, f, &t);
+  return std::max(l.TriangleDeviation(t[0], t[1], t[2]),
+                  l.TriangleDeviation(t[3], t[4], t[5]));
+}
+
+// Largest distance of the lattice heights in a leaf from the straight
+// lines between its sides, along x (each row) or along y (each column).
+double AlongDeviation(const Lattice& l, const Leaf& f, bool along_x) {
+  const int64_t n = along_x ? f.w : f.h, m = along_x ? f.h : f.w;
+  double dev = 0;
+  for (int64_t b = 0; b <= m; ++b) {
+    auto z = [&](int64_t a) {
+      return along_x ? l.Z(f.i0 + a, f.j0 + b) : l.Z(f.i0 + b, f.j0 + a);
+    };
+    const double z0 = z(0), z1 = z(n);
+    for (int64_t a = 1; a < n; ++a) {
+      dev = std::max(dev, std::fabs(z(a) - (z0 + (z1 - z0) * a / n)));
+    }
+  }
+  return dev;
+}
+
+// The halves of a leaf across x or across y: across the direction in which
+// the surface is further from linear (a scallop along a pass is split
+// across the pass, not along it); a side of one cell is not split.
+std::array<Leaf, 2> Halves(const Lattice& l, const Leaf& f) {
+  const std::array<Leaf, 2> across_x = {
+      Leaf{f.i0, f.j0, f.w / 2, f.h}, Leaf{f.i0 + f.w / 2, f.j0, f.w / 2, f.h}};
+  const std::array<Leaf, 2> across_y = {
+      Leaf{f.i0, f.j0, f.w, f.h / 2}, Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
+  if (f.h == 1) return across_x;
+  if (f.w == 1) return across_y;
+  return AlongDeviation(l, f, true) >= AlongDeviation(l, f, false) ? across_x
+                                                                   : across_y;
+}
+
+int64_t Cross(P o, P a, P b) {
+  return (a.i - o.i) * (b.j - o.j) - (a.j - o.j) * (b.i - o.i);
+}
+
+// Triangulates a convex polygon (counter-clockwise, collinear vertices
+// allowed, positive area) without degenerate triangles: repeatedly cuts off
+// a corner whose triangle has area and leaves a polygon with area, the one
+// with the shortest cut.
+void ClipEars(std::vector<P> poly, std::vector<P>* out) {
+  while (poly.size() > 3) {
+    const size_t n = poly.size();
+    size_t best = n;
+    int64_t best_len = 0;
+    for (size_t k = 0; k < n; ++k) {
+      const P& prev = poly[(k + n - 1) % n];
+      const P& next = poly[(k + 1) % n];
+      if (Cross(prev, poly[k], next) <= 0) continue;  // not a corner
+      // The rest must not be all on the line prev-next.
+      bool area = false;
+      for (size_t q = 2; q + 1 < n && !area; ++q) {
+        area = Cross(prev, next, poly[(k + q) % n]) != 0;
+      }
+      if (!area) continue;
+      const int64_t di = next.i - prev.i, dj = next.j - prev.j;
+      const int64_t len = di * di + dj * dj;
+      if (best == n || len < best_len) {
+        best = k;
+        best_len = len;
+      }
+    }
+    if (best == n) return;  // cannot happen for a convex polygon with area
+    out->insert(out->end(),
+                {poly[(best + n - 1) % n], poly[best], poly[(best + 1) % n]});
+    poly.erase(poly.begin() + static_cast<std::ptrdiff_t>(best));
+  }
+  out->insert(out->end(), poly.begin(), poly.end());
 }
 
 }  // namespace
@@ -162,113 +242,121 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
   constexpr int64_t kRoot = 64;
   std::vector<Leaf> pending, leaves;
   for (int64_t j = 0; j < ny; j += kRoot) {
-    for (int64_t i = 0; i < nx; i += kRoot) pending.push_back({i, j, kRoot});
+    for (int64_t i = 0; i < nx; i += kRoot) {
+      pending.push_back({i, j, kRoot, kRoot});
+    }
   }
+  // Blocks leaving the lattice: halved across the side that leaves it.
   while (!pending.empty()) {
+    std::vector<std::array<Leaf, 2>> halves(pending.size());
     std::vector<char> split(pending.size());
     pool.ParallelFor(static_cast<int64_t>(pending.size()), [&](int64_t k) {
       const Leaf& f = pending[k];
-      if (f.size == 1) return;
-      if (f.i0 + f.size > nx || f.j0 + f.size > ny) {
-        split[k] = 1;
+      if (f.i0 + f.w > nx) {
+        halves[k] = {Leaf{f.i0, f.j0, f.w / 2, f.h},
+                     Leaf{f.i0 + f.w / 2, f.j0, f.w / 2, f.h}};
+      } else if (f.j0 + f.h > ny) {
+        halves[k] = {Leaf{f.i0, f.j0, f.w, f.h / 2},
+                     Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
+      } else if (f.w * f.h > 1 && CornerDeviation(l, f) > tolerance) {
+        halves[k] = Halves(l, f);
+      } else {
         return;
       }
-      std::vector<P> t;
-      CornerTriangles(l, f, &t);
-      split[k] = l.TriangleDeviation(t[0], t[1], t[2]) > tolerance ||
-                 l.TriangleDeviation(t[3], t[4], t[5]) > tolerance;
+      split[k] = 1;
     });
     std::vector<Leaf> next;
     for (size_t k = 0; k < pending.size(); ++k) {
-      const Leaf& f = pending[k];
       if (!split[k]) {
-        leaves.push_back(f);
+        leaves.push_back(pending[k]);
         continue;
       }
-      const int64_t h = f.size / 2;
-      for (const Leaf& c : {Leaf{f.i0, f.j0, h}, Leaf{f.i0 + h, f.j0, h},
-                            Leaf{f.i0, f.j0 + h, h},
-                            Leaf{f.i0 + h, f.j0 + h, h}}) {
+      for (const Leaf& c : halves[k]) {
         if (c.i0 < nx && c.j0 < ny) next.push_back(c);
       }
     }
     pending = std::move(next);
   }
 
-  // Conforming triangulation, measured; leaves over the tolerance are split
-  // and the whole is redone (their neighbours' sides change).
+  // Conforming triangulation, measured; leaves over the tolerance are
+  // split and the leaves they touch (their sides gain vertices) are
+  // triangulated and measured again, until none is over.
   const int64_t lattice_vertices = (nx + 1) * (ny + 1);
-  std::vector<std::vector<P>> tris;
-  std::vector<double> leaf_dev;
-  std::vector<uint8_t> used;
+  std::vector<std::vector<P>> tris(leaves.size());
+  std::vector<double> leaf_dev(leaves.size());
+  std::vector<char> dirty(leaves.size(), 1);
+  std::vector<uint8_t> used, old_used;
   for (;;) {
+    old_used.swap(used);
     used.assign(lattice_vertices, 0);
     for (const Leaf& f : leaves) {
-      used[l.Index(f.i0, f.j0)] = used[l.Index(f.i0 + f.size, f.j0)] = 1;
-      used[l.Index(f.i0, f.j0 + f.size)] = 1;
-      used[l.Index(f.i0 + f.size, f.j0 + f.size)] = 1;
+      used[l.Index(f.i0, f.j0)] = used[l.Index(f.i0 + f.w, f.j0)] = 1;
+      used[l.Index(f.i0, f.j0 + f.h)] = 1;
+      used[l.Index(f.i0 + f.w, f.j0 + f.h)] = 1;
     }
-    tris.assign(leaves.size(), {});
-    leaf_dev.assign(leaves.size(), 0);
     pool.ParallelFor(static_cast<int64_t>(leaves.size()), [&](int64_t k) {
       const Leaf& f = leaves[k];
-      const int64_t s = f.size;
-      // The sides' used vertices, counter-clockwise from (i0, j0).
+      // The sides' lattice vertices, counter-clockwise from (i0, j0).
+      std::vector<P> side;
+      for (int64_t d = 0; d < f.w; ++d) side.push_back({f.i0 + d, f.j0});
+      for (int64_t d = 0; d < f.h; ++d) side.push_back({f.i0 + f.w, f.j0 + d});
+      for (int64_t d = f.w; d > 0; --d) side.push_back({f.i0 + d, f.j0 + f.h});
+      for (int64_t d = f.h; d > 0; --d) side.push_back({f.i0, f.j0 + d});
+      if (!dirty[k]) {
+        for (const P& p : side) {
+          if (used[l.Index(p.i, p.j)] != old_used[l.Index(p.i, p.j)]) {
+            dirty[k] = 1;
+            break;
+          }
+        }
+        if (!dirty[k]) return;
+      }
       std::vector<P> ring;
-      for (int64_t d = 0; d < s; ++d) {
-        if (used[l.Index(f.i0 + d, f.j0)]) ring.push_back({f.i0 + d, f.j0});
-      }
-      for (int64_t d = 0; d < s; ++d) {
-        if (used[l.Index(f.i0 + s, f.j0 + d)]) {
-          ring.push_back({f.i0 + s, f.j0 + d});
-        }
-      }
-      for (int64_t d = s; d > 0; --d) {
-        if (used[l.Index(f.i0 + d, f.j0 + s)]) {
-          ring.push_back({f.i0 + d, f.j0 + s});
-        }
-      }
-      for (int64_t d = s; d > 0; --d) {
-        if (used[l.Index(f.i0, f.j0 + d)]) ring.push_back({f.i0, f.j0 + d});
+      for (const P& p : side) {
+        if (used[l.Index(p.i, p.j)]) ring.push_back(p);
       }
       std::vector<P>& t = tris[k];
+      t.clear();
       if (ring.size() == 4) {
         CornerTriangles(l, f, &t);
       } else {
-        const P c{f.i0 + s / 2, f.j0 + s / 2};
-        for (size_t q = 0; q < ring.size(); ++q) {
-          t.insert(t.end(), {c, ring[q], ring[(q + 1) % ring.size()]});
-        }
+        ClipEars(std::move(ring), &t);
       }
       double dev = 0;
       for (size_t q = 0; q + 2 < t.size(); q += 3) {
         dev = std::max(dev, l.TriangleDeviation(t[q], t[q + 1], t[q + 2]));
       }
       leaf_dev[k] = dev;
+      dirty[k] = 0;
     });
     std::vector<Leaf> next;
+    std::vector<std::vector<P>> next_tris;
+    std::vector<double> next_dev;
     bool refined = false;
     for (size_t k = 0; k < leaves.size(); ++k) {
       const Leaf& f = leaves[k];
-      if (leaf_dev[k] <= tolerance || f.size == 1) {
+      if (leaf_dev[k] <= tolerance || f.w * f.h == 1) {
         next.push_back(f);
+        next_tris.push_back(std::move(tris[k]));
+        next_dev.push_back(leaf_dev[k]);
         continue;
       }
       refined = true;
-      const int64_t h = f.size / 2;
-      next.insert(next.end(),
-                  {Leaf{f.i0, f.j0, h}, Leaf{f.i0 + h, f.j0, h},
-                   Leaf{f.i0, f.j0 + h, h}, Leaf{f.i0 + h, f.j0 + h, h}});
+      for (const Leaf& half : Halves(l, f)) {
+        next.push_back(half);
+        next_tris.emplace_back();
+        next_dev.push_back(INFINITY);
+      }
     }
     leaves = std::move(next);
+    tris = std::move(next_tris);
+    leaf_dev = std::move(next_dev);
+    dirty.resize(leaves.size());
+    for (size_t k = 0; k < leaves.size(); ++k) dirty[k] = tris[k].empty();
     if (!refined) break;
   }
 
-  // Fan centres are used too; then the used lattice vertices, row-major,
-  // are the new top vertices.
-  for (const std::vector<P>& t : tris) {
-    for (const P& p : t) used[l.Index(p.i, p.j)] = 1;
-  }
+  // The used lattice vertices, row-major, are the new top vertices.
   TriangleMesh mesh;
   mesh.lattice_nx = full.lattice_nx;
   mesh.lattice_ny = full.lattice_ny;
