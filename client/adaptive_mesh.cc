@@ -67,8 +67,9 @@ class Lattice {
   }
 
   // Largest |fine - coarse| over triangle (a, b, c) (counter-clockwise),
-  // coarse being the plane through the three lattice vertices.
-  double TriangleDeviation(P a, P b, P c) const {
+  // coarse being the plane through the three lattice vertices; once it
+  // passes `limit`, some value above it.
+  double TriangleDeviation(P a, P b, P c, double limit = INFINITY) const {
     const double za = Z(a.i, a.j), zb = Z(b.i, b.j), zc = Z(c.i, c.j);
     const int64_t area2 = (b.i - a.i) * (c.j - a.j) - (b.j - a.j) * (c.i - a.i);
     if (area2 <= 0) return INFINITY;  // never built; refuse loudly
@@ -88,11 +89,13 @@ class Lattice {
             (wa * za + wb * zb + wc * zc) / static_cast<double>(area2);
         dev = std::max(dev, std::fabs(Z(i, j) - coarse));
       }
+      if (dev > limit) return dev;
     }
     dev = std::max(dev, EdgeDeviation(a, b));
+    if (dev > limit) return dev;
     dev = std::max(dev, EdgeDeviation(b, c));
-    dev = std::max(dev, EdgeDeviation(c, a));
-    return dev;
+    if (dev > limit) return dev;
+    return std::max(dev, EdgeDeviation(c, a));
   }
 
   // Largest gap along the coarse edge p -> q, at its crossings with every
@@ -144,28 +147,35 @@ void CornerTriangles(const Lattice& l, const Leaf& f, std::vector<P>* out) {
   }
 }
 
-double CornerDeviation(const Lattice& l, const Leaf& f) {
-  std::vector<P> t;
-  CornerTriangles(l, f, &t);
-  return std::max(l.TriangleDeviation(t[0], t[1], t[2]),
-                  l.TriangleDeviation(t[3], t[4], t[5]));
-}
-
-// Largest distance of the lattice heights in a leaf from the straight
-// lines between its sides, along x (each row) or along y (each column).
-double AlongDeviation(const Lattice& l, const Leaf& f, bool along_x) {
-  const int64_t n = along_x ? f.w : f.h, m = along_x ? f.h : f.w;
+// Largest distance of the lattice heights on the line from p to q (along a
+// row or a column) from the straight line between its ends.
+double LineDeviation(const Lattice& l, P p, P q) {
+  const int64_t n = std::max(std::abs(q.i - p.i), std::abs(q.j - p.j));
+  const int64_t si = (q.i - p.i) / std::max<int64_t>(n, 1);
+  const int64_t sj = (q.j - p.j) / std::max<int64_t>(n, 1);
+  const double z0 = l.Z(p.i, p.j), z1 = l.Z(q.i, q.j);
   double dev = 0;
-  for (int64_t b = 0; b <= m; ++b) {
-    auto z = [&](int64_t a) {
-      return along_x ? l.Z(f.i0 + a, f.j0 + b) : l.Z(f.i0 + b, f.j0 + a);
-    };
-    const double z0 = z(0), z1 = z(n);
-    for (int64_t a = 1; a < n; ++a) {
-      dev = std::max(dev, std::fabs(z(a) - (z0 + (z1 - z0) * a / n)));
-    }
+  for (int64_t a = 1; a < n; ++a) {
+    dev = std::max(dev, std::fabs(l.Z(p.i + a * si, p.j + a * sj) -
+                                  (z0 + (z1 - z0) * a / n)));
   }
   return dev;
+}
+
+// Whether the corner triangles of a leaf are within `tolerance`. Its sides
+// are edges of those triangles: checked first, they reject most blocks
+// cheaply.
+bool CornersFit(const Lattice& l, const Leaf& f, double tolerance) {
+  const P a{f.i0, f.j0}, b{f.i0 + f.w, f.j0}, c{f.i0 + f.w, f.j0 + f.h},
+      d{f.i0, f.j0 + f.h};
+  if (LineDeviation(l, a, b) > tolerance || LineDeviation(l, d, c) > tolerance ||
+      LineDeviation(l, a, d) > tolerance || LineDeviation(l, b, c) > tolerance) {
+    return false;
+  }
+  std::vector<P> t;
+  CornerTriangles(l, f, &t);
+  return l.TriangleDeviation(t[0], t[1], t[2], tolerance) <= tolerance &&
+         l.TriangleDeviation(t[3], t[4], t[5], tolerance) <= tolerance;
 }
 
 // The halves of a leaf across x or across y: across the direction in which
@@ -178,8 +188,15 @@ std::array<Leaf, 2> Halves(const Lattice& l, const Leaf& f) {
       Leaf{f.i0, f.j0, f.w, f.h / 2}, Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
   if (f.h == 1) return across_x;
   if (f.w == 1) return across_y;
-  return AlongDeviation(l, f, true) >= AlongDeviation(l, f, false) ? across_x
-                                                                   : across_y;
+  // The rows and columns at the sides and through the middle.
+  double along_x = 0, along_y = 0;
+  for (int64_t j : {f.j0, f.j0 + f.h / 2, f.j0 + f.h}) {
+    along_x = std::max(along_x, LineDeviation(l, {f.i0, j}, {f.i0 + f.w, j}));
+  }
+  for (int64_t i : {f.i0, f.i0 + f.w / 2, f.i0 + f.w}) {
+    along_y = std::max(along_y, LineDeviation(l, {i, f.j0}, {i, f.j0 + f.h}));
+  }
+  return along_x >= along_y ? across_x : across_y;
 }
 
 int64_t Cross(P o, P a, P b) {
@@ -232,7 +249,8 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
   const Lattice l(full);
   const int64_t nx = l.nx(), ny = l.ny();
   if (nx < 1 || ny < 1 ||
-      full.top_vertices != (nx + 1) * (ny + 1)) {
+      full.top_vertices != (nx + 1) * (ny + 1) ||
+      static_cast<int64_t>(full.vertices.size()) < full.top_vertices) {
     return absl::InvalidArgumentError("not a full-resolution lattice mesh");
   }
   ThreadPool& pool = ThreadPool::Default();
@@ -258,7 +276,7 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
       } else if (f.j0 + f.h > ny) {
         halves[k] = {Leaf{f.i0, f.j0, f.w, f.h / 2},
                      Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
-      } else if (f.w * f.h > 1 && CornerDeviation(l, f) > tolerance) {
+      } else if (f.w * f.h > 1 && !CornersFit(l, f, tolerance)) {
         halves[k] = Halves(l, f);
       } else {
         return;

@@ -35,10 +35,13 @@ struct RunOutputSummary {
   double mesh_deviation = 0;        // measured, mm (SimplifySurfaceMesh)
 };
 
-// Writes into the existing directory `dir`, in this order: relief.png;
-// error.png when `error` is given; marks.png, marks.svg and marks.json when
-// `marks` is given; surface.stl and surface.wrl. Stops at the first error
-// (naming the file); files written before it stay.
+// Writes into the existing directory `dir`: relief.png; error.png when
+// `error` is given; marks.png, marks.svg and marks.json when `marks` is
+// given; surface.stl and surface.wrl; returned in that order. Three chains
+// run at once (the pictures, the marks files, the meshes), each stopping at
+// its first error; the first error in that order is returned (naming the
+// file); files written stay. `summary`, if given, is filled when the meshes
+// were written.
 absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     const std::string& dir, const SurfaceGrid& grid, const ErrorRaster* error,
     const std::vector<MarkPolyline>* marks,

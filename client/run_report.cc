@@ -5,6 +5,8 @@
 #include <chrono>
 #include <cstdio>
 #include <functional>
+#include <future>
+#include <utility>
 #include <thread>
 #include <filesystem>
 #include <fstream>
@@ -137,13 +139,33 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
                              const OutputOptions& options, RunReport* report) {
   const bool files = !options.dir.empty();
   const StockSpec& stock = report->stock;
-  auto t0 = std::chrono::steady_clock::now();
-  auto step = [&](const char* name) {
-    const auto now = std::chrono::steady_clock::now();
-    report->output_steps.emplace_back(
-        name, std::chrono::duration<double>(now - t0).count());
-    t0 = now;
+  using Clock = std::chrono::steady_clock;
+  auto seconds = [](Clock::time_point t0) {
+    return std::chrono::duration<double>(Clock::now() - t0).count();
   };
+  // The marks and the tiles are fetched while the server measures the
+  // error (each step's own time is reported; they overlap).
+  std::future<std::pair<absl::StatusOr<std::vector<MarkPolyline>>, double>>
+      marks_fetch;
+  if (report->scheme == SchemeKind::kTaylor) {
+    marks_fetch = std::async(std::launch::async, [&] {
+      const auto t0 = Clock::now();
+      auto m = Retrying<std::vector<MarkPolyline>>(
+          "the cutting marks", [&] { return FetchMarks(conn, id); });
+      return std::make_pair(std::move(m), seconds(t0));
+    });
+  }
+  std::future<std::pair<absl::StatusOr<SurfaceGrid>, double>> grid_fetch;
+  if (files) {
+    grid_fetch = std::async(std::launch::async, [&] {
+      const auto t0 = Clock::now();
+      auto g = Retrying<SurfaceGrid>("the tiles", [&] {
+        return FetchGrid(conn, id, stock, report->scheme);
+      });
+      return std::make_pair(std::move(g), seconds(t0));
+    });
+  }
+  const auto t0 = Clock::now();
   auto stats = Retrying<pb::ErrorStats>(
       "the error statistics", [&]() -> absl::StatusOr<pb::ErrorStats> {
         auto ctx = conn.Context(id, 3600);
@@ -160,19 +182,29 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
         if (!st.ok()) return FromGrpc(st);
         return out;
       });
+  report->output_steps.emplace_back("error_stats", seconds(t0));
+  std::vector<MarkPolyline> marks;
+  absl::Status marks_status;
+  if (marks_fetch.valid()) {
+    auto [m, s] = marks_fetch.get();
+    report->output_steps.emplace_back("marks", s);
+    if (m.ok()) {
+      marks = *std::move(m);
+      report->marks = Summarize(marks);
+    }
+    marks_status = m.status();
+  }
+  absl::StatusOr<SurfaceGrid> grid = absl::UnknownError("not fetched");
+  if (grid_fetch.valid()) {
+    auto [g, s] = grid_fetch.get();
+    report->output_steps.emplace_back("tiles", s);
+    grid = std::move(g);
+  }
   if (!stats.ok()) return stats.status();
   report->error = *std::move(stats);
-  step("error_stats");
-  std::vector<MarkPolyline> marks;
-  if (report->scheme == SchemeKind::kTaylor) {
-    auto m = Retrying<std::vector<MarkPolyline>>(
-        "the cutting marks", [&] { return FetchMarks(conn, id); });
-    if (!m.ok()) return m.status();
-    marks = *std::move(m);
-    report->marks = Summarize(marks);
-    step("marks");
-  }
+  if (!marks_status.ok()) return marks_status;
   if (!files) return absl::OkStatus();
+  if (!grid.ok()) return grid.status();
 
   std::error_code ec;
   std::filesystem::create_directories(options.dir, ec);
@@ -180,11 +212,6 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     return absl::FailedPreconditionError(
         absl::StrCat("cannot create --out ", options.dir, ": ", ec.message()));
   }
-  auto grid = Retrying<SurfaceGrid>("the tiles", [&] {
-    return FetchGrid(conn, id, stock, report->scheme);
-  });
-  if (!grid.ok()) return grid.status();
-  step("tiles");
   ErrorRaster raster;
   raster.region = {stock.x0, stock.y0, stock.x1, stock.y1};
   raster.cols = report->error.map_cols();

@@ -73,7 +73,7 @@ absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
     const SurfaceGrid& grid, const SurfaceMeshOptions& options = {});
 
 // An error-bounded adaptive version of a full-resolution mesh from
-// BuildSurfaceMesh: the top is re-triangulated on a subset of the lattice
+// BuildSurfaceMesh (only its vertices are read): the top is re-triangulated on a subset of the lattice
 // vertices (squares of 2^k lattice cells, conforming, no T-junctions) so
 // that its vertical distance to the full-resolution top, measured
 // everywhere (at every lattice vertex and wherever an edge of one crosses
