@@ -21,7 +21,7 @@
 #include <utility>
 #include <vector>
 
-#include "client/bitmap_font.h"
+#include "client/text.h"
 #include "client/colormap.h"
 #include "client/marks_files.h"
 #include "client/pictures.h"
@@ -203,32 +203,53 @@ TEST(PngTest, ReportsErrors) {
 
 // ------------------------------------------------------------------- font
 
-TEST(FontTest, DrawsDistinctGlyphs) {
-  auto ink = [](const std::string& text) {
-    Image im(TextWidth(text, 2) + 4, kGlyphHeight * 2 + 4, 3, {255, 255, 255});
-    DrawText(im, 2, 2, text, {0, 0, 0}, 2);
-    std::vector<bool> mask;
-    for (int y = 0; y < im.height(); ++y) {
-      for (int x = 0; x < im.width(); ++x) mask.push_back(im.Get(x, y).r == 0);
-    }
-    return mask;
+TEST(TextTest, DrawsAntiAliasedDistinctLabels) {
+  auto draw = [](const std::string& text, int scale) {
+    Image im(TextWidth(text, scale) + 8, kGlyphHeight * scale + 8, 3,
+             {255, 255, 255});
+    DrawText(im, 4, 4, text, {0, 0, 0}, scale);
+    return im;
   };
-  EXPECT_EQ(TextWidth("1e-6", 1), 4 * kGlyphAdvance - 1);
-  EXPECT_EQ(TextWidth("1e-6", 3), 3 * (4 * kGlyphAdvance - 1));
-  const std::string chars = "0123456789abcdefghijklmnopqrstuvwxyz.-+()";
-  std::vector<std::vector<bool>> seen;
+  auto ink = [](const Image& im) {
+    std::vector<uint8_t> v;
+    for (int y = 0; y < im.height(); ++y) {
+      for (int x = 0; x < im.width(); ++x) v.push_back(im.Get(x, y).r);
+    }
+    return v;
+  };
+  // Widths grow with the text and the scale.
+  EXPECT_GT(TextWidth("1e-6", 1), 10);
+  EXPECT_GT(TextWidth("1e-6 mm", 2), TextWidth("1e-6", 2));
+  EXPECT_NEAR(TextWidth("1e-6", 3), 3 * TextWidth("1e-6", 1), 4);
+  EXPECT_EQ(TextWidth("", 2), 0);
+  const std::string chars = "0123456789abcdefghijklmnopqrstuvwxyzM.-+()@";
+  std::vector<std::vector<uint8_t>> seen;
   for (char c : chars) {
-    ASSERT_TRUE(HasGlyph(c)) << c;
-    const auto m = ink(std::string(1, c));
-    EXPECT_GT(std::count(m.begin(), m.end(), true), 0) << c;
+    const Image im = draw(std::string(1, c), 2);
+    const std::vector<uint8_t> m = ink(im);
+    // Dark ink and anti-aliased edges (grey levels between).
+    EXPECT_LT(*std::min_element(m.begin(), m.end()), 100) << c;
+    EXPECT_TRUE(std::any_of(m.begin(), m.end(),
+                            [](uint8_t v) { return v > 40 && v < 215; }))
+        << c;
     for (const auto& other : seen) EXPECT_NE(m, other) << c;
     seen.push_back(m);
+    // Ink stays on its line: within the line box, one pixel of margin.
+    for (int y = 0; y < im.height(); ++y) {
+      for (int x = 0; x < im.width(); ++x) {
+        if (y < 3 || y > 4 + kGlyphHeight * 2) {
+          EXPECT_EQ(im.Get(x, y).r, 255) << c << " at " << x << "," << y;
+        }
+      }
+    }
   }
-  EXPECT_TRUE(HasGlyph('M'));  // drawn as 'm'
-  EXPECT_EQ(ink("M"), ink("m"));
-  EXPECT_FALSE(HasGlyph('@'));
-  const std::vector<bool> blank = ink(" ");
-  EXPECT_EQ(std::count(blank.begin(), blank.end(), true), 0);
+  const std::vector<uint8_t> blank = ink(draw(" ", 2));
+  EXPECT_EQ(std::count(blank.begin(), blank.end(), 255),
+            static_cast<long>(blank.size()));
+  // Clipped at the image's edges.
+  Image small(5, 5, 3, {255, 255, 255});
+  DrawText(small, -3, -6, "8888", {0, 0, 0}, 3);
+  DrawText(small, 3, 3, "8888", {0, 0, 0}, 3);
 }
 
 // ----------------------------------------------------------------- relief
@@ -340,16 +361,19 @@ TEST(ErrorMapTest, LogScaleColoursAndLegend) {
   EXPECT_EQ(back->Get((layout.zero_x0 + layout.zero_x1) / 2,
                       (layout.zero_y0 + layout.zero_y1) / 2),
             kZeroErrorColor);
+  // Ink in pixels' worth of full coverage (the text is anti-aliased).
   auto ink_in = [&](int x0, int y0, int x1, int y1) {
-    int n = 0;
+    double n = 0;
     for (int y = y0; y < y1; ++y) {
-      for (int x = x0; x < x1; ++x) n += Luma(back->Get(x, y)) < 80;
+      for (int x = x0; x < x1; ++x) {
+        n += std::max(0.0, 1 - Luma(back->Get(x, y)) / 200.0);
+      }
     }
     return n;
   };
   EXPECT_GT(ink_in(layout.bar_x1 + 2, layout.bar_y0 - 10, back->width(),
                    layout.bar_y1 + 10),
-            5 * 120);  // five tick labels
+            5 * 100);  // five tick labels ("1e-2": about 110 px of ink)
   EXPECT_GT(ink_in(layout.legend_x0, 0, back->width(), layout.bar_y0 - 12),
             300);  // "error (mm)", "max 1.00e-2"
   EXPECT_EQ(ink_in(layout.bar_x1 + 2, layout.zero_y1 + 12, back->width(),
