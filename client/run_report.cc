@@ -12,10 +12,11 @@
 #include <fstream>
 #include <system_error>
 
+#include <nlohmann/json.hpp>
+
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "client/json_writer.h"
 #include "client/run_outputs.h"
 #include "client/surface_grid.h"
 #include "core/cutting_marks.h"
@@ -243,72 +244,59 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
 }
 
 std::string StatsJson(const RunReport& r) {
-  JsonWriter j;
-  j.BeginObject();
-  j.Key("file").String(r.file);
-  j.Key("server").String(r.server);
-  j.Key("moves").Int(r.moves);
-  j.Key("source_lines").Int(r.lines);
-  j.Key("nodes_lowered").Int(r.nodes_lowered);
-  j.Key("scheme").String(r.scheme == SchemeKind::kZmap ? "zmap" : "taylor");
-  j.Key("stock").BeginObject()
-      .Key("x0").Double(r.stock.x0).Key("y0").Double(r.stock.y0)
-      .Key("x1").Double(r.stock.x1).Key("y1").Double(r.stock.y1)
-      .Key("top").Double(r.stock.z_top)
-      .Key("nx").Int(r.stock.nx).Key("ny").Int(r.stock.ny)
-      .EndObject();
-  j.Key("seconds").BeginObject()
-      .Key("parse").Double(r.parse_seconds)
-      .Key("simulate").Double(r.simulate_seconds)
-      .Key("outputs").Double(r.output_seconds);
-  j.Key("output_steps").BeginObject();
-  for (const auto& [name, seconds] : r.output_steps) {
-    j.Key(name).Double(seconds);
-  }
-  j.EndObject().EndObject();
-  j.Key("moves_per_second")
-      .Double(r.simulate_seconds > 0 ? r.moves / r.simulate_seconds : 0);
-  j.Key("error").BeginObject()
-      .Key("max").Double(r.error.max_error())
-      .Key("mean").Double(r.error.mean_error())
-      .Key("rms").Double(r.error.rms_error())
-      .Key("max_at").BeginArray().Double(r.error.max_x())
-      .Double(r.error.max_y()).EndArray()
-      .Key("samples").Int(r.error.samples())
-      .EndObject();
+  using Json = nlohmann::ordered_json;
+  Json steps = Json::object();
+  for (const auto& [name, seconds] : r.output_steps) steps[name] = seconds;
+  Json j = {
+      {"file", r.file},
+      {"server", r.server},
+      {"moves", r.moves},
+      {"source_lines", r.lines},
+      {"nodes_lowered", r.nodes_lowered},
+      {"scheme", r.scheme == SchemeKind::kZmap ? "zmap" : "taylor"},
+      {"stock",
+       {{"x0", r.stock.x0}, {"y0", r.stock.y0}, {"x1", r.stock.x1},
+        {"y1", r.stock.y1}, {"top", r.stock.z_top}, {"nx", r.stock.nx},
+        {"ny", r.stock.ny}}},
+      {"seconds",
+       {{"parse", r.parse_seconds},
+        {"simulate", r.simulate_seconds},
+        {"outputs", r.output_seconds},
+        {"output_steps", steps}}},
+      {"moves_per_second",
+       r.simulate_seconds > 0 ? r.moves / r.simulate_seconds : 0},
+      {"error",
+       {{"max", r.error.max_error()},
+        {"mean", r.error.mean_error()},
+        {"rms", r.error.rms_error()},
+        {"max_at", {r.error.max_x(), r.error.max_y()}},
+        {"samples", r.error.samples()}}},
+  };
   if (r.marks) {
-    j.Key("marks").BeginObject()
-        .Key("polylines").Int(r.marks->polylines)
-        .Key("vertices").Int(r.marks->vertices)
-        .Key("total_length").Double(r.marks->total_length)
-        .Key("angle_deg").BeginArray().Double(r.marks->min_angle_deg)
-        .Double(r.marks->max_angle_deg).EndArray();
+    Json& m = j["marks"] = {
+        {"polylines", r.marks->polylines},
+        {"vertices", r.marks->vertices},
+        {"total_length", r.marks->total_length},
+        {"angle_deg", {r.marks->min_angle_deg, r.marks->max_angle_deg}}};
     if (r.marks_shown) {
       // What marks.json/svg/png show (FilterMarks).
-      j.Key("shown").BeginObject()
-          .Key("min_angle_deg").Double(r.marks_display.min_angle_deg)
-          .Key("min_length").Double(r.marks_display.min_length)
-          .Key("polylines").Int(r.marks_shown->polylines)
-          .Key("vertices").Int(r.marks_shown->vertices)
-          .Key("total_length").Double(r.marks_shown->total_length)
-          .EndObject();
+      m["shown"] = {{"min_angle_deg", r.marks_display.min_angle_deg},
+                    {"min_length", r.marks_display.min_length},
+                    {"polylines", r.marks_shown->polylines},
+                    {"vertices", r.marks_shown->vertices},
+                    {"total_length", r.marks_shown->total_length}};
     }
-    j.EndObject();
   }
   if (r.mesh.mesh_triangles > 0) {
-    j.Key("mesh").BeginObject()
-        .Key("tolerance").Double(r.mesh_tolerance)
-        .Key("max_deviation").Double(r.mesh.mesh_deviation)
-        .Key("triangles").Int(r.mesh.mesh_triangles)
-        .Key("full_triangles").Int(r.mesh.full_mesh_triangles)
-        .EndObject();
+    j["mesh"] = {{"tolerance", r.mesh_tolerance},
+                 {"max_deviation", r.mesh.mesh_deviation},
+                 {"triangles", r.mesh.mesh_triangles},
+                 {"full_triangles", r.mesh.full_mesh_triangles}};
   }
-  if (!r.ignored.empty()) j.Key("ignored").String(r.ignored);
-  j.Key("files").BeginArray();
-  for (const std::string& f : r.files) j.String(f);
-  j.EndArray();
-  j.EndObject();
-  return j.str();
+  if (!r.ignored.empty()) j["ignored"] = r.ignored;
+  j["files"] = r.files;
+  // Paths and G-code words are not always UTF-8: replaced, not thrown on.
+  return j.dump(-1, ' ', false, Json::error_handler_t::replace);
 }
 
 absl::Status WriteStatsJson(const RunReport& r, const std::string& path) {
