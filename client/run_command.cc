@@ -305,6 +305,10 @@ int RunCommand(const std::vector<std::string>& argv) {
   if (!subdivide.ok()) return fail(subdivide.status(), 2);
   const int64_t batch_points = batch->value_or(20000);
   if (batch_points < 2) return fail(absl::InvalidArgumentError("--batch must be >= 2"), 2);
+  OutputOptions output_flags;
+  if (absl::Status s = ParseOutputFlags(*args, &output_flags); !s.ok()) {
+    return fail(s, 2);
+  }
 
   const auto t_parse = std::chrono::steady_clock::now();
   auto path = ReadToolpathFile(file, gopt);
@@ -399,12 +403,9 @@ int RunCommand(const std::vector<std::string>& argv) {
   report.server = (*conn)->target();
   report.ignored = path->IgnoredSummary();
   const auto t_out = std::chrono::steady_clock::now();
-  OutputOptions oopt;
+  OutputOptions oopt = output_flags;
   if (auto out = args->Get("out")) oopt.dir = *out;
   oopt.subdivide = subdivide->value_or(1);
-  if (absl::Status s = ParseOutputFlags(*args, &oopt); !s.ok()) {
-    return fail(s, 2);
-  }
   absl::Status written = CollectAndWrite(**conn, id, oopt, &report);
   report.output_seconds = Since(t_out);
   if (!written.ok()) return fail(written, 1);
