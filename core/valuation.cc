@@ -56,12 +56,14 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
   auto cell_index = [](double f, int32_t n) {
     return f >= n - 1 ? n - 1 : f > 0 ? static_cast<int32_t>(f) : 0;
   };
-  // Samples of different bins can share a cell: a lock-free max.
-  auto map_max = [&](double x, double y, double err) {
+  auto map_cell = [&](double x, double y) {
     const int32_t cx = cell_index((x - region.x0) / cell_x, options.map_cols);
     const int32_t cy = cell_index((y - region.y0) / cell_y, options.map_rows);
-    std::atomic_ref<float> cell(map[size_t{1} * cy * options.map_cols + cx]);
-    const float e = static_cast<float>(err);
+    return int64_t{cy} * options.map_cols + cx;
+  };
+  // Samples of different bins can share a cell: a lock-free max.
+  auto map_max = [&](int64_t c, float e) {
+    std::atomic_ref<float> cell(map[c]);
     float cur = cell.load(std::memory_order_relaxed);
     while (e > cur && !cell.compare_exchange_weak(cur, e)) {
     }
@@ -171,11 +173,25 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           c.sweep.Heights(xs.data(), ys.data(), count, h.data());
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
+        // An element's samples mostly share a map cell: their max goes in
+        // once per run of one cell (the same max: cells start at 0 and
+        // take only larger values).
+        int64_t run_cell = -1;
+        float run_max = 0;
         for (int32_t q = 0; q < count; ++q) {
           const double x = xs[q], y = ys[q];
           const double err =
               SampleError(wp.scheme().Reconstruct(e, x, y), est[q]);
-          if (mapped) map_max(x, y, err);
+          if (mapped) {
+            const int64_t c = map_cell(x, y);
+            if (c != run_cell) {
+              if (run_cell >= 0) map_max(run_cell, run_max);
+              run_cell = c;
+              run_max = 0;
+            }
+            const float ef = static_cast<float>(err);
+            if (ef > run_max) run_max = ef;
+          }
           p.sum += err;
           p.sum_sq += err * err;
           ++p.n;
@@ -185,6 +201,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             p.max_y = y;
           }
         }
+        if (run_cell >= 0) map_max(run_cell, run_max);
       }
     }
   });
