@@ -20,12 +20,14 @@ RUN cmake -S . -B /build -G Ninja -DCMAKE_BUILD_TYPE=Release \
  && strip /build/bin/swarfd /build/bin/swarf \
  && deploy/docker/runtime-packages /build/bin/swarfd /build/bin/swarf \
       > /build/runtime-packages \
+ && echo fonts-dejavu-core >> /build/runtime-packages \
  && cat /build/runtime-packages
 
 # -------------------------------------------------------------- runtime
 FROM debian:bookworm-slim
 # Only the shared libraries the two binaries load (listed by the build stage
-# from their ldd output: gRPC, protobuf, abseil, spdlog, SQLite, libpng, ...).
+# from their ldd output: gRPC, protobuf, abseil, spdlog, SQLite, libpng,
+# cairo, ...) and the font the picture labels use.
 COPY --from=build /build/runtime-packages /tmp/runtime-packages
 RUN apt-get update \
  && xargs -a /tmp/runtime-packages apt-get install -y --no-install-recommends \

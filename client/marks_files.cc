@@ -10,6 +10,63 @@
 
 namespace swarf::cli {
 
+std::vector<MarkPolyline> FilterMarks(const std::vector<MarkPolyline>& marks,
+                                      const MarkDisplayFilter& filter) {
+  std::vector<MarkPolyline> out;
+  for (const MarkPolyline& p : marks) {
+    const size_t n = p.vertices.size();
+    const bool rim = p.owners[0] == kStockTopOwner;
+    auto keep = [&](size_t k) {
+      return rim || (k < p.angle_deg.size() &&
+                     p.angle_deg[k] >= filter.min_angle_deg);
+    };
+    auto emit = [&](MarkPolyline piece) {
+      if (piece.vertices.size() >= 2 &&
+          PolylineLength(piece) >= filter.min_length) {
+        out.push_back(std::move(piece));
+      }
+    };
+    // Start after a dropped vertex, so that a closed polyline's run over
+    // its first vertex stays whole.
+    size_t start = 0;
+    bool all = true;
+    for (size_t k = 0; k < n; ++k) {
+      if (!keep(k)) {
+        all = false;
+        start = p.closed ? k + 1 : 0;
+        break;
+      }
+    }
+    if (all) {
+      emit(p);
+      continue;
+    }
+    MarkPolyline piece;
+    auto flush = [&] {
+      if (!piece.vertices.empty()) emit(std::move(piece));
+      piece = MarkPolyline();
+    };
+    for (size_t q = 0; q < n; ++q) {
+      const size_t k = (start + q) % n;
+      if (!keep(k)) {
+        flush();
+        continue;
+      }
+      if (piece.vertices.empty()) {
+        piece.owners = k < p.vertex_owners.size() ? p.vertex_owners[k]
+                                                  : p.owners;
+      }
+      piece.vertices.push_back(p.vertices[k]);
+      if (k < p.angle_deg.size()) piece.angle_deg.push_back(p.angle_deg[k]);
+      if (k < p.vertex_owners.size()) {
+        piece.vertex_owners.push_back(p.vertex_owners[k]);
+      }
+    }
+    flush();
+  }
+  return out;
+}
+
 std::string MarksJson(const std::vector<MarkPolyline>& marks,
                       bool vertex_owners) {
   JsonWriter j;

@@ -12,6 +12,23 @@
 
 namespace swarf::cli {
 
+// Which marks the files show. Seams between facets of one smooth surface
+// meet at a fraction of a degree; rims and real creases at more.
+struct MarkDisplayFilter {
+  double min_angle_deg = 1;  // vertices below it are dropped...
+  double min_length = 0.2;   // mm; ...and pieces shorter than this
+};
+inline constexpr MarkDisplayFilter kDefaultMarkDisplay;
+
+// The parts of `marks` to display: each polyline is cut into its runs of
+// consecutive vertices at min_angle_deg or more (a closed polyline with
+// every vertex there stays closed; a run may wrap past its first vertex);
+// runs of at least two vertices and min_length (3D length) are kept, with
+// their owners, angles and vertex owners. Rims on the stock top (owner -1)
+// are kept whatever their angle.
+std::vector<MarkPolyline> FilterMarks(const std::vector<MarkPolyline>& marks,
+                                      const MarkDisplayFilter& filter);
+
 // Compact JSON, without a trailing newline:
 // {"polylines":[{"closed":false,"owners":[a,b],"vertices":[[x,y,z],...],
 // "angle_deg":[...]}]}, owner -1 for the stock top; with vertex_owners also

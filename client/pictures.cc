@@ -8,7 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "client/bitmap_font.h"
+#include "client/text.h"
 #include "client/colormap.h"
 #include "core/thread_pool.h"
 

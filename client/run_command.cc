@@ -62,6 +62,14 @@ const std::string kUsage =
     "  --subdivide N                STL: split each element N x N using the\n"
     "                               scheme's patches (default 1)\n"
     "  --batch N                    moves per batch sent (default 20000)\n"
+    "  --mesh-tolerance T           STL/VRML: largest vertical distance to\n"
+    "                               the full-resolution surface (mm,\n"
+    "                               default 0.005; 0: every element)\n"
+    "  --marks-min-angle A          marks files: drop vertices where the\n"
+    "                               surfaces meet under A degrees (default\n"
+    "                               1; rims on the stock top always stay)\n"
+    "  --marks-min-length L         ...and pieces shorter than L mm\n"
+    "                               (default 0.2)\n"
     "  --json                       print the stats document instead\n"
     "G-code:\n" + std::string(kToolpathUsage);
 
@@ -265,6 +273,7 @@ int RunCommand(const std::vector<std::string>& argv) {
                                    "batch"};
   valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
   valued.insert(std::begin(kToolpathFlags), std::end(kToolpathFlags));
+  valued.insert(std::begin(kOutputFlags), std::end(kOutputFlags));
   auto args = Args::Parse(argv, valued, {"json", "help", "quiet", kStrictFlag});
   auto fail = [](const absl::Status& s, int code) {
     std::cerr << "swarf run: " << s.message() << "\n";
@@ -317,6 +326,10 @@ int RunCommand(const std::vector<std::string>& argv) {
   if (!subdivide.ok()) return fail(subdivide.status(), 2);
   const int64_t batch_points = batch->value_or(20000);
   if (batch_points < 2) return fail(absl::InvalidArgumentError("--batch must be >= 2"), 2);
+  OutputOptions output_flags;
+  if (absl::Status s = ParseOutputFlags(*args, &output_flags); !s.ok()) {
+    return fail(s, 2);
+  }
 
   const auto t_parse = std::chrono::steady_clock::now();
   auto path = ReadToolpathFile(file, gopt, tflags.format);
@@ -423,7 +436,7 @@ int RunCommand(const std::vector<std::string>& argv) {
   report.server = (*conn)->target();
   report.ignored = path->IgnoredSummary();
   const auto t_out = std::chrono::steady_clock::now();
-  OutputOptions oopt;
+  OutputOptions oopt = output_flags;
   if (auto out = args->Get("out")) oopt.dir = *out;
   oopt.subdivide = subdivide->value_or(1);
   std::map<int32_t, double> radius_by_tool;

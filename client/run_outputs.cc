@@ -1,6 +1,8 @@
 #include "client/run_outputs.h"
 
 #include <chrono>
+#include <functional>
+#include <future>
 
 #include "absl/strings/str_cat.h"
 #include "client/marks_files.h"
@@ -15,81 +17,112 @@ double Since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
+// Files built and written one after the other, each timed; stops at the
+// first error.
+class Chain {
+ public:
+  explicit Chain(std::string base) : base_(std::move(base)) {}
+  void Then(const std::string& name,
+            const std::function<absl::Status(const std::string&)>& write) {
+    if (!status_.ok()) return;
+    const auto t0 = Clock::now();
+    status_ = write(base_ + name);
+    if (status_.ok()) written_.push_back({base_ + name, Since(t0)});
+  }
+  absl::Status status() const { return status_; }
+  const std::vector<WrittenFile>& written() const { return written_; }
+
+ private:
+  const std::string base_;
+  absl::Status status_;
+  std::vector<WrittenFile> written_;
+};
+
 }  // namespace
 
 absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     const std::string& dir, const SurfaceGrid& grid, const ErrorRaster* error,
-    const std::vector<MarkPolyline>* marks, const RunOutputOptions& options) {
-  std::vector<WrittenFile> written;
+    const std::vector<MarkPolyline>* marks, const RunOutputOptions& options,
+    RunOutputSummary* summary) {
   const std::string base = dir.empty() || dir.back() == '/' ? dir : dir + "/";
-  auto done = [&](const std::string& name, Clock::time_point t0) {
-    written.push_back({base + name, Since(t0)});
-  };
-  auto t0 = Clock::now();
-  absl::StatusOr<Image> relief = RenderRelief(grid, options.relief);
-  if (!relief.ok()) return relief.status();
-  if (absl::Status st = WritePng(*relief, base + "relief.png"); !st.ok()) {
-    return st;
-  }
-  done("relief.png", t0);
-
-  if (error != nullptr) {
-    t0 = Clock::now();
-    absl::StatusOr<Image> map = RenderErrorMap(*error, options.error);
-    if (!map.ok()) return map.status();
-    if (absl::Status st = WritePng(*map, base + "error.png"); !st.ok()) {
-      return st;
+  // Three independent chains at once (most writers are serial): the
+  // pictures, the marks files, the meshes.
+  auto meshes = std::async(std::launch::async, [&] {
+    Chain c(base);
+    absl::StatusOr<TriangleMesh> mesh;
+    c.Then("surface.stl", [&](const std::string& path) {
+      mesh = BuildSurfaceMesh(grid, options.mesh);
+      if (!mesh.ok()) return mesh.status();
+      return WriteStl(*mesh, path);
+    });
+    c.Then("surface.wrl", [&](const std::string& path) {
+      const std::vector<Rgb> colors =
+          options.vrml_colors ? SurfaceColors(*mesh, grid.spec.z_top)
+                              : std::vector<Rgb>();
+      return WriteVrml(*mesh, path, colors);
+    });
+    if (c.status().ok() && summary != nullptr) {
+      const int64_t nx = mesh->lattice_nx, ny = mesh->lattice_ny;
+      summary->full_mesh_triangles = 2 * nx * ny + 6 * (nx + ny) - 2;
+      summary->mesh_triangles = static_cast<int64_t>(mesh->triangles.size());
+      summary->mesh_deviation = mesh->max_deviation;
     }
-    done("error.png", t0);
-  }
-
+    return c;
+  });
+  std::future<Chain> marks_files;
   if (marks != nullptr) {
-    t0 = Clock::now();
-    // The relief already drawn serves when the frames agree (grids of about
-    // 1000 nodes and more per side).
-    const PixelFrame frame = ReliefFrame(grid.spec, options.marks.relief);
-    absl::StatusOr<Image> finer;
-    if (!(frame == ReliefFrame(grid.spec, options.relief))) {
-      finer = RenderRelief(grid, options.marks.relief);
-      if (!finer.ok()) return finer.status();
-    }
-    absl::StatusOr<Image> picture = DrawMarks(
-        finer.ok() ? *finer : *relief, frame, *marks, options.marks);
-    if (!picture.ok()) return picture.status();
-    if (absl::Status st = WritePng(*picture, base + "marks.png"); !st.ok()) {
-      return st;
-    }
-    done("marks.png", t0);
-    t0 = Clock::now();
-    if (absl::Status st = WriteMarksSvg(grid.spec, *marks, base + "marks.svg");
-        !st.ok()) {
-      return st;
-    }
-    done("marks.svg", t0);
-    t0 = Clock::now();
-    if (absl::Status st = WriteMarksJson(*marks, base + "marks.json");
-        !st.ok()) {
-      return st;
-    }
-    done("marks.json", t0);
+    marks_files = std::async(std::launch::async, [&] {
+      Chain c(base);
+      c.Then("marks.svg", [&](const std::string& path) {
+        return WriteMarksSvg(grid.spec, *marks, path);
+      });
+      c.Then("marks.json", [&](const std::string& path) {
+        return WriteMarksJson(*marks, path);
+      });
+      return c;
+    });
   }
 
-  t0 = Clock::now();
-  absl::StatusOr<TriangleMesh> mesh = BuildSurfaceMesh(grid, options.mesh);
-  if (!mesh.ok()) return mesh.status();
-  if (absl::Status st = WriteStl(*mesh, base + "surface.stl"); !st.ok()) {
-    return st;
+  Chain pictures(base);
+  absl::StatusOr<Image> relief;
+  pictures.Then("relief.png", [&](const std::string& path) {
+    relief = RenderRelief(grid, options.relief);
+    if (!relief.ok()) return relief.status();
+    return WritePng(*relief, path);
+  });
+  if (error != nullptr) {
+    pictures.Then("error.png", [&](const std::string& path) {
+      absl::StatusOr<Image> map = RenderErrorMap(*error, options.error);
+      if (!map.ok()) return map.status();
+      return WritePng(*map, path);
+    });
   }
-  done("surface.stl", t0);
-  t0 = Clock::now();
-  const std::vector<Rgb> colors =
-      options.vrml_colors ? SurfaceColors(*mesh, grid.spec.z_top)
-                          : std::vector<Rgb>();
-  if (absl::Status st = WriteVrml(*mesh, base + "surface.wrl", colors);
-      !st.ok()) {
-    return st;
+  if (marks != nullptr) {
+    pictures.Then("marks.png", [&](const std::string& path) {
+      // The relief already drawn serves when the frames agree (grids of
+      // about 1000 nodes and more per side).
+      const PixelFrame frame = ReliefFrame(grid.spec, options.marks.relief);
+      absl::StatusOr<Image> finer;
+      if (!(frame == ReliefFrame(grid.spec, options.relief))) {
+        finer = RenderRelief(grid, options.marks.relief);
+        if (!finer.ok()) return finer.status();
+      }
+      absl::StatusOr<Image> picture = DrawMarks(
+          finer.ok() ? *finer : *relief, frame, *marks, options.marks);
+      if (!picture.ok()) return picture.status();
+      return WritePng(*picture, path);
+    });
   }
-  done("surface.wrl", t0);
+
+  std::vector<Chain> chains;
+  chains.push_back(std::move(pictures));
+  if (marks_files.valid()) chains.push_back(marks_files.get());
+  chains.push_back(meshes.get());
+  std::vector<WrittenFile> written;
+  for (const Chain& c : chains) {
+    if (!c.status().ok()) return c.status();
+    written.insert(written.end(), c.written().begin(), c.written().end());
+  }
   return written;
 }
 

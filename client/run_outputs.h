@@ -18,7 +18,7 @@ struct RunOutputOptions {
   ReliefOptions relief;
   ErrorMapOptions error;
   MarksPictureOptions marks;
-  SurfaceMeshOptions mesh;
+  SurfaceMeshOptions mesh;  // its tolerance > 0: the adaptive mesh
   bool vrml_colors = true;  // per-vertex height colours in surface.wrl
 };
 
@@ -28,14 +28,24 @@ struct WrittenFile {
   double seconds = 0;
 };
 
-// Writes into the existing directory `dir`, in this order: relief.png;
-// error.png when `error` is given; marks.png, marks.svg and marks.json when
-// `marks` is given; surface.stl and surface.wrl. Stops at the first error
-// (naming the file); files written before it stay.
+// What the meshes came to.
+struct RunOutputSummary {
+  int64_t mesh_triangles = 0;       // in surface.stl / surface.wrl
+  int64_t full_mesh_triangles = 0;  // the full-resolution lattice's
+  double mesh_deviation = 0;        // measured, mm (SimplifySurfaceMesh)
+};
+
+// Writes into the existing directory `dir`: relief.png; error.png when
+// `error` is given; marks.png, marks.svg and marks.json when `marks` is
+// given; surface.stl and surface.wrl; returned in that order. Three chains
+// run at once (the pictures, the marks files, the meshes), each stopping at
+// its first error; the first error in that order is returned (naming the
+// file); files written stay. `summary`, if given, is filled when the meshes
+// were written.
 absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     const std::string& dir, const SurfaceGrid& grid, const ErrorRaster* error,
     const std::vector<MarkPolyline>* marks,
-    const RunOutputOptions& options = {});
+    const RunOutputOptions& options = {}, RunOutputSummary* summary = nullptr);
 
 }  // namespace swarf::cli
 

@@ -1,17 +1,22 @@
 #include "client/run_report.h"
 
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <cstdio>
 #include <functional>
+#include <future>
+#include <utility>
 #include <thread>
 #include <filesystem>
 #include <fstream>
 #include <system_error>
 
+#include <nlohmann/json.hpp>
+
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "client/json_writer.h"
 #include "client/run_outputs.h"
 #include "client/surface_grid.h"
 #include "core/cutting_marks.h"
@@ -108,10 +113,60 @@ std::string Rate(double per_s) {
 
 }  // namespace
 
+absl::Status ParseOutputFlags(const Args& args, OutputOptions* out) {
+  auto number = [&](const char* flag, double* v) -> absl::Status {
+    const auto text = args.Get(flag);
+    if (!text) return absl::OkStatus();
+    if (!absl::SimpleAtod(*text, v) || !std::isfinite(*v) || *v < 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--", flag, " must be a number >= 0, got \"", *text,
+                       "\""));
+    }
+    return absl::OkStatus();
+  };
+  if (absl::Status s = number("mesh-tolerance", &out->mesh_tolerance);
+      !s.ok()) {
+    return s;
+  }
+  if (absl::Status s =
+          number("marks-min-angle", &out->marks_display.min_angle_deg);
+      !s.ok()) {
+    return s;
+  }
+  return number("marks-min-length", &out->marks_display.min_length);
+}
+
 absl::Status CollectAndWrite(Connection& conn, const std::string& id,
                              const OutputOptions& options, RunReport* report) {
   const bool files = !options.dir.empty();
   const StockSpec& stock = report->stock;
+  using Clock = std::chrono::steady_clock;
+  auto seconds = [](Clock::time_point t0) {
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+  };
+  // The marks and the tiles are fetched while the server measures the
+  // error (each step's own time is reported; they overlap).
+  std::future<std::pair<absl::StatusOr<std::vector<MarkPolyline>>, double>>
+      marks_fetch;
+  if (GetScheme(report->scheme).stores_derivatives()) {
+    marks_fetch = std::async(std::launch::async, [&] {
+      const auto t0 = Clock::now();
+      auto m = Retrying<std::vector<MarkPolyline>>(
+          "the cutting marks", [&] { return FetchMarks(conn, id); });
+      return std::make_pair(std::move(m), seconds(t0));
+    });
+  }
+  std::future<std::pair<absl::StatusOr<SurfaceGrid>, double>> grid_fetch;
+  if (files) {
+    grid_fetch = std::async(std::launch::async, [&] {
+      const auto t0 = Clock::now();
+      auto g = Retrying<SurfaceGrid>("the tiles", [&] {
+        return FetchGrid(conn, id, stock, report->scheme);
+      });
+      return std::make_pair(std::move(g), seconds(t0));
+    });
+  }
+  const auto t0 = Clock::now();
   auto stats = Retrying<pb::ErrorStats>(
       "the error statistics", [&]() -> absl::StatusOr<pb::ErrorStats> {
         auto ctx = conn.Context(id, 3600);
@@ -128,17 +183,29 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
         if (!st.ok()) return FromGrpc(st);
         return out;
       });
+  report->output_steps.emplace_back("error_stats", seconds(t0));
+  std::vector<MarkPolyline> marks;
+  absl::Status marks_status;
+  if (marks_fetch.valid()) {
+    auto [m, s] = marks_fetch.get();
+    report->output_steps.emplace_back("marks", s);
+    if (m.ok()) {
+      marks = *std::move(m);
+      report->marks = Summarize(marks);
+    }
+    marks_status = m.status();
+  }
+  absl::StatusOr<SurfaceGrid> grid = absl::UnknownError("not fetched");
+  if (grid_fetch.valid()) {
+    auto [g, s] = grid_fetch.get();
+    report->output_steps.emplace_back("tiles", s);
+    grid = std::move(g);
+  }
   if (!stats.ok()) return stats.status();
   report->error = *std::move(stats);
-  std::vector<MarkPolyline> marks;
-  if (GetScheme(report->scheme).stores_derivatives()) {
-    auto m = Retrying<std::vector<MarkPolyline>>(
-        "the cutting marks", [&] { return FetchMarks(conn, id); });
-    if (!m.ok()) return m.status();
-    marks = *std::move(m);
-    report->marks = Summarize(marks);
-  }
+  if (!marks_status.ok()) return marks_status;
   if (!files) return absl::OkStatus();
+  if (!grid.ok()) return grid.status();
 
   std::error_code ec;
   std::filesystem::create_directories(options.dir, ec);
@@ -146,10 +213,6 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     return absl::FailedPreconditionError(
         absl::StrCat("cannot create --out ", options.dir, ": ", ec.message()));
   }
-  auto grid = Retrying<SurfaceGrid>("the tiles", [&] {
-    return FetchGrid(conn, id, stock, report->scheme);
-  });
-  if (!grid.ok()) return grid.status();
   if (options.moves != nullptr) grid->moves = *options.moves;
   ErrorRaster raster;
   raster.region = {stock.x0, stock.y0, stock.x1, stock.y1};
@@ -159,70 +222,89 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
                           report->error.map_max_error().end());
   RunOutputOptions out;
   out.mesh.subdivision = std::max(1, options.subdivide);
+  out.mesh.tolerance = options.mesh_tolerance;
+  report->mesh_tolerance = options.mesh_tolerance;
+  report->marks_display = options.marks_display;
+  if (report->marks) {
+    marks = FilterMarks(marks, options.marks_display);
+    report->marks_shown = Summarize(marks);
+  }
   auto written = WriteRunOutputs(options.dir, *grid,
                                  raster.cols > 0 ? &raster : nullptr,
-                                 report->marks ? &marks : nullptr, out);
+                                 report->marks ? &marks : nullptr, out,
+                                 &report->mesh);
   if (!written.ok()) return written.status();
-  for (const WrittenFile& f : *written) report->files.push_back(f.path);
+  for (const WrittenFile& f : *written) {
+    report->files.push_back(f.path);
+    report->output_steps.emplace_back(
+        std::filesystem::path(f.path).filename().string(), f.seconds);
+  }
   report->files.push_back(
       (std::filesystem::path(options.dir) / "stats.json").string());
   return absl::OkStatus();
 }
 
 std::string StatsJson(const RunReport& r) {
-  JsonWriter j;
-  j.BeginObject();
-  j.Key("file").String(r.file);
-  j.Key("server").String(r.server);
-  j.Key("moves").Int(r.moves);
-  j.Key("source_lines").Int(r.lines);
-  j.Key("nodes_lowered").Int(r.nodes_lowered);
-  j.Key("scheme").String(std::string(GetScheme(r.scheme).name()));
-  j.Key("stock").BeginObject()
-      .Key("x0").Double(r.stock.x0).Key("y0").Double(r.stock.y0)
-      .Key("x1").Double(r.stock.x1).Key("y1").Double(r.stock.y1)
-      .Key("top").Double(r.stock.z_top)
-      .Key("nx").Int(r.stock.nx).Key("ny").Int(r.stock.ny)
-      .EndObject();
-  j.Key("seconds").BeginObject()
-      .Key("parse").Double(r.parse_seconds)
-      .Key("simulate").Double(r.simulate_seconds)
-      .Key("outputs").Double(r.output_seconds)
-      .EndObject();
-  j.Key("moves_per_second")
-      .Double(r.simulate_seconds > 0 ? r.moves / r.simulate_seconds : 0);
-  j.Key("error").BeginObject()
-      .Key("max").Double(r.error.max_error())
-      .Key("mean").Double(r.error.mean_error())
-      .Key("rms").Double(r.error.rms_error())
-      .Key("max_at").BeginArray().Double(r.error.max_x())
-      .Double(r.error.max_y()).EndArray()
-      .Key("samples").Int(r.error.samples())
-      .EndObject();
+  using Json = nlohmann::ordered_json;
+  Json steps = Json::object();
+  for (const auto& [name, seconds] : r.output_steps) steps[name] = seconds;
+  Json j = {
+      {"file", r.file},
+      {"server", r.server},
+      {"moves", r.moves},
+      {"source_lines", r.lines},
+      {"nodes_lowered", r.nodes_lowered},
+      {"scheme", std::string(GetScheme(r.scheme).name())},
+      {"stock",
+       {{"x0", r.stock.x0}, {"y0", r.stock.y0}, {"x1", r.stock.x1},
+        {"y1", r.stock.y1}, {"top", r.stock.z_top}, {"nx", r.stock.nx},
+        {"ny", r.stock.ny}}},
+      {"seconds",
+       {{"parse", r.parse_seconds},
+        {"simulate", r.simulate_seconds},
+        {"outputs", r.output_seconds},
+        {"output_steps", steps}}},
+      {"moves_per_second",
+       r.simulate_seconds > 0 ? r.moves / r.simulate_seconds : 0},
+      {"error",
+       {{"max", r.error.max_error()},
+        {"mean", r.error.mean_error()},
+        {"rms", r.error.rms_error()},
+        {"max_at", {r.error.max_x(), r.error.max_y()}},
+        {"samples", r.error.samples()}}},
+  };
   if (r.marks) {
-    j.Key("marks").BeginObject()
-        .Key("polylines").Int(r.marks->polylines)
-        .Key("vertices").Int(r.marks->vertices)
-        .Key("total_length").Double(r.marks->total_length)
-        .Key("angle_deg").BeginArray().Double(r.marks->min_angle_deg)
-        .Double(r.marks->max_angle_deg).EndArray()
-        .EndObject();
+    Json& m = j["marks"] = {
+        {"polylines", r.marks->polylines},
+        {"vertices", r.marks->vertices},
+        {"total_length", r.marks->total_length},
+        {"angle_deg", {r.marks->min_angle_deg, r.marks->max_angle_deg}}};
+    if (r.marks_shown) {
+      // What marks.json/svg/png show (FilterMarks).
+      m["shown"] = {{"min_angle_deg", r.marks_display.min_angle_deg},
+                    {"min_length", r.marks_display.min_length},
+                    {"polylines", r.marks_shown->polylines},
+                    {"vertices", r.marks_shown->vertices},
+                    {"total_length", r.marks_shown->total_length}};
+    }
   }
-  if (!r.ignored.empty()) j.Key("ignored").String(r.ignored);
-  j.Key("dropped_moves").Int(r.dropped_moves);
-  if (!r.dropped.empty()) j.Key("dropped").String(r.dropped);
+  if (r.mesh.mesh_triangles > 0) {
+    j["mesh"] = {{"tolerance", r.mesh_tolerance},
+                 {"max_deviation", r.mesh.mesh_deviation},
+                 {"triangles", r.mesh.mesh_triangles},
+                 {"full_triangles", r.mesh.full_mesh_triangles}};
+  }
+  if (!r.ignored.empty()) j["ignored"] = r.ignored;
+  j["dropped_moves"] = r.dropped_moves;
+  if (!r.dropped.empty()) j["dropped"] = r.dropped;
   if (!r.outside_stock.empty()) {
-    j.Key("outside_stock").BeginObject()
-        .Key("mm").Double(r.outside_mm)
-        .Key("line").Int(r.outside_line)
-        .Key("message").String(r.outside_stock)
-        .EndObject();
+    j["outside_stock"] = {{"mm", r.outside_mm},
+                          {"line", r.outside_line},
+                          {"message", r.outside_stock}};
   }
-  j.Key("files").BeginArray();
-  for (const std::string& f : r.files) j.String(f);
-  j.EndArray();
-  j.EndObject();
-  return j.str();
+  j["files"] = r.files;
+  // Paths and G-code words are not always UTF-8: replaced, not thrown on.
+  return j.dump(-1, ' ', false, Json::error_handler_t::replace);
 }
 
 absl::Status WriteStatsJson(const RunReport& r, const std::string& path) {
@@ -250,6 +332,22 @@ std::string Summary(const RunReport& r) {
                           "degrees between the surfaces\n",
                           r.marks->polylines, r.marks->total_length,
                           r.marks->min_angle_deg, r.marks->max_angle_deg);
+  }
+  if (r.marks_shown) {
+    absl::StrAppendFormat(&s,
+                          "  shown    %d marks polylines (%.1f mm) at %g "
+                          "degrees and %g mm or more\n",
+                          r.marks_shown->polylines,
+                          r.marks_shown->total_length,
+                          r.marks_display.min_angle_deg,
+                          r.marks_display.min_length);
+  }
+  if (r.mesh.mesh_triangles > 0) {
+    absl::StrAppendFormat(&s,
+                          "  mesh     %d triangles (full lattice %d), max "
+                          "vertical deviation %.3g mm (tolerance %g mm)\n",
+                          r.mesh.mesh_triangles, r.mesh.full_mesh_triangles,
+                          r.mesh.mesh_deviation, r.mesh_tolerance);
   }
   if (!r.files.empty()) {
     absl::StrAppend(&s, "  wrote   ");

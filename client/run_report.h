@@ -6,9 +6,14 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "absl/status/status.h"
+#include "client/args.h"
 #include "client/connection.h"
+#include "client/marks_files.h"
+#include "client/run_outputs.h"
 #include "core/cutting_marks.h"
 #include "core/scheme.h"
 #include "core/stock.h"
@@ -32,15 +37,34 @@ struct RunReport {
   pb::ErrorStats error;
   // Cutting marks (taylor only).
   std::optional<MarkSummary> marks;
+  // The marks the files show (FilterMarks), with --out.
+  std::optional<MarkSummary> marks_shown;
+  MarkDisplayFilter marks_display;
+  // The meshes written, with --out.
+  double mesh_tolerance = 0;
+  RunOutputSummary mesh;
   std::vector<std::string> files;  // written, in order
+  // Each output step and its wall time (s), in order: the error statistics,
+  // the marks and the tiles fetched, then every file built and written.
+  std::vector<std::pair<std::string, double>> output_steps;
 };
 
 struct OutputOptions {
   std::string dir;    // empty: no files, statistics only
   int subdivide = 1;  // STL: sub-elements per element side
+  double mesh_tolerance = 0.005;  // mm; 0: the full lattice
+  MarkDisplayFilter marks_display = kDefaultMarkDisplay;
   // The session's moves by id (SurfaceGrid::moves); not owned, may be null.
   const std::vector<Move>* moves = nullptr;
 };
+
+// The valued options ParseOutputFlags reads (documented in `swarf run`'s
+// usage).
+inline constexpr const char* kOutputFlags[] = {
+    "mesh-tolerance", "marks-min-angle", "marks-min-length"};
+
+// Reads kOutputFlags into `out`; InvalidArgument naming the flag.
+absl::Status ParseOutputFlags(const Args& args, OutputOptions* out);
 
 // Fetches the error statistics (and, with a directory, the error map, the
 // node grid and the marks) of session `id` and writes the files.

@@ -10,10 +10,18 @@
 #include "absl/strings/str_format.h"
 #include "client/args.h"
 #include "client/commands.h"
+#include "server/convert.h"
 #include "client/connection.h"
 #include "grpcpp/generic/generic_stub.h"
 
 namespace swarf::cli {
+
+namespace {
+std::string SchemeLabel(int scheme) {
+  auto k = server::SchemeFromProto(scheme, "scheme");
+  return k.ok() ? std::string(GetScheme(*k).name()) : "?";
+}
+}  // namespace
 namespace {
 
 // grpc.health.v1.Health/Check through a generic stub (the health proto is
@@ -143,7 +151,7 @@ int SessionsCommand(const std::vector<std::string>& argv) {
   for (const pb::Session& s : resp.sessions()) {
     std::cout << absl::StrFormat(
         "%-24s %-7s %5dx%-5d %10d %12d %10.1f\n", s.session_id(),
-        s.scheme() == pb::SCHEME_ZMAP ? "zmap" : "taylor", s.nx(), s.ny(),
+        SchemeLabel(s.scheme()), s.nx(), s.ny(),
         s.last_seq(), s.moves_applied(), s.memory_bytes() / 1048576.0);
   }
   std::cout << resp.sessions_size() << " session(s) on "

@@ -96,6 +96,8 @@ absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
         z_bottom, z_min));
   }
   mesh.z_bottom = z_bottom;
+  // The adaptive mesh needs only the lattice's heights.
+  if (options.tolerance != 0) return SimplifySurfaceMesh(mesh, options.tolerance);
 
   // Bottom vertices, one under each boundary vertex of the top: the south
   // and north rows (corners included), then the west and east columns.

@@ -41,8 +41,12 @@ struct TriangleMesh {
   std::vector<std::array<int32_t, 3>> triangles;  // ccw seen from outside
   // The first top_vertices vertices are the top lattice, row-major (J, I).
   int64_t top_vertices = 0;
+  // (With a tolerance: the lattice vertices kept, in that order.)
   int32_t lattice_nx = 0, lattice_ny = 0;  // NX, NY: lattice cells
   double z_bottom = 0;
+  // Largest vertical distance (mm) between the top and the full-resolution
+  // lattice surface, measured (0 for the full lattice itself).
+  double max_deviation = 0;
 };
 
 struct SurfaceMeshOptions {
@@ -51,6 +55,8 @@ struct SurfaceMeshOptions {
   // The bottom plane (mm); must lie strictly below every top vertex. Absent:
   // DefaultZBottom of the lowest top vertex.
   std::optional<double> z_bottom;
+  // > 0: SimplifySurfaceMesh with this tolerance (mm); 0: the full lattice.
+  double tolerance = 0;
 };
 
 // Most top lattice vertices BuildSurfaceMesh accepts (int32 triangle
@@ -65,6 +71,20 @@ double DefaultZBottom(const StockSpec& spec, double z_min);
 // or a z_bottom that is not finite or not below every top vertex.
 absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
     const SurfaceGrid& grid, const SurfaceMeshOptions& options = {});
+
+// An error-bounded adaptive version of a full-resolution mesh from
+// BuildSurfaceMesh (only its vertices are read): the top is re-triangulated on a subset of the lattice
+// vertices (squares of 2^k lattice cells, conforming, no T-junctions) so
+// that its vertical distance to the full-resolution top, measured
+// everywhere (at every lattice vertex and wherever an edge of one crosses
+// an edge of the other; the largest in max_deviation), is at most
+// `tolerance` mm. The same walls under the top's boundary edges and a flat
+// bottom at the same z_bottom fanned from one vertex under its middle:
+// closed and oriented as the full mesh. The top vertices come first, in
+// lattice row-major order. InvalidArgument for a negative or non-finite
+// tolerance or a mesh BuildSurfaceMesh did not make.
+absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
+                                                 double tolerance);
 
 // Binary STL: 80-byte header (not starting with "solid"), little-endian
 // uint32 triangle count, per triangle the unit normal (from the vertices'

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <optional>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -55,12 +56,14 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
   auto cell_index = [](double f, int32_t n) {
     return f >= n - 1 ? n - 1 : f > 0 ? static_cast<int32_t>(f) : 0;
   };
-  // Samples of different bins can share a cell: a lock-free max.
-  auto map_max = [&](double x, double y, double err) {
+  auto map_cell = [&](double x, double y) {
     const int32_t cx = cell_index((x - region.x0) / cell_x, options.map_cols);
     const int32_t cy = cell_index((y - region.y0) / cell_y, options.map_rows);
-    std::atomic_ref<float> cell(map[size_t{1} * cy * options.map_cols + cx]);
-    const float e = static_cast<float>(err);
+    return int64_t{cy} * options.map_cols + cx;
+  };
+  // Samples of different bins can share a cell: a lock-free max.
+  auto map_max = [&](int64_t c, float e) {
+    std::atomic_ref<float> cell(map[c]);
     float cur = cell.load(std::memory_order_relaxed);
     while (e > cur && !cell.compare_exchange_weak(cur, e)) {
     }
@@ -69,7 +72,19 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
   const int32_t bins = index.bins_x() * index.bins_y();
   std::vector<Partial> partials(bins);
 
-  wp.pool().ParallelFor(bins, [&](int64_t b) {
+  ThreadPool& pool = options.pool != nullptr ? *options.pool : wp.pool();
+  // The lattice's offsets inside an element (fractions of its sides), the
+  // corners left out.
+  std::vector<double> fx, fy;
+  for (int sj = 0; sj < n; ++sj) {
+    for (int si = 0; si < n; ++si) {
+      if ((si == 0 || si == n - 1) && (sj == 0 || sj == n - 1)) continue;
+      fx.push_back(si);
+      fy.push_back(sj);
+    }
+  }
+  const double z_top = wp.spec().z_top;
+  pool.ParallelFor(bins, [&](int64_t b) {
     const int32_t bx = static_cast<int32_t>(b % index.bins_x());
     const int32_t by = static_cast<int32_t>(b / index.bins_x());
     const int32_t ei0 = bx * MoveIndex::kBinElements;
@@ -87,14 +102,32 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       Rect box;
     };
     std::vector<Candidate> bin;
-    const double z_top = wp.spec().z_top;
     for (uint32_t id : index.Bin(static_cast<int32_t>(b))) {
       const Move& m = wp.move(id);
       const BallSweep s(m.from, m.to, m.radius);
       bin.push_back({s, s.Footprint(z_top).Bounds()});
     }
-    std::vector<double> xs, ys, est;
-    std::vector<const BallSweep*> kept;
+    // The sweeps of recent corner owners: neighbouring elements share most.
+    struct Owner {
+      int32_t id = -1;
+      std::optional<BallSweep> sweep;
+    };
+    constexpr int kOwnerCache = 8;
+    Owner cache[kOwnerCache];
+    int next_slot = 0;
+    auto owner_sweep = [&](int32_t id) -> const BallSweep& {
+      for (Owner& o : cache) {
+        if (o.id == id) return *o.sweep;
+      }
+      Owner& o = cache[next_slot];
+      next_slot = (next_slot + 1) % kOwnerCache;
+      const Move& m = wp.move(id);
+      o.id = id;
+      o.sweep.emplace(m.from, m.to, m.radius);
+      return *o.sweep;
+    };
+    const size_t lattice = fx.size();
+    std::vector<double> xs(lattice), ys(lattice), est(lattice), h(lattice);
     Partial& p = partials[b];
     for (int32_t ej = ej0; ej < ej1; ++ej) {
       for (int32_t ei = ei0; ei < ei1; ++ei) {
@@ -103,26 +136,22 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             e.y1 < region.y0) {
           continue;
         }
-        xs.clear();
-        ys.clear();
-        for (int sj = 0; sj < n; ++sj) {
-          for (int si = 0; si < n; ++si) {
-            const bool corner = (si == 0 || si == n - 1) &&
-                                (sj == 0 || sj == n - 1);
-            if (corner) continue;
-            const double x = e.x0 + (e.x1 - e.x0) * si / (n - 1);
-            const double y = e.y0 + (e.y1 - e.y0) * sj / (n - 1);
-            if (!region.Contains(x, y)) continue;
-            xs.push_back(x);
-            ys.push_back(y);
-          }
+        int32_t count = 0;
+        for (size_t q = 0; q < lattice; ++q) {
+          const double x = e.x0 + (e.x1 - e.x0) * fx[q] / (n - 1);
+          const double y = e.y0 + (e.y1 - e.y0) * fy[q] / (n - 1);
+          if (!region.Contains(x, y)) continue;
+          xs[count] = x;
+          ys[count] = y;
+          ++count;
         }
-        if (xs.empty()) continue;
+        if (count == 0) continue;
         // An upper bound of the exact surface at each sample: the sweeps
         // that own the corners (exact heights of real moves). Only moves
         // that dip below the element's highest bound inside the element
         // can lower a sample further; the rest of the bin is skipped.
-        est.assign(xs.size(), z_top);
+        // Heights() is bit-identical to Height(), several samples at once.
+        std::fill_n(est.begin(), count, z_top);
         const int32_t corner_i[4] = {ei, ei + 1, ei + 1, ei};
         const int32_t corner_j[4] = {ej, ej, ej + 1, ej + 1};
         int32_t owners[4];
@@ -131,29 +160,38 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           bool seen = owners[k] < 0;
           for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
           if (seen) continue;
-          const Move& m = wp.move(owners[k]);
-          const BallSweep s(m.from, m.to, m.radius);
-          for (size_t q = 0; q < xs.size(); ++q) {
-            est[q] = std::min(est[q], s.Height(xs[q], ys[q]));
-          }
+          owner_sweep(owners[k]).Heights(xs.data(), ys.data(), count,
+                                         h.data());
+          for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
-        const double cap = *std::max_element(est.begin(), est.end());
+        const double cap = *std::max_element(est.begin(), est.begin() + count);
         const Rect box{e.x0, e.y0, e.x1, e.y1};
-        kept.clear();
         for (const Candidate& c : bin) {
           if (!c.box.Intersects(box) || !(c.sweep.lowest() < cap)) continue;
           const BallSweep::Capsule f = c.sweep.Footprint(cap);
-          if (!f.empty && f.Bounds().Intersects(box)) kept.push_back(&c.sweep);
+          if (f.empty || !f.Bounds().Intersects(box)) continue;
+          c.sweep.Heights(xs.data(), ys.data(), count, h.data());
+          for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
-        for (size_t q = 0; q < xs.size(); ++q) {
-          double exact = est[q];
-          for (const BallSweep* s : kept) {
-            exact = std::min(exact, s->Height(xs[q], ys[q]));
-          }
+        // An element's samples mostly share a map cell: their max goes in
+        // once per run of one cell (the same max: cells start at 0 and
+        // take only larger values).
+        int64_t run_cell = -1;
+        float run_max = 0;
+        for (int32_t q = 0; q < count; ++q) {
           const double x = xs[q], y = ys[q];
           const double err =
-              SampleError(wp.scheme().Reconstruct(e, x, y), exact);
-          if (mapped) map_max(x, y, err);
+              SampleError(wp.scheme().Reconstruct(e, x, y), est[q]);
+          if (mapped) {
+            const int64_t c = map_cell(x, y);
+            if (c != run_cell) {
+              if (run_cell >= 0) map_max(run_cell, run_max);
+              run_cell = c;
+              run_max = 0;
+            }
+            const float ef = static_cast<float>(err);
+            if (ef > run_max) run_max = ef;
+          }
           p.sum += err;
           p.sum_sq += err * err;
           ++p.n;
@@ -163,6 +201,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             p.max_y = y;
           }
         }
+        if (run_cell >= 0) map_max(run_cell, run_max);
       }
     }
   });

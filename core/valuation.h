@@ -9,6 +9,7 @@
 
 #include "absl/status/statusor.h"
 #include "core/geometry.h"
+#include "core/thread_pool.h"
 #include "core/workpiece.h"
 
 namespace swarf {
@@ -34,12 +35,18 @@ struct ValuationOptions {
   std::optional<Rect> region;
   // An error raster over the region (both 0: none). At most kMaxMapCells.
   int32_t map_cols = 0, map_rows = 0;
+  // The threads to run on (not owned); null: the workpiece's pool. The
+  // statistics and the map are bit-identical whatever the pool's size.
+  ThreadPool* pool = nullptr;
 };
 
 inline constexpr int64_t kMaxMapCells = int64_t{1} << 24;
 
 // Eq. (15): error = |w - w_exact| over every sample. InvalidArgument for bad
-// options. Runs on the workpiece's pool; must not overlap an Apply.
+// options. Runs on options.pool (default: the workpiece's) over bins of
+// MoveIndex::kBinElements^2 elements, each bin's sums taken in element and
+// sample order and the bins' added in bin order, so the result does not
+// depend on the threads. Must not overlap an Apply.
 absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
                                         const ValuationOptions& options = {});
 

@@ -21,7 +21,7 @@
 #include <utility>
 #include <vector>
 
-#include "client/bitmap_font.h"
+#include "client/text.h"
 #include "client/colormap.h"
 #include "client/marks_files.h"
 #include "client/pictures.h"
@@ -203,32 +203,53 @@ TEST(PngTest, ReportsErrors) {
 
 // ------------------------------------------------------------------- font
 
-TEST(FontTest, DrawsDistinctGlyphs) {
-  auto ink = [](const std::string& text) {
-    Image im(TextWidth(text, 2) + 4, kGlyphHeight * 2 + 4, 3, {255, 255, 255});
-    DrawText(im, 2, 2, text, {0, 0, 0}, 2);
-    std::vector<bool> mask;
-    for (int y = 0; y < im.height(); ++y) {
-      for (int x = 0; x < im.width(); ++x) mask.push_back(im.Get(x, y).r == 0);
-    }
-    return mask;
+TEST(TextTest, DrawsAntiAliasedDistinctLabels) {
+  auto draw = [](const std::string& text, int scale) {
+    Image im(TextWidth(text, scale) + 8, kGlyphHeight * scale + 8, 3,
+             {255, 255, 255});
+    DrawText(im, 4, 4, text, {0, 0, 0}, scale);
+    return im;
   };
-  EXPECT_EQ(TextWidth("1e-6", 1), 4 * kGlyphAdvance - 1);
-  EXPECT_EQ(TextWidth("1e-6", 3), 3 * (4 * kGlyphAdvance - 1));
-  const std::string chars = "0123456789abcdefghijklmnopqrstuvwxyz.-+()";
-  std::vector<std::vector<bool>> seen;
+  auto ink = [](const Image& im) {
+    std::vector<uint8_t> v;
+    for (int y = 0; y < im.height(); ++y) {
+      for (int x = 0; x < im.width(); ++x) v.push_back(im.Get(x, y).r);
+    }
+    return v;
+  };
+  // Widths grow with the text and the scale.
+  EXPECT_GT(TextWidth("1e-6", 1), 10);
+  EXPECT_GT(TextWidth("1e-6 mm", 2), TextWidth("1e-6", 2));
+  EXPECT_NEAR(TextWidth("1e-6", 3), 3 * TextWidth("1e-6", 1), 4);
+  EXPECT_EQ(TextWidth("", 2), 0);
+  const std::string chars = "0123456789abcdefghijklmnopqrstuvwxyzM.-+()@";
+  std::vector<std::vector<uint8_t>> seen;
   for (char c : chars) {
-    ASSERT_TRUE(HasGlyph(c)) << c;
-    const auto m = ink(std::string(1, c));
-    EXPECT_GT(std::count(m.begin(), m.end(), true), 0) << c;
+    const Image im = draw(std::string(1, c), 2);
+    const std::vector<uint8_t> m = ink(im);
+    // Dark ink and anti-aliased edges (grey levels between).
+    EXPECT_LT(*std::min_element(m.begin(), m.end()), 100) << c;
+    EXPECT_TRUE(std::any_of(m.begin(), m.end(),
+                            [](uint8_t v) { return v > 40 && v < 215; }))
+        << c;
     for (const auto& other : seen) EXPECT_NE(m, other) << c;
     seen.push_back(m);
+    // Ink stays on its line: within the line box, one pixel of margin.
+    for (int y = 0; y < im.height(); ++y) {
+      for (int x = 0; x < im.width(); ++x) {
+        if (y < 3 || y > 4 + kGlyphHeight * 2) {
+          EXPECT_EQ(im.Get(x, y).r, 255) << c << " at " << x << "," << y;
+        }
+      }
+    }
   }
-  EXPECT_TRUE(HasGlyph('M'));  // drawn as 'm'
-  EXPECT_EQ(ink("M"), ink("m"));
-  EXPECT_FALSE(HasGlyph('@'));
-  const std::vector<bool> blank = ink(" ");
-  EXPECT_EQ(std::count(blank.begin(), blank.end(), true), 0);
+  const std::vector<uint8_t> blank = ink(draw(" ", 2));
+  EXPECT_EQ(std::count(blank.begin(), blank.end(), 255),
+            static_cast<long>(blank.size()));
+  // Clipped at the image's edges.
+  Image small(5, 5, 3, {255, 255, 255});
+  DrawText(small, -3, -6, "8888", {0, 0, 0}, 3);
+  DrawText(small, 3, 3, "8888", {0, 0, 0}, 3);
 }
 
 // ----------------------------------------------------------------- relief
@@ -340,16 +361,19 @@ TEST(ErrorMapTest, LogScaleColoursAndLegend) {
   EXPECT_EQ(back->Get((layout.zero_x0 + layout.zero_x1) / 2,
                       (layout.zero_y0 + layout.zero_y1) / 2),
             kZeroErrorColor);
+  // Ink in pixels' worth of full coverage (the text is anti-aliased).
   auto ink_in = [&](int x0, int y0, int x1, int y1) {
-    int n = 0;
+    double n = 0;
     for (int y = y0; y < y1; ++y) {
-      for (int x = x0; x < x1; ++x) n += Luma(back->Get(x, y)) < 80;
+      for (int x = x0; x < x1; ++x) {
+        n += std::max(0.0, 1 - Luma(back->Get(x, y)) / 200.0);
+      }
     }
     return n;
   };
   EXPECT_GT(ink_in(layout.bar_x1 + 2, layout.bar_y0 - 10, back->width(),
                    layout.bar_y1 + 10),
-            5 * 120);  // five tick labels
+            5 * 100);  // five tick labels ("1e-2": about 110 px of ink)
   EXPECT_GT(ink_in(layout.legend_x0, 0, back->width(), layout.bar_y0 - 12),
             300);  // "error (mm)", "max 1.00e-2"
   EXPECT_EQ(ink_in(layout.bar_x1 + 2, layout.zero_y1 + 12, back->width(),
@@ -561,6 +585,62 @@ TEST(MarksTest, JsonRoundTrips) {
                 .fields()
                 .size(),
             5u);
+}
+
+TEST(MarksTest, FilterKeepsRimsAndCreasesAndDropsSeams) {
+  auto line = [](bool closed, std::array<int32_t, 2> owners,
+                 std::vector<Vec3> v, std::vector<double> angles) {
+    MarkPolyline p;
+    p.closed = closed;
+    p.owners = owners;
+    p.vertices = std::move(v);
+    p.angle_deg = std::move(angles);
+    for (size_t k = 0; k < p.vertices.size(); ++k) {
+      p.vertex_owners.push_back({owners[0], owners[1] + static_cast<int>(k)});
+    }
+    return p;
+  };
+  const std::vector<Vec3> row = {{0, 0, 0},   {0.1, 0, 0}, {0.2, 0, 0},
+                                 {0.3, 0, 0}, {0.4, 0, 0}, {0.5, 0, 0}};
+  const std::vector<Vec3> ring = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0},
+                                  {0.5, 1.5, 0}, {0, 1, 0}};
+  const std::vector<MarkPolyline> marks = {
+      line(false, {3, 4}, row, {5, 5, 0.3, 5, 5, 5}),  // a seam vertex
+      line(true, {5, 6}, ring, {2, 2, 2, 2, 2}),        // a crease
+      line(true, {5, 8}, ring, {2, 2, 0.5, 2, 2}),      // one seam vertex
+      line(false, {-1, 7}, row, {0.1, 0.1, 0.1, 0.1, 0.1, 0.1}),  // a rim
+      line(false, {9, 10}, row, {0.2, 0.9, 0.5, 0.1, 0.1, 0.1}),  // a seam
+  };
+  const std::vector<MarkPolyline> shown =
+      FilterMarks(marks, MarkDisplayFilter{1, 0.15});
+  ASSERT_EQ(shown.size(), 4u);
+  // The seam vertex cuts the first: [0, 0.1] is too short, [0.3, 0.5] stays.
+  EXPECT_FALSE(shown[0].closed);
+  ASSERT_EQ(shown[0].vertices.size(), 3u);
+  EXPECT_EQ(shown[0].vertices[0].x, 0.3);
+  EXPECT_EQ(shown[0].owners, (std::array<int32_t, 2>{3, 7}));
+  EXPECT_EQ(shown[0].angle_deg, (std::vector<double>{5, 5, 5}));
+  ASSERT_EQ(shown[0].vertex_owners.size(), 3u);
+  EXPECT_EQ(shown[0].vertex_owners[2], (std::array<int32_t, 2>{3, 9}));
+  // The whole crease, still closed.
+  EXPECT_TRUE(shown[1].closed);
+  EXPECT_EQ(shown[1].vertices.size(), 5u);
+  // Opened at its seam vertex, whole across its first vertex: 3, 4, 0, 1.
+  EXPECT_FALSE(shown[2].closed);
+  ASSERT_EQ(shown[2].vertices.size(), 4u);
+  EXPECT_EQ(shown[2].vertices[0].x, 0.5);
+  EXPECT_EQ(shown[2].vertices[2].x, 0);
+  EXPECT_EQ(shown[2].vertices[3].x, 1);
+  // The rim, whatever its angle.
+  EXPECT_EQ(shown[3].owners[0], -1);
+  EXPECT_EQ(shown[3].vertices.size(), 6u);
+  // Nothing dropped with both bounds at 0.
+  const std::vector<MarkPolyline> all = FilterMarks(marks, {0, 0});
+  ASSERT_EQ(all.size(), marks.size());
+  for (size_t k = 0; k < all.size(); ++k) {
+    EXPECT_EQ(all[k].vertices.size(), marks[k].vertices.size());
+    EXPECT_EQ(all[k].closed, marks[k].closed);
+  }
 }
 
 // ------------------------------------------------------------------- mesh
@@ -811,6 +891,129 @@ TEST(MeshTest, VrmlHasTheSameMesh) {
   EXPECT_NEAR(cols[0], kStockColor.r / 255.0, 1e-3);
   const size_t wall = mesh->vertices.size() - 1;
   EXPECT_LT(cols[3 * wall], kStockColor.r / 255.0 - 0.1);
+}
+
+// The height of a mesh's top (its first top_vertices vertices' triangles)
+// at (x, y), by barycentric interpolation in the triangle holding it.
+class TopSurface {
+ public:
+  explicit TopSurface(const TriangleMesh& m) : m_(m) {
+    for (const auto& t : m.triangles) {
+      if (t[0] < m.top_vertices && t[1] < m.top_vertices &&
+          t[2] < m.top_vertices) {
+        top_.push_back(t);
+      }
+    }
+  }
+  size_t triangles() const { return top_.size(); }
+  double Height(double x, double y) const {
+    for (const auto& t : top_) {
+      const Vec3 &a = m_.vertices[t[0]], &b = m_.vertices[t[1]],
+                 &c = m_.vertices[t[2]];
+      if (x < std::min({a.x, b.x, c.x}) - 1e-9 ||
+          x > std::max({a.x, b.x, c.x}) + 1e-9 ||
+          y < std::min({a.y, b.y, c.y}) - 1e-9 ||
+          y > std::max({a.y, b.y, c.y}) + 1e-9) {
+        continue;
+      }
+      const double d = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+      const double u = ((b.x - x) * (c.y - y) - (b.y - y) * (c.x - x)) / d;
+      const double v = ((c.x - x) * (a.y - y) - (c.y - y) * (a.x - x)) / d;
+      const double w = 1 - u - v;
+      if (u < -1e-9 || v < -1e-9 || w < -1e-9) continue;
+      return u * a.z + v * b.z + w * c.z;
+    }
+    ADD_FAILURE() << "no top triangle holds " << x << "," << y;
+    return NAN;
+  }
+
+ private:
+  const TriangleMesh& m_;
+  std::vector<std::array<int32_t, 3>> top_;
+};
+
+TEST(MeshTest, AdaptiveMeshStaysWithinTheTolerance) {
+  TempDir dir;
+  for (SchemeKind scheme : kSchemes) {
+    auto wp = Cut(scheme);
+    const SurfaceGrid g = GridOf(*wp);
+    auto full = BuildSurfaceMesh(g, MeshOptions(1));
+    ASSERT_TRUE(full.ok());
+    const TopSurface fine(*full);
+    for (double tol : {0.05, 0.2}) {
+      SCOPED_TRACE(std::string(GetScheme(scheme).name()) + " tolerance " +
+                   std::to_string(tol));
+      SurfaceMeshOptions o = MeshOptions(1);
+      o.tolerance = tol;
+      auto mesh = BuildSurfaceMesh(g, o);
+      ASSERT_TRUE(mesh.ok()) << mesh.status();
+      EXPECT_LE(mesh->max_deviation, tol);
+      EXPECT_GT(mesh->max_deviation, tol / 4);  // it does use the room
+      EXPECT_EQ(mesh->z_bottom, full->z_bottom);
+      // Far fewer triangles: the uncut top is flat, the grooves are long.
+      EXPECT_LT(4 * mesh->triangles.size(), full->triangles.size());
+      // Its vertices are lattice vertices, at their heights.
+      for (int64_t k = 0; k < mesh->top_vertices; ++k) {
+        const Vec3& v = mesh->vertices[k];
+        EXPECT_EQ(v.z, fine.Height(v.x, v.y));
+      }
+      // The distance to the full-resolution top, at every lattice vertex,
+      // every cell centre and random points, is within the tolerance and
+      // the measured maximum.
+      const TopSurface coarse(*mesh);
+      std::vector<std::pair<double, double>> points;
+      const GridGeometry geo = g.geometry();
+      for (int32_t j = 0; j <= 60; ++j) {
+        for (int32_t i = 0; i <= 100; ++i) {
+          points.push_back({geo.NodeX(i), geo.NodeY(j)});
+          if (i < 100 && j < 60) {
+            points.push_back({geo.NodeX(i) + 0.25, geo.NodeY(j) + 0.25});
+          }
+        }
+      }
+      std::mt19937 rng(3);
+      std::uniform_real_distribution<double> ux(0, 50), uy(0, 30);
+      for (int k = 0; k < 3000; ++k) points.push_back({ux(rng), uy(rng)});
+      double seen = 0;
+      for (const auto& [x, y] : points) {
+        seen = std::max(seen, std::fabs(fine.Height(x, y) -
+                                        coarse.Height(x, y)));
+      }
+      EXPECT_LE(seen, mesh->max_deviation + 1e-9);
+      EXPECT_GT(seen, 0.5 * mesh->max_deviation);
+      // Closed and oriented, the same volume as the full mesh within the
+      // tolerance over the top's area.
+      ASSERT_TRUE(WriteStl(*mesh, dir.File("adaptive.stl")).ok());
+      const double volume = CheckClosedMesh(
+          ParseStl(ReadAll(dir.File("adaptive.stl"))), g.spec, mesh->z_bottom);
+      ASSERT_TRUE(WriteStl(*full, dir.File("full.stl")).ok());
+      const double full_volume = CheckClosedMesh(
+          ParseStl(ReadAll(dir.File("full.stl"))), g.spec, full->z_bottom);
+      EXPECT_NEAR(volume, full_volume, tol * 50 * 30 + 1e-3);
+    }
+  }
+}
+
+TEST(MeshTest, AdaptiveMeshOfUncutStockIsTwoTrianglesPerSide) {
+  auto wp = Cut(SchemeKind::kTaylor, TestStock(), {});
+  auto full = BuildSurfaceMesh(GridOf(*wp), MeshOptions(1, 5));
+  ASSERT_TRUE(full.ok());
+  auto mesh = SimplifySurfaceMesh(*full, 0);
+  ASSERT_TRUE(mesh.ok());
+  EXPECT_EQ(mesh->max_deviation, 0);
+  // 64-cell blocks: a 100 x 60 top is 2 x 1 blocks split to fit the
+  // lattice (64 + 32 + 4 across, 32 + 16 + 8 + 4 up): 12 rectangles.
+  EXPECT_LE(mesh->top_vertices, 30);
+  EXPECT_LE(mesh->triangles.size(), 80u);
+  EXPECT_EQ(SimplifySurfaceMesh(*full, -1).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(SimplifySurfaceMesh(*full, std::nan("")).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  TempDir dir;
+  ASSERT_TRUE(WriteStl(*mesh, dir.File("flat.stl")).ok());
+  const double volume = CheckClosedMesh(ParseStl(ReadAll(dir.File("flat.stl"))),
+                                        TestStock(), 5);
+  EXPECT_NEAR(volume, 50.0 * 30 * 5, 1e-6 * volume);
 }
 
 // ------------------------------------------------------------ all outputs

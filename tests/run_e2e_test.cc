@@ -84,6 +84,24 @@ TEST_P(RunE2eTest, CorpusJobRunsAndItsOutputsAreValid) {
   EXPECT_GT(err.at("samples").number_value(), 0);
   EXPECT_GT(f.at("marks").struct_value().fields().at("polylines").number_value(),
             0);
+  // The marks shown are a part of those found; the adaptive mesh is within
+  // its tolerance with fewer triangles than the lattice; every step timed.
+  const auto& marks = f.at("marks").struct_value().fields();
+  const auto& shown = marks.at("shown").struct_value().fields();
+  EXPECT_LE(shown.at("vertices").number_value(),
+            marks.at("vertices").number_value());
+  EXPECT_GT(shown.at("polylines").number_value(), 0);
+  const auto& mesh = f.at("mesh").struct_value().fields();
+  EXPECT_EQ(mesh.at("tolerance").number_value(), 0.005);
+  EXPECT_LE(mesh.at("max_deviation").number_value(), 0.005);
+  EXPECT_LT(mesh.at("triangles").number_value(),
+            mesh.at("full_triangles").number_value());
+  const auto& steps = f.at("seconds").struct_value().fields().at(
+      "output_steps").struct_value().fields();
+  for (const char* step : {"error_stats", "marks", "tiles", "relief.png",
+                           "surface.stl", "surface.wrl"}) {
+    EXPECT_GE(steps.at(step).number_value(), 0) << step;
+  }
   const auto& st = f.at("stock").struct_value().fields();
   const double x0 = st.at("x0").number_value(), x1 = st.at("x1").number_value();
   const double y0 = st.at("y0").number_value(), y1 = st.at("y1").number_value();

@@ -12,6 +12,7 @@
 #include "absl/status/status.h"
 #include "gtest/gtest.h"
 #include "core/instances.h"
+#include "core/thread_pool.h"
 #include "core/workpiece.h"
 
 namespace swarf {
@@ -148,17 +149,47 @@ TEST(MeasureErrorTest, BadOptions) {
   EXPECT_TRUE(MeasureError(*wp, line).ok());
 }
 
-// The statistics against an independent loop over the same samples, with
-// the exact surface taken over every move.
-TEST(MeasureErrorTest, MatchesIndependentComputation) {
-  std::mt19937_64 rng(12);
-  std::uniform_real_distribution<double> ux(-2, 18), uy(-2, 10), uz(0, 3),
-      rad(0.5, 3);
+// `count` random moves with tips in [x0, x1] x [y0, y1] x [z0, z1] and
+// radii in [r0, r1].
+std::vector<Move> RandomMoves(uint64_t seed, int count, double x0, double x1,
+                              double y0, double y1, double z0, double z1,
+                              double r0, double r1) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> ux(x0, x1), uy(y0, y1), uz(z0, z1),
+      rad(r0, r1);
   std::vector<Move> moves;
-  for (int k = 0; k < 25; ++k) {
+  for (int k = 0; k < count; ++k) {
     moves.push_back({{ux(rng), uy(rng), uz(rng)}, {ux(rng), uy(rng), uz(rng)},
                      rad(rng)});
   }
+  return moves;
+}
+
+// Calls f(x, y, error) for the 21 samples of element (ei, ej) in lattice
+// order, the exact surface taken plainly over every move.
+template <typename F>
+void ForEachSample(const Workpiece& wp, const std::vector<Move>& moves,
+                   int32_t ei, int32_t ej, F f) {
+  const ElementCorners e = wp.Corners(ei, ej);
+  for (int sj = 0; sj < 5; ++sj) {
+    for (int si = 0; si < 5; ++si) {
+      if ((si == 0 || si == 4) && (sj == 0 || sj == 4)) continue;
+      const double x = e.x0 + (e.x1 - e.x0) * si / 4;
+      const double y = e.y0 + (e.y1 - e.y0) * sj / 4;
+      double exact = wp.spec().z_top;
+      for (const Move& m : moves) {
+        exact = std::min(exact, BallSweep(m.from, m.to, m.radius).Height(x, y));
+      }
+      f(x, y, std::fabs(wp.scheme().Reconstruct(e, x, y) - exact));
+    }
+  }
+}
+
+// The statistics against an independent loop over the same samples, with
+// the exact surface taken over every move.
+TEST(MeasureErrorTest, MatchesIndependentComputation) {
+  const std::vector<Move> moves = RandomMoves(12, 25, -2, 18, -2, 10, 0, 3,
+                                              0.5, 3);
   const StockSpec spec{0, 0, 16, 8, 2, 40, 20};
   for (SchemeKind scheme : kSchemes) {
     SCOPED_TRACE(GetScheme(scheme).name());
@@ -169,25 +200,12 @@ TEST(MeasureErrorTest, MatchesIndependentComputation) {
     int64_t n = 0;
     for (int32_t ej = 0; ej < spec.ny; ++ej) {
       for (int32_t ei = 0; ei < spec.nx; ++ei) {
-        const ElementCorners e = wp->Corners(ei, ej);
-        for (int sj = 0; sj < 5; ++sj) {
-          for (int si = 0; si < 5; ++si) {
-            if ((si == 0 || si == 4) && (sj == 0 || sj == 4)) continue;
-            const double x = e.x0 + (e.x1 - e.x0) * si / 4;
-            const double y = e.y0 + (e.y1 - e.y0) * sj / 4;
-            double exact = spec.z_top;
-            for (const Move& m : moves) {
-              exact = std::min(exact,
-                               BallSweep(m.from, m.to, m.radius).Height(x, y));
-            }
-            const double err =
-                std::fabs(wp->scheme().Reconstruct(e, x, y) - exact);
-            max = std::max(max, err);
-            sum += err;
-            sum_sq += err * err;
-            ++n;
-          }
-        }
+        ForEachSample(*wp, moves, ei, ej, [&](double, double, double err) {
+          max = std::max(max, err);
+          sum += err;
+          sum_sq += err * err;
+          ++n;
+        });
       }
     }
     EXPECT_EQ(stats->samples, n);
@@ -204,6 +222,83 @@ TEST(MeasureErrorTest, MatchesIndependentComputation) {
     if (scheme == SchemeKind::kZmap) {
       EXPECT_NEAR(at, stats->max_error, 1e-12);
     }
+  }
+}
+
+// Any pool gives the same bits: statistics, place of the max and map. And
+// they equal a plain serial loop that takes the exact surface over every
+// move (no corner-owner bound, no skipped moves, scalar Height) and sums
+// the samples in the order the contract states: by bin, then element, then
+// sample.
+TEST(MeasureErrorTest, ParallelEqualsSerialBitForBit) {
+  const std::vector<Move> moves = RandomMoves(7, 100, -2, 42, -2, 32, -1.5,
+                                              0.3, 0.3, 2);
+  // 56 x 40 elements: 4 x 3 bins, the last ones partial.
+  const StockSpec spec{0, 0, 40, 30, 0, 56, 40};
+  ValuationOptions opt;
+  opt.map_cols = 37;
+  opt.map_rows = 23;
+  for (SchemeKind scheme : kSchemes) {
+    SCOPED_TRACE(GetScheme(scheme).name());
+    auto wp = Cut(spec, scheme, moves);
+    ThreadPool one(1), four(4);
+    opt.pool = &one;
+    const ErrorStats serial = *MeasureError(*wp, opt);
+    for (ThreadPool* pool : {&four, static_cast<ThreadPool*>(nullptr)}) {
+      opt.pool = pool;
+      const ErrorStats parallel = *MeasureError(*wp, opt);
+      EXPECT_EQ(parallel.samples, serial.samples);
+      EXPECT_EQ(parallel.max_error, serial.max_error);
+      EXPECT_EQ(parallel.mean_error, serial.mean_error);
+      EXPECT_EQ(parallel.rms_error, serial.rms_error);
+      EXPECT_EQ(parallel.max_x, serial.max_x);
+      EXPECT_EQ(parallel.max_y, serial.max_y);
+      EXPECT_EQ(parallel.map, serial.map);
+    }
+
+    const GridGeometry grid(spec);
+    const int32_t bx = (spec.nx + 15) / 16, by = (spec.ny + 15) / 16;
+    const double cell_x = 40.0 / opt.map_cols, cell_y = 30.0 / opt.map_rows;
+    std::vector<float> map(opt.map_cols * opt.map_rows, 0.0f);
+    double sum = 0, sum_sq = 0, max = -1, max_x = 0, max_y = 0;
+    int64_t n = 0;
+    for (int32_t b = 0; b < bx * by; ++b) {
+      double bsum = 0, bsum_sq = 0;
+      for (int32_t ej = b / bx * 16; ej < std::min(b / bx * 16 + 16, spec.ny);
+           ++ej) {
+        for (int32_t ei = b % bx * 16;
+             ei < std::min(b % bx * 16 + 16, spec.nx); ++ei) {
+          ForEachSample(*wp, moves, ei, ej, [&](double x, double y,
+                                                double err) {
+            bsum += err;
+            bsum_sq += err * err;
+            ++n;
+            if (err > max) {
+              max = err;
+              max_x = x;
+              max_y = y;
+            }
+            const int cx = std::clamp(static_cast<int>(x / cell_x), 0,
+                                      opt.map_cols - 1);
+            const int cy = std::clamp(static_cast<int>(y / cell_y), 0,
+                                      opt.map_rows - 1);
+            float& cell = map[cy * opt.map_cols + cx];
+            cell = std::max(cell, static_cast<float>(err));
+          });
+        }
+      }
+      sum += bsum;
+      sum_sq += bsum_sq;
+    }
+    ASSERT_EQ(grid.nx(), spec.nx);
+    EXPECT_EQ(serial.samples, n);
+    EXPECT_EQ(serial.max_error, max);
+    EXPECT_EQ(serial.max_x, max_x);
+    EXPECT_EQ(serial.max_y, max_y);
+    EXPECT_EQ(serial.mean_error, sum / n);
+    EXPECT_EQ(serial.rms_error, std::sqrt(sum_sq / n));
+    EXPECT_EQ(serial.map, map);
+    EXPECT_GT(max, 0.1);
   }
 }
 

@@ -1,0 +1,430 @@
+// Error-bounded adaptive triangulation of the top lattice (see
+// SimplifySurfaceMesh in surface_mesh.h).
+//
+// Leaves are rectangles of 2^a x 2^b lattice cells found top down (a k-d
+// tree: ridges and scallops along a pass get long thin leaves): a block
+// whose two corner triangles stay within the tolerance of the
+// full-resolution surface is kept, else halved across x or y, whichever
+// fits better. Each leaf is then triangulated conformingly: with two
+// triangles when no smaller neighbour put a vertex on its sides, else by
+// clipping ears off the polygon of its corners and side vertices. Every
+// leaf's triangles are measured against the full-resolution surface (both
+// piecewise linear, so the largest vertical gap lies at a lattice vertex or
+// where a coarse edge crosses a fine one: all are checked); a leaf over the
+// tolerance is split and everything retriangulated, until none is. Single
+// cells are the full-resolution triangles, so this ends.
+#include <algorithm>
+#include <array>
+#include <cstddef>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "absl/strings/str_format.h"
+#include "client/surface_mesh.h"
+#include "core/thread_pool.h"
+
+namespace swarf::cli {
+namespace {
+
+// Lattice vertex (i, j) in lattice units.
+struct P {
+  int64_t i, j;
+};
+
+class Lattice {
+ public:
+  Lattice(const TriangleMesh& full)
+      : nx_(full.lattice_nx), ny_(full.lattice_ny), full_(full) {}
+
+  int64_t nx() const { return nx_; }
+  int64_t ny() const { return ny_; }
+  int64_t Index(int64_t i, int64_t j) const { return j * (nx_ + 1) + i; }
+  double Z(int64_t i, int64_t j) const {
+    return full_.vertices[Index(i, j)].z;
+  }
+  // The full-resolution cell's split, as BuildSurfaceMesh chooses it.
+  bool MainDiagonal(int64_t i, int64_t j) const {
+    return std::fabs(Z(i, j) - Z(i + 1, j + 1)) <=
+           std::fabs(Z(i + 1, j) - Z(i, j + 1));
+  }
+  // The full-resolution surface at (x, y), lattice units.
+  double Fine(double x, double y) const {
+    int64_t i = std::clamp<int64_t>(static_cast<int64_t>(std::floor(x)), 0,
+                                    nx_ - 1);
+    int64_t j = std::clamp<int64_t>(static_cast<int64_t>(std::floor(y)), 0,
+                                    ny_ - 1);
+    const double u = x - i, v = y - j;
+    const double z00 = Z(i, j), z10 = Z(i + 1, j), z01 = Z(i, j + 1),
+                 z11 = Z(i + 1, j + 1);
+    if (MainDiagonal(i, j)) {
+      return u >= v ? z00 + u * (z10 - z00) + v * (z11 - z10)
+                    : z00 + u * (z11 - z01) + v * (z01 - z00);
+    }
+    return u + v <= 1 ? z00 + u * (z10 - z00) + v * (z01 - z00)
+                      : z11 + (1 - u) * (z01 - z11) + (1 - v) * (z10 - z11);
+  }
+
+  // Largest |fine - coarse| over triangle (a, b, c) (counter-clockwise),
+  // coarse being the plane through the three lattice vertices; once it
+  // passes `limit`, some value above it.
+  double TriangleDeviation(P a, P b, P c, double limit = INFINITY) const {
+    const double za = Z(a.i, a.j), zb = Z(b.i, b.j), zc = Z(c.i, c.j);
+    const int64_t area2 = (b.i - a.i) * (c.j - a.j) - (b.j - a.j) * (c.i - a.i);
+    if (area2 <= 0) return INFINITY;  // never built; refuse loudly
+    double dev = 0;
+    // Lattice vertices inside or on the triangle (exact integer tests).
+    const int64_t i0 = std::min({a.i, b.i, c.i}), i1 = std::max({a.i, b.i, c.i});
+    const int64_t j0 = std::min({a.j, b.j, c.j}), j1 = std::max({a.j, b.j, c.j});
+    auto edge = [](P p, P q, int64_t i, int64_t j) {
+      return (q.i - p.i) * (j - p.j) - (q.j - p.j) * (i - p.i);
+    };
+    for (int64_t j = j0; j <= j1; ++j) {
+      for (int64_t i = i0; i <= i1; ++i) {
+        const int64_t wa = edge(b, c, i, j), wb = edge(c, a, i, j),
+                      wc = edge(a, b, i, j);
+        if (wa < 0 || wb < 0 || wc < 0) continue;
+        const double coarse =
+            (wa * za + wb * zb + wc * zc) / static_cast<double>(area2);
+        dev = std::max(dev, std::fabs(Z(i, j) - coarse));
+      }
+      if (dev > limit) return dev;
+    }
+    dev = std::max(dev, EdgeDeviation(a, b));
+    if (dev > limit) return dev;
+    dev = std::max(dev, EdgeDeviation(b, c));
+    if (dev > limit) return dev;
+    return std::max(dev, EdgeDeviation(c, a));
+  }
+
+  // Largest gap along the coarse edge p -> q, at its crossings with every
+  // line a fine edge can lie on: x, y, x - y and x + y integer.
+  double EdgeDeviation(P p, P q) const {
+    const double zp = Z(p.i, p.j), zq = Z(q.i, q.j);
+    const int64_t di = q.i - p.i, dj = q.j - p.j;
+    double dev = 0;
+    auto at = [&](double t) {
+      if (!(t > 0 && t < 1)) return;
+      const double x = p.i + t * di, y = p.j + t * dj;
+      dev = std::max(dev, std::fabs(Fine(x, y) - (zp + t * (zq - zp))));
+    };
+    // Along direction d from s, the crossings of f(x, y) = integer, where f
+    // changes by df per unit t.
+    auto crossings = [&](int64_t s, int64_t df) {
+      if (df == 0) return;
+      const int64_t lo = std::min(s, s + df), hi = std::max(s, s + df);
+      for (int64_t k = lo + 1; k < hi; ++k) {
+        at(static_cast<double>(k - s) / static_cast<double>(df));
+      }
+    };
+    crossings(p.i, di);
+    crossings(p.j, dj);
+    crossings(p.i - p.j, di - dj);
+    crossings(p.i + p.j, di + dj);
+    return dev;
+  }
+
+ private:
+  const int64_t nx_, ny_;
+  const TriangleMesh& full_;
+};
+
+struct Leaf {
+  int64_t i0, j0, w, h;  // cells [i0, i0 + w) x [j0, j0 + h)
+};
+
+// The two corner triangles of a leaf, split along the diagonal whose ends
+// differ less in height (as the full-resolution cells are).
+void CornerTriangles(const Lattice& l, const Leaf& f, std::vector<P>* out) {
+  const P a{f.i0, f.j0}, b{f.i0 + f.w, f.j0}, c{f.i0 + f.w, f.j0 + f.h},
+      d{f.i0, f.j0 + f.h};
+  if (std::fabs(l.Z(a.i, a.j) - l.Z(c.i, c.j)) <=
+      std::fabs(l.Z(b.i, b.j) - l.Z(d.i, d.j))) {
+    out->insert(out->end(), {a, b, c, a, c, d});
+  } else {
+    out->insert(out->end(), {a, b, d, b, c, d});
+  }
+}
+
+// Largest distance of the lattice heights on the line from p to q (along a
+// row or a column) from the straight line between its ends.
+double LineDeviation(const Lattice& l, P p, P q) {
+  const int64_t n = std::max(std::abs(q.i - p.i), std::abs(q.j - p.j));
+  const int64_t si = (q.i - p.i) / std::max<int64_t>(n, 1);
+  const int64_t sj = (q.j - p.j) / std::max<int64_t>(n, 1);
+  const double z0 = l.Z(p.i, p.j), z1 = l.Z(q.i, q.j);
+  double dev = 0;
+  for (int64_t a = 1; a < n; ++a) {
+    dev = std::max(dev, std::fabs(l.Z(p.i + a * si, p.j + a * sj) -
+                                  (z0 + (z1 - z0) * a / n)));
+  }
+  return dev;
+}
+
+// Whether the corner triangles of a leaf are within `tolerance`. Its sides
+// are edges of those triangles: checked first, they reject most blocks
+// cheaply.
+bool CornersFit(const Lattice& l, const Leaf& f, double tolerance) {
+  const P a{f.i0, f.j0}, b{f.i0 + f.w, f.j0}, c{f.i0 + f.w, f.j0 + f.h},
+      d{f.i0, f.j0 + f.h};
+  if (LineDeviation(l, a, b) > tolerance || LineDeviation(l, d, c) > tolerance ||
+      LineDeviation(l, a, d) > tolerance || LineDeviation(l, b, c) > tolerance) {
+    return false;
+  }
+  std::vector<P> t;
+  CornerTriangles(l, f, &t);
+  return l.TriangleDeviation(t[0], t[1], t[2], tolerance) <= tolerance &&
+         l.TriangleDeviation(t[3], t[4], t[5], tolerance) <= tolerance;
+}
+
+// The halves of a leaf across x or across y: across the direction in which
+// the surface is further from linear (a scallop along a pass is split
+// across the pass, not along it); a side of one cell is not split.
+std::array<Leaf, 2> Halves(const Lattice& l, const Leaf& f) {
+  const std::array<Leaf, 2> across_x = {
+      Leaf{f.i0, f.j0, f.w / 2, f.h}, Leaf{f.i0 + f.w / 2, f.j0, f.w / 2, f.h}};
+  const std::array<Leaf, 2> across_y = {
+      Leaf{f.i0, f.j0, f.w, f.h / 2}, Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
+  if (f.h == 1) return across_x;
+  if (f.w == 1) return across_y;
+  // The rows and columns at the sides and through the middle.
+  double along_x = 0, along_y = 0;
+  for (int64_t j : {f.j0, f.j0 + f.h / 2, f.j0 + f.h}) {
+    along_x = std::max(along_x, LineDeviation(l, {f.i0, j}, {f.i0 + f.w, j}));
+  }
+  for (int64_t i : {f.i0, f.i0 + f.w / 2, f.i0 + f.w}) {
+    along_y = std::max(along_y, LineDeviation(l, {i, f.j0}, {i, f.j0 + f.h}));
+  }
+  return along_x >= along_y ? across_x : across_y;
+}
+
+int64_t Cross(P o, P a, P b) {
+  return (a.i - o.i) * (b.j - o.j) - (a.j - o.j) * (b.i - o.i);
+}
+
+// Triangulates a convex polygon (counter-clockwise, collinear vertices
+// allowed, positive area) without degenerate triangles: repeatedly cuts off
+// a corner whose triangle has area and leaves a polygon with area, the one
+// with the shortest cut.
+void ClipEars(std::vector<P> poly, std::vector<P>* out) {
+  while (poly.size() > 3) {
+    const size_t n = poly.size();
+    size_t best = n;
+    int64_t best_len = 0;
+    for (size_t k = 0; k < n; ++k) {
+      const P& prev = poly[(k + n - 1) % n];
+      const P& next = poly[(k + 1) % n];
+      if (Cross(prev, poly[k], next) <= 0) continue;  // not a corner
+      // The rest must not be all on the line prev-next.
+      bool area = false;
+      for (size_t q = 2; q + 1 < n && !area; ++q) {
+        area = Cross(prev, next, poly[(k + q) % n]) != 0;
+      }
+      if (!area) continue;
+      const int64_t di = next.i - prev.i, dj = next.j - prev.j;
+      const int64_t len = di * di + dj * dj;
+      if (best == n || len < best_len) {
+        best = k;
+        best_len = len;
+      }
+    }
+    if (best == n) return;  // cannot happen for a convex polygon with area
+    out->insert(out->end(),
+                {poly[(best + n - 1) % n], poly[best], poly[(best + 1) % n]});
+    poly.erase(poly.begin() + static_cast<std::ptrdiff_t>(best));
+  }
+  out->insert(out->end(), poly.begin(), poly.end());
+}
+
+}  // namespace
+
+absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
+                                                 double tolerance) {
+  if (!(tolerance >= 0) || !std::isfinite(tolerance)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the mesh tolerance must be a finite number >= 0 (mm), got %g",
+        tolerance));
+  }
+  const Lattice l(full);
+  const int64_t nx = l.nx(), ny = l.ny();
+  if (nx < 1 || ny < 1 ||
+      full.top_vertices != (nx + 1) * (ny + 1) ||
+      static_cast<int64_t>(full.vertices.size()) < full.top_vertices) {
+    return absl::InvalidArgumentError("not a full-resolution lattice mesh");
+  }
+  ThreadPool& pool = ThreadPool::Default();
+
+  // Top down: roots of kRoot cells; a block leaving the lattice or whose
+  // corner triangles miss the tolerance is split.
+  constexpr int64_t kRoot = 64;
+  std::vector<Leaf> pending, leaves;
+  for (int64_t j = 0; j < ny; j += kRoot) {
+    for (int64_t i = 0; i < nx; i += kRoot) {
+      pending.push_back({i, j, kRoot, kRoot});
+    }
+  }
+  // Blocks leaving the lattice: halved across the side that leaves it.
+  while (!pending.empty()) {
+    std::vector<std::array<Leaf, 2>> halves(pending.size());
+    std::vector<char> split(pending.size());
+    pool.ParallelFor(static_cast<int64_t>(pending.size()), [&](int64_t k) {
+      const Leaf& f = pending[k];
+      if (f.i0 + f.w > nx) {
+        halves[k] = {Leaf{f.i0, f.j0, f.w / 2, f.h},
+                     Leaf{f.i0 + f.w / 2, f.j0, f.w / 2, f.h}};
+      } else if (f.j0 + f.h > ny) {
+        halves[k] = {Leaf{f.i0, f.j0, f.w, f.h / 2},
+                     Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
+      } else if (f.w * f.h > 1 && !CornersFit(l, f, tolerance)) {
+        halves[k] = Halves(l, f);
+      } else {
+        return;
+      }
+      split[k] = 1;
+    });
+    std::vector<Leaf> next;
+    for (size_t k = 0; k < pending.size(); ++k) {
+      if (!split[k]) {
+        leaves.push_back(pending[k]);
+        continue;
+      }
+      for (const Leaf& c : halves[k]) {
+        if (c.i0 < nx && c.j0 < ny) next.push_back(c);
+      }
+    }
+    pending = std::move(next);
+  }
+
+  // Conforming triangulation, measured; leaves over the tolerance are
+  // split and the leaves they touch (their sides gain vertices) are
+  // triangulated and measured again, until none is over.
+  const int64_t lattice_vertices = (nx + 1) * (ny + 1);
+  std::vector<std::vector<P>> tris(leaves.size());
+  std::vector<double> leaf_dev(leaves.size());
+  std::vector<char> dirty(leaves.size(), 1);
+  std::vector<uint8_t> used, old_used;
+  for (;;) {
+    old_used.swap(used);
+    used.assign(lattice_vertices, 0);
+    for (const Leaf& f : leaves) {
+      used[l.Index(f.i0, f.j0)] = used[l.Index(f.i0 + f.w, f.j0)] = 1;
+      used[l.Index(f.i0, f.j0 + f.h)] = 1;
+      used[l.Index(f.i0 + f.w, f.j0 + f.h)] = 1;
+    }
+    pool.ParallelFor(static_cast<int64_t>(leaves.size()), [&](int64_t k) {
+      const Leaf& f = leaves[k];
+      // The sides' lattice vertices, counter-clockwise from (i0, j0).
+      std::vector<P> side;
+      for (int64_t d = 0; d < f.w; ++d) side.push_back({f.i0 + d, f.j0});
+      for (int64_t d = 0; d < f.h; ++d) side.push_back({f.i0 + f.w, f.j0 + d});
+      for (int64_t d = f.w; d > 0; --d) side.push_back({f.i0 + d, f.j0 + f.h});
+      for (int64_t d = f.h; d > 0; --d) side.push_back({f.i0, f.j0 + d});
+      if (!dirty[k]) {
+        for (const P& p : side) {
+          if (used[l.Index(p.i, p.j)] != old_used[l.Index(p.i, p.j)]) {
+            dirty[k] = 1;
+            break;
+          }
+        }
+        if (!dirty[k]) return;
+      }
+      std::vector<P> ring;
+      for (const P& p : side) {
+        if (used[l.Index(p.i, p.j)]) ring.push_back(p);
+      }
+      std::vector<P>& t = tris[k];
+      t.clear();
+      if (ring.size() == 4) {
+        CornerTriangles(l, f, &t);
+      } else {
+        ClipEars(std::move(ring), &t);
+      }
+      double dev = 0;
+      for (size_t q = 0; q + 2 < t.size(); q += 3) {
+        dev = std::max(dev, l.TriangleDeviation(t[q], t[q + 1], t[q + 2]));
+      }
+      leaf_dev[k] = dev;
+      dirty[k] = 0;
+    });
+    std::vector<Leaf> next;
+    std::vector<std::vector<P>> next_tris;
+    std::vector<double> next_dev;
+    bool refined = false;
+    for (size_t k = 0; k < leaves.size(); ++k) {
+      const Leaf& f = leaves[k];
+      if (leaf_dev[k] <= tolerance || f.w * f.h == 1) {
+        next.push_back(f);
+        next_tris.push_back(std::move(tris[k]));
+        next_dev.push_back(leaf_dev[k]);
+        continue;
+      }
+      refined = true;
+      for (const Leaf& half : Halves(l, f)) {
+        next.push_back(half);
+        next_tris.emplace_back();
+        next_dev.push_back(INFINITY);
+      }
+    }
+    leaves = std::move(next);
+    tris = std::move(next_tris);
+    leaf_dev = std::move(next_dev);
+    dirty.resize(leaves.size());
+    for (size_t k = 0; k < leaves.size(); ++k) dirty[k] = tris[k].empty();
+    if (!refined) break;
+  }
+
+  // The used lattice vertices, row-major, are the new top vertices.
+  TriangleMesh mesh;
+  mesh.lattice_nx = full.lattice_nx;
+  mesh.lattice_ny = full.lattice_ny;
+  mesh.z_bottom = full.z_bottom;
+  std::vector<int32_t> remap(lattice_vertices, -1);
+  for (int64_t v = 0; v < lattice_vertices; ++v) {
+    if (!used[v]) continue;
+    remap[v] = static_cast<int32_t>(mesh.vertices.size());
+    mesh.vertices.push_back(full.vertices[v]);
+  }
+  mesh.top_vertices = static_cast<int64_t>(mesh.vertices.size());
+  for (size_t k = 0; k < tris.size(); ++k) {
+    const std::vector<P>& t = tris[k];
+    for (size_t q = 0; q + 2 < t.size(); q += 3) {
+      mesh.triangles.push_back({remap[l.Index(t[q].i, t[q].j)],
+                                remap[l.Index(t[q + 1].i, t[q + 1].j)],
+                                remap[l.Index(t[q + 2].i, t[q + 2].j)]});
+    }
+    mesh.max_deviation = std::max(mesh.max_deviation, leaf_dev[k]);
+  }
+
+  // Walls under the top's boundary edges (counter-clockwise seen from
+  // above), and a bottom fanned from a vertex under the middle.
+  std::vector<int64_t> boundary;  // lattice indices, counter-clockwise
+  for (int64_t i = 0; i < nx; ++i) boundary.push_back(l.Index(i, 0));
+  for (int64_t j = 0; j < ny; ++j) boundary.push_back(l.Index(nx, j));
+  for (int64_t i = nx; i > 0; --i) boundary.push_back(l.Index(i, ny));
+  for (int64_t j = ny; j > 0; --j) boundary.push_back(l.Index(0, j));
+  std::vector<int32_t> top_ring, bottom_ring;
+  for (int64_t v : boundary) {
+    if (!used[v]) continue;
+    top_ring.push_back(remap[v]);
+    bottom_ring.push_back(static_cast<int32_t>(mesh.vertices.size()));
+    const Vec3& p = full.vertices[v];
+    mesh.vertices.push_back({p.x, p.y, full.z_bottom});
+  }
+  const Vec3& lo = full.vertices[0];
+  const Vec3& hi = full.vertices[lattice_vertices - 1];
+  const int32_t middle = static_cast<int32_t>(mesh.vertices.size());
+  mesh.vertices.push_back({(lo.x + hi.x) / 2, (lo.y + hi.y) / 2,
+                           full.z_bottom});
+  for (size_t q = 0; q < top_ring.size(); ++q) {
+    const size_t r = (q + 1) % top_ring.size();
+    const int32_t a = top_ring[q], b = top_ring[r];
+    const int32_t ab = bottom_ring[q], bb = bottom_ring[r];
+    mesh.triangles.push_back({ab, bb, b});
+    mesh.triangles.push_back({ab, b, a});
+    mesh.triangles.push_back({middle, bb, ab});
+  }
+  return mesh;
+}
+
+}  // namespace swarf::cli
