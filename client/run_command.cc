@@ -24,6 +24,7 @@
 #include "client/connection.h"
 #include "client/json_writer.h"
 #include "client/run_report.h"
+#include "client/viewer/viewer.h"
 #include "core/toolpath.h"
 
 namespace swarf::cli {
@@ -53,7 +54,10 @@ constexpr char kUsage[] =
     "  --subdivide N                STL: split each element N x N using the\n"
     "                               scheme's patches (default 1)\n"
     "  --batch N                    moves per batch sent (default 20000)\n"
-    "  --json                       print the stats document instead\n";
+    "  --json                       print the stats document instead\n"
+    "  --view                       show the part live in a browser (a page\n"
+    "                               on 127.0.0.1, kept up until Ctrl-C)\n"
+    "  --view-port N                the page's port (default: a free one)\n";
 
 struct ToolChoice {
   double radius = 0;
@@ -254,7 +258,8 @@ int RunCommand(const std::vector<std::string>& argv) {
                                    "server", "out",           "subdivide",
                                    "batch"};
   valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
-  auto args = Args::Parse(argv, valued, {"json", "help", "quiet"});
+  valued.insert(std::begin(kViewerFlags), std::end(kViewerFlags));
+  auto args = Args::Parse(argv, valued, {"json", "help", "quiet", "view"});
   auto fail = [](const absl::Status& s, int code) {
     std::cerr << "swarf run: " << s.message() << "\n";
     return code;
@@ -364,17 +369,29 @@ int RunCommand(const std::vector<std::string>& argv) {
         scheme == SchemeKind::kZmap ? "zmap" : "taylor", (*conn)->target());
   }
 
+  const std::vector<PathRun> runs = Runs(*path, tool_ids);
+  std::unique_ptr<Viewer> viewer;
+  if (args->Has("view") || args->Has("view-port")) {
+    auto vopt = ViewerOptionsFrom(*args);
+    if (!vopt.ok()) return fail(vopt.status(), 2);
+    auto v = Viewer::Start(conn->get(), id, *vopt, ViewerPathOf(runs));
+    if (!v.ok()) return fail(v.status(), 1);
+    viewer = *std::move(v);
+    std::cerr << "swarf run: viewer at " << viewer->url() << std::endl;
+  }
+
   // Simulate.
   const auto t_sim = std::chrono::steady_clock::now();
   ProgressBar bar(json || args->Has("quiet"));
   StreamProgress last;
   absl::Status streamed = StreamPath(
-      **conn, id, Runs(*path, tool_ids), batch_points,
+      **conn, id, runs, batch_points,
       [&](const StreamProgress& p) {
         last = p;
         bar.Update(p);
       });
   const double sim_s = Since(t_sim);
+  if (viewer) viewer->MarkFinished();
   if (!streamed.ok()) return fail(streamed, 1);
 
   // Outputs.
@@ -400,6 +417,17 @@ int RunCommand(const std::vector<std::string>& argv) {
     absl::Status s = WriteStatsJson(report, oopt.dir + "/stats.json");
     if (!s.ok()) return fail(s, 1);
   }
+  if (json) {
+    std::cout << StatsJson(report) << "\n";
+  } else {
+    std::cout << Summary(report);
+  }
+  if (viewer) {
+    std::cerr << "swarf run: the viewer stays at " << viewer->url()
+              << " (Ctrl-C to stop)" << std::endl;
+    viewer->ServeUntilInterrupted();
+    viewer.reset();
+  }
   if (!(*conn)->embedded()) {
     // A remote session served this run only.
     auto ctx = (*conn)->Context(id, 30);
@@ -407,11 +435,6 @@ int RunCommand(const std::vector<std::string>& argv) {
     del.set_session_id(id);
     pb::DeleteSessionResponse resp;
     (*conn)->stub().DeleteSession(ctx.get(), del, &resp);
-  }
-  if (json) {
-    std::cout << StatsJson(report) << "\n";
-  } else {
-    std::cout << Summary(report);
   }
   return 0;
 }
