@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <sys/socket.h>
+
 #include <csignal>
 #include <cstdlib>
 #include <cstring>
@@ -107,6 +109,12 @@ class ViewerImpl {
     rows_ = session_.ny() / stride_ + 1;
     tiles_.resize(static_cast<size_t>(session_.tiles_x()) * session_.tiles_y());
     Routes();
+    // SO_REUSEADDR only: cpp-httplib's default also sets SO_REUSEPORT, which
+    // would let two viewers share a port silently.
+    http_.set_socket_options([](socket_t sock) {
+      int yes = 1;
+      setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, &yes, sizeof yes);
+    });
     port_ = options_.port == 0
                 ? http_.bind_to_any_port(options_.host)
                 : (http_.bind_to_port(options_.host, options_.port)
