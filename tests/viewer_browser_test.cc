@@ -242,7 +242,7 @@ TEST(ViewerBrowserTest, AttachedViewerFollowsAStreamedJob) {
       pb::SimulateResponse resp;
       ASSERT_TRUE(stream->Read(&resp));
       ASSERT_TRUE(resp.has_ack()) << resp.DebugString();
-      std::this_thread::sleep_for(std::chrono::milliseconds(60));
+      std::this_thread::sleep_for(std::chrono::milliseconds(150));
     }
     stream->WritesDone();
     ASSERT_TRUE(stream->Finish().ok());
