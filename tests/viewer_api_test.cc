@@ -276,9 +276,9 @@ TEST_F(ViewerApiTest, ProbeMarksErrorMapAndPathAreTheApis) {
 
   auto e = http.Get("/api/errormap?samples=3");
   ASSERT_TRUE(e && e->status == 200);
-  uint32_t cols, rows;
-  std::memcpy(&cols, e->body.data(), 4);
-  std::memcpy(&rows, e->body.data() + 4, 4);
+  size_t off = 0;
+  const uint32_t cols = Take<uint32_t>(e->body, &off);
+  const uint32_t rows = Take<uint32_t>(e->body, &off);
   EXPECT_EQ(cols, 1024u);
   EXPECT_EQ(rows, 600u);
   EXPECT_EQ(e->body.size(), 16 + 4ull * cols * rows);
@@ -289,22 +289,22 @@ TEST_F(ViewerApiTest, ProbeMarksErrorMapAndPathAreTheApis) {
   // The path: every point once all moves are in, as floats.
   auto p = http.Get("/api/path?from=3");
   ASSERT_TRUE(p && p->status == 200);
-  uint32_t from, n;
-  std::memcpy(&from, p->body.data(), 4);
-  std::memcpy(&n, p->body.data() + 4, 4);
+  off = 0;
+  const uint32_t from = Take<uint32_t>(p->body, &off);
+  const uint32_t n = Take<uint32_t>(p->body, &off);
   EXPECT_EQ(from, 3u);
   ASSERT_EQ(n, path.points.size());
   ASSERT_EQ(p->body.size(), 8 + 12ull * (n - from));
   for (uint32_t k = from; k < n; ++k) {
-    float xyz[3];
-    std::memcpy(xyz, p->body.data() + 8 + 12 * (k - from), 12);
-    EXPECT_EQ(xyz[0], static_cast<float>(path.points[k].x));
-    EXPECT_EQ(xyz[2], static_cast<float>(path.points[k].z));
+    EXPECT_EQ(Take<float>(p->body, &off), static_cast<float>(path.points[k].x));
+    EXPECT_EQ(Take<float>(p->body, &off), static_cast<float>(path.points[k].y));
+    EXPECT_EQ(Take<float>(p->body, &off), static_cast<float>(path.points[k].z));
   }
   const auto state = Json(http.Get("/api/state")->body);
   EXPECT_EQ(state.fields().at("moves").number_value(), moves);
   EXPECT_EQ(state.fields().at("moves_total").number_value(), moves);
   EXPECT_FALSE(state.fields().at("finished").bool_value());
+  EXPECT_EQ(state.fields().at("tool").number_value(), 1);
   viewer->MarkFinished();
   EXPECT_TRUE(Json(http.Get("/api/state")->body)
                   .fields().at("finished").bool_value());
@@ -319,6 +319,14 @@ TEST_F(ViewerApiTest, ProbeMarksErrorMapAndPathAreTheApis) {
   auto orbit = http.Get("/three/OrbitControls.js");
   ASSERT_TRUE(orbit && orbit->status == 200);
   EXPECT_NE(orbit->body.find("OrbitControls"), std::string::npos);
+  // Addressed by another name (DNS rebinding): refused.
+  auto rebound = http.Get("/api/state", {{"Host", "evil.example:80"}});
+  ASSERT_TRUE(rebound);
+  EXPECT_EQ(rebound->status, 403);
+  httplib::Client by_name("localhost", viewer->port());
+  auto local = by_name.Get("/api/state");
+  ASSERT_TRUE(local);
+  EXPECT_EQ(local->status, 200);
 }
 
 TEST_F(ViewerApiTest, StartErrorsNameWhatIsWrong) {

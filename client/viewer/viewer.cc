@@ -314,7 +314,12 @@ class ViewerImpl {
     } else {
       w.BeginArray().EndArray();
     }
-    w.Key("path_points").Int(static_cast<int64_t>(PathAvailableLocked()));
+    const size_t reached = PathAvailableLocked();
+    w.Key("path_points").Int(static_cast<int64_t>(reached));
+    // The tool at the last point reached, when the program is known.
+    w.Key("tool").Int(reached > 0 && reached <= path_.tools.size()
+                          ? path_.tools[reached - 1]
+                          : -1);
     w.Key("finished").Bool(finished_);
     w.Key("error").String(error_);
     w.EndObject();
@@ -477,6 +482,20 @@ class ViewerImpl {
   }
 
   void Routes() {
+    // Only requests addressed to this viewer by name: a web page elsewhere
+    // cannot reach the session through a DNS name rebound to 127.0.0.1.
+    http_.set_pre_routing_handler(
+        [this](const httplib::Request& req, httplib::Response& res) {
+          const std::string host = req.get_header_value("Host");
+          const std::string port = absl::StrCat(":", port_);
+          if (host == options_.host + port || host == "localhost" + port) {
+            return httplib::Server::HandlerResponse::Unhandled;
+          }
+          res.status = 403;
+          res.set_content("the viewer answers only to " + options_.host + port,
+                          "text/plain");
+          return httplib::Server::HandlerResponse::Handled;
+        });
     http_.Get("/", [](const httplib::Request&, httplib::Response& res) {
       res.set_content(reinterpret_cast<const char*>(kViewerPage), kViewerPageSize, "text/html; charset=utf-8");
     });
@@ -651,6 +670,7 @@ ViewerPath ViewerPathOf(const std::vector<PathRun>& runs) {
       started = true;
       p.points.push_back(run.points[k]);
       p.moves_at.push_back(moves);
+      p.tools.push_back(run.tool_id);
     }
   }
   p.moves_total = moves;

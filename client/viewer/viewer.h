@@ -54,6 +54,7 @@ struct ViewerOptions {
 struct ViewerPath {
   std::vector<Vec3> points;
   std::vector<int64_t> moves_at;  // same size, non-decreasing
+  std::vector<int32_t> tools;     // same size: the tool cutting to it
   int64_t moves_total = 0;
 };
 
