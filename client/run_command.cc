@@ -57,7 +57,8 @@ constexpr char kUsage[] =
     "  --json                       print the stats document instead\n"
     "  --view                       show the part live in a browser (a page\n"
     "                               on 127.0.0.1, kept up until Ctrl-C)\n"
-    "  --view-port N                the page's port (default: a free one)\n";
+    "  --view-port N                the page's port (default: a free one)\n"
+    "  --view-wait                  start cutting once a page is open\n";
 
 struct ToolChoice {
   double radius = 0;
@@ -259,7 +260,7 @@ int RunCommand(const std::vector<std::string>& argv) {
                                    "batch"};
   valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
   valued.insert(std::begin(kViewerFlags), std::end(kViewerFlags));
-  auto args = Args::Parse(argv, valued, {"json", "help", "quiet", "view"});
+  auto args = Args::Parse(argv, valued, {"json", "help", "quiet", "view", "view-wait"});
   auto fail = [](const absl::Status& s, int code) {
     std::cerr << "swarf run: " << s.message() << "\n";
     return code;
@@ -371,13 +372,17 @@ int RunCommand(const std::vector<std::string>& argv) {
 
   const std::vector<PathRun> runs = Runs(*path, tool_ids);
   std::unique_ptr<Viewer> viewer;
-  if (args->Has("view") || args->Has("view-port")) {
+  if (args->Has("view") || args->Has("view-port") || args->Has("view-wait")) {
     auto vopt = ViewerOptionsFrom(*args);
     if (!vopt.ok()) return fail(vopt.status(), 2);
     auto v = Viewer::Start(conn->get(), id, *vopt, ViewerPathOf(runs));
     if (!v.ok()) return fail(v.status(), 1);
     viewer = *std::move(v);
     std::cerr << "swarf run: viewer at " << viewer->url() << std::endl;
+    if (args->Has("view-wait")) {
+      std::cerr << "swarf run: waiting for the page to open" << std::endl;
+      viewer->WaitForPage();
+    }
   }
 
   // Simulate.

@@ -271,8 +271,9 @@ TEST(ViewerBrowserTest, AttachedViewerFollowsAStreamedJob) {
   EXPECT_EQ(view.Wait(), 0);
 }
 
-// swarf run --view on its embedded server: the same page once the job is in
-// (its URL on stderr), with the program's toolpath, until Ctrl-C.
+// swarf run --view-wait on its embedded server: the same page (its URL on
+// stderr; the run cuts once the page is open), with the program's toolpath,
+// until Ctrl-C.
 TEST(ViewerBrowserTest, RunViewShowsTheFinishedJob) {
   SKIP_WITHOUT_CHROMIUM();
   std::filesystem::create_directories(SWARF_VIEWER_OUT);
@@ -288,7 +289,7 @@ TEST(ViewerBrowserTest, RunViewShowsTheFinishedJob) {
     }
   }
   Child run({SWARF_CLI, "run", file, "--tool", "ball:d=6", "--stock",
-             "0,0,100,100,0", "--mesh", "300", "--view", "--view-port", "0",
+             "0,0,100,100,0", "--mesh", "300", "--view-wait", "--view-port", "0",
              "--quiet"},
             /*with_stderr=*/true);
   std::string line, url;

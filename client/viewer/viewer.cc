@@ -137,6 +137,12 @@ class ViewerImpl {
     return absl::StrCat("http://", options_.host, ":", port_, "/");
   }
 
+  void WaitForPage() {
+    absl::MutexLock l(&mu_);
+    mu_.Await(absl::Condition(
+        +[](int* pages) { return *pages > 0; }, &pages_));
+  }
+
   void MarkFinished() {
     absl::MutexLock l(&mu_);
     finished_ = true;
@@ -520,6 +526,10 @@ class ViewerImpl {
                                     httplib::Response& res) {
       res.set_header("Cache-Control", "no-cache");
       auto last = std::make_shared<uint64_t>(~uint64_t{0});
+      {
+        absl::MutexLock l(&mu_);
+        ++pages_;
+      }
       res.set_chunked_content_provider(
           "text/event-stream", [this, last](size_t, httplib::DataSink& sink) {
             std::string msg;
@@ -536,6 +546,10 @@ class ViewerImpl {
               }
             }
             return sink.write(msg.data(), msg.size());
+          },
+          [this](bool) {
+            absl::MutexLock l(&mu_);
+            --pages_;
           });
     });
     http_.Get("/api/tiles", [this](const httplib::Request& req,
@@ -608,6 +622,7 @@ class ViewerImpl {
   Vec3 position_ ABSL_GUARDED_BY(mu_);
   std::vector<Vec3> trail_ ABSL_GUARDED_BY(mu_);
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
+  int pages_ ABSL_GUARDED_BY(mu_) = 0;  // with the event stream open
   std::string error_ ABSL_GUARDED_BY(mu_);
   // Bumps when the state the page sees changes (events are sent on change).
   uint64_t state_seq_ ABSL_GUARDED_BY(mu_) = 0;
@@ -628,6 +643,7 @@ Viewer::~Viewer() = default;
 int Viewer::port() const { return impl_->port(); }
 std::string Viewer::url() const { return impl_->url(); }
 void Viewer::MarkFinished() { impl_->MarkFinished(); }
+void Viewer::WaitForPage() { impl_->WaitForPage(); }
 
 namespace {
 std::atomic<bool> interrupted{false};

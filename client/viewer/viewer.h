@@ -74,6 +74,8 @@ class Viewer {
 
   int port() const;
   std::string url() const;
+  // Blocks until a page has opened (its event stream is connected).
+  void WaitForPage();
   // The streaming client is done (the page says so); the viewer keeps
   // serving.
   void MarkFinished();
