@@ -352,6 +352,7 @@ class ViewerImpl {
     w.Key("stride").Int(stride_);
     w.Key("cols").Int(cols_).Key("rows").Int(rows_);
     w.Key("known_path").Bool(!path_.points.empty());
+    w.Key("path_total").Int(static_cast<int64_t>(path_.points.size()));
     w.Key("tools").BeginArray();
     for (const pb::Tool& t : session_.tools()) {
       w.BeginObject().Key("id").Int(t.id());
