@@ -8,7 +8,8 @@
 // chromium-driver or python3-selenium is not installed.
 #include <png.h>
 #include <signal.h>
-#include <spawn.h>
+#include <poll.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -35,42 +36,61 @@ namespace {
 
 namespace pb = ::swarf::v1;
 
-// A child process with its stdout (and, for the script, stdin) piped.
+// A child process in its own process group (with whatever it starts:
+// chromedriver, chromium), its stdout piped; killed with the test.
 class Child {
  public:
   explicit Child(const std::vector<std::string>& argv,
                  bool with_stderr = false) {
     int out[2];
     EXPECT_EQ(pipe(out), 0);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_adddup2(&fa, out[1], STDOUT_FILENO);
-    if (with_stderr) posix_spawn_file_actions_adddup2(&fa, out[1], STDERR_FILENO);
-    posix_spawn_file_actions_addclose(&fa, out[0]);
     std::vector<char*> args;
     for (const std::string& a : argv) args.push_back(const_cast<char*>(a.c_str()));
     args.push_back(nullptr);
-    EXPECT_EQ(posix_spawn(&pid_, args[0], &fa, nullptr, args.data(), environ), 0)
-        << argv[0];
-    posix_spawn_file_actions_destroy(&fa);
+    pid_ = fork();
+    if (pid_ == 0) {
+      prctl(PR_SET_PDEATHSIG, SIGKILL);  // the test died: so does this
+      setpgid(0, 0);
+      dup2(out[1], STDOUT_FILENO);
+      if (with_stderr) dup2(out[1], STDERR_FILENO);
+      close(out[0]);
+      close(out[1]);
+      execve(args[0], args.data(), environ);
+      _exit(127);
+    }
+    EXPECT_GT(pid_, 0) << argv[0];
     close(out[1]);
-    out_ = fdopen(out[0], "r");
+    fd_ = out[0];
   }
   ~Child() {
-    if (pid_ > 0 && !waited_) {
-      kill(pid_, SIGKILL);
-      Wait();
-    }
-    if (out_) fclose(out_);
+    if (pid_ > 0) kill(-pid_, SIGKILL);  // the group: nothing left behind
+    if (pid_ > 0 && !waited_) Wait();
+    if (fd_ >= 0) close(fd_);
   }
-  // The next line of its stdout without the newline; false at EOF.
-  bool ReadLine(std::string* line) {
-    char* buf = nullptr;
-    size_t cap = 0;
-    const ssize_t n = getline(&buf, &cap, out_);
-    if (n >= 0) line->assign(buf, n > 0 && buf[n - 1] == '\n' ? n - 1 : n);
-    free(buf);
-    return n >= 0;
+  // The next line of its stdout without the newline; false at EOF or when
+  // none comes within `timeout_s`.
+  bool ReadLine(std::string* line, double timeout_s = 180) {
+    const auto deadline = std::chrono::steady_clock::now() +
+                          std::chrono::milliseconds(int64_t(timeout_s * 1000));
+    for (;;) {
+      const size_t nl = buf_.find('\n');
+      if (nl != std::string::npos) {
+        line->assign(buf_, 0, nl);
+        buf_.erase(0, nl + 1);
+        return true;
+      }
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+          deadline - std::chrono::steady_clock::now());
+      pollfd p{fd_, POLLIN, 0};
+      if (left.count() <= 0 || poll(&p, 1, static_cast<int>(left.count())) <= 0) {
+        ADD_FAILURE() << "no line from the child within " << timeout_s << " s";
+        return false;
+      }
+      char chunk[4096];
+      const ssize_t n = read(fd_, chunk, sizeof chunk);
+      if (n <= 0) return false;
+      buf_.append(chunk, n);
+    }
   }
   void Signal(int sig) { kill(pid_, sig); }
   // Exit status (-1 if killed by a signal).
@@ -84,7 +104,8 @@ class Child {
  private:
   pid_t pid_ = -1;
   bool waited_ = false;
-  FILE* out_ = nullptr;
+  int fd_ = -1;
+  std::string buf_;
 };
 
 bool Installed() {
