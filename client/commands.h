@@ -14,6 +14,7 @@ int LoadCommand(const std::vector<std::string>& args);
 int HealthCommand(const std::vector<std::string>& args);
 int SessionsCommand(const std::vector<std::string>& args);
 int MarksCommand(const std::vector<std::string>& args);
+int ViewCommand(const std::vector<std::string>& args);
 
 }  // namespace swarf::cli
 

@@ -17,6 +17,7 @@ constexpr char kUsage[] =
     "  health  whether a running swarfd is serving\n"
     "  sessions  the sessions of a running swarfd\n"
     "  load    many sessions streaming at once: throughput and latency\n"
+    "  view    the live 3D viewer of a running swarfd's session\n"
     "Run 'swarf <command> --help' for a command's options.\n";
 
 }  // namespace
@@ -37,6 +38,7 @@ int main(int argc, char** argv) {
   if (cmd == "health") return swarf::cli::HealthCommand(args);
   if (cmd == "sessions") return swarf::cli::SessionsCommand(args);
   if (cmd == "load") return swarf::cli::LoadCommand(args);
+  if (cmd == "view") return swarf::cli::ViewCommand(args);
   if (cmd == "--help" || cmd == "-h" || cmd == "help") {
     std::cout << kUsage;
     return 0;

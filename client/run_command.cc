@@ -27,6 +27,7 @@
 #include "client/toolpath_flags.h"
 #include "gcode/toolpath.h"
 #include "server/convert.h"
+#include "client/viewer/viewer.h"
 
 namespace swarf::cli {
 
@@ -71,6 +72,10 @@ const std::string kUsage =
     "  --marks-min-length L         ...and pieces shorter than L mm\n"
     "                               (default 0.2)\n"
     "  --json                       print the stats document instead\n"
+    "  --view                       show the part live in a browser (a page\n"
+    "                               on 127.0.0.1, kept up until Ctrl-C)\n"
+    "  --view-port N                the page's port (default: a free one)\n"
+    "  --view-wait                  start cutting once a page is open\n"
     "G-code:\n" + std::string(kToolpathUsage);
 
 struct ToolChoice {
@@ -274,7 +279,9 @@ int RunCommand(const std::vector<std::string>& argv) {
   valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
   valued.insert(std::begin(kToolpathFlags), std::end(kToolpathFlags));
   valued.insert(std::begin(kOutputFlags), std::end(kOutputFlags));
-  auto args = Args::Parse(argv, valued, {"json", "help", "quiet", kStrictFlag});
+  valued.insert(std::begin(kViewerFlags), std::end(kViewerFlags));
+  auto args = Args::Parse(argv, valued,
+                          {"json", "help", "quiet", kStrictFlag, "view", "view-wait"});
   auto fail = [](const absl::Status& s, int code) {
     std::cerr << "swarf run: " << s.message() << "\n";
     return code;
@@ -410,11 +417,25 @@ int RunCommand(const std::vector<std::string>& argv) {
         GetScheme(scheme).name(), (*conn)->target());
   }
 
+  const std::vector<PathRun> runs = Runs(*path, tool_ids);
+  std::unique_ptr<Viewer> viewer;
+  if (args->Has("view") || args->Has("view-port") || args->Has("view-wait")) {
+    auto vopt = ViewerOptionsFrom(*args);
+    if (!vopt.ok()) return fail(vopt.status(), 2);
+    auto v = Viewer::Start(conn->get(), id, *vopt, ViewerPathOf(runs));
+    if (!v.ok()) return fail(v.status(), 1);
+    viewer = *std::move(v);
+    std::cerr << "swarf run: viewer at " << viewer->url() << std::endl;
+    if (args->Has("view-wait")) {
+      std::cerr << "swarf run: waiting for the page to open" << std::endl;
+      viewer->WaitForPage();
+    }
+  }
+
   // Simulate.
   const auto t_sim = std::chrono::steady_clock::now();
   ProgressBar bar(json || args->Has("quiet"));
   StreamProgress last;
-  const std::vector<PathRun> runs = Runs(*path, tool_ids);
   absl::Status streamed = StreamPath(
       **conn, id, runs, batch_points,
       [&](const StreamProgress& p) {
@@ -422,6 +443,7 @@ int RunCommand(const std::vector<std::string>& argv) {
         bar.Update(p);
       });
   const double sim_s = Since(t_sim);
+  if (viewer) viewer->MarkFinished();
   if (!streamed.ok()) return fail(streamed, 1);
 
   // Outputs.
@@ -450,6 +472,17 @@ int RunCommand(const std::vector<std::string>& argv) {
     absl::Status s = WriteStatsJson(report, oopt.dir + "/stats.json");
     if (!s.ok()) return fail(s, 1);
   }
+  if (json) {
+    std::cout << StatsJson(report) << "\n";
+  } else {
+    std::cout << Summary(report);
+  }
+  if (viewer) {
+    std::cerr << "swarf run: the viewer stays at " << viewer->url()
+              << " (Ctrl-C to stop)" << std::endl;
+    viewer->ServeUntilInterrupted();
+    viewer.reset();
+  }
   if (!(*conn)->embedded()) {
     // A remote session served this run only.
     auto ctx = (*conn)->Context(id, 30);
@@ -457,11 +490,6 @@ int RunCommand(const std::vector<std::string>& argv) {
     del.set_session_id(id);
     pb::DeleteSessionResponse resp;
     (*conn)->stub().DeleteSession(ctx.get(), del, &resp);
-  }
-  if (json) {
-    std::cout << StatsJson(report) << "\n";
-  } else {
-    std::cout << Summary(report);
   }
   return 0;
 }

@@ -1,0 +1,350 @@
+// The viewer's HTTP side without a browser (client/viewer/viewer.h): what it
+// relays equals what the gRPC API answers (tiles, subsampled by its stride;
+// only changed tiles after a version; Probe; marks; error map; the path),
+// and bad requests get clear errors.
+#include <cstring>
+#include <set>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "client/connection.h"
+#include "client/viewer/viewer.h"
+#include "google/protobuf/struct.pb.h"
+#include "google/protobuf/util/json_util.h"
+#include "gtest/gtest.h"
+#include "httplib.h"
+
+namespace swarf::cli {
+namespace {
+
+// A decoded /api/tiles tile.
+struct PageTile {
+  int32_t c0, r0, cols, rows;
+  double version;
+  std::vector<float> heights;
+};
+
+template <typename T>
+T Take(const std::string& b, size_t* off) {
+  T v;
+  EXPECT_LE(*off + sizeof(T), b.size());
+  std::memcpy(&v, b.data() + *off, sizeof(T));
+  *off += sizeof(T);
+  return v;
+}
+
+std::vector<PageTile> DecodeTiles(const std::string& b, uint32_t* stride) {
+  size_t off = 0;
+  const uint32_t count = Take<uint32_t>(b, &off);
+  *stride = Take<uint32_t>(b, &off);
+  Take<double>(b, &off);
+  std::vector<PageTile> out(count);
+  for (PageTile& t : out) {
+    t.c0 = Take<int32_t>(b, &off);
+    t.r0 = Take<int32_t>(b, &off);
+    t.cols = Take<int32_t>(b, &off);
+    t.rows = Take<int32_t>(b, &off);
+    t.version = Take<double>(b, &off);
+    t.heights.resize(static_cast<size_t>(t.cols) * t.rows);
+    for (float& h : t.heights) h = Take<float>(b, &off);
+  }
+  EXPECT_EQ(off, b.size());
+  return out;
+}
+
+google::protobuf::Struct Json(const std::string& text) {
+  google::protobuf::Struct s;
+  EXPECT_TRUE(google::protobuf::util::JsonStringToMessage(text, &s).ok())
+      << text;
+  return s;
+}
+
+class ViewerApiTest : public ::testing::Test {
+ protected:
+  // A taylor session of nx x ny elements over [0, 150] x [0, 60].
+  void SetUp() override {
+    auto conn = Connection::Open("");
+    ASSERT_TRUE(conn.ok());
+    conn_ = *std::move(conn);
+    pb::CreateSessionRequest req;
+    req.set_session_id(id_);
+    req.mutable_stock()->set_x1(150);
+    req.mutable_stock()->set_y1(60);
+    req.set_nx(1500);
+    req.set_ny(600);
+    req.add_tools()->set_id(1);
+    req.mutable_tools(0)->mutable_ball()->set_radius(2);
+    pb::Session s;
+    auto ctx = conn_->Context(id_);
+    ASSERT_TRUE(conn_->stub().CreateSession(ctx.get(), req, &s).ok());
+  }
+
+  // Streams a zigzag over y in [y0, y1] as one batch (continuing the path).
+  void Cut(double y0, double y1) {
+    PathRun run;
+    run.tool_id = 1;
+    run.reposition = !started_;
+    pb::SimulateRequest req;
+    pb::MoveBatch* b = req.mutable_moves();
+    b->set_seq(++seq_);
+    b->set_tool_id(1);
+    b->set_reposition(run.reposition);
+    for (double y = y0; y <= y1; y += 3) {
+      run.points.push_back({5, y, -1 - y / 60});
+      run.points.push_back({145, y + 1.5, -1.5});
+    }
+    for (const Vec3& p : run.points) {
+      b->add_xyz(p.x);
+      b->add_xyz(p.y);
+      b->add_xyz(p.z);
+    }
+    auto ctx = conn_->Context(id_);
+    auto stream = conn_->stub().Simulate(ctx.get());
+    ASSERT_TRUE(stream->Write(req));
+    pb::SimulateResponse resp;
+    ASSERT_TRUE(stream->Read(&resp));
+    ASSERT_TRUE(resp.has_ack()) << resp.DebugString();
+    stream->WritesDone();
+    ASSERT_TRUE(stream->Finish().ok());
+    runs_.push_back(run);
+    started_ = true;
+  }
+
+  pb::Session Session() {
+    pb::GetSessionRequest req;
+    req.set_session_id(id_);
+    pb::Session s;
+    auto ctx = conn_->Context(id_);
+    EXPECT_TRUE(conn_->stub().GetSession(ctx.get(), req, &s).ok());
+    return s;
+  }
+
+  std::unique_ptr<Viewer> StartViewer(ViewerPath path = {}) {
+    ViewerOptions o;
+    o.poll_seconds = 0.01;
+    auto v = Viewer::Start(conn_.get(), id_, o, std::move(path));
+    EXPECT_TRUE(v.ok()) << v.status();
+    return v.ok() ? *std::move(v) : nullptr;
+  }
+
+  // Waits until the viewer holds the session's current version.
+  void AwaitVersion(httplib::Client& http, uint64_t version) {
+    for (int i = 0; i < 500; ++i) {
+      auto r = http.Get("/api/state");
+      if (r && r->status == 200 &&
+          Json(r->body).fields().at("version").number_value() ==
+              static_cast<double>(version)) {
+        return;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    FAIL() << "the viewer never reached version " << version;
+  }
+
+  // GetTiles (float heights) as tile index -> tile.
+  std::map<std::pair<int, int>, pb::Tile> ApiTiles(uint64_t since) {
+    pb::GetTilesRequest req;
+    req.set_session_id(id_);
+    req.set_since_version(since);
+    auto ctx = conn_->Context(id_);
+    auto reader = conn_->stub().GetTiles(ctx.get(), req);
+    std::map<std::pair<int, int>, pb::Tile> out;
+    pb::Tile t;
+    while (reader->Read(&t)) out[{t.tx(), t.ty()}] = t;
+    EXPECT_TRUE(reader->Finish().ok());
+    return out;
+  }
+
+  const std::string id_ = "viewer-api";
+  std::unique_ptr<Connection> conn_;
+  std::vector<PathRun> runs_;
+  bool started_ = false;
+  uint64_t seq_ = 0;
+};
+
+TEST_F(ViewerApiTest, TilesAreTheApisSubsampledAndOnlyChangedOnesAfter) {
+  Cut(5, 20);
+  auto viewer = StartViewer();
+  ASSERT_TRUE(viewer);
+  httplib::Client http("127.0.0.1", viewer->port());
+  const uint64_t v1 = Session().version();
+  AwaitVersion(http, v1);
+
+  auto all = http.Get("/api/tiles");
+  ASSERT_TRUE(all && all->status == 200);
+  uint32_t stride = 0;
+  const std::vector<PageTile> tiles = DecodeTiles(all->body, &stride);
+  // 1501 nodes along x: every 2nd node keeps the page under 1024 a side.
+  EXPECT_EQ(stride, 2u);
+  const auto api = ApiTiles(0);
+  ASSERT_EQ(tiles.size(), api.size());
+  for (const PageTile& t : tiles) {
+    const int tx = t.c0 * 2 / 64, ty = t.r0 * 2 / 64;
+    const pb::Tile& a = api.at({tx, ty});
+    EXPECT_EQ(t.version, a.version());
+    EXPECT_EQ(t.c0 * 2, a.i0());
+    EXPECT_EQ(t.cols, (a.nx() + 1) / 2);
+    EXPECT_EQ(t.rows, (a.ny() + 1) / 2);
+    for (int r = 0; r < t.rows; ++r) {
+      for (int c = 0; c < t.cols; ++c) {
+        ASSERT_EQ(t.heights[r * t.cols + c], a.heights_f(2 * r * a.nx() + 2 * c))
+            << "tile " << tx << "," << ty << " node " << c << "," << r;
+      }
+    }
+  }
+
+  // After more moves: exactly the tiles they changed.
+  Cut(40, 50);
+  const uint64_t v2 = Session().version();
+  ASSERT_GT(v2, v1);
+  AwaitVersion(http, v2);
+  auto since = http.Get(("/api/tiles?since=" + std::to_string(v1)).c_str());
+  ASSERT_TRUE(since && since->status == 200);
+  std::set<std::pair<int, int>> got, want;
+  for (const PageTile& t : DecodeTiles(since->body, &stride)) {
+    got.insert({t.c0 * 2 / 64, t.r0 * 2 / 64});
+  }
+  for (const auto& [k, t] : ApiTiles(v1)) want.insert(k);
+  EXPECT_FALSE(want.empty());
+  EXPECT_LT(want.size(), api.size());
+  EXPECT_EQ(got, want);
+  auto none = http.Get(("/api/tiles?since=" + std::to_string(v2)).c_str());
+  ASSERT_TRUE(none && none->status == 200);
+  EXPECT_TRUE(DecodeTiles(none->body, &stride).empty());
+}
+
+TEST_F(ViewerApiTest, ProbeMarksErrorMapAndPathAreTheApis) {
+  Cut(5, 30);
+  ViewerPath path = ViewerPathOf(runs_);
+  const int64_t moves = path.moves_total;
+  auto viewer = StartViewer(path);
+  ASSERT_TRUE(viewer);
+  httplib::Client http("127.0.0.1", viewer->port());
+  AwaitVersion(http, Session().version());
+
+  for (const auto& [x, y] : std::vector<std::pair<double, double>>{
+           {75.123456789, 12.5}, {5, 5}, {149.99, 59.99}, {100.25, 100}}) {
+    pb::ProbeRequest req;
+    req.set_session_id(id_);
+    req.add_xy(x);
+    req.add_xy(y);
+    pb::ProbeResponse want;
+    auto ctx = conn_->Context(id_);
+    const grpc::Status st = conn_->stub().Probe(ctx.get(), req, &want);
+    char q[128];
+    std::snprintf(q, sizeof q, "/api/probe?x=%.17g&y=%.17g", x, y);
+    auto r = http.Get(q);
+    ASSERT_TRUE(r);
+    if (!st.ok()) {  // outside the stock: the API's error, as HTTP
+      EXPECT_EQ(r->status, 400) << r->body;
+      EXPECT_EQ(r->body, st.error_message());
+      continue;
+    }
+    ASSERT_EQ(r->status, 200) << r->body;
+    const auto j = Json(r->body);
+    EXPECT_EQ(j.fields().at("z").number_value(), want.heights(0));
+    EXPECT_EQ(j.fields().at("owner").number_value(), want.owners(0));
+  }
+  for (const char* bad : {"/api/probe?x=1", "/api/probe?x=nan&y=1",
+                          "/api/probe?x=abc&y=1", "/api/tiles?since=-1",
+                          "/api/tiles?since=x"}) {
+    auto r = http.Get(bad);
+    ASSERT_TRUE(r);
+    EXPECT_EQ(r->status, 400) << bad;
+    EXPECT_FALSE(r->body.empty()) << bad;
+  }
+
+  // Marks: as many polylines (of 2+ vertices) as GetCuttingMarks gives.
+  auto m = http.Get("/api/marks?min_angle=1");
+  ASSERT_TRUE(m && m->status == 200);
+  uint32_t count;
+  std::memcpy(&count, m->body.data(), 4);
+  {
+    pb::GetCuttingMarksRequest req;
+    req.set_session_id(id_);
+    req.set_min_angle_deg(1);
+    auto ctx = conn_->Context(id_);
+    auto reader = conn_->stub().GetCuttingMarks(ctx.get(), req);
+    uint32_t want = 0;
+    pb::Polyline p;
+    while (reader->Read(&p)) want += p.xyz_size() >= 6;
+    ASSERT_TRUE(reader->Finish().ok());
+    EXPECT_GT(want, 0u);
+    EXPECT_EQ(count, want);
+  }
+
+  auto e = http.Get("/api/errormap?samples=3");
+  ASSERT_TRUE(e && e->status == 200);
+  size_t off = 0;
+  const uint32_t cols = Take<uint32_t>(e->body, &off);
+  const uint32_t rows = Take<uint32_t>(e->body, &off);
+  EXPECT_EQ(cols, 1024u);
+  EXPECT_EQ(rows, 600u);
+  EXPECT_EQ(e->body.size(), 16 + 4ull * cols * rows);
+  auto bad_samples = http.Get("/api/errormap?samples=1000");
+  ASSERT_TRUE(bad_samples);
+  EXPECT_EQ(bad_samples->status, 400);
+
+  // The path: every point once all moves are in, as floats.
+  auto p = http.Get("/api/path?from=3");
+  ASSERT_TRUE(p && p->status == 200);
+  off = 0;
+  const uint32_t from = Take<uint32_t>(p->body, &off);
+  const uint32_t n = Take<uint32_t>(p->body, &off);
+  EXPECT_EQ(from, 3u);
+  ASSERT_EQ(n, path.points.size());
+  ASSERT_EQ(p->body.size(), 8 + 12ull * (n - from));
+  for (uint32_t k = from; k < n; ++k) {
+    EXPECT_EQ(Take<float>(p->body, &off), static_cast<float>(path.points[k].x));
+    EXPECT_EQ(Take<float>(p->body, &off), static_cast<float>(path.points[k].y));
+    EXPECT_EQ(Take<float>(p->body, &off), static_cast<float>(path.points[k].z));
+  }
+  const auto state = Json(http.Get("/api/state")->body);
+  EXPECT_EQ(state.fields().at("moves").number_value(), moves);
+  EXPECT_EQ(state.fields().at("moves_total").number_value(), moves);
+  EXPECT_FALSE(state.fields().at("finished").bool_value());
+  EXPECT_EQ(state.fields().at("tool").number_value(), 1);
+  viewer->MarkFinished();
+  EXPECT_TRUE(Json(http.Get("/api/state")->body)
+                  .fields().at("finished").bool_value());
+
+  // The page and three.js, served from here.
+  auto page = http.Get("/");
+  ASSERT_TRUE(page && page->status == 200);
+  EXPECT_NE(page->body.find("three/three.min.js"), std::string::npos);
+  auto three = http.Get("/three/three.min.js");
+  ASSERT_TRUE(three && three->status == 200);
+  EXPECT_NE(three->body.find("REVISION"), std::string::npos);
+  auto orbit = http.Get("/three/OrbitControls.js");
+  ASSERT_TRUE(orbit && orbit->status == 200);
+  EXPECT_NE(orbit->body.find("OrbitControls"), std::string::npos);
+  // Addressed by another name (DNS rebinding): refused.
+  auto rebound = http.Get("/api/state", {{"Host", "evil.example:80"}});
+  ASSERT_TRUE(rebound);
+  EXPECT_EQ(rebound->status, 403);
+  httplib::Client by_name("localhost", viewer->port());
+  auto local = by_name.Get("/api/state");
+  ASSERT_TRUE(local);
+  EXPECT_EQ(local->status, 200);
+}
+
+TEST_F(ViewerApiTest, StartErrorsNameWhatIsWrong) {
+  ViewerOptions o;
+  auto missing = Viewer::Start(conn_.get(), "no-such-session", o);
+  ASSERT_FALSE(missing.ok());
+  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(missing.status().message().find("no-such-session"),
+            std::string::npos);
+  auto first = StartViewer();
+  ASSERT_TRUE(first);
+  o.port = first->port();
+  auto taken = Viewer::Start(conn_.get(), id_, o);
+  ASSERT_FALSE(taken.ok());
+  EXPECT_EQ(taken.status().code(), absl::StatusCode::kUnavailable);
+  EXPECT_NE(taken.status().message().find(std::to_string(o.port)),
+            std::string::npos);
+}
+
+}  // namespace
+}  // namespace swarf::cli
