@@ -50,7 +50,7 @@ void BM_Instance(benchmark::State& state, const char* name, SchemeKind scheme) {
   for (auto _ : state) {
     auto wp = *Workpiece::Create(inst.stock, scheme);
     auto r = wp->Apply(inst.moves);
-    benchmark::DoNotOptimize(r->nodes_lowered);
+    benchmark::DoNotOptimize(r->node_lowerings);
     state.PauseTiming();
     wp.reset();  // freeing is not part of the paper's figure
     state.ResumeTiming();
@@ -96,7 +96,7 @@ void BM_FinishingMoves(benchmark::State& state, SchemeKind scheme) {
     for (size_t k = 0; k < moves.size(); k += batch) {
       const size_t n = std::min(batch, moves.size() - k);
       auto r = wp->Apply(std::span<const Move>(moves.data() + k, n));
-      benchmark::DoNotOptimize(r->nodes_lowered);
+      benchmark::DoNotOptimize(r->node_lowerings);
     }
     state.PauseTiming();
     wp.reset();

@@ -59,7 +59,7 @@ void BM_InProcess(benchmark::State& state) {
       for (size_t p = k; p < std::min(pts.size(), k + batch); ++p) {
         buf.push_back({pts[p - 1], pts[p], kBallRadius});
       }
-      benchmark::DoNotOptimize(wp->Apply(buf)->nodes_lowered);
+      benchmark::DoNotOptimize(wp->Apply(buf)->node_lowerings);
     }
     state.PauseTiming();
     wp.reset();

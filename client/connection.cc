@@ -174,7 +174,7 @@ absl::Status StreamPath(
             p.moves_done += moves_of[k - 1];
           }
           acked = a.seq();
-          p.nodes_lowered += a.nodes_lowered();
+          p.node_lowerings += a.node_lowerings();
           if (progress) progress(p);
         }
       } else if (resp.has_error() && batch_error.ok()) {

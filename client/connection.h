@@ -83,7 +83,7 @@ std::vector<Move> RunMoves(const std::vector<PathRun>& runs,
 struct StreamProgress {
   int64_t moves_done = 0;   // acknowledged
   int64_t moves_total = 0;
-  int64_t nodes_lowered = 0;
+  int64_t node_lowerings = 0;
 };
 
 // Streams runs into the session as move batches of at most `batch_points`

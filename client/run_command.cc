@@ -452,7 +452,7 @@ int RunCommand(const std::vector<std::string>& argv) {
   report.lines = path->source_lines();
   report.parse_seconds = parse_s;
   report.simulate_seconds = sim_s;
-  report.nodes_lowered = last.nodes_lowered;
+  report.node_lowerings = last.node_lowerings;
   report.stock = *stock;
   report.scheme = scheme;
   report.server = (*conn)->target();

@@ -253,7 +253,7 @@ std::string StatsJson(const RunReport& r) {
       {"server", r.server},
       {"moves", r.moves},
       {"source_lines", r.lines},
-      {"nodes_lowered", r.nodes_lowered},
+      {"node_lowerings", r.node_lowerings},
       {"scheme", std::string(GetScheme(r.scheme).name())},
       {"stock",
        {{"x0", r.stock.x0}, {"y0", r.stock.y0}, {"x1", r.stock.x1},

@@ -29,7 +29,7 @@ struct RunReport {
   std::string dropped, outside_stock;
   double outside_mm = 0;
   int64_t outside_line = 0;
-  int64_t moves = 0, lines = 0, nodes_lowered = 0;
+  int64_t moves = 0, lines = 0, node_lowerings = 0;
   StockSpec stock;
   SchemeKind scheme = SchemeKind::kGuarded;
   double parse_seconds = 0, simulate_seconds = 0, output_seconds = 0;

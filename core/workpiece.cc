@@ -350,7 +350,7 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
   if (changed) ++version_;
   for (int64_t k = 0; k < n_touched; ++k) {
     if (lowered[k] == 0) continue;
-    result.nodes_lowered += lowered[k];
+    result.node_lowerings += lowered[k];
     result.changed_tiles.push_back(touched[k].first);
     tile_version_[touched[k].first] = version_;
   }

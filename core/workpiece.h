@@ -69,7 +69,7 @@ struct NodeValue {
 struct ApplyResult {
   int64_t first_move_id = 0;  // id of the batch's first move
   int64_t moves = 0;          // moves in the batch
-  int64_t nodes_lowered = 0;  // node updates (a node lowered twice counts 2)
+  int64_t node_lowerings = 0;  // node updates (a node lowered twice counts 2)
   uint64_t version = 0;       // workpiece version after the batch
   std::vector<int32_t> changed_tiles;  // ascending tile indices
 };

@@ -653,7 +653,7 @@ class SimulateReactor
     pb::Ack* ack = out->emplace_back().mutable_ack();
     ack->set_seq(r->seq);
     ack->set_moves_applied(r->moves_applied);
-    ack->set_nodes_lowered(r->nodes_lowered);
+    ack->set_node_lowerings(r->node_lowerings);
     ack->set_version(r->version);
     ack->set_duplicate(r->duplicate);
     const int32_t tiles_x = session_->spec().stock.nx / kTileSize + 1;

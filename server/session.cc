@@ -412,7 +412,7 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
   last_position_ = pos;
   digests_.push_back(digest);
   r.moves_applied = wp_->move_count();
-  r.nodes_lowered = applied->nodes_lowered;
+  r.node_lowerings = applied->node_lowerings;
   r.version = applied->version;
   for (int32_t t : applied->changed_tiles) {
     r.changed_tiles.emplace_back(t, wp_->TileVersion(t));

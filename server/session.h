@@ -43,7 +43,7 @@ struct SessionSpec {
 struct BatchResult {
   uint64_t seq = 0;
   int64_t moves_applied = 0;  // in the session, in total
-  int64_t nodes_lowered = 0;  // by this batch
+  int64_t node_lowerings = 0;  // by this batch
   uint64_t version = 0;       // after the batch
   std::vector<std::pair<int32_t, uint64_t>> changed_tiles;  // tile, version
   bool duplicate = false;  // seq already applied: nothing done

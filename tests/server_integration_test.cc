@@ -357,7 +357,7 @@ void ExpectAck(const pb::Ack& a, int k, const Toolpath& tp,
   EXPECT_EQ(a.seq(), static_cast<uint64_t>(k));
   EXPECT_FALSE(a.duplicate());
   EXPECT_EQ(a.moves_applied(), tp.MovesThrough(k));
-  EXPECT_EQ(a.nodes_lowered(), ref.result(k).nodes_lowered);
+  EXPECT_EQ(a.node_lowerings(), ref.result(k).node_lowerings);
   EXPECT_EQ(a.version(), ref.result(k).version);
   EXPECT_EQ(ChangedTiles(a), ChangedTiles(ref.result(k), ref.wp().tiles_x()));
 }
@@ -871,7 +871,7 @@ TEST_F(ServerTest, RepositionBatchesCutExactlyTheInstanceMoves) {
       SCOPED_TRACE(absl::StrCat("batch ", k + 1));
       EXPECT_EQ(acks[k].seq(), k + 1);
       EXPECT_EQ(acks[k].moves_applied(), static_cast<int64_t>(k + 1));
-      EXPECT_EQ(acks[k].nodes_lowered(), want[k].nodes_lowered);
+      EXPECT_EQ(acks[k].node_lowerings(), want[k].node_lowerings);
       EXPECT_EQ(acks[k].version(), want[k].version);
       EXPECT_EQ(ChangedTiles(acks[k]), ChangedTiles(want[k], wp->tiles_x()));
     }
@@ -1114,7 +1114,7 @@ TEST_F(ServerTest, CancelMidStreamLeavesWholeBatchesOnly) {
   EXPECT_EQ(after.version(), ref.wp().version());
   for (size_t k = 0; k < acks.size(); ++k) {
     EXPECT_EQ(acks[k].version(), ref.result(k + 1).version);
-    EXPECT_EQ(acks[k].nodes_lowered(), ref.result(k + 1).nodes_lowered);
+    EXPECT_EQ(acks[k].node_lowerings(), ref.result(k + 1).node_lowerings);
   }
   ASSERT_EQ(tiles.size(), static_cast<size_t>(ref.wp().tile_count()));
   for (int32_t t = 0; t < ref.wp().tile_count(); ++t) {
@@ -1170,7 +1170,7 @@ TEST_F(ServerTest, ResumeOnANewStreamDuplicatesAndGaps) {
   ASSERT_EQ(acks.size(), want_acks);
   EXPECT_EQ(acks[0].seq(), last_acked);
   EXPECT_TRUE(acks[0].duplicate());
-  EXPECT_EQ(acks[0].nodes_lowered(), 0);
+  EXPECT_EQ(acks[0].node_lowerings(), 0);
   EXPECT_EQ(acks[0].changed_tiles_size(), 0);
   uint64_t applied_by_first = last_acked;
   for (size_t i = 1; i < acks.size() && acks[i].duplicate(); ++i) {
@@ -1183,7 +1183,7 @@ TEST_F(ServerTest, ResumeOnANewStreamDuplicatesAndGaps) {
     SCOPED_TRACE(absl::StrCat("resumed batch ", k));
     EXPECT_EQ(acks[i].seq(), static_cast<uint64_t>(k));
     if (static_cast<uint64_t>(k) <= applied_by_first) {
-      EXPECT_EQ(acks[i].nodes_lowered(), 0);
+      EXPECT_EQ(acks[i].node_lowerings(), 0);
       EXPECT_EQ(acks[i].changed_tiles_size(), 0);
       EXPECT_GE(acks[i].moves_applied(), tp.MovesThrough(k));
       EXPECT_LE(acks[i].moves_applied(), tp.MovesThrough(applied_by_first));
@@ -1210,7 +1210,7 @@ TEST_F(ServerTest, ResumeOnANewStreamDuplicatesAndGaps) {
   EXPECT_TRUE(dup.duplicate());
   EXPECT_EQ(dup.moves_applied(), tp.MovesThrough(n));
   EXPECT_EQ(dup.version(), full.wp().version());
-  EXPECT_EQ(dup.nodes_lowered(), 0);
+  EXPECT_EQ(dup.node_lowerings(), 0);
   pb::Session after_dup;
   ASSERT_TRUE(GetSession(id, &after_dup).ok());
   EXPECT_EQ(after_dup.last_seq(), state.last_seq());

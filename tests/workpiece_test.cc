@@ -296,7 +296,7 @@ TEST(WorkpieceTest, ExactTieKeepsLowerId) {
     const uint64_t v2 = wp->version();
     auto again = wp->Apply(std::vector<Move>{groove});
     ASSERT_TRUE(again.ok());
-    EXPECT_EQ(again->nodes_lowered, 0);
+    EXPECT_EQ(again->node_lowerings, 0);
     EXPECT_TRUE(again->changed_tiles.empty());
     EXPECT_EQ(again->version, v2);
     EXPECT_EQ(wp->version(), v2);
@@ -344,7 +344,7 @@ TEST(WorkpieceTilesTest, BoundingBoxOverlapDoesNotAllocate) {
     auto res = wp->Apply(std::vector<Move>{m});
     ASSERT_TRUE(res.ok());
     EXPECT_EQ(res->changed_tiles, std::vector<int32_t>{0});
-    EXPECT_EQ(res->nodes_lowered, 2);
+    EXPECT_EQ(res->node_lowerings, 2);
     EXPECT_EQ(wp->allocated_tiles(), 1);
     EXPECT_FALSE(wp->TileAllocated(1));
     EXPECT_EQ(wp->Node(63, 62).owner, 0);
@@ -369,13 +369,13 @@ TEST(WorkpieceTilesTest, MovesAboveOrBesideChangeNothing) {
     for (const Move& m : harmless) {
       auto res = wp->Apply(std::vector<Move>{m});
       ASSERT_TRUE(res.ok());
-      EXPECT_EQ(res->nodes_lowered, 0);
+      EXPECT_EQ(res->node_lowerings, 0);
       EXPECT_TRUE(res->changed_tiles.empty());
       EXPECT_EQ(res->version, 0u);
     }
     auto all = wp->Apply(harmless);
     ASSERT_TRUE(all.ok());
-    EXPECT_EQ(all->nodes_lowered, 0);
+    EXPECT_EQ(all->node_lowerings, 0);
     EXPECT_EQ(wp->version(), 0u);
     EXPECT_EQ(wp->allocated_tiles(), 0);
     EXPECT_EQ(wp->move_count(), 2 * static_cast<int64_t>(harmless.size()));
@@ -434,8 +434,8 @@ TEST(WorkpieceTilesTest, VersionsAndChangedTilesFollowTheNodes) {
                 std::vector<int32_t>(changed.begin(), changed.end()));
       EXPECT_TRUE(std::is_sorted(res->changed_tiles.begin(),
                                  res->changed_tiles.end()));
-      EXPECT_GE(res->nodes_lowered, changed_nodes);
-      EXPECT_EQ(res->nodes_lowered == 0, changed_nodes == 0);
+      EXPECT_GE(res->node_lowerings, changed_nodes);
+      EXPECT_EQ(res->node_lowerings == 0, changed_nodes == 0);
       EXPECT_EQ(wp->version(), v0 + (changed.empty() ? 0 : 1));
       EXPECT_EQ(res->version, wp->version());
       for (int32_t t = 0; t < wp->tile_count(); ++t) {
@@ -682,7 +682,7 @@ TEST(WorkpieceStateTest, RestoredStateIsBitIdenticalAndContinues) {
       auto b = restored->Apply(rest.subspan(k, 50));
       ASSERT_TRUE(a.ok() && b.ok());
       EXPECT_EQ(a->changed_tiles, b->changed_tiles);
-      EXPECT_EQ(a->nodes_lowered, b->nodes_lowered);
+      EXPECT_EQ(a->node_lowerings, b->node_lowerings);
     }
     ExpectSameWorkpiece(*original, *restored);
     EXPECT_EQ(SavedState(*restored), SavedState(*original));

@@ -261,8 +261,8 @@ void FuzzBatch(Session& s, const pb::MoveBatch& b) {
                  ExpectedMoves(b, before.last_position.has_value()));
   FUZZ_CHECK(r->moves_applied == after.moves_applied);
   FUZZ_CHECK(r->version == after.version && after.version >= before.version);
-  FUZZ_CHECK(r->nodes_lowered >= 0);
-  FUZZ_CHECK((r->nodes_lowered > 0) == !r->changed_tiles.empty());
+  FUZZ_CHECK(r->node_lowerings >= 0);
+  FUZZ_CHECK((r->node_lowerings > 0) == !r->changed_tiles.empty());
   if (after.last_position.has_value()) {
     FUZZ_CHECK(Finite(*after.last_position));
   }

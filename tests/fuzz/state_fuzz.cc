@@ -185,7 +185,7 @@ void CheckLoaded(Target& target, std::string_view bytes, SchemeKind scheme) {
   auto r = fresh->Apply({&cut, 1});
   FUZZ_CHECK(r.ok());
   FUZZ_CHECK(fresh->move_count() == wp.move_count() + 1);
-  FUZZ_CHECK(fresh->version() == wp.version() + (r->nodes_lowered > 0));
+  FUZZ_CHECK(fresh->version() == wp.version() + (r->node_lowerings > 0));
   CheckInvariants(*fresh);
 }
 

@@ -89,7 +89,7 @@ class SendResult:
     last_seq: int        # seq of the last batch sent
     batches: int         # batches sent by this call
     moves_applied: int   # moves in the session, in total
-    nodes_lowered: int   # node updates by this call's batches
+    node_lowerings: int   # node updates by this call's batches
     version: int         # grid version after the last batch
     resumed: int         # times the stream was resumed during the call
 
@@ -543,7 +543,7 @@ class Session:
                 ack = resp.ack
                 while pending and pending[0].seq <= ack.seq:
                     pending.pop(0)
-                lowered += ack.nodes_lowered
+                lowered += ack.node_lowerings
                 last_ack = ack
             elif resp.HasField("error"):
                 # The batch was not applied; the ones sent after it would
@@ -555,7 +555,7 @@ class Session:
         return SendResult(
             last_seq=self._next_seq - 1, batches=len(batches),
             moves_applied=last_ack.moves_applied if last_ack else
-            self.moves_applied, nodes_lowered=lowered,
+            self.moves_applied, node_lowerings=lowered,
             version=last_ack.version if last_ack else 0, resumed=resumed)
 
     def _resync(self) -> None:
