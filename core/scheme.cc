@@ -120,12 +120,26 @@ double RimDistance(const SurfaceJet& j) {
 PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
   const double delta = RimDistance(j);
   if (delta == kInfinity) return PatchTrust::kFull;
-  const double reach = kPatchReach * delta;
+  // The same along the direction of the larger principal curvature (a
+  // ramp's cylinder: its cross-section, where the gradient mixes in the
+  // flat slope along the axis).
+  const double m = 0.5 * (j.wxx + j.wyy);
+  const double q = std::hypot(0.5 * (j.wxx - j.wyy), j.wxy);
+  const double k1 = m + q;
+  const double th = 0.5 * std::atan2(2 * j.wxy, j.wxx - j.wyy);
+  const double ex = std::cos(th), ey = std::sin(th);
+  const double se = j.wx * ex + j.wy * ey;
+  const double de = k1 > 0 ? (1 + se * se) / (k1 * (std::sqrt(1 + se * se) +
+                                                    std::abs(se)))
+                           : kInfinity;
+  const double reach = kPatchReach * std::min(delta, de);
   if (dx * dx + dy * dy > reach * reach) return PatchTrust::kNone;
   const double s = std::hypot(j.wx, j.wy);
   if (s > 0 && (dx * j.wx + dy * j.wy) / s > kPatchUphill * delta) {
     return PatchTrust::kLowerBound;  // uphill, towards the rim
   }
+  const double along = (dx * ex + dy * ey) * (se < 0 ? -1 : 1);
+  if (se != 0 && along > kPatchUphill * de) return PatchTrust::kLowerBound;
   return PatchTrust::kFull;
 }
 

@@ -102,8 +102,12 @@ double GuardedHeight(const ElementCorners& e, double x, double y);
 // larger principal curvature.
 double RimDistance(const SurfaceJet& j);
 
-// How far a patch is trusted, in rim distances: in any direction up to
-// kPatchReach; uphill, towards the rim, up to kPatchUphill, beyond which the
+// How far a patch is trusted, in rim distances (RimDistance along the
+// gradient, and the same along the direction of the larger principal
+// curvature: a ramp's cylinder has its rim across the axis, while its
+// gradient mixes in the slope along it): in any direction up to
+// kPatchReach of the smaller; uphill along either, towards its rim, up to
+// kPatchUphill of it, beyond which the
 // parabola, rising slower than the circle, only bounds the surface from
 // below. Both measured on the corpus and the analytic walls
 // (docs/benchmarks.md, "Guarded scheme"): uphill 1.0 lets the slot whose
