@@ -111,7 +111,8 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
   for (int k = 0; k < 4; ++k) {
     e.c[k] = jet(is[k], js[k]);
     const int32_t o = owner(is[k], js[k]);
-    if (o >= 0 && o < static_cast<int64_t>(moves.size())) {
+    if (o >= 0 && o < static_cast<int64_t>(moves.size()) &&
+        GetScheme(scheme).uses_reach()) {
       e.reach[k] = ReachOf(moves, o, spec.z_top);
     }
   }

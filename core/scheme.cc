@@ -99,6 +99,33 @@ int GuardedMin(const ElementCorners& e, double x, double y, double* w) {
 
 }  // namespace
 
+namespace {
+
+// Where a circle of curvature k met at slope^2 s2 turns vertical (see
+// RimDistance); infinite for k = 0.
+double CircleRimDistance(double s2, double k) {
+  const double denom = std::abs(k) * (std::sqrt(1 + s2) + std::sqrt(s2));
+  if (!(denom > 0)) return kInfinity;
+  return (1 + s2) / denom;
+}
+
+// The patch's principal curvatures m +- q, and the direction (ex, ey) of
+// m + q.
+struct Principal {
+  double m, q, ex, ey;
+};
+Principal PrincipalCurvatures(const SurfaceJet& j) {
+  Principal p;
+  p.m = 0.5 * (j.wxx + j.wyy);
+  p.q = std::hypot(0.5 * (j.wxx - j.wyy), j.wxy);
+  const double th = 0.5 * std::atan2(2 * j.wxy, j.wxx - j.wyy);
+  p.ex = std::cos(th);
+  p.ey = std::sin(th);
+  return p;
+}
+
+}  // namespace
+
 double RimDistance(const SurfaceJet& j) {
   const double s2 = j.wx * j.wx + j.wy * j.wy;
   // Curvature along the gradient direction (at a flat node, the larger
@@ -108,13 +135,10 @@ double RimDistance(const SurfaceJet& j) {
     k = (j.wx * j.wx * j.wxx + 2 * j.wx * j.wy * j.wxy + j.wy * j.wy * j.wyy) /
         s2;
   } else {
-    const double m = 0.5 * (j.wxx + j.wyy);
-    const double q = std::hypot(0.5 * (j.wxx - j.wyy), j.wxy);
-    k = std::max(std::abs(m + q), std::abs(m - q));
+    const Principal p = PrincipalCurvatures(j);
+    k = std::max(std::abs(p.m + p.q), std::abs(p.m - p.q));
   }
-  const double denom = std::abs(k) * (std::sqrt(1 + s2) + std::sqrt(s2));
-  if (!(denom > 0)) return kInfinity;  // a plane
-  return (1 + s2) / denom;
+  return CircleRimDistance(s2, k);
 }
 
 PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
@@ -123,15 +147,11 @@ PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
   // The same along the direction of the larger principal curvature (a
   // ramp's cylinder: its cross-section, where the gradient mixes in the
   // flat slope along the axis).
-  const double m = 0.5 * (j.wxx + j.wyy);
-  const double q = std::hypot(0.5 * (j.wxx - j.wyy), j.wxy);
-  const double k1 = m + q;
-  const double th = 0.5 * std::atan2(2 * j.wxy, j.wxx - j.wyy);
-  const double ex = std::cos(th), ey = std::sin(th);
+  const Principal p = PrincipalCurvatures(j);
+  const double k1 = p.m + p.q;
+  const double ex = p.ex, ey = p.ey;
   const double se = j.wx * ex + j.wy * ey;
-  const double de = k1 > 0 ? (1 + se * se) / (k1 * (std::sqrt(1 + se * se) +
-                                                    std::abs(se)))
-                           : kInfinity;
+  const double de = k1 > 0 ? CircleRimDistance(se * se, k1) : kInfinity;
   const double reach = kPatchReach * std::min(delta, de);
   if (dx * dx + dy * dy > reach * reach) return PatchTrust::kNone;
   const double s = std::hypot(j.wx, j.wy);
@@ -213,6 +233,7 @@ class GuardedScheme final : public Scheme {
   int parameters_per_node() const override { return 6; }
   bool stores_derivatives() const override { return true; }
   int bytes_per_node() const override { return 32; }  // as taylor
+  bool uses_reach() const override { return true; }
   double Reconstruct(const ElementCorners& e, double x,
                      double y) const override {
     return GuardedHeight(e, x, y);

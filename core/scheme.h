@@ -46,7 +46,7 @@ struct ElementCorners {
   double x0 = 0, y0 = 0, x1 = 0, y1 = 0;
   double z_top = 0;  // stock top: no reconstruction lies above it
   SurfaceJet c[4];
-  CornerReach reach[4];  // used by kGuarded only
+  CornerReach reach[4];  // filled where the scheme uses_reach()
 };
 
 class Scheme {
@@ -58,6 +58,9 @@ class Scheme {
   virtual int parameters_per_node() const = 0;
   // Whether nodes store the sweep's derivatives (wx .. wyy).
   virtual bool stores_derivatives() const = 0;
+  // Whether Reconstruct reads ElementCorners::reach (else it may be left
+  // unbounded, saving the work of filling it).
+  virtual bool uses_reach() const { return false; }
   // Bytes per allocated node, including the owning move id.
   virtual int bytes_per_node() const = 0;
   // Height at (x, y) inside the element. Thread-safe.

@@ -464,7 +464,9 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
   for (int k = 0; k < 4; ++k) {
     const NodeValue n = Node(is[k], js[k]);
     e.c[k] = n.jet;
-    if (n.owner >= 0) e.reach[k] = ReachOf(moves_, n.owner, e.z_top);
+    if (n.owner >= 0 && scheme_->uses_reach()) {
+      e.reach[k] = ReachOf(moves_, n.owner, e.z_top);
+    }
   }
   return e;
 }
