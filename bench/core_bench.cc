@@ -6,7 +6,7 @@
 #include <memory>
 #include <vector>
 
-#include "core/ball_sweep.h"
+#include "core/cutter/ball_sweep.h"
 #include "core/instances.h"
 #include "core/workpiece.h"
 

@@ -41,7 +41,7 @@ endif()
 
 # Clang 14 emits target_clones' ifunc under a suffixed name that callers in
 # other files can't link against: clang builds keep the default clone only
-# (core/ball_sweep.cc).
+# (core/cutter/ball_sweep.cc).
 if(CMAKE_CXX_COMPILER_ID STREQUAL "Clang")
   add_compile_definitions(SWARF_NO_TARGET_CLONES)
 endif()

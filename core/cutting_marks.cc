@@ -1197,11 +1197,8 @@ double ExactCreaseDistance(const Workpiece& wp, int32_t a, int32_t b, double x,
       return true;
     }
     if (id < 0 || id >= wp.move_count()) return false;
-    const Move& m = wp.move(id);
-    const BallSweep sweep(m.from, m.to, m.radius);
-    const SweepPoint p = sweep.Locate(x, y);
-    if (p.piece == SweepPoint::kNone) return false;
-    const SurfaceJet j = sweep.Jet(p);
+    const SurfaceJet j = wp.MoveJet(id, x, y);
+    if (!(j.w < kInf)) return false;
     *w = j.w;
     *gx = j.wx;
     *gy = j.wy;

@@ -21,7 +21,7 @@ absl::StatusOr<Instance> PaperInstance(std::string_view name, int mesh) {
     const double centres[5][2] = {
         {50, 50}, {30, 30}, {70, 30}, {30, 70}, {70, 70}};
     for (const auto& c : centres) {
-      inst.moves.push_back({{c[0], c[1], 5}, {c[0], c[1], -10}, 20});
+      inst.moves.push_back({{c[0], c[1], 5}, {c[0], c[1], -10}, Cutter::Ball(20)});
     }
     return inst;
   }
@@ -32,7 +32,7 @@ absl::StatusOr<Instance> PaperInstance(std::string_view name, int mesh) {
       const double ux = std::cos(a), uy = std::sin(a);
       inst.moves.push_back(
           {{50 - 40 * ux, 50 - 40 * uy, -4}, {50 + 40 * ux, 50 + 40 * uy, -4},
-           10});
+           Cutter::Ball(10)});
     }
     return inst;
   }

@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "core/ball_sweep.h"
+#include "core/cutter/ball_sweep.h"
 #include "core/stock.h"
 
 namespace swarf {

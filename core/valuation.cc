@@ -98,32 +98,30 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     }
     // The bin's moves, with the XY box where each can cut below the top.
     struct Candidate {
-      BallSweep sweep;
+      Sweep sweep;
       Rect box;
     };
     std::vector<Candidate> bin;
     for (uint32_t id : index.Bin(static_cast<int32_t>(b))) {
-      const Move& m = wp.move(id);
-      const BallSweep s(m.from, m.to, m.radius);
+      const Sweep s = wp.MoveSweep(id);
       bin.push_back({s, s.Footprint(z_top).Bounds()});
     }
     // The sweeps of recent corner owners: neighbouring elements share most.
     struct Owner {
       int32_t id = -1;
-      std::optional<BallSweep> sweep;
+      std::optional<Sweep> sweep;
     };
     constexpr int kOwnerCache = 8;
     Owner cache[kOwnerCache];
     int next_slot = 0;
-    auto owner_sweep = [&](int32_t id) -> const BallSweep& {
+    auto owner_sweep = [&](int32_t id) -> const Sweep& {
       for (Owner& o : cache) {
         if (o.id == id) return *o.sweep;
       }
       Owner& o = cache[next_slot];
       next_slot = (next_slot + 1) % kOwnerCache;
-      const Move& m = wp.move(id);
       o.id = id;
-      o.sweep.emplace(m.from, m.to, m.radius);
+      o.sweep.emplace(wp.MoveSweep(id));
       return *o.sweep;
     };
     const size_t lattice = fx.size();
@@ -168,7 +166,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const Rect box{e.x0, e.y0, e.x1, e.y1};
         for (const Candidate& c : bin) {
           if (!c.box.Intersects(box) || !(c.sweep.lowest() < cap)) continue;
-          const BallSweep::Capsule f = c.sweep.Footprint(cap);
+          const Capsule f = c.sweep.Footprint(cap);
           if (f.empty || !f.Bounds().Intersects(box)) continue;
           c.sweep.Heights(xs.data(), ys.data(), count, h.data());
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);

@@ -92,8 +92,7 @@ absl::Status Workpiece::ValidateMoves(std::span<const Move> moves) {
       double v;
     } fields[] = {{"from.x", m.from.x}, {"from.y", m.from.y},
                   {"from.z", m.from.z}, {"to.x", m.to.x},
-                  {"to.y", m.to.y},     {"to.z", m.to.z},
-                  {"radius", m.radius}};
+                  {"to.y", m.to.y},     {"to.z", m.to.z}};
     for (const auto& f : fields) {
       if (!std::isfinite(f.v)) {
         return absl::InvalidArgumentError(absl::StrCat(
@@ -105,11 +104,8 @@ absl::Status Workpiece::ValidateMoves(std::span<const Move> moves) {
                          kMaxCoordinate, " mm, got ", f.v));
       }
     }
-    if (!(m.radius >= kMinRadius && m.radius <= kMaxRadius)) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("moves[", k, "].radius must be in [", kMinRadius, ", ",
-                       kMaxRadius, "] mm, got ", m.radius));
-    }
+    SWARF_RETURN_IF_ERROR(
+        ValidateCutter(m.cutter, absl::StrCat("moves[", k, "].cutter")));
   }
   return absl::OkStatus();
 }
@@ -125,7 +121,7 @@ std::unique_ptr<Workpiece::Tile> Workpiece::NewTile() const {
 
 template <bool kDerivatives>
 int64_t Workpiece::CutTile(int32_t t, Tile* tile,
-                           std::span<const BallSweep> sweeps,
+                           std::span<const Sweep> sweeps,
                            std::span<const uint32_t> batch_moves,
                            int64_t first_id) const {
   const int32_t ti = t % tiles_x_, tj = t / tiles_x_;
@@ -154,18 +150,21 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   std::pair<int32_t, int32_t> segment[kChunk];  // (first, length) per row
   float* const jet_rows[5] = {jets[0], jets[1], jets[2], jets[3], jets[4]};
   // Located candidates, and the lowered ones packed (taylor only).
-  std::unique_ptr<BallSweep::Points> located, packed;
+  std::unique_ptr<BallSweep::Points> located, packed;  // ball only
   if constexpr (kDerivatives) {
     located = std::make_unique<BallSweep::Points>();
     packed = std::make_unique<BallSweep::Points>();
   }
 
-  for (uint32_t m : batch_moves) {
-    const BallSweep sweep = sweeps[m];
+  // One move of one shape: S is the shape's sweep class (chosen once per
+  // move), so that its row loops are inlined and vectorized.
+  auto cut_move = [&]<class S>(const S& shape_sweep, uint32_t m) {
+    constexpr bool kBall = std::is_same_v<S, BallSweep>;
+    const S sweep = shape_sweep;
     // Nodes only go down: the tile's highest node caps what can be cut.
-    if (!(sweep.lowest() < tile->zmax)) continue;
-    const BallSweep::Capsule cap = sweep.Footprint(tile->zmax);
-    if (cap.empty) continue;
+    if (!(sweep.lowest() < tile->zmax)) return;
+    const Capsule cap = sweep.Footprint(tile->zmax);
+    if (cap.empty) return;
     const int32_t id = static_cast<int32_t>(first_id + m);
     int32_t n = 0;
     int32_t segments = 0;  // row segments of the chunk (taylor)
@@ -173,7 +172,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     // nodes' derivatives from their located points (vectorized).
     auto flush = [&] {
       const double* hw = h;
-      if constexpr (kDerivatives) {
+      if constexpr (kDerivatives && kBall) {
         sweep.Locate(cx, cy, n, located.get());
         hw = located->w;
       } else {
@@ -192,7 +191,19 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
         if constexpr (kDerivatives) lowered_at[q] = lower;
       }
       lowered += low;
-      if constexpr (kDerivatives) {
+      if constexpr (kDerivatives && !kBall) {
+        // Other shapes: the jets of the lowered nodes, one at a time (their
+        // w is bit-identical to Heights').
+        for (int32_t q = 0; q < low; ++q) {
+          const int32_t k = ck[lk[q]];
+          const SurfaceJet j = sweep.JetAt(cx[lk[q]], cy[lk[q]]);
+          tile->d[0][k] = static_cast<float>(j.wx);
+          tile->d[1][k] = static_cast<float>(j.wy);
+          tile->d[2][k] = static_cast<float>(j.wxx);
+          tile->d[3][k] = static_cast<float>(j.wxy);
+          tile->d[4][k] = static_cast<float>(j.wyy);
+        }
+      } else if constexpr (kDerivatives) {
         if (2 * low >= n) {
           // Mostly lowered (fresh cuts): jets of the whole chunk, copied to
           // the tile by row segment, whole segments at once.
@@ -246,6 +257,9 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       }
     }
     if (n > 0) flush();
+  };
+  for (uint32_t m : batch_moves) {
+    sweeps[m].Visit([&](const auto& s) { cut_move(s, m); });
   }
   if (lowered > 0) tile->zmax = TileTop(t, *tile);  // tighter for later
   return lowered;
@@ -262,8 +276,8 @@ double Workpiece::TileTop(int32_t t, const Tile& tile) const {
 }
 
 std::optional<Rect> Workpiece::IndexMove(uint32_t id, const Move& move) {
-  const std::optional<Rect> b = BallSweep::FootprintBounds(
-      move.from, move.to, move.radius, spec().z_top);
+  const std::optional<Rect> b =
+      FootprintBounds(move.from, move.to, move.cutter, spec().z_top);
   if (!b.has_value() || !b->Intersects(grid_.bounds())) {
     return std::nullopt;  // above the top, or beside the stock
   }
@@ -288,12 +302,12 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
   result.first_move_id = move_count();
   result.moves = static_cast<int64_t>(moves.size());
 
-  std::vector<BallSweep> sweeps;
+  std::vector<Sweep> sweeps;
   sweeps.reserve(moves.size());
   // (tile, move) pairs for every tile a move's footprint may touch.
   std::vector<std::pair<int32_t, uint32_t>> pairs;
   for (size_t m = 0; m < moves.size(); ++m) {
-    sweeps.emplace_back(moves[m].from, moves[m].to, moves[m].radius);
+    sweeps.emplace_back(moves[m].from, moves[m].to, moves[m].cutter);
     const std::optional<Rect> footprint = IndexMove(
         static_cast<uint32_t>(result.first_move_id + m), moves[m]);
     if (!footprint.has_value()) continue;
@@ -429,16 +443,13 @@ CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
   // Where each sweep is below the top (beyond, the top is lower anyway): a
   // rapid above the stock continues no surface.
   auto add = [&](const Move& m) {
-    const BallSweep::Capsule c =
-        BallSweep(m.from, m.to, m.radius).Footprint(z_top);
+    const Capsule c = Sweep(m.from, m.to, m.cutter).Footprint(z_top);
     if (c.empty) return;
     // The footprint's exact radius (Footprint widens it by a margin for
     // the cut; here a point just outside must stay outside, as for the
     // exact surface).
-    const double h = std::min(m.from.z, m.to.z) + m.radius - z_top;
     const double rho =
-        h > 0 ? std::sqrt(std::max(0.0, m.radius * m.radius - h * h))
-              : m.radius;
+        FootprintRadius(m.cutter, std::min(m.from.z, m.to.z), z_top);
     r.capsule[r.count++] = {c.x0, c.y0, c.x1, c.y1, rho};
   };
   const Move& m = moves[id];
@@ -479,13 +490,23 @@ double Workpiece::Reconstruct(double x, double y) const {
                               x, y);
 }
 
+Sweep Workpiece::MoveSweep(int64_t id) const {
+  const Move& m = moves_[id];
+  return Sweep(m.from, m.to, m.cutter);
+}
+
+double Workpiece::MoveHeight(int64_t id, double x, double y) const {
+  return MoveSweep(id).Height(x, y);
+}
+
+SurfaceJet Workpiece::MoveJet(int64_t id, double x, double y) const {
+  return MoveSweep(id).JetAt(x, y);
+}
+
 double Workpiece::ExactHeightOver(std::span<const uint32_t> ids, double x,
                                   double y) const {
   double w = spec().z_top;
-  for (uint32_t id : ids) {
-    const Move& m = moves_[id];
-    w = std::min(w, BallSweep(m.from, m.to, m.radius).Height(x, y));
-  }
+  for (uint32_t id : ids) w = std::min(w, MoveHeight(id, x, y));
   return w;
 }
 
@@ -494,8 +515,8 @@ double Workpiece::ExactHeight(double x, double y) const {
   if (!r.Contains(x, y)) {
     // Outside the stock the index has no bins; look at every move.
     double w = spec().z_top;
-    for (const Move& m : moves_) {
-      w = std::min(w, BallSweep(m.from, m.to, m.radius).Height(x, y));
+    for (int64_t id = 0; id < move_count(); ++id) {
+      w = std::min(w, MoveHeight(id, x, y));
     }
     return w;
   }

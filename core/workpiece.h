@@ -25,7 +25,8 @@
 
 #include "absl/functional/function_ref.h"
 #include "absl/status/statusor.h"
-#include "core/ball_sweep.h"
+#include "core/cutter/cutter.h"
+#include "core/cutter/sweep.h"
 #include "core/geometry.h"
 #include "core/move_index.h"
 #include "core/scheme.h"
@@ -39,10 +40,17 @@ inline constexpr int32_t kTileBits = 6;
 inline constexpr int32_t kTileSize = 1 << kTileBits;  // nodes per tile side
 inline constexpr int32_t kTileNodes = kTileSize * kTileSize;
 
-// A straight move of a ball-end cutter between two tool-tip positions (mm).
+// A straight move of a cutter between two tool-tip positions (mm).
 struct Move {
+  Move() = default;
+  Move(const Vec3& tip_from, const Vec3& tip_to, const Cutter& c)
+      : from(tip_from), to(tip_to), cutter(c) {}
+  // A ball-end move: the paper's cutter.
+  Move(const Vec3& tip_from, const Vec3& tip_to, double ball_radius)
+      : from(tip_from), to(tip_to), cutter(Cutter::Ball(ball_radius)) {}
+
   Vec3 from, to;
-  double radius = 0;
+  Cutter cutter;
 };
 
 // Where the swept surface of moves[id] exists and how low it goes (for the
@@ -52,10 +60,9 @@ struct Move {
 // lowest tip.
 CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top);
 
-// Physical bounds on moves (mm). They keep every intermediate value of the
-// sweep finite (squares of coordinates, 1 / (1e-4 r)^3 at a rim).
-inline constexpr double kMinRadius = 1e-4;
-inline constexpr double kMaxRadius = 1e5;
+// Physical bounds on moves (mm). With kMinRadius and kMaxRadius
+// (core/cutter/cutter.h) they keep every intermediate value of the sweep
+// finite (squares of coordinates, 1 / (1e-4 r)^3 at a rim).
 inline constexpr double kMaxCoordinate = 1e9;
 
 // Moves per workpiece are numbered from 0; ids are stored in int32.
@@ -82,8 +89,8 @@ class Workpiece {
       const StockSpec& spec, SchemeKind scheme, ThreadPool* pool = nullptr);
 
   // InvalidArgument naming the move index and field for a coordinate that
-  // is not finite or beyond kMaxCoordinate, or a radius outside
-  // [kMinRadius, kMaxRadius].
+  // is not finite or beyond kMaxCoordinate, or a cutter ValidateCutter
+  // refuses ("moves[k].cutter.radius ...").
   static absl::Status ValidateMoves(std::span<const Move> moves);
 
   // Applies a batch whole, or nothing on error. Move ids continue from the
@@ -134,6 +141,14 @@ class Workpiece {
   // The scheme's reconstructed surface at a point of the stock (clamped to
   // the stock rectangle).
   double Reconstruct(double x, double y) const;
+  // The one exact-surface entry point: the sweep of move `id`
+  // (0 <= id < move_count()), its height at (x, y) (+inf where the tool
+  // never passes), and its height and derivatives there (as the taylor
+  // scheme stores them, before float rounding). The valuation, the cutting
+  // marks and the exact-height queries all go through these.
+  Sweep MoveSweep(int64_t id) const;
+  double MoveHeight(int64_t id, double x, double y) const;
+  SurfaceJet MoveJet(int64_t id, double x, double y) const;
   // The true machined surface: the minimum of the stock top and of every
   // sweep at (x, y).
   double ExactHeight(double x, double y) const;
@@ -183,7 +198,7 @@ class Workpiece {
   // The highest node of tile t (what CutTile caps cuts with).
   double TileTop(int32_t t, const Tile& tile) const;
   template <bool kDerivatives>
-  int64_t CutTile(int32_t t, Tile* tile, std::span<const BallSweep> sweeps,
+  int64_t CutTile(int32_t t, Tile* tile, std::span<const Sweep> sweeps,
                   std::span<const uint32_t> batch_moves,
                   int64_t first_id) const;
 

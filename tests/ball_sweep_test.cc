@@ -1,6 +1,6 @@
 // BallSweep against analytic truths (spheres, horizontal grooves), a
 // brute-force minimum over the balls along the move, and finite differences.
-#include "core/ball_sweep.h"
+#include "core/cutter/ball_sweep.h"
 
 #include <algorithm>
 #include <cmath>

@@ -123,7 +123,7 @@ Toolpath FromInstance(std::string_view name, int mesh, int segments,
   const Instance inst = ValueOrDie(PaperInstance(name, mesh));
   Toolpath tp;
   tp.stock = inst.stock;
-  tp.radius = inst.moves.front().radius;
+  tp.radius = inst.moves.front().cutter.radius;
   auto add = [&](const Vec3& p) {
     if (!tp.points.empty() && tp.points.back().x == p.x &&
         tp.points.back().y == p.y && tp.points.back().z == p.z) {
@@ -132,7 +132,7 @@ Toolpath FromInstance(std::string_view name, int mesh, int segments,
     tp.points.push_back(p);
   };
   for (const Move& m : inst.moves) {
-    EXPECT_EQ(m.radius, tp.radius);  // one tool per instance
+    EXPECT_EQ(m.cutter.radius, tp.radius);  // one tool per instance
     add({m.from.x, m.from.y, kSafeZ});
     add(m.from);
     for (int s = 1; s < segments; ++s) {
@@ -840,7 +840,7 @@ TEST_F(ServerTest, RepositionBatchesCutExactlyTheInstanceMoves) {
     const Instance inst = ValueOrDie(PaperInstance(name, 120));
     Toolpath tp;  // for the session request only
     tp.stock = inst.stock;
-    tp.radius = inst.moves.front().radius;
+    tp.radius = inst.moves.front().cutter.radius;
     const std::string id = absl::StrCat("reposition-", std::string(name));
     ASSERT_TRUE(Create(CreateRequest(id, tp, pb::SCHEME_TAYLOR)).ok());
     auto wp = ValueOrDie(Workpiece::Create(inst.stock, SchemeKind::kTaylor));

@@ -6,7 +6,7 @@
 #include <random>
 #include <vector>
 
-#include "core/ball_sweep.h"
+#include "core/cutter/ball_sweep.h"
 #include "gtest/gtest.h"
 
 namespace swarf {

@@ -178,7 +178,7 @@ void ForEachSample(const Workpiece& wp, const std::vector<Move>& moves,
       const double y = e.y0 + (e.y1 - e.y0) * sj / 4;
       double exact = wp.spec().z_top;
       for (const Move& m : moves) {
-        exact = std::min(exact, BallSweep(m.from, m.to, m.radius).Height(x, y));
+        exact = std::min(exact, BallSweep(m.from, m.to, m.cutter.radius).Height(x, y));
       }
       f(x, y, std::fabs(wp.scheme().Reconstruct(e, x, y) - exact));
     }

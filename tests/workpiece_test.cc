@@ -58,7 +58,7 @@ std::vector<Move> MixedMoves(uint64_t seed, int count) {
     const double r = rad(rng);
     const double x = ux(rng), y = uy(rng);
     Move m;
-    m.radius = r;
+    m.cutter.radius = r;
     switch (k % 9) {
       case 0:  // plunge
         m = {{x, y, top + 5 * unit(rng)}, {x, y, top - 0.1 - 4 * unit(rng)}, r};
@@ -145,7 +145,7 @@ std::unique_ptr<Workpiece> ApplyInBatches(const std::vector<Move>& moves,
 TEST(WorkpieceTest, NodesAreTheLowestSweep) {
   const std::vector<Move> moves = MixedMoves(1, 300);
   std::vector<BallSweep> sweeps;
-  for (const Move& m : moves) sweeps.emplace_back(m.from, m.to, m.radius);
+  for (const Move& m : moves) sweeps.emplace_back(m.from, m.to, m.cutter.radius);
   for (SchemeKind scheme : kSchemes) {
     SCOPED_TRACE(SchemeName(scheme));
     auto wp = MakeWorkpiece(MixedStock(), scheme);
@@ -504,13 +504,13 @@ TEST(WorkpieceValidationTest, BadBatchIsRejectedWhole) {
     }
     for (double bad : {0.0, -0.0, -1.0, -1e-300, nan, inf, -inf}) {
       std::vector<Move> batch = good;
-      batch[4].radius = bad;
+      batch[4].cutter.radius = bad;
       expect_rejected(batch, 4, "radius");
     }
     // The first bad move is the one named.
     std::vector<Move> two_bad = good;
     two_bad[2].to.y = nan;
-    two_bad[4].radius = 0;
+    two_bad[4].cutter.radius = 0;
     expect_rejected(two_bad, 2, "to.y");
     // And a clean batch still applies afterwards.
     auto ok = wp->Apply(good);
@@ -604,7 +604,7 @@ TEST(WorkpieceExactHeightTest, MatchesAllSweepsAtRandomPoints) {
     const double x = ux(rng), y = uy(rng);
     double w = MixedStock().z_top;
     for (const Move& m : moves) {
-      w = std::min(w, BallSweep(m.from, m.to, m.radius).Height(x, y));
+      w = std::min(w, BallSweep(m.from, m.to, m.cutter.radius).Height(x, y));
     }
     ASSERT_EQ(wp->ExactHeight(x, y), w) << "at " << x << "," << y;
   }
@@ -620,7 +620,7 @@ TEST(WorkpieceExactHeightTest, SeesCutsBetweenNodes) {
   EXPECT_EQ(wp->allocated_tiles(), 0);  // no node is cut
   EXPECT_EQ(wp->ExactHeight(2.5, 2.5), -1);
   EXPECT_EQ(wp->ExactHeight(2.5, 2.8),
-            BallSweep(m.from, m.to, m.radius).Height(2.5, 2.8));
+            BallSweep(m.from, m.to, m.cutter.radius).Height(2.5, 2.8));
   EXPECT_EQ(wp->ExactHeight(7.5, 7.5), 0);
 }
 

@@ -1,4 +1,4 @@
-#include "core/ball_sweep.h"
+#include "core/cutter/ball_sweep.h"
 
 #include <algorithm>
 #include <cmath>
@@ -213,13 +213,7 @@ std::optional<Rect> BallSweep::FootprintBounds(const Vec3& tip_from,
 BallSweep::Capsule BallSweep::Footprint(double cap) const {
   Capsule c = FootprintEnds(a_, b_, r_, r2_, cap);
   if (c.empty) return c;
-  c.length = std::hypot(c.x1 - c.x0, c.y1 - c.y0);
-  if (c.length > 0) {
-    c.ux = (c.x1 - c.x0) / c.length;
-    c.uy = (c.y1 - c.y0) / c.length;
-    c.inv_ux = c.ux != 0 ? 1 / c.ux : 0;
-    c.inv_uy = c.uy != 0 ? 1 / c.uy : 0;
-  }
+  FillDirection(&c);
   return c;
 }
 

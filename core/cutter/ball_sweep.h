@@ -9,8 +9,8 @@
 // and otherwise the start or end sphere on the side where the contact lies.
 //
 // A BallSweep is an immutable value; all methods are thread-safe.
-#ifndef SWARF_CORE_BALL_SWEEP_H_
-#define SWARF_CORE_BALL_SWEEP_H_
+#ifndef SWARF_CORE_CUTTER_BALL_SWEEP_H_
+#define SWARF_CORE_CUTTER_BALL_SWEEP_H_
 
 #include <algorithm>
 #include <cmath>
@@ -19,12 +19,11 @@
 #include <limits>
 #include <utility>
 
+#include "core/cutter/capsule.h"
 #include "core/geometry.h"
 #include "core/surface_jet.h"
 
 namespace swarf {
-
-inline constexpr double kInf = std::numeric_limits<double>::infinity();
 
 // At the rim of a sphere or cylinder the lower surface is vertical and its
 // derivatives are infinite. Derivatives are computed with the depth below the
@@ -147,6 +146,9 @@ class BallSweep {
     return ClampedJet(j);
   }
 
+  // Jet(Locate(x, y)): the seam's entry point (core/cutter/sweep.h).
+  SurfaceJet JetAt(double x, double y) const { return Jet(Locate(x, y)); }
+
   // Eq. (14) as the paper writes it (C1, C2, C3 and their derivatives), at a
   // point on the cylinder. Jet() uses the equivalent closed form of
   // CylinderJet(), which costs a third; tests check that they agree.
@@ -161,54 +163,7 @@ class BallSweep {
   // The region where the swept surface is below `cap` lies inside the XY
   // capsule returned here (a segment and a radius). Empty when the sweep
   // never goes below `cap`.
-  struct Capsule {
-    bool empty = true;
-    double x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // segment ends (ball centres, XY)
-    double radius = 0;
-    double ux = 0, uy = 0, length = 0;  // unit XY direction and length
-    double inv_ux = 0, inv_uy = 0;      // 1 / ux, 1 / uy (0 where those are)
-    Rect Bounds() const {
-      return {std::min(x0, x1) - radius, std::min(y0, y1) - radius,
-              std::max(x0, x1) + radius, std::max(y0, y1) + radius};
-    }
-    // The x-interval of the capsule on the row y (empty if it misses).
-    // Inline: it runs for every row of every move.
-    Interval RowSpan(double y) const {
-      Interval out;
-      if (empty) return out;
-      const double r2 = radius * radius;
-      const double dy0 = y - y0, dy1 = y - y1;
-      const double q0 = r2 - dy0 * dy0, q1 = r2 - dy1 * dy1;
-      if (q0 >= 0) {
-        const double w = std::sqrt(q0);
-        out.Hull({x0 - w, x0 + w});
-      }
-      if (q1 >= 0) {
-        const double w = std::sqrt(q1);
-        out.Hull({x1 - w, x1 + w});
-      }
-      if (length > 0) {
-        // The band between the ends: 0 <= (p - p0) . u <= length and
-        // |(p - p0) . (-uy, ux)| <= radius, each linear in x on the row.
-        Interval strip{-kInf, kInf};
-        ClipLinear(ux, inv_ux, dy0 * uy - x0 * ux, 0, length, &strip);
-        ClipLinear(-uy, -inv_uy, x0 * uy + dy0 * ux, -radius, radius, &strip);
-        out.Hull(strip);
-      }
-      return out;
-    }
-    // Restricts `iv` to the x where lo <= a x + b <= hi; inv_a = 1 / a.
-    static void ClipLinear(double a, double inv_a, double b, double lo,
-                           double hi, Interval* iv) {
-      if (a == 0) {
-        if (b < lo || b > hi) *iv = Interval{};
-        return;
-      }
-      double x_lo = (lo - b) * inv_a, x_hi = (hi - b) * inv_a;
-      if (a < 0) std::swap(x_lo, x_hi);
-      iv->Intersect(x_lo, x_hi);
-    }
-  };
+  using Capsule = swarf::Capsule;
   // Where the sweep reaches below the height `cap` (a conservative capsule
   // around it).
   Capsule Footprint(double cap) const;
@@ -348,4 +303,4 @@ inline SweepPoint BallSweep::LocateGeneral(double x, double y) const {
 
 }  // namespace swarf
 
-#endif  // SWARF_CORE_BALL_SWEEP_H_
+#endif  // SWARF_CORE_CUTTER_BALL_SWEEP_H_

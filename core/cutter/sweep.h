@@ -1,0 +1,83 @@
+// The seam between the simulation and the cutter shapes: the sweep of one
+// straight move of any cutter, and the one place that picks the shape.
+//
+// Every shape's sweep class (BallSweep, FlatSweep, ...: one file per shape
+// in core/cutter/) is an immutable value, thread-safe, built from the two
+// tool-tip positions of the move and a Cutter validated by ValidateCutter,
+// and provides:
+//   double lowest() const;               // lowest height the tool reaches
+//   Capsule Footprint(double cap) const; // conservative XY region where the
+//                                        // swept surface is below cap
+//   double Height(double x, double y) const;  // exact lowest height of the
+//                                        // swept solid at (x, y); +inf where
+//                                        // the tool never passes over it
+//   void Heights(const double* x, const double* y, int32_t n,
+//                double* out) const;     // bit-identical to Height, n <= 256
+//   SurfaceJet JetAt(double x, double y) const;  // w bit-identical to
+//                                        // Height; analytic derivatives of
+//                                        // the swept surface that sets the
+//                                        // height, bounded with ClampedJet;
+//                                        // zeros where the height is +inf
+// The tile kernel is a template over these classes, chosen once per move
+// (Sweep::Visit), so that each shape's row loops stay vectorized.
+#ifndef SWARF_CORE_CUTTER_SWEEP_H_
+#define SWARF_CORE_CUTTER_SWEEP_H_
+
+#include <cstdint>
+#include <optional>
+#include <utility>
+#include <variant>
+
+#include "core/cutter/ball_sweep.h"
+#include "core/cutter/capsule.h"
+#include "core/cutter/cutter.h"
+#include "core/geometry.h"
+#include "core/surface_jet.h"
+
+namespace swarf {
+
+// The sweep of one straight move of any cutter. Immutable, thread-safe.
+class Sweep {
+ public:
+  using Variant = std::variant<BallSweep>;
+
+  // tip_from/tip_to finite; `cutter` valid (ValidateCutter).
+  Sweep(const Vec3& tip_from, const Vec3& tip_to, const Cutter& cutter);
+
+  double lowest() const {
+    return std::visit([](const auto& s) { return s.lowest(); }, v_);
+  }
+  Capsule Footprint(double cap) const {
+    return std::visit([&](const auto& s) { return s.Footprint(cap); }, v_);
+  }
+  double Height(double x, double y) const {
+    return std::visit([&](const auto& s) { return s.Height(x, y); }, v_);
+  }
+  void Heights(const double* x, const double* y, int32_t n,
+               double* out) const {
+    std::visit([&](const auto& s) { s.Heights(x, y, n, out); }, v_);
+  }
+  // Height and derivatives of the swept surface at (x, y), as the tile
+  // kernel stores them (before float rounding).
+  SurfaceJet JetAt(double x, double y) const {
+    return std::visit([&](const auto& s) { return s.JetAt(x, y); }, v_);
+  }
+  // Calls f(const ShapeSweep&) with the shape's own class.
+  template <class F>
+  decltype(auto) Visit(F&& f) const {
+    return std::visit(std::forward<F>(f), v_);
+  }
+
+ private:
+  Variant v_;
+};
+
+// The footprint's bounds below `cap` for the move between two tool tips,
+// without building the sweep where the shape allows; nullopt where the
+// footprint is empty. Bit-identical to Sweep(...).Footprint(cap).Bounds().
+std::optional<Rect> FootprintBounds(const Vec3& tip_from, const Vec3& tip_to,
+                                    const Cutter& cutter, double cap);
+
+}  // namespace swarf
+
+#endif  // SWARF_CORE_CUTTER_SWEEP_H_
