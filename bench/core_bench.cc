@@ -1,5 +1,5 @@
-// Benchmarks of the core engine: node evaluations, short finishing moves and
-// the paper's two instances at 1000x1000. Run: build/bin/swarf_bench
+// Benchmarks of the core engine: node evaluations, short finishing moves,
+// the paper's two instances at 1000x1000, and reads of a cut workpiece. Run: build/bin/swarf_bench
 #include <benchmark/benchmark.h>
 
 #include <cmath>
@@ -7,7 +7,9 @@
 #include <vector>
 
 #include "core/cutter/ball_sweep.h"
+#include "core/cutting_marks.h"
 #include "core/instances.h"
+#include "core/valuation.h"
 #include "core/workpiece.h"
 
 namespace swarf {
@@ -138,6 +140,62 @@ void BM_RecordMoves(benchmark::State& state) {
           benchmark::Counter::kInvert);
 }
 BENCHMARK(BM_RecordMoves)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// What reads cost once a job is cut: the finishing raster of
+// BM_FinishingMoves cut on a taylor workpiece (1000x1000), then every
+// allocated tile read with derivatives (as the service answers GetTiles),
+// the valuation (eq. 15, 21 samples per element, MeasureError), and the
+// cutting marks (FindCuttingMarks, default options). Each read starts from a
+// freshly cut workpiece, so that nothing computed for an earlier read is
+// reused.
+std::unique_ptr<Workpiece> FinishedWorkpiece(SchemeKind scheme) {
+  const std::vector<Move> moves = FinishingRaster(0.2, 0.1, 100);
+  auto wp = *Workpiece::Create({0, 0, 100, 100, 0, 1000, 1000}, scheme);
+  for (size_t k = 0; k < moves.size(); k += 10000) {
+    const size_t n = std::min<size_t>(10000, moves.size() - k);
+    (void)wp->Apply(std::span<const Move>(moves.data() + k, n));
+  }
+  return wp;
+}
+
+enum class Read { kTiles, kValuation, kMarks };
+
+void BM_Read(benchmark::State& state, Read what) {
+  std::vector<double> w(kTileNodes);
+  std::vector<float> d(5 * kTileNodes);
+  std::vector<int32_t> owner(kTileNodes);
+  float* dp[5];
+  for (int c = 0; c < 5; ++c) dp[c] = d.data() + c * kTileNodes;
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto wp = FinishedWorkpiece(SchemeKind::kTaylor);
+    state.ResumeTiming();
+    switch (what) {
+      case Read::kTiles:
+        for (int32_t t = 0; t < wp->tile_count(); ++t) {
+          if (!wp->TileAllocated(t)) continue;
+          wp->ReadTile(t, w.data(), dp, owner.data());
+          benchmark::DoNotOptimize(d.data());
+        }
+        break;
+      case Read::kValuation:
+        benchmark::DoNotOptimize(MeasureError(*wp)->max_error);
+        break;
+      case Read::kMarks:
+        benchmark::DoNotOptimize(FindCuttingMarks(*wp, {})->size());
+        break;
+    }
+    state.PauseTiming();
+    wp.reset();
+    state.ResumeTiming();
+  }
+}
+BENCHMARK_CAPTURE(BM_Read, tiles_with_derivatives, Read::kTiles)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Read, valuation, Read::kValuation)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Read, marks, Read::kMarks)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 }  // namespace swarf

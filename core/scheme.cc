@@ -204,8 +204,8 @@ class TaylorScheme final : public Scheme {
   std::string_view name() const override { return "taylor"; }
   int parameters_per_node() const override { return 6; }
   bool stores_derivatives() const override { return true; }
-  // double w, five float derivatives, int32 id.
-  int bytes_per_node() const override { return 32; }
+  // double w and int32 owner: the derivatives are computed from the owner.
+  int bytes_per_node() const override { return 12; }
   double Reconstruct(const ElementCorners& e, double x,
                      double y) const override {
     return MinOfPatches(e, x, y);
@@ -232,7 +232,7 @@ class GuardedScheme final : public Scheme {
   std::string_view name() const override { return "guarded"; }
   int parameters_per_node() const override { return 6; }
   bool stores_derivatives() const override { return true; }
-  int bytes_per_node() const override { return 32; }  // as taylor
+  int bytes_per_node() const override { return 12; }  // as taylor
   bool uses_reach() const override { return true; }
   double Reconstruct(const ElementCorners& e, double x,
                      double y) const override {

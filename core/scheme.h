@@ -56,7 +56,8 @@ class Scheme {
   virtual std::string_view name() const = 0;
   // Parameters per node as the paper counts them (Tables 1-2).
   virtual int parameters_per_node() const = 0;
-  // Whether nodes store the sweep's derivatives (wx .. wyy).
+  // Whether nodes carry the sweep's derivatives (wx .. wyy), computed from
+  // their owners when read.
   virtual bool stores_derivatives() const = 0;
   // Whether Reconstruct reads ElementCorners::reach (else it may be left
   // unbounded, saving the work of filling it).

@@ -12,19 +12,13 @@
 namespace swarf {
 
 // Nodal parameters of one tile, structure-of-arrays, row-major (j, i), in
-// one arena block. w and owner are initialised to the stock top; the
-// derivatives (taylor only) are written only where a node is cut and read
-// only where owner >= 0, so the pages of uncut nodes are never touched.
+// one arena block: height and owner, for every scheme (12 bytes a node).
+// Both are initialised to the stock top.
 struct Workpiece::Tile {
-  Tile(TileArena* arena, bool derivatives)
+  explicit Tile(TileArena* arena)
       : arena(arena),
         w(static_cast<double*>(arena->Allocate())),
-        owner(reinterpret_cast<int32_t*>(w + kTileNodes)) {
-    if (derivatives) {
-      float* base = reinterpret_cast<float*>(owner + kTileNodes);
-      for (int k = 0; k < 5; ++k) d[k] = base + k * kTileNodes;
-    }
-  }
+        owner(reinterpret_cast<int32_t*>(w + kTileNodes)) {}
   ~Tile() { arena->Free(w); }
   Tile(const Tile&) = delete;
   Tile& operator=(const Tile&) = delete;
@@ -32,8 +26,16 @@ struct Workpiece::Tile {
   TileArena* arena;
   double* w;
   int32_t* owner;
-  float* d[5] = {};  // wx, wy, wxx, wxy, wyy; null for zmap
   double zmax = 0;   // upper bound on w over the tile's grid nodes
+};
+
+// The derivatives of a tile's cut nodes at one tile version, computed from
+// their owners' sweeps (eq. 8-9, 14 and the other shapes' jets), rounded to
+// float as the paper's nodal parameters are kept; zeros for uncut nodes.
+struct Workpiece::TileJets {
+  uint64_t serial = 0;   // the workpiece state they were computed from
+  uint64_t version = 0;  // the tile's version then
+  float d[5][kTileNodes];  // wx, wy, wxx, wxy, wyy
 };
 
 namespace {
@@ -58,6 +60,12 @@ std::pair<int32_t, int32_t> NodeRange(double a, double b, double origin,
   return {lo, hi};
 }
 
+// Distinct for every workpiece state that jets may be cached for.
+uint64_t NextSerial() {
+  static std::atomic<uint64_t> next{1};
+  return next.fetch_add(1, std::memory_order_relaxed);
+}
+
 }  // namespace
 
 Workpiece::Workpiece(const StockSpec& spec, const Scheme& scheme,
@@ -71,7 +79,9 @@ Workpiece::Workpiece(const StockSpec& spec, const Scheme& scheme,
       tile_version_(tiles_.size(), 0),
       arena_(std::make_unique<TileArena>(size_t{kTileNodes} *
                                          scheme.bytes_per_node())),
-      index_(grid_) {}
+      index_(grid_),
+      serial_(NextSerial()),
+      jets_(tiles_.size()) {}
 
 Workpiece::~Workpiece() {
   tiles_.clear();  // blocks go back to the arena before it goes
@@ -111,15 +121,13 @@ absl::Status Workpiece::ValidateMoves(std::span<const Move> moves) {
 }
 
 std::unique_ptr<Workpiece::Tile> Workpiece::NewTile() const {
-  auto tile = std::make_unique<Tile>(arena_.get(),
-                                     scheme_->stores_derivatives());
+  auto tile = std::make_unique<Tile>(arena_.get());
   std::fill_n(tile->w, kTileNodes, spec().z_top);
   std::fill_n(tile->owner, kTileNodes, -1);
   tile->zmax = spec().z_top;
   return tile;
 }
 
-template <bool kDerivatives>
 int64_t Workpiece::CutTile(int32_t t, Tile* tile,
                            std::span<const Sweep> sweeps,
                            std::span<const uint32_t> batch_moves,
@@ -142,24 +150,14 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   // moves (a few nodes per row) still fill the vector units.
   constexpr int32_t kChunk = 256;
   static_assert(kChunk >= kTileSize);
-  static_assert(kChunk <= BallSweep::Points::kMax);
   alignas(64) double cx[kChunk], cy[kChunk], h[kChunk];
-  alignas(64) float jets[5][kChunk];
-  int32_t ck[kChunk], lk[kChunk];
-  bool lowered_at[kChunk];
-  std::pair<int32_t, int32_t> segment[kChunk];  // (first, length) per row
-  float* const jet_rows[5] = {jets[0], jets[1], jets[2], jets[3], jets[4]};
-  // Located candidates, and the lowered ones packed (taylor only).
-  std::unique_ptr<BallSweep::Points> located, packed;  // ball only
-  if constexpr (kDerivatives) {
-    located = std::make_unique<BallSweep::Points>();
-    packed = std::make_unique<BallSweep::Points>();
-  }
+  int32_t ck[kChunk];
 
   // One move of one shape: S is the shape's sweep class (chosen once per
-  // move), so that its row loops are inlined and vectorized.
+  // move), so that its row loops are inlined and vectorized. Only heights
+  // and owners are stored: derivatives are a function of (owner, node) and
+  // are computed when read (TileJets).
   auto cut_move = [&]<class S>(const S& shape_sweep, uint32_t m) {
-    constexpr bool kBall = std::is_same_v<S, BallSweep>;
     const S sweep = shape_sweep;
     // Nodes only go down: the tile's highest node caps what can be cut.
     if (!(sweep.lowest() < tile->zmax)) return;
@@ -167,75 +165,21 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     if (cap.empty) return;
     const int32_t id = static_cast<int32_t>(first_id + m);
     int32_t n = 0;
-    int32_t segments = 0;  // row segments of the chunk (taylor)
-    // The chunk's sweep heights (vectorized), lowering, then the lowered
-    // nodes' derivatives from their located points (vectorized).
+    // The chunk's sweep heights (vectorized), then lowering.
     auto flush = [&] {
-      const double* hw = h;
-      if constexpr (kDerivatives && kBall) {
-        sweep.Locate(cx, cy, n, located.get());
-        hw = located->w;
-      } else {
-        sweep.Heights(cx, cy, n, h);
-      }
+      sweep.Heights(cx, cy, n, h);
       int32_t low = 0;
       for (int32_t q = 0; q < n; ++q) {
         const int32_t k = ck[q];
-        const bool lower = hw[q] < w[k] || (hw[q] == w[k] && id < owner[k]);
+        const bool lower = h[q] < w[k] || (h[q] == w[k] && id < owner[k]);
         if (lower) {
-          w[k] = hw[q];
+          w[k] = h[q];
           owner[k] = id;
-          if constexpr (kDerivatives) lk[low] = q;
           ++low;
         }
-        if constexpr (kDerivatives) lowered_at[q] = lower;
       }
       lowered += low;
-      if constexpr (kDerivatives && !kBall) {
-        // Other shapes: the jets of the lowered nodes, one at a time (their
-        // w is bit-identical to Heights').
-        for (int32_t q = 0; q < low; ++q) {
-          const int32_t k = ck[lk[q]];
-          const SurfaceJet j = sweep.JetAt(cx[lk[q]], cy[lk[q]]);
-          tile->d[0][k] = static_cast<float>(j.wx);
-          tile->d[1][k] = static_cast<float>(j.wy);
-          tile->d[2][k] = static_cast<float>(j.wxx);
-          tile->d[3][k] = static_cast<float>(j.wxy);
-          tile->d[4][k] = static_cast<float>(j.wyy);
-        }
-      } else if constexpr (kDerivatives) {
-        if (2 * low >= n) {
-          // Mostly lowered (fresh cuts): jets of the whole chunk, copied to
-          // the tile by row segment, whole segments at once.
-          sweep.Jets(*located, n, jet_rows);
-          for (int32_t s = 0; s < segments; ++s) {
-            const auto [q0, len] = segment[s];
-            const int32_t k0 = ck[q0];
-            bool all = true;
-            for (int32_t q = q0; q < q0 + len; ++q) all &= lowered_at[q];
-            for (int c = 0; c < 5; ++c) {
-              float* dst = tile->d[c] + k0;
-              const float* src = jets[c] + q0;
-              if (all) {
-                std::copy(src, src + len, dst);
-              } else {
-                for (int32_t q = 0; q < len; ++q) {
-                  if (lowered_at[q0 + q]) dst[q] = src[q];
-                }
-              }
-            }
-          }
-        } else if (low > 0) {
-          // A few lowered (finishing over cut stock): only theirs, packed.
-          for (int32_t q = 0; q < low; ++q) packed->Set(q, located->At(lk[q]));
-          sweep.Jets(*packed, low, jet_rows);
-          for (int32_t q = 0; q < low; ++q) {
-            for (int c = 0; c < 5; ++c) tile->d[c][ck[lk[q]]] = jets[c][q];
-          }
-        }
-      }
       n = 0;
-      segments = 0;
     };
     const Rect b = cap.Bounds();
     auto [j_lo, j_hi] = NodeRange(b.y0, b.y1, y0, inv_dy, j_max);
@@ -248,7 +192,6 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       i_lo = std::max(i_lo, i_base);
       if (i_lo > i_hi) continue;
       if (n + (i_hi - i_lo + 1) > kChunk) flush();
-      if constexpr (kDerivatives) segment[segments++] = {n, i_hi - i_lo + 1};
       const int32_t k0 = (j - j_base) * kTileSize - i_base;
       for (int32_t i = i_lo; i <= i_hi; ++i, ++n) {
         cx[n] = x0 + i * dx;  // as GridGeometry::NodeX: bit-identical
@@ -340,7 +283,6 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
   const int64_t n_touched = static_cast<int64_t>(touched.size()) - 1;
 
   std::vector<int64_t> lowered(n_touched, 0);
-  const bool derivs = scheme_->stores_derivatives();
   pool_->ParallelFor(n_touched, [&](int64_t k) {
     const int32_t t = touched[k].first;
     std::span<const uint32_t> list(tile_moves.data() + touched[k].second,
@@ -351,10 +293,7 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
       fresh = NewTile();
       tile = fresh.get();
     }
-    lowered[k] = derivs ? CutTile<true>(t, tile, sweeps, list,
-                                        result.first_move_id)
-                        : CutTile<false>(t, tile, sweeps, list,
-                                         result.first_move_id);
+    lowered[k] = CutTile(t, tile, sweeps, list, result.first_move_id);
     // Only a tile that was really cut stays allocated.
     if (fresh != nullptr && lowered[k] > 0) tiles_[t] = std::move(fresh);
   });
@@ -372,10 +311,81 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
   return result;
 }
 
+void Workpiece::ComputeJets(int32_t t, const Tile& tile,
+                            TileJets* out) const {
+  const TileExtent e = Extent(t);
+  for (int c = 0; c < 5; ++c) std::fill_n(out->d[c], kTileNodes, 0.0f);
+  // Nodes of one owner come in runs along rows: one sweep per run.
+  int32_t last = -1;
+  std::optional<Sweep> sweep;
+  for (int32_t j = 0; j < e.ny; ++j) {
+    const double y = grid_.NodeY(e.j0 + j);
+    for (int32_t i = 0; i < e.nx; ++i) {
+      const int32_t k = j * kTileSize + i;
+      const int32_t o = tile.owner[k];
+      if (o < 0) continue;
+      if (o != last) {
+        sweep.emplace(MoveSweep(o));
+        last = o;
+      }
+      // The node's coordinates as the cut computed them: the jet's w is
+      // the stored height, bit for bit.
+      const SurfaceJet jet = sweep->JetAt(grid_.NodeX(e.i0 + i), y);
+      out->d[0][k] = static_cast<float>(jet.wx);
+      out->d[1][k] = static_cast<float>(jet.wy);
+      out->d[2][k] = static_cast<float>(jet.wxx);
+      out->d[3][k] = static_cast<float>(jet.wxy);
+      out->d[4][k] = static_cast<float>(jet.wyy);
+    }
+  }
+}
+
+std::shared_ptr<const Workpiece::TileJets> Workpiece::Jets(int32_t t) const {
+  const Tile* tile = tiles_[t].get();
+  const uint64_t version = tile_version_[t];
+  // The last tile this thread read: most reads stay in one tile.
+  thread_local std::shared_ptr<const TileJets> last;
+  thread_local int32_t last_tile = -1;
+  if (last != nullptr && last_tile == t && last->serial == serial_ &&
+      last->version == version) {
+    return last;
+  }
+  std::shared_ptr<const TileJets> jets;
+  {
+    std::lock_guard<std::mutex> lock(jets_mu_);
+    const auto& cached = jets_[t];
+    if (cached != nullptr && cached->serial == serial_ &&
+        cached->version == version) {
+      jets = cached;
+    }
+  }
+  if (jets == nullptr) {
+    // Computed outside the lock; two threads may both compute a tile, with
+    // the same result.
+    auto fresh = std::make_shared<TileJets>();
+    fresh->serial = serial_;
+    fresh->version = version;
+    ComputeJets(t, *tile, fresh.get());
+    jets = std::move(fresh);
+    std::lock_guard<std::mutex> lock(jets_mu_);
+    if (jets_[t] == nullptr) {
+      jets_order_.push_back(t);
+      if (jets_order_.size() > kJetCacheTiles) {
+        jets_[jets_order_.front()] = nullptr;
+        jets_order_.pop_front();
+      }
+    }
+    jets_[t] = jets;
+  }
+  last = jets;
+  last_tile = t;
+  return jets;
+}
+
 NodeValue Workpiece::Node(int32_t i, int32_t j) const {
   NodeValue v;
-  const Tile* tile =
-      tiles_[(j >> kTileBits) * tiles_x_ + (i >> kTileBits)].get();
+  const int32_t t = (j >> kTileBits) * tiles_x_ + (i >> kTileBits);
+  const Tile* tile = tiles_[t].get();
   if (tile == nullptr) {
     v.jet.w = spec().z_top;
     return v;
@@ -383,12 +393,13 @@ NodeValue Workpiece::Node(int32_t i, int32_t j) const {
   const int32_t k = (j & (kTileSize - 1)) * kTileSize + (i & (kTileSize - 1));
   v.jet.w = tile->w[k];
   v.owner = tile->owner[k];
-  if (v.owner >= 0 && tile->d[0] != nullptr) {
-    v.jet.wx = tile->d[0][k];
-    v.jet.wy = tile->d[1][k];
-    v.jet.wxx = tile->d[2][k];
-    v.jet.wxy = tile->d[3][k];
-    v.jet.wyy = tile->d[4][k];
+  if (v.owner >= 0 && scheme_->stores_derivatives()) {
+    const std::shared_ptr<const TileJets> jets = Jets(t);
+    v.jet.wx = jets->d[0][k];
+    v.jet.wy = jets->d[1][k];
+    v.jet.wxx = jets->d[2][k];
+    v.jet.wxy = jets->d[3][k];
+    v.jet.wyy = jets->d[4][k];
   }
   return v;
 }
@@ -406,6 +417,10 @@ void Workpiece::ReadTile(int32_t t, double* w, float* const d[5],
                          int32_t* owner) const {
   const TileExtent e = Extent(t);
   const Tile* tile = tiles_[t].get();
+  std::shared_ptr<const TileJets> jets;
+  if (d != nullptr && tile != nullptr && scheme_->stores_derivatives()) {
+    jets = Jets(t);
+  }
   for (int32_t j = 0; j < e.ny; ++j) {
     for (int32_t i = 0; i < e.nx; ++i) {
       const int32_t out = j * e.nx + i;
@@ -415,7 +430,7 @@ void Workpiece::ReadTile(int32_t t, double* w, float* const d[5],
       if (owner != nullptr) owner[out] = cut ? tile->owner[k] : -1;
       if (d != nullptr) {
         for (int c = 0; c < 5; ++c) {
-          d[c][out] = cut && tile->d[c] != nullptr ? tile->d[c][k] : 0.0f;
+          d[c][out] = jets != nullptr ? jets->d[c][k] : 0.0f;
         }
       }
     }
@@ -535,13 +550,18 @@ int64_t Workpiece::allocated_node_bytes() const {
 }
 
 // The state format: a header, then each allocated tile in ascending order.
-// header: "SWARFWP1", scheme kind (u32), nx, ny (i32), x0, y0, x1, y1, z_top
+// header: "SWARFWP2", scheme kind (u32), nx, ny (i32), x0, y0, x1, y1, z_top
 // (f64), version (u64), moves (u64), allocated tiles (u32)
 // tile: index (u32), version (u64), w (f64 x kTileNodes), owner (i32 x
-// kTileNodes), then for taylor wx, wy, wxx, wxy, wyy (f32 x kTileNodes each)
+// kTileNodes).
+// "SWARFWP1" states (written when derivatives were stored) are read too:
+// their tiles of schemes with derivatives carry wx, wy, wxx, wxy, wyy
+// (f32 x kTileNodes each) after the owners, which are checked and dropped
+// (the owners' sweeps give them again, bit for bit).
 namespace {
 
-constexpr char kStateMagic[8] = {'S', 'W', 'A', 'R', 'F', 'W', 'P', '1'};
+constexpr char kStateMagic[8] = {'S', 'W', 'A', 'R', 'F', 'W', 'P', '2'};
+constexpr char kStateMagicV1[8] = {'S', 'W', 'A', 'R', 'F', 'W', 'P', '1'};
 
 struct StateHeader {
   uint32_t scheme;
@@ -595,7 +615,6 @@ void Workpiece::SaveState(
   sink(&moves, 8);
   const uint32_t tiles = static_cast<uint32_t>(allocated_tiles());
   sink(&tiles, 4);
-  std::vector<float> d;  // derivatives with uncut nodes zeroed
   for (int32_t t = 0; t < tile_count(); ++t) {
     const Tile* tile = tiles_[t].get();
     if (tile == nullptr) continue;
@@ -604,14 +623,6 @@ void Workpiece::SaveState(
     sink(&tile_version_[t], 8);
     sink(tile->w, kTileNodes * sizeof(double));
     sink(tile->owner, kTileNodes * sizeof(int32_t));
-    if (tile->d[0] == nullptr) continue;
-    d.resize(kTileNodes);
-    for (int c = 0; c < 5; ++c) {
-      for (int32_t k = 0; k < kTileNodes; ++k) {
-        d[k] = tile->owner[k] >= 0 ? tile->d[c][k] : 0.0f;
-      }
-      sink(d.data(), kTileNodes * sizeof(float));
-    }
   }
 }
 
@@ -641,7 +652,8 @@ absl::Status Workpiece::LoadState(
   StateReader in(read);
   char magic[8];
   StateHeader h;
-  if (!in.Read(magic, 8) || std::memcmp(magic, kStateMagic, 8) != 0 ||
+  const bool v1 = in.Read(magic, 8) && std::memcmp(magic, kStateMagicV1, 8) == 0;
+  if ((!v1 && std::memcmp(magic, kStateMagic, 8) != 0) ||
       !in.Read(&h.scheme) || !in.Read(&h.nx) || !in.Read(&h.ny) ||
       !in.Read(&h.x0) || !in.Read(&h.y0) || !in.Read(&h.x1) ||
       !in.Read(&h.y1) || !in.Read(&h.z_top) || !in.Read(&h.version) ||
@@ -667,7 +679,8 @@ absl::Status Workpiece::LoadState(
   }
   std::vector<std::unique_ptr<Tile>> tiles(tiles_.size());
   std::vector<uint64_t> tile_version(tiles_.size(), 0);
-  const bool derivs = scheme_->stores_derivatives();
+  const bool derivs = v1 && scheme_->stores_derivatives();
+  std::vector<float> d[5];  // a v1 state's derivatives, checked, dropped
   const int32_t moves = static_cast<int32_t>(moves_.size());
   int64_t last = -1;
   for (uint32_t n = 0; n < h.tiles; ++n) {
@@ -683,14 +696,15 @@ absl::Status Workpiece::LoadState(
           "state: tile ", t, " (version ", version, ") out of order or range"));
     }
     last = t;
-    auto tile = std::make_unique<Tile>(arena_.get(), derivs);
+    auto tile = std::make_unique<Tile>(arena_.get());  // derivs);
     if (!in.Read(tile->w, kTileNodes * sizeof(double)) ||
         !in.Read(tile->owner, kTileNodes * sizeof(int32_t))) {
       return absl::DataLossError("state: truncated");
     }
     if (derivs) {
       for (int c = 0; c < 5; ++c) {
-        if (!in.Read(tile->d[c], kTileNodes * sizeof(float))) {
+        d[c].resize(kTileNodes);
+        if (!in.Read(d[c].data(), kTileNodes * sizeof(float))) {
           return absl::DataLossError("state: truncated");
         }
       }
@@ -711,10 +725,9 @@ absl::Status Workpiece::LoadState(
             " and owner ", o));
       }
       for (int c = 0; derivs && o >= 0 && c < 5; ++c) {
-        if (!(std::fabs(tile->d[c][k]) <= kMaxStoredDerivative)) {
+        if (!(std::fabs(d[c][k]) <= kMaxStoredDerivative)) {
           return absl::DataLossError(absl::StrCat(
-              "state: tile ", t, " node ", k, " has derivative ",
-              tile->d[c][k]));
+              "state: tile ", t, " node ", k, " has derivative ", d[c][k]));
         }
       }
     }
@@ -728,6 +741,7 @@ absl::Status Workpiece::LoadState(
   tiles_.swap(tiles);
   tile_version_.swap(tile_version);
   version_ = h.version;
+  serial_ = NextSerial();  // cached jets were of the state replaced
   return absl::OkStatus();
 }
 

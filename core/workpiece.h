@@ -7,8 +7,10 @@
 // one of its nodes (0: never changed).
 //
 // A node is lowered only where a sweep is strictly below it (on an exact tie
-// the lower move id wins); it then takes all its parameters from that sweep
-// and records the move id as its owner. The state is therefore a function of
+// the lower move id wins); it then takes that sweep's height and records the
+// move id as its owner. Its derivatives (schemes that use them) are a pure
+// function of (owner's sweep, node position): they are computed when read,
+// once per tile version, and never stored (12 bytes per node, any scheme). The state is therefore a function of
 // the set of moves, bit-identical whatever their order and batching.
 //
 // Thread safety: Apply must not run concurrently with anything else on the
@@ -17,7 +19,9 @@
 #define SWARF_CORE_WORKPIECE_H_
 
 #include <cstdint>
+#include <deque>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <span>
 #include <string_view>
@@ -102,8 +106,7 @@ class Workpiece {
   // SaveState writes the nodal state (the allocated tiles' parameters and
   // owners, the tile versions and the workpiece version; not the moves) to
   // `sink`, piece by piece, in a little-endian format LoadState reads.
-  // Derivatives of uncut nodes are written as zeros, so equal states give
-  // equal bytes.
+  // Only heights and owners: derivatives follow from the owners' moves.
   void SaveState(
       absl::FunctionRef<void(const void* data, size_t size)> sink) const;
   // Appends moves whose cuts the nodal state already holds (as LoadState
@@ -188,6 +191,10 @@ class Workpiece {
 
  private:
   struct Tile;
+  struct TileJets;
+  // Tiles whose jets are kept for reads (80 KiB each): bounded, so that
+  // memory per node stays the 12 bytes of height and owner.
+  static constexpr size_t kJetCacheTiles = 128;
   Workpiece(const StockSpec& spec, const Scheme& scheme, ThreadPool* pool);
   std::unique_ptr<Tile> NewTile() const;
   // ValidateMoves, and ResourceExhausted past kMaxMoves (Apply and Record).
@@ -197,10 +204,14 @@ class Workpiece {
   std::optional<Rect> IndexMove(uint32_t id, const Move& move);
   // The highest node of tile t (what CutTile caps cuts with).
   double TileTop(int32_t t, const Tile& tile) const;
-  template <bool kDerivatives>
   int64_t CutTile(int32_t t, Tile* tile, std::span<const Sweep> sweeps,
                   std::span<const uint32_t> batch_moves,
                   int64_t first_id) const;
+
+  // The derivatives of tile t's nodes at its current version, computed from
+  // the owners' sweeps once and cached (thread-safe).
+  std::shared_ptr<const TileJets> Jets(int32_t t) const;
+  void ComputeJets(int32_t t, const Tile& tile, TileJets* out) const;
 
   const GridGeometry grid_;
   const Scheme* scheme_;
@@ -212,6 +223,10 @@ class Workpiece {
   uint64_t version_ = 0;
   std::vector<Move> moves_;
   MoveIndex index_;
+  uint64_t serial_;  // changes when LoadState replaces the nodes
+  mutable std::mutex jets_mu_;
+  mutable std::vector<std::shared_ptr<const TileJets>> jets_;  // per tile
+  mutable std::deque<int32_t> jets_order_;  // cached tiles, oldest first
 };
 
 }  // namespace swarf

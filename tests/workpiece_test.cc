@@ -1,6 +1,7 @@
 // Workpiece: nodes against a brute force over all moves, independence of
 // order and batching, lazy tiles and versions, and rejection of bad batches.
 #include "core/workpiece.h"
+#include "tests/state_v1.h"
 
 #include <algorithm>
 #include <cmath>
@@ -769,7 +770,9 @@ TEST(WorkpieceStateTest, ForeignOrDamagedStatesAreRejected) {
   const double deep = -1e300;
   std::memcpy(too_deep.data() + header + 12 + 8 * cut, &deep, 8);
   expect_rejected(too_deep, "height -1e+300");
-  std::string bad_derivative = state;
+  // A version-1 state (derivatives stored after the owners) with an
+  // infinite derivative (wx).
+  std::string bad_derivative = StateV1(*original);
   const float inf = std::numeric_limits<float>::infinity();
   std::memcpy(bad_derivative.data() + owner0 + kTileNodes * 4 + 4 * cut, &inf,
               4);
@@ -795,6 +798,25 @@ TEST(WorkpieceStateTest, ForeignOrDamagedStatesAreRejected) {
   rest = state;
   ASSERT_TRUE(target->LoadState(read, [] { return absl::OkStatus(); }).ok());
   EXPECT_EQ(SavedState(*target), state);
+}
+
+// A version-1 state (snapshots written when derivatives were stored) loads
+// into the same workpiece as the current format: the derivatives it carries
+// are the ones computed on demand, bit for bit, and it saves as version 2.
+TEST(WorkpieceStateTest, VersionOneStatesStillLoad) {
+  const std::vector<Move> moves = MixedMoves(11, 150);
+  for (SchemeKind scheme :
+       {SchemeKind::kZmap, SchemeKind::kTaylor, SchemeKind::kGuarded}) {
+    auto original = MakeWorkpiece(MixedStock(), scheme);
+    ASSERT_TRUE(original->Apply(moves).ok());
+    const std::string v1 = StateV1(*original);
+    ASSERT_EQ(v1.substr(0, 8), "SWARFWP1");
+    auto target = MakeWorkpiece(MixedStock(), scheme);
+    ASSERT_TRUE(target->Record(moves).ok());
+    ASSERT_TRUE(target->LoadState(v1).ok());
+    EXPECT_EQ(SavedState(*target), SavedState(*original));
+    EXPECT_EQ(StateV1(*target), v1);
+  }
 }
 
 // Record indexes moves as Apply does: the exact surface sees them.

@@ -12,9 +12,9 @@
 // exactly when its version is nonzero (at most the workpiece's); the
 // reconstructed surface (sampled around each tile's lowest node) finite and
 // at most the top, its gradient finite. Saved again it gives the bytes read
-// (but for the derivatives of uncut nodes, saved as zeros), which a fresh
-// workpiece loads and saves identically, and which goes on cutting with the
-// same invariants.
+// (a version-1 state, which carried derivatives, saves as version 2
+// without them), which a fresh workpiece loads and saves identically, and
+// which goes on cutting with the same invariants.
 
 #include "tests/fuzz/state_fuzz.h"
 
@@ -36,14 +36,14 @@
 namespace swarf {
 namespace {
 
-// The state format (core/workpiece.cc): an 80-byte header, then per tile
-// its index (u32), version (u64), w (f64), owners (i32) and, for taylor,
+// The state format (core/workpiece.cc): an 80-byte header ("SWARFWP2"),
+// then per tile its index (u32), version (u64), w (f64) and owners (i32),
+// kTileNodes each; in version 1 ("SWARFWP1") taylor tiles were followed by
 // five derivatives (f32), kTileNodes each.
 constexpr size_t kHeaderBytes = 80;
 constexpr size_t kOwnersAt = 4 + 8 + kTileNodes * sizeof(double);
-constexpr size_t kDerivativesAt = kOwnersAt + kTileNodes * sizeof(int32_t);
-constexpr size_t kTaylorTileBytes =
-    kDerivativesAt + 5 * kTileNodes * sizeof(float);
+constexpr size_t kTileBytes = kOwnersAt + kTileNodes * sizeof(int32_t);
+constexpr size_t kDerivativeBytes = 5 * kTileNodes * sizeof(float);
 
 // One thread: the fuzz runs share the machine.
 ThreadPool& Pool() {
@@ -152,21 +152,18 @@ void CheckInvariants(const Workpiece& wp) {
 }
 
 // What SaveState writes for a state `bytes` that loaded, into *out: the
-// same bytes, with the derivatives of uncut nodes zeroed (taylor).
+// same bytes, or for a version-1 state the version-2 bytes (its taylor
+// tiles without their derivatives).
 void Canonical(std::string_view bytes, SchemeKind scheme, std::string* out) {
   out->assign(bytes);
+  if (bytes.size() < kHeaderBytes || bytes[7] != '1') return;
+  (*out)[7] = '2';
   if (scheme != SchemeKind::kTaylor) return;
-  for (size_t at = kHeaderBytes; at < out->size(); at += kTaylorTileBytes) {
-    FUZZ_CHECK(at + kTaylorTileBytes <= out->size());
-    char* tile = out->data() + at;
-    for (int32_t k = 0; k < kTileNodes; ++k) {
-      int32_t owner;
-      std::memcpy(&owner, tile + kOwnersAt + 4 * k, 4);
-      if (owner >= 0) continue;
-      for (int c = 0; c < 5; ++c) {
-        std::memset(tile + kDerivativesAt + (c * kTileNodes + k) * 4, 0, 4);
-      }
-    }
+  out->resize(kHeaderBytes);
+  for (size_t at = kHeaderBytes; at < bytes.size();
+       at += kTileBytes + kDerivativeBytes) {
+    FUZZ_CHECK(at + kTileBytes + kDerivativeBytes <= bytes.size());
+    out->append(bytes.substr(at, kTileBytes));
   }
 }
 

@@ -3,7 +3,7 @@
 // that picks the scheme, per scheme: uncut, partly cut (the other moves
 // recorded): the first rows (the near tiles), the corner plunge (the far
 // corner tile, partial on both axes); wholly cut, also for the streaming
-// overload. Run at build time, so the
+// overload, and in the version-1 format. Run at build time, so the
 // seeds follow the state format.
 
 #include <algorithm>
@@ -15,6 +15,7 @@
 #include "core/workpiece.h"
 #include "tests/fuzz/seed_dir.h"
 #include "tests/fuzz/state_fuzz.h"
+#include "tests/state_v1.h"
 
 namespace {
 
@@ -23,8 +24,10 @@ using swarf::SchemeKind;
 using swarf::Workpiece;
 
 // The state of the fuzz workpiece with the moves [begin, end) applied (in
-// batches of 10) and the others recorded.
-std::string State(SchemeKind scheme, size_t begin, size_t end) {
+// batches of 10) and the others recorded; in the version-1 format (with
+// derivatives) when v1.
+std::string State(SchemeKind scheme, size_t begin, size_t end,
+                  bool v1 = false) {
   const std::vector<Move> moves = swarf::state_fuzz::Moves();
   auto wp = Workpiece::Create(swarf::state_fuzz::Stock(), scheme);
   if (!wp.ok()) std::abort();
@@ -36,6 +39,7 @@ std::string State(SchemeKind scheme, size_t begin, size_t end) {
     }
   }
   if (!(*wp)->Record(all.subspan(end)).ok()) std::abort();
+  if (v1) return swarf::StateV1(**wp);
   std::string out;
   (*wp)->SaveState([&](const void* data, size_t size) {
     out.append(static_cast<const char*>(data), size);
@@ -60,6 +64,7 @@ int main(int argc, char** argv) {
     seeds.Write(name + "_cut", first, cut);
     seeds.Write(name + "_cut_streamed", first | swarf::state_fuzz::kStreamed,
                 cut);
+    seeds.Write(name + "_cut_v1", first, State(scheme, 0, all, true));
   }
   return seeds.Done();
 }
