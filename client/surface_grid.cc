@@ -32,6 +32,7 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
   for (int64_t id = 0; id < wp.move_count(); ++id) {
     g->moves.push_back(wp.move(id));
   }
+  g->surfaces = std::make_shared<const MoveSweeps>(g->moves);
   std::vector<double> w(kTileNodes);
   std::vector<float> dbuf(5 * kTileNodes);
   std::vector<int32_t> owner(kTileNodes);
@@ -115,6 +116,11 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
         GetScheme(scheme).uses_reach()) {
       e.reach[k] = ReachOf(moves, o, spec.z_top);
     }
+  }
+  if (GetScheme(scheme).uses_stencil() && surfaces != nullptr) {
+    e.surfaces = surfaces.get();
+    FillStencil(ei, ej, spec.nx, spec.ny,
+                [&](int32_t i, int32_t j) { return owner(i, j); }, &e);
   }
   return e;
 }

@@ -12,6 +12,7 @@
 #define SWARF_CLIENT_SURFACE_GRID_H_
 
 #include <cstdint>
+#include <memory>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -31,6 +32,9 @@ struct SurfaceGrid {
   // The session's moves by id, for the guarded scheme's reach of each
   // owner (ReachOf). Owners beyond it have an unbounded reach.
   std::vector<Move> moves;
+  // The same moves' exact surfaces, for the exact scheme (null: that
+  // scheme falls back to the patches). Immutable, shared by copies.
+  std::shared_ptr<const MoveSweeps> surfaces;
 
   // Untouched stock: every node at z_top, flat, owner -1. InvalidArgument
   // for a spec ValidateStock rejects, or more than kMaxGridNodes nodes.

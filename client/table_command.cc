@@ -205,7 +205,8 @@ int TableCommand(const std::vector<std::string>& argv) {
   std::vector<Row> rows;
   for (const std::string& name : instances) {
     for (SchemeKind scheme :
-         {SchemeKind::kZmap, SchemeKind::kTaylor, SchemeKind::kGuarded}) {
+         {SchemeKind::kZmap, SchemeKind::kTaylor, SchemeKind::kGuarded,
+          SchemeKind::kExact}) {
       for (int m : meshes) {
         auto inst = PaperInstance(name, m);
         if (!inst.ok()) {

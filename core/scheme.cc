@@ -255,17 +255,65 @@ class GuardedScheme final : public Scheme {
   }
 };
 
+class ExactScheme final : public Scheme {
+ public:
+  SchemeKind kind() const override { return SchemeKind::kExact; }
+  std::string_view name() const override { return "exact"; }
+  // The height; the owner names the surface the rest comes from.
+  int parameters_per_node() const override { return 1; }
+  bool stores_derivatives() const override { return true; }  // on demand
+  int bytes_per_node() const override { return 12; }
+  bool uses_stencil() const override { return true; }
+  double Reconstruct(const ElementCorners& e, double x,
+                     double y) const override {
+    return ExactStencilHeight(e, x, y);
+  }
+  void Gradient(const ElementCorners& e, double x, double y, double* gx,
+                double* gy) const override {
+    *gx = *gy = 0;  // the stock top
+    if (e.surfaces == nullptr) {
+      GetScheme(SchemeKind::kTaylor).Gradient(e, x, y, gx, gy);
+      return;
+    }
+    double w = e.z_top;
+    int32_t lowest = -1;
+    for (int k = 0; k < e.owner_count; ++k) {
+      const double h = e.surfaces->Height(e.owners[k], x, y);
+      if (h < w) {
+        w = h;
+        lowest = e.owners[k];
+      }
+    }
+    if (lowest < 0) return;
+    const SurfaceJet j = e.surfaces->Jet(lowest, x, y);
+    *gx = j.wx;
+    *gy = j.wy;
+  }
+};
+
 }  // namespace
+
+double ExactStencilHeight(const ElementCorners& e, double x, double y) {
+  if (e.surfaces == nullptr) return MinOfPatches(e, x, y);
+  double w = e.z_top;
+  for (int k = 0; k < e.owner_count; ++k) {
+    w = std::min(w, e.surfaces->Height(e.owners[k], x, y));
+  }
+  return w;
+}
 
 const Scheme& GetScheme(SchemeKind kind) {
   static const ZmapScheme* const zmap = new ZmapScheme;
   static const TaylorScheme* const taylor = new TaylorScheme;
   static const GuardedScheme* const guarded = new GuardedScheme;
+  static const ExactScheme* const exact = new ExactScheme;
   switch (kind) {
     case SchemeKind::kZmap:
       return *zmap;
     case SchemeKind::kTaylor:
       return *taylor;
+    case SchemeKind::kExact:
+      return *exact;
     case SchemeKind::kGuarded:
       break;
   }
@@ -276,9 +324,10 @@ absl::StatusOr<SchemeKind> ParseScheme(std::string_view name) {
   if (name == "zmap") return SchemeKind::kZmap;
   if (name == "taylor") return SchemeKind::kTaylor;
   if (name == "guarded") return SchemeKind::kGuarded;
+  if (name == "exact") return SchemeKind::kExact;
   return absl::InvalidArgumentError(
       absl::StrCat("unknown scheme \"", std::string(name),
-                   "\" (expected guarded, taylor or zmap)"));
+                   "\" (expected guarded, exact, taylor or zmap)"));
 }
 
 }  // namespace swarf

@@ -340,7 +340,7 @@ void Workpiece::ComputeJets(int32_t t, const Tile& tile,
   }
 }
 
-std::shared_ptr<const Workpiece::TileJets> Workpiece::Jets(int32_t t) const {
+const Workpiece::TileJets& Workpiece::Jets(int32_t t) const {
   const Tile* tile = tiles_[t].get();
   const uint64_t version = tile_version_[t];
   // The last tile this thread read: most reads stay in one tile.
@@ -348,7 +348,7 @@ std::shared_ptr<const Workpiece::TileJets> Workpiece::Jets(int32_t t) const {
   thread_local int32_t last_tile = -1;
   if (last != nullptr && last_tile == t && last->serial == serial_ &&
       last->version == version) {
-    return last;
+    return *last;
   }
   std::shared_ptr<const TileJets> jets;
   {
@@ -377,9 +377,16 @@ std::shared_ptr<const Workpiece::TileJets> Workpiece::Jets(int32_t t) const {
     }
     jets_[t] = jets;
   }
-  last = jets;
+  last = std::move(jets);
   last_tile = t;
-  return jets;
+  return *last;
+}
+
+int32_t Workpiece::OwnerAt(int32_t i, int32_t j) const {
+  const Tile* tile =
+      tiles_[(j >> kTileBits) * tiles_x_ + (i >> kTileBits)].get();
+  if (tile == nullptr) return -1;
+  return tile->owner[(j & (kTileSize - 1)) * kTileSize + (i & (kTileSize - 1))];
 }
 
 NodeValue Workpiece::Node(int32_t i, int32_t j) const {
@@ -394,12 +401,12 @@ NodeValue Workpiece::Node(int32_t i, int32_t j) const {
   v.jet.w = tile->w[k];
   v.owner = tile->owner[k];
   if (v.owner >= 0 && scheme_->stores_derivatives()) {
-    const std::shared_ptr<const TileJets> jets = Jets(t);
-    v.jet.wx = jets->d[0][k];
-    v.jet.wy = jets->d[1][k];
-    v.jet.wxx = jets->d[2][k];
-    v.jet.wxy = jets->d[3][k];
-    v.jet.wyy = jets->d[4][k];
+    const TileJets& jets = Jets(t);
+    v.jet.wx = jets.d[0][k];
+    v.jet.wy = jets.d[1][k];
+    v.jet.wxx = jets.d[2][k];
+    v.jet.wxy = jets.d[3][k];
+    v.jet.wyy = jets.d[4][k];
   }
   return v;
 }
@@ -417,9 +424,9 @@ void Workpiece::ReadTile(int32_t t, double* w, float* const d[5],
                          int32_t* owner) const {
   const TileExtent e = Extent(t);
   const Tile* tile = tiles_[t].get();
-  std::shared_ptr<const TileJets> jets;
+  const TileJets* jets = nullptr;
   if (d != nullptr && tile != nullptr && scheme_->stores_derivatives()) {
-    jets = Jets(t);
+    jets = &Jets(t);
   }
   for (int32_t j = 0; j < e.ny; ++j) {
     for (int32_t i = 0; i < e.nx; ++i) {
@@ -478,6 +485,47 @@ CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
   return r;
 }
 
+MoveSweeps::MoveSweeps(const std::vector<Move>* moves)
+    : moves_(moves), serial_(NextSerial()) {}
+
+MoveSweeps::MoveSweeps(std::vector<Move> moves)
+    : owned_(std::move(moves)), moves_(&owned_), serial_(NextSerial()) {}
+
+const Sweep* MoveSweeps::SweepOf(int32_t id) const {
+  if (id < 0 || id >= static_cast<int64_t>(moves_->size())) return nullptr;
+  // The stencil's owners come back for every sample of an element and for
+  // its neighbours: a few per thread cover them.
+  struct Entry {
+    uint64_t serial = 0;
+    int32_t id = -1;
+    std::optional<Sweep> sweep;
+  };
+  constexpr int kEntries = 16;
+  thread_local Entry cache[kEntries];
+  thread_local int next = 0;
+  for (const Entry& e : cache) {
+    if (e.id == id && e.serial == serial_) return &*e.sweep;
+  }
+  Entry& e = cache[next];
+  next = (next + 1) % kEntries;
+  const Move& m = (*moves_)[id];
+  e.sweep.emplace(m.from, m.to, m.cutter);
+  e.id = id;
+  e.serial = serial_;
+  return &*e.sweep;
+}
+
+double MoveSweeps::Height(int32_t id, double x, double y) const {
+  const Sweep* s = SweepOf(id);
+  return s != nullptr ? s->Height(x, y) : kInf;
+}
+
+SurfaceJet MoveSweeps::Jet(int32_t id, double x, double y) const {
+  const Sweep* s = SweepOf(id);
+  if (s == nullptr) return {kInf, 0, 0, 0, 0, 0};
+  return s->JetAt(x, y);
+}
+
 ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
   ElementCorners e;
   e.x0 = grid_.NodeX(ei);
@@ -493,6 +541,11 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
     if (n.owner >= 0 && scheme_->uses_reach()) {
       e.reach[k] = ReachOf(moves_, n.owner, e.z_top);
     }
+  }
+  if (scheme_->uses_stencil()) {
+    e.surfaces = &surfaces_;
+    FillStencil(ei, ej, grid_.nx(), grid_.ny(),
+                [&](int32_t i, int32_t j) { return OwnerAt(i, j); }, &e);
   }
   return e;
 }

@@ -64,6 +64,28 @@ struct Move {
 // lowest tip.
 CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top);
 
+// The exact swept surfaces of a list of moves, by index: the exact
+// scheme's MoveSurfaces. Thread-safe (each thread keeps the last few sweeps
+// it built). `moves` (not owned) must outlive it; it may grow between
+// calls, not during them.
+class MoveSweeps final : public MoveSurfaces {
+ public:
+  explicit MoveSweeps(const std::vector<Move>* moves);
+  // Owning its own copy of the moves.
+  explicit MoveSweeps(std::vector<Move> moves);
+  MoveSweeps(const MoveSweeps&) = delete;
+  MoveSweeps& operator=(const MoveSweeps&) = delete;
+  // +inf (and a zero jet) for an id outside the list.
+  double Height(int32_t id, double x, double y) const override;
+  SurfaceJet Jet(int32_t id, double x, double y) const override;
+
+ private:
+  const Sweep* SweepOf(int32_t id) const;
+  std::vector<Move> owned_;
+  const std::vector<Move>* moves_;
+  uint64_t serial_;  // tells this list's cached sweeps from others'
+};
+
 // Physical bounds on moves (mm). With kMinRadius and kMaxRadius
 // (core/cutter/cutter.h) they keep every intermediate value of the sweep
 // finite (squares of coordinates, 1 / (1e-4 r)^3 at a rim).
@@ -139,7 +161,8 @@ class Workpiece {
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
   NodeValue Node(int32_t i, int32_t j) const;
   // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with each cut corner's
-  // reach (ReachOf its owner).
+  // reach (ReachOf its owner) and the stencil's owners and the moves'
+  // surfaces, where the scheme uses them.
   ElementCorners Corners(int32_t ei, int32_t ej) const;
   // The scheme's reconstructed surface at a point of the stock (clamped to
   // the stock rectangle).
@@ -185,6 +208,8 @@ class Workpiece {
   int64_t allocated_node_bytes() const;
 
   const MoveIndex& index() const { return index_; }
+  // The moves' exact surfaces, by id (the exact scheme's).
+  const MoveSurfaces& surfaces() const { return surfaces_; }
   ThreadPool& pool() const { return *pool_; }
 
   ~Workpiece();
@@ -209,8 +234,11 @@ class Workpiece {
                   int64_t first_id) const;
 
   // The derivatives of tile t's nodes at its current version, computed from
-  // the owners' sweeps once and cached (thread-safe).
-  std::shared_ptr<const TileJets> Jets(int32_t t) const;
+  // the owners' sweeps once and cached (thread-safe). The reference stays
+  // valid until this thread's next call (the thread keeps the last one).
+  const TileJets& Jets(int32_t t) const;
+  // Node (i, j)'s owner (-1: uncut), without its jet.
+  int32_t OwnerAt(int32_t i, int32_t j) const;
   void ComputeJets(int32_t t, const Tile& tile, TileJets* out) const;
 
   const GridGeometry grid_;
@@ -224,6 +252,7 @@ class Workpiece {
   std::vector<Move> moves_;
   MoveIndex index_;
   uint64_t serial_;  // changes when LoadState replaces the nodes
+  MoveSweeps surfaces_{&moves_};
   mutable std::mutex jets_mu_;
   mutable std::vector<std::shared_ptr<const TileJets>> jets_;  // per tile
   mutable std::deque<int32_t> jets_order_;  // cached tiles, oldest first

@@ -49,6 +49,8 @@ pb::Scheme SchemeToProto(SchemeKind kind) {
       return pb::SCHEME_ZMAP;
     case SchemeKind::kTaylor:
       return pb::SCHEME_TAYLOR;
+    case SchemeKind::kExact:
+      return pb::SCHEME_EXACT;
     case SchemeKind::kGuarded:
       break;
   }
@@ -62,6 +64,8 @@ absl::StatusOr<SchemeKind> SchemeFromProto(int value,
       return SchemeKind::kZmap;
     case pb::SCHEME_TAYLOR:
       return SchemeKind::kTaylor;
+    case pb::SCHEME_EXACT:
+      return SchemeKind::kExact;
     case pb::SCHEME_UNSPECIFIED:
     case pb::SCHEME_GUARDED:
       return SchemeKind::kGuarded;

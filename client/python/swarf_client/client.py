@@ -40,7 +40,8 @@ _RESUMABLE = (grpc.StatusCode.UNAVAILABLE, grpc.StatusCode.CANCELLED,
               grpc.StatusCode.UNKNOWN, grpc.StatusCode.INTERNAL,
               grpc.StatusCode.ABORTED)
 
-_SCHEMES = {"taylor": pb.SCHEME_TAYLOR, "zmap": pb.SCHEME_ZMAP}
+_SCHEMES = {"taylor": pb.SCHEME_TAYLOR, "zmap": pb.SCHEME_ZMAP,
+            "guarded": pb.SCHEME_GUARDED, "exact": pb.SCHEME_EXACT}
 _SCHEME_NAMES = {v: k for k, v in _SCHEMES.items()}
 _CODES = {c.value[0]: c for c in grpc.StatusCode}
 
@@ -274,7 +275,8 @@ class Client:
           stock: (x0, y0, x1, y1, z_top) mm: the stock rectangle, flat top.
           spacing: target node spacing (mm); or nx and ny, the ELEMENT
             counts along x and y (nodes: nx + 1, ny + 1).
-          scheme: "taylor" (heights and derivatives) or "zmap".
+          scheme: "taylor" (heights and derivatives, the paper's eq. 1-2),
+            "zmap", "guarded" (the server's default) or "exact".
           tools: {tool id: ball-end radius (mm)}, or one radius (tool id 1).
           session_id: 1-64 of [A-Za-z0-9_-]; generated when empty.
           delete_on_exit: the session's `with` block deletes it.
@@ -283,7 +285,7 @@ class Client:
         """
         if scheme not in _SCHEMES:
             raise SwarfError(grpc.StatusCode.INVALID_ARGUMENT,
-                             f"scheme must be taylor or zmap, got {scheme!r}")
+                             f"scheme must be one of {sorted(_SCHEMES)}, got {scheme!r}")
         x0, y0, x1, y1, z_top = (float(v) for v in stock)
         req = pb.CreateSessionRequest(
             session_id=session_id,
@@ -418,7 +420,7 @@ class Session:
 
     @property
     def scheme(self) -> str:
-        return _SCHEME_NAMES.get(self._info.scheme, "taylor")
+        return _SCHEME_NAMES.get(self._info.scheme, "guarded")
 
     @property
     def tools(self) -> Dict[int, float]:
@@ -692,7 +694,7 @@ class Session:
         if r.map_cols > 0:
             m = np.asarray(r.map_max_error, np.float32).reshape(
                 r.map_rows, r.map_cols)
-        return ErrorStats(_SCHEME_NAMES.get(r.scheme, "taylor"), r.max_error,
+        return ErrorStats(_SCHEME_NAMES.get(r.scheme, "guarded"), r.max_error,
                           r.mean_error, r.rms_error, (r.max_x, r.max_y),
                           r.samples, m)
 
