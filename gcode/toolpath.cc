@@ -71,6 +71,23 @@ void Toolpath::Append(const ToolpathPoint& p) {
   points_.push_back(pt);
 }
 
+void Toolpath::AppendProgram(const Toolpath& next) {
+  points_.reserve(points_.size() + next.points_.size());
+  for (size_t k = 0; k < next.points_.size(); ++k) {
+    ToolpathPoint p = next.points_[k];
+    if (k == 0) p.starts_run = true;
+    Append(p);
+  }
+  source_lines_ += next.source_lines_;
+  blocks_executed_ += next.blocks_executed_;
+  for (const auto& [word, n] : next.ignored_) ignored_[word] += n;
+  notes_.insert(notes_.end(), next.notes_.begin(), next.notes_.end());
+  dropped_moves_ += next.dropped_moves_;
+  for (const DroppedMove& d : next.first_dropped_) {
+    if (first_dropped_.size() < kFirstDropped) first_dropped_.push_back(d);
+  }
+}
+
 void Toolpath::CountIgnored(const std::string& word, int64_t n) {
   ignored_[word] += n;
 }

@@ -122,6 +122,12 @@ class Toolpath {
   // empty when none.
   std::string DroppedSummary() const;
 
+  // Appends the program run after this one (CAMotics projects run several
+  // files in order): its points, the first starting a run (each program
+  // starts from an unknown position), and its counts, notes and dropped
+  // moves (whose lines are its own file's).
+  void AppendProgram(const Toolpath& next);
+
   // Building (the parsers; tests). Append drops a point that repeats the
   // previous point's position within a run: a zero-length move sweeps
   // nothing.
