@@ -93,7 +93,8 @@ const std::string kUsage =
     "  --view-wait                  start cutting once a page is open\n"
     "G-code:\n" + std::string(kToolpathUsage);
 
-// The first use of every tool number in a program: "FILE line N".
+// The tool numbers a program uses, each with where it is first selected
+// (its T word or M6; with no T word, the first move): "FILE line N".
 void AddToolUses(const Toolpath& path, const std::string& file,
                  std::vector<ToolUse>* uses) {
   int last = -1;
@@ -103,7 +104,9 @@ void AddToolUses(const Toolpath& path, const std::string& file,
     const bool seen = std::any_of(uses->begin(), uses->end(), [&](const ToolUse& u) {
       return u.number == p.tool;
     });
-    if (!seen) uses->push_back({p.tool, absl::StrCat(file, " line ", p.line)});
+    if (seen) continue;
+    const int32_t line = path.ToolSelectedAt(p.tool).value_or(p.line);
+    uses->push_back({p.tool, absl::StrCat(file, " line ", line)});
   }
 }
 
@@ -444,7 +447,8 @@ int RunCommand(const std::vector<std::string>& argv) {
         (stock->x1 - stock->x0) / stock->nx,
         GetScheme(scheme).name(), (*conn)->target());
     for (const auto& [t, c] : *tools) {
-      std::cerr << "swarf run: tool " << t << ": " << CutterSummary(c) << "\n";
+      std::cerr << "swarf run: tool " << t << (t == 0 ? " (no T word)" : "")
+                << ": " << CutterSummary(c) << "\n";
     }
   }
 
