@@ -370,7 +370,7 @@ class Client:
           session_id: 1-64 of [A-Za-z0-9_-]; generated when empty.
           delete_on_exit: the session's `with` block deletes it.
         Raises SwarfError (INVALID_ARGUMENT naming the field,
-        ALREADY_EXISTS, RESOURCE_EXHAUSTED, UNIMPLEMENTED).
+        ALREADY_EXISTS, RESOURCE_EXHAUSTED).
         """
         if scheme not in _SCHEMES:
             raise SwarfError(grpc.StatusCode.INVALID_ARGUMENT,
