@@ -368,6 +368,21 @@ TEST_F(RunProjectTest, LinuxCncToolTableAndNumberedTools) {
   ASSERT_EQ(tools.size(), 2u);
   EXPECT_EQ(tools.at("1").string_value(), "bull d=101.6 r=1");  // D in inches
   EXPECT_EQ(tools.at("2").string_value(), "vbit d=3 angle=60");  // --tool wins
+
+  // Cutter compensation takes the radius of the table's tool D names.
+  const std::string comp = (dir_ / "comp.nc").string();
+  WriteFile(comp,
+            "G21 G17\nT1 M6\nG0 X-5 Y-5 Z1\nG1 Z-1\nG41 D1\nG1 X0 Y0\nX10\n"
+            "G40\nG1 X15 Y-5\n");
+  EXPECT_EQ(RunCapturing({comp, "--tools", tbl, "--spacing", "0.5", "--quiet"},
+                         &err),
+            0)
+      << err;
+  WriteFile(comp, "G21 G17\nT1 M6\nG0 X-5 Y-5 Z1\nG1 Z-1\nG41 D3\nG1 X0 Y0\n");
+  EXPECT_EQ(RunCapturing({comp, "--tools", tbl, "--quiet"}, &err), 1);
+  EXPECT_NE(err.find("line 5: G41: the radius of tool 3 is unknown"),
+            std::string::npos)
+      << err;
 }
 
 // The corpus' new projects run unmodified with the tools they name.
