@@ -311,6 +311,41 @@ TEST_F(RunProjectTest, RunsTheFilesInOrderWithTheProjectsToolsAndWorkpiece) {
   EXPECT_NEAR(lowest_top, -1, 1e-5);
 }
 
+// "automatic": true: the stock from the toolpath (its XY bounds plus the
+// tool radius, top 0), grown by the margin, percent of its size, as CAMotics
+// grows its automatic workpiece.
+TEST_F(RunProjectTest, AutomaticWorkpieceGrowsByTheMarginPercent) {
+  std::string project = Project(R"("part1.nc")");
+  std::string text;
+  {
+    std::ifstream in(project);
+    text.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const std::string given = "\"automatic\": false, \"margin\": 5";
+  const size_t at = text.find(given);
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, given.size(), "\"automatic\": true, \"margin\": 10");
+  WriteFile(project, text);
+  std::stringstream out;
+  std::streambuf* old = std::cout.rdbuf(out.rdbuf());
+  std::string err;
+  const int rc = RunCapturing({"--project", project, "--spacing", "0.25",
+                               "--json", "--quiet"},
+                              &err);
+  std::cout.rdbuf(old);
+  ASSERT_EQ(rc, 0) << err;
+  google::protobuf::Struct stats;
+  ASSERT_TRUE(
+      google::protobuf::util::JsonStringToMessage(out.str(), &stats).ok());
+  // part1.nc: X2..18 at Y2 with a 2 mm ball: [1, 19] x [1, 3], then 10%.
+  const auto& st = stats.fields().at("stock").struct_value().fields();
+  EXPECT_DOUBLE_EQ(st.at("x0").number_value(), 1 - 1.8);
+  EXPECT_DOUBLE_EQ(st.at("x1").number_value(), 19 + 1.8);
+  EXPECT_DOUBLE_EQ(st.at("y0").number_value(), 1 - 0.2);
+  EXPECT_DOUBLE_EQ(st.at("y1").number_value(), 3 + 0.2);
+  EXPECT_EQ(st.at("top").number_value(), 0);
+}
+
 TEST_F(RunProjectTest, ToolErrorsNameTheLineAndTheTool) {
   WriteFile(dir_ / "t3.nc", "G21\n(T3 is the tool)\nT3 M6\nG0 X1 Y1 Z5\nG1 Z-1\n");
   std::string err;
