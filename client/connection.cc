@@ -100,14 +100,14 @@ std::unique_ptr<grpc::ClientContext> Connection::Context(
 }
 
 std::vector<Move> RunMoves(const std::vector<PathRun>& runs,
-                           const std::map<int32_t, double>& radius_by_tool) {
+                           const std::map<int32_t, Cutter>& cutter_by_tool) {
   std::vector<Move> moves;
   std::optional<Vec3> pos;
   for (const PathRun& run : runs) {
     if (run.reposition) pos.reset();
-    const double r = radius_by_tool.at(run.tool_id);
+    const Cutter& c = cutter_by_tool.at(run.tool_id);
     for (const Vec3& p : run.points) {
-      if (pos.has_value()) moves.push_back({*pos, p, r});
+      if (pos.has_value()) moves.push_back({*pos, p, c});
       pos = p;
     }
   }

@@ -76,9 +76,9 @@ struct PathRun {
 };
 
 // The moves a session numbers from these runs, in id order (as
-// Session::BatchMoves does), with the radius of each run's tool.
+// Session::BatchMoves does), with the cutter of each run's tool.
 std::vector<Move> RunMoves(const std::vector<PathRun>& runs,
-                           const std::map<int32_t, double>& radius_by_tool);
+                           const std::map<int32_t, Cutter>& cutter_by_tool);
 
 struct StreamProgress {
   int64_t moves_done = 0;   // acknowledged

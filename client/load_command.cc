@@ -14,6 +14,8 @@
 #include "client/args.h"
 #include "client/commands.h"
 #include "client/connection.h"
+#include "client/tool_table.h"
+#include "server/convert.h"
 
 namespace swarf::cli {
 namespace {
@@ -22,8 +24,10 @@ using Clock = std::chrono::steady_clock;
 
 constexpr char kUsage[] =
     "usage: swarf load [--server HOST:PORT] [--sessions N] [--moves N]\n"
-    "                  [--batch N] [--mesh N] [--token T] [--tls-ca F ...]\n"
-    "Streams a finishing raster (a 1 mm ball, 0.1 mm moves) into N sessions\n"
+    "                  [--batch N] [--mesh N] [--tool SHAPE:KEYS] [--token T]\n"
+    "                  [--tls-ca F ...]\n"
+    "Streams a finishing raster (0.1 mm moves; --tool as for swarf run,\n"
+    "default ball:d=1) into N sessions\n"
     "at once (default 32 sessions of 100000 moves, batches of 2000, grids of\n"
     "300 x 300) and reports the throughput, the p50/p99 time from sending a\n"
     "batch to its acknowledgement, the errors and the server's peak memory.\n"
@@ -36,8 +40,8 @@ struct Result {
 };
 
 // One session's job: create, stream, delete.
-void RunSession(Connection& conn, const std::string& id, int64_t moves,
-                int64_t batch, int32_t mesh, Result* out) {
+void RunSession(Connection& conn, const std::string& id, const Cutter& cutter,
+                int64_t moves, int64_t batch, int32_t mesh, Result* out) {
   pb::CreateSessionRequest create;
   create.set_session_id(id);
   const double side = mesh * 0.1;
@@ -45,9 +49,7 @@ void RunSession(Connection& conn, const std::string& id, int64_t moves,
   create.mutable_stock()->set_y1(side);
   create.set_nx(mesh);
   create.set_ny(mesh);
-  pb::Tool* tool = create.add_tools();
-  tool->set_id(1);
-  tool->mutable_ball()->set_radius(0.5);
+  server::ToolToProto({1, cutter}, create.add_tools());
   {
     pb::Session s;
     auto ctx = conn.Context(id, 60);
@@ -122,7 +124,7 @@ double Percentile(std::vector<double> v, double q) {
 
 int LoadCommand(const std::vector<std::string>& argv) {
   std::set<std::string> valued = {"server", "sessions", "moves", "batch",
-                                  "mesh"};
+                                  "mesh", "tool"};
   valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
   auto args = Args::Parse(argv, valued, {"help"});
   if (!args.ok()) {
@@ -146,6 +148,11 @@ int LoadCommand(const std::vector<std::string>& argv) {
       std::cerr << "swarf load: counts must be positive\n";
       return 2;
     }
+  }
+  auto tool = ParseToolOption(args->Get("tool").value_or("ball:d=1"));
+  if (!tool.ok()) {
+    std::cerr << "swarf load: " << tool.status().message() << "\n";
+    return 2;
   }
   const int n = sessions->value_or(32);
   const int64_t m = moves->value_or(100000);
@@ -184,8 +191,8 @@ int LoadCommand(const std::vector<std::string>& argv) {
   for (int k = 0; k < n; ++k) {
     Connection& c = embedded ? *embedded : *conns[k];
     threads.emplace_back([&, k, &c = c] {
-      RunSession(c, absl::StrFormat("load-%s-%d", tag, k), m, b, g,
-                 &results[k]);
+      RunSession(c, absl::StrFormat("load-%s-%d", tag, k), tool->cutter, m, b,
+                 g, &results[k]);
     });
   }
   for (auto& t : threads) t.join();
@@ -207,12 +214,12 @@ int LoadCommand(const std::vector<std::string>& argv) {
   auto ctx = c.Context("", 10);
   c.stub().ListSessions(ctx.get(), {}, &list);
   std::cout << absl::StrFormat(
-      "%d sessions x %d moves (batches of %d, %dx%d grids) on the %s\n"
+      "%d sessions x %d moves (batches of %d, %dx%d grids, %s) on the %s\n"
       "  throughput  %.2fM moves/s (%d moves in %.2f s)\n"
       "  ack latency p50 %.1f ms, p99 %.1f ms (%d batches)\n"
       "  errors      %d\n"
       "  server peak memory %.0f MiB\n",
-      n, m, b, g, g, c.target(), total / seconds / 1e6, total, seconds,
+      n, m, b, g, g, CutterSummary(tool->cutter), c.target(), total / seconds / 1e6, total, seconds,
       1e3 * Percentile(lat, 0.5), 1e3 * Percentile(lat, 0.99), lat.size(),
       errors, list.server_peak_memory_bytes() / 1048576.0);
   return errors == 0 ? 0 : 1;

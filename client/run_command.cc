@@ -24,6 +24,7 @@
 #include "client/connection.h"
 #include "client/json_writer.h"
 #include "client/run_report.h"
+#include "client/tool_table.h"
 #include "client/toolpath_flags.h"
 #include "gcode/toolpath.h"
 #include "server/convert.h"
@@ -40,13 +41,27 @@ namespace {
 
 const std::string kUsage =
     "usage: swarf run FILE [options]\n"
+    "       swarf run --project JOB.camotics [options]\n"
     "Simulates a toolpath (G-code, RS274/NGC as LinuxCNC runs it, or x,y,z\n"
     "lines; the format by content; positions are the tool tip, mm) and\n"
     "reports the result.\n"
     "options:\n"
-    "  --tool ball:d=D | ball:r=R   the ball-end cutter (mm); for programs\n"
-    "                               with several tools: --tool N=ball:d=D each\n"
-    "  --stock x0,y0,x1,y1,top      stock (mm); default: the toolpath's XY\n"
+    "  --tool SHAPE:KEYS            the cutter (mm; d a diameter, angle the\n"
+    "                               INCLUDED angle): ball:d=6, flat:d=6,\n"
+    "                               bull:d=6,r=1 (corner radius),\n"
+    "                               vbit:d=6,angle=90[,tip=0.2] (tip: flat\n"
+    "                               tip diameter), taper:d=6,tip=1,angle=10\n"
+    "                               (ball tip diameter, taper angle); one per\n"
+    "                               tool number: --tool T2=flat:d=6 (the\n"
+    "                               program selects them with T and M6)\n"
+    "  --tools FILE                 a tool table: LinuxCNC .tbl (T, D, the\n"
+    "                               shape in the comment, else flat) or a\n"
+    "                               CAMotics .camotics project's tools\n"
+    "  --tools-units mm|inch        units of a .tbl's D (default mm)\n"
+    "  --project FILE.camotics      a CAMotics project: its tools, workpiece\n"
+    "                               and G-code files (run in order)\n"
+    "  --stock x0,y0,x1,y1,top      stock (mm); default: the project's\n"
+    "                               workpiece, else the toolpath's XY\n"
     "                               bounds plus the tool radius, top 0\n"
     "  --spacing S | --mesh N       grid spacing (mm), or N elements along the\n"
     "                               longer side; default 0.1 mm (coarser if\n"
@@ -78,71 +93,26 @@ const std::string kUsage =
     "  --view-wait                  start cutting once a page is open\n"
     "G-code:\n" + std::string(kToolpathUsage);
 
-struct ToolChoice {
-  double radius = 0;
-};
-
-// "ball:d=3.175" / "ball:r=1" -> radius.
-absl::StatusOr<double> ParseBall(const std::string& spec) {
-  std::vector<std::string> parts = absl::StrSplit(spec, ':');
-  if (parts.size() != 2 || parts[0] != "ball") {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "--tool \"", spec, "\": expected ball:d=DIAMETER or ball:r=RADIUS"));
+// The tool numbers a program uses, each with where it is first selected
+// (its T word or M6; with no T word, the first move): "FILE line N".
+void AddToolUses(const Toolpath& path, const std::string& file,
+                 std::vector<ToolUse>* uses) {
+  int last = -1;
+  for (const ToolpathPoint& p : path.points()) {
+    if (p.tool == last) continue;
+    last = p.tool;
+    const bool seen = std::any_of(uses->begin(), uses->end(), [&](const ToolUse& u) {
+      return u.number == p.tool;
+    });
+    if (seen) continue;
+    const int32_t line = path.ToolSelectedAt(p.tool).value_or(p.line);
+    uses->push_back({p.tool, absl::StrCat(file, " line ", line)});
   }
-  std::vector<std::string> kv = absl::StrSplit(parts[1], '=');
-  double v = 0;
-  if (kv.size() != 2 || (kv[0] != "d" && kv[0] != "r") ||
-      !absl::SimpleAtod(kv[1], &v) || !(v > 0) || !std::isfinite(v)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "--tool \"", spec, "\": expected ball:d=D or ball:r=R with D, R > 0"));
-  }
-  return kv[0] == "d" ? v / 2 : v;
-}
-
-// Tool radius per tool number of the program: one unnumbered --tool serves
-// every number; numbered ones ("2=ball:d=3") serve theirs.
-absl::StatusOr<std::map<int, double>> ChooseTools(
-    const std::vector<std::string>& specs, const std::vector<int>& used) {
-  if (specs.empty()) {
-    return absl::InvalidArgumentError(
-        "--tool is required, e.g. --tool ball:d=3.175");
-  }
-  std::optional<double> any;
-  std::map<int, double> numbered;
-  for (const std::string& spec : specs) {
-    const size_t eq = spec.find('=');
-    const size_t colon = spec.find(':');
-    if (eq != std::string::npos && (colon == std::string::npos || eq < colon)) {
-      int n;
-      if (!absl::SimpleAtoi(spec.substr(0, eq), &n)) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("--tool \"", spec, "\": bad tool number"));
-      }
-      auto r = ParseBall(spec.substr(eq + 1));
-      if (!r.ok()) return r.status();
-      numbered[n] = *r;
-    } else {
-      auto r = ParseBall(spec);
-      if (!r.ok()) return r.status();
-      any = *r;
-    }
-  }
-  std::map<int, double> out;
-  for (int t : used) {
-    if (numbered.count(t)) {
-      out[t] = numbered[t];
-    } else if (any.has_value()) {
-      out[t] = *any;
-    } else {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "the program uses tool T", t, ": give --tool ", t, "=ball:d=..."));
-    }
-  }
-  return out;
 }
 
 absl::StatusOr<StockSpec> ChooseStock(const Args& args, const Toolpath& path,
-                                      double max_radius) {
+                                      double max_radius,
+                                      const CamoticsProject* project) {
   StockSpec s;
   if (auto v = args.Get("stock")) {
     std::vector<std::string> f = absl::StrSplit(*v, ',');
@@ -154,11 +124,24 @@ absl::StatusOr<StockSpec> ChooseStock(const Args& args, const Toolpath& path,
           "--stock must be x0,y0,x1,y1,top (five numbers, mm)");
     }
     s = {d[0], d[1], d[2], d[3], d[4], 0, 0};
+  } else if (project != nullptr && !project->automatic) {
+    // The project's workpiece as given (CAMotics ignores the margin then).
+    s = {project->min[0], project->min[1], project->max[0], project->max[1],
+         project->max[2], 0, 0};
   } else {
-    // As CAMotics' automatic workpiece: the path's XY bounds, top at 0.
+    // As CAMotics' automatic workpiece: the path's XY bounds, top at 0,
+    // grown by a project's margin (percent of the size) on every side.
     const double m = max_radius;
     s = {path.x_bounds().lo - m, path.y_bounds().lo - m,
          path.x_bounds().hi + m, path.y_bounds().hi + m, 0, 0, 0};
+    if (project != nullptr) {
+      const double mx = (s.x1 - s.x0) * project->margin_percent / 100;
+      const double my = (s.y1 - s.y0) * project->margin_percent / 100;
+      s.x0 -= mx;
+      s.x1 += mx;
+      s.y0 -= my;
+      s.y1 += my;
+    }
   }
   const double w = s.x1 - s.x0, h = s.y1 - s.y0;
   if (!(w > 0) || !(h > 0)) {
@@ -272,7 +255,8 @@ std::string NewSessionId() {
 }  // namespace
 
 int RunCommand(const std::vector<std::string>& argv) {
-  std::set<std::string> valued = {"tool",   "stock",         "spacing",
+  std::set<std::string> valued = {"tool",   "tools", "tools-units", "project",
+                                   "stock",         "spacing",
                                    "mesh",   "scheme",        "arc-tolerance",
                                    "server", "out",           "subdivide",
                                    "batch"};
@@ -294,12 +278,49 @@ int RunCommand(const std::vector<std::string>& argv) {
     std::cout << kUsage;
     return 0;
   }
-  if (args->positional().size() != 1) {
+  // The program(s) and the tools: a FILE, or a CAMotics project's files.
+  std::optional<CamoticsProject> project;
+  std::vector<std::string> files = args->positional();
+  if (auto p = args->Get("project")) {
+    if (!files.empty()) {
+      std::cerr << "swarf run: give a toolpath FILE or --project, not both\n";
+      return 2;
+    }
+    auto read = ReadCamoticsProject(*p);
+    if (!read.ok()) return fail(read.status(), 2);
+    project = *std::move(read);
+    files = project->files;
+    if (files.empty()) {
+      return fail(absl::InvalidArgumentError(
+                      absl::StrCat(*p, ": the project lists no files")),
+                  2);
+    }
+  } else if (files.size() != 1) {
     std::cerr << "swarf run: give one toolpath FILE\n" << kUsage;
     return 2;
   }
-  const std::string file = args->positional()[0];
+  const std::string file = project.has_value() ? *args->Get("project") : files[0];
   const bool json = args->Has("json");
+  std::optional<ToolTable> table;
+  if (project.has_value()) table = project->tools;
+  if (auto t = args->Get("tools")) {
+    const std::string units = args->Get("tools-units").value_or("mm");
+    if (units != "mm" && units != "inch") {
+      return fail(absl::InvalidArgumentError("--tools-units must be mm or inch"),
+                  2);
+    }
+    auto read = ReadToolTableFile(*t, units == "inch" ? 25.4 : 1);
+    if (!read.ok()) return fail(read.status(), 2);
+    table = *std::move(read);
+  }
+  if (!table.has_value() && !args->Has("tool")) {
+    return fail(absl::InvalidArgumentError(
+                    "--tool (or --tools FILE) is required, e.g. --tool "
+                    "ball:d=3.175"),
+                2);
+  }
+  auto choices = ParseToolChoices(args->All("tool"), std::move(table));
+  if (!choices.ok()) return fail(choices.status(), 2);
 
   // Parse.
   ToolpathFlags tflags;
@@ -308,10 +329,10 @@ int RunCommand(const std::vector<std::string>& argv) {
   }
   GcodeOptions& gopt = tflags.options;
   // Cutter compensation (G41/G42) needs the radius of the tool it names.
-  gopt.tool_radius = [specs = args->All("tool")](int t) -> std::optional<double> {
-    auto r = ChooseTools(specs, {t});
-    if (!r.ok()) return std::nullopt;
-    return r->at(t);
+  gopt.tool_radius = [&c = *choices](int t) -> std::optional<double> {
+    const std::optional<Cutter> cutter = KnownTool(c, t);
+    if (!cutter.has_value()) return std::nullopt;
+    return cutter->radius;
   };
   if (auto t = args->Get("arc-tolerance")) {
     if (!absl::SimpleAtod(*t, &gopt.arc_tolerance) ||
@@ -339,8 +360,18 @@ int RunCommand(const std::vector<std::string>& argv) {
   }
 
   const auto t_parse = std::chrono::steady_clock::now();
-  auto path = ReadToolpathFile(file, gopt, tflags.format);
-  if (!path.ok()) return fail(path.status(), 1);  // names the file
+  absl::StatusOr<Toolpath> path;
+  std::vector<ToolUse> uses;
+  for (const std::string& f : files) {
+    auto one = ReadToolpathFile(f, gopt, tflags.format);
+    if (!one.ok()) return fail(one.status(), 1);  // names the file
+    AddToolUses(*one, f, &uses);
+    if (path.ok()) {
+      path->AppendProgram(*one);
+    } else {
+      path = *std::move(one);
+    }
+  }
   const double parse_s = Since(t_parse);
   if (path->move_count() < 1) {
     std::cerr << "swarf run: " << file << ": no moves";
@@ -356,11 +387,12 @@ int RunCommand(const std::vector<std::string>& argv) {
       std::cerr << "swarf run: " << path->IgnoredSummary() << "\n";
     }
   }
-  auto tools = ChooseTools(args->All("tool"), path->Tools());
+  auto tools = ChooseTools(*choices, uses);
   if (!tools.ok()) return fail(tools.status(), 2);
   double max_radius = 0;
-  for (const auto& [t, r] : *tools) max_radius = std::max(max_radius, r);
-  auto stock = ChooseStock(*args, *path, max_radius);
+  for (const auto& [t, c] : *tools) max_radius = std::max(max_radius, c.radius);
+  auto stock = ChooseStock(*args, *path, max_radius,
+                           project.has_value() ? &*project : nullptr);
   if (!stock.ok()) return fail(stock.status(), 2);
   RunReport report;
   {
@@ -370,7 +402,8 @@ int RunCommand(const std::vector<std::string>& argv) {
                       &report, &warnings);
     if (!checked.ok()) {
       return fail(absl::InvalidArgumentError(
-                      absl::StrCat(file, ": ", checked.message())),
+                      absl::StrCat(files.size() == 1 ? files[0] : file, ": ",
+                                   checked.message())),
                   1);
     }
     if (!json) {
@@ -395,10 +428,8 @@ int RunCommand(const std::vector<std::string>& argv) {
   create.set_ny(stock->ny);
   create.set_scheme(server::SchemeToProto(scheme));
   std::map<int, int32_t> tool_ids;
-  for (const auto& [t, r] : *tools) {
-    pb::Tool* tool = create.add_tools();
-    tool->set_id(t);
-    tool->mutable_ball()->set_radius(r);
+  for (const auto& [t, c] : *tools) {
+    server::ToolToProto({t, c}, create.add_tools());
     tool_ids[t] = t;
   }
   pb::Session session;
@@ -415,6 +446,10 @@ int RunCommand(const std::vector<std::string>& argv) {
         stock->z_top, stock->nx, stock->ny,
         (stock->x1 - stock->x0) / stock->nx,
         GetScheme(scheme).name(), (*conn)->target());
+    for (const auto& [t, c] : *tools) {
+      std::cerr << "swarf run: tool " << t << (t == 0 ? " (no T word)" : "")
+                << ": " << CutterSummary(c) << "\n";
+    }
   }
 
   const std::vector<PathRun> runs = Runs(*path, tool_ids);
@@ -461,9 +496,12 @@ int RunCommand(const std::vector<std::string>& argv) {
   OutputOptions oopt = output_flags;
   if (auto out = args->Get("out")) oopt.dir = *out;
   oopt.subdivide = subdivide->value_or(1);
-  std::map<int32_t, double> radius_by_tool;
-  for (const auto& [t, r] : *tools) radius_by_tool[tool_ids.at(t)] = r;
-  const std::vector<Move> moves = RunMoves(runs, radius_by_tool);
+  std::map<int32_t, Cutter> cutter_by_tool;
+  for (const auto& [t, c] : *tools) {
+    cutter_by_tool[tool_ids.at(t)] = c;
+    report.tools.emplace_back(t, CutterSummary(c));
+  }
+  const std::vector<Move> moves = RunMoves(runs, cutter_by_tool);
   oopt.moves = &moves;
   absl::Status written = CollectAndWrite(**conn, id, oopt, &report);
   report.output_seconds = Since(t_out);

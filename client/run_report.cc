@@ -251,6 +251,8 @@ std::string StatsJson(const RunReport& r) {
   using Json = nlohmann::ordered_json;
   Json steps = Json::object();
   for (const auto& [name, seconds] : r.output_steps) steps[name] = seconds;
+  Json tools = Json::object();
+  for (const auto& [n, summary] : r.tools) tools[absl::StrCat(n)] = summary;
   Json j = {
       {"file", r.file},
       {"server", r.server},
@@ -258,6 +260,7 @@ std::string StatsJson(const RunReport& r) {
       {"source_lines", r.lines},
       {"node_lowerings", r.node_lowerings},
       {"scheme", std::string(GetScheme(r.scheme).name())},
+      {"tools", tools},
       {"stock",
        {{"x0", r.stock.x0}, {"y0", r.stock.y0}, {"x1", r.stock.x1},
         {"y1", r.stock.y1}, {"top", r.stock.z_top}, {"nx", r.stock.nx},

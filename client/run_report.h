@@ -30,6 +30,8 @@ struct RunReport {
   double outside_mm = 0;
   int64_t outside_line = 0;
   int64_t moves = 0, lines = 0, node_lowerings = 0;
+  // The tools used, by number: "ball d=3.175" (CutterSummary).
+  std::vector<std::pair<int, std::string>> tools;
   StockSpec stock;
   SchemeKind scheme = SchemeKind::kGuarded;
   double parse_seconds = 0, simulate_seconds = 0, output_seconds = 0;

@@ -1269,7 +1269,10 @@ absl::Status Interpreter::Execute(const Block& b) {
       return Err(absl::StrCat("T", t, " is not a tool number (0-65535)"));
     }
     last_t_ = static_cast<int32_t>(t);
-    if (!had_m6_) tool_ = static_cast<uint16_t>(last_t_);
+    if (!had_m6_) {
+      tool_ = static_cast<uint16_t>(last_t_);
+      path_.NoteToolSelected(tool_, static_cast<int32_t>(main_line_));
+    }
     used |= Bit('T');
   }
   bool m6 = false, end = false, m98 = false, m99 = false;
@@ -1286,6 +1289,7 @@ absl::Status Interpreter::Execute(const Block& b) {
           return Err(absl::StrCat("M61 Q", q, " is not a tool number"));
         }
         tool_ = static_cast<uint16_t>(q);
+        path_.NoteToolSelected(tool_, static_cast<int32_t>(main_line_));
         had_m6_ = true;
         used |= Bit('Q');
         break;
@@ -1714,7 +1718,10 @@ absl::Status Interpreter::NonModal(const Block& b, int code, uint32_t* used) {
 // The machine may travel to a tool-change position: every axis becomes
 // unknown and the next known position starts a new run.
 void Interpreter::ToolChange() {
-  if (last_t_ >= 0) tool_ = static_cast<uint16_t>(last_t_);
+  if (last_t_ >= 0) {
+    tool_ = static_cast<uint16_t>(last_t_);
+    path_.NoteToolSelected(tool_, static_cast<int32_t>(main_line_));
+  }
   had_m6_ = true;
   known_ = 0;
   in_run_ = false;

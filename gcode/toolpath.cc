@@ -71,6 +71,24 @@ void Toolpath::Append(const ToolpathPoint& p) {
   points_.push_back(pt);
 }
 
+void Toolpath::AppendProgram(const Toolpath& next) {
+  points_.reserve(points_.size() + next.points_.size());
+  for (size_t k = 0; k < next.points_.size(); ++k) {
+    ToolpathPoint p = next.points_[k];
+    if (k == 0) p.starts_run = true;
+    Append(p);
+  }
+  source_lines_ += next.source_lines_;
+  blocks_executed_ += next.blocks_executed_;
+  for (const auto& [word, n] : next.ignored_) ignored_[word] += n;
+  notes_.insert(notes_.end(), next.notes_.begin(), next.notes_.end());
+  tool_selected_.insert(next.tool_selected_.begin(), next.tool_selected_.end());
+  dropped_moves_ += next.dropped_moves_;
+  for (const DroppedMove& d : next.first_dropped_) {
+    if (first_dropped_.size() < kFirstDropped) first_dropped_.push_back(d);
+  }
+}
+
 void Toolpath::CountIgnored(const std::string& word, int64_t n) {
   ignored_[word] += n;
 }
@@ -106,6 +124,12 @@ int64_t Toolpath::ignored_total() const {
   int64_t total = 0;
   for (const auto& [word, n] : ignored_) total += n;
   return total;
+}
+
+std::optional<int32_t> Toolpath::ToolSelectedAt(int n) const {
+  auto it = tool_selected_.find(n);
+  if (it == tool_selected_.end()) return std::nullopt;
+  return it->second;
 }
 
 std::vector<int> Toolpath::Tools() const {

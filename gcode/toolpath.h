@@ -88,6 +88,9 @@ class Toolpath {
 
   // Distinct tool numbers of the points, in order of first use.
   std::vector<int> Tools() const;
+  // The line where tool number n was first selected (a T word before any
+  // M6, M6, M61), nullopt if never (tool 0 when no T word is given).
+  std::optional<int32_t> ToolSelectedAt(int n) const;
 
   // Source lines read (up to the program end).
   int64_t source_lines() const { return source_lines_; }
@@ -122,6 +125,12 @@ class Toolpath {
   // empty when none.
   std::string DroppedSummary() const;
 
+  // Appends the program run after this one (CAMotics projects run several
+  // files in order): its points, the first starting a run (each program
+  // starts from an unknown position), and its counts, notes and dropped
+  // moves (whose lines are its own file's).
+  void AppendProgram(const Toolpath& next);
+
   // Building (the parsers; tests). Append drops a point that repeats the
   // previous point's position within a run: a zero-length move sweeps
   // nothing.
@@ -132,6 +141,10 @@ class Toolpath {
   // Keeps the first kFirstDropped.
   static constexpr size_t kFirstDropped = 10;
   void AddDropped(int32_t line, unsigned missing_axes_mask);
+  // Keeps the first line per tool.
+  void NoteToolSelected(int tool, int32_t line) {
+    tool_selected_.emplace(tool, line);
+  }
   void Reserve(int64_t points) { points_.reserve(points); }
   // Gives back capacity beyond half the size over it (a trim copies every
   // point into freshly faulted memory: slow, so only for a large waste).
@@ -151,6 +164,7 @@ class Toolpath {
   std::vector<std::string> notes_;
   int64_t dropped_moves_ = 0;
   std::vector<DroppedMove> first_dropped_;
+  std::map<int, int32_t> tool_selected_;
 };
 
 enum class Dialect {

@@ -75,6 +75,71 @@ absl::StatusOr<SchemeKind> SchemeFromProto(int value,
   }
 }
 
+absl::Status ValidateTool(const ToolSpec& tool, int k) {
+  return ValidateCutter(
+      tool.cutter, absl::StrCat("tools[", k, "].",
+                                std::string(CutterKindName(tool.cutter.kind))));
+}
+
+absl::StatusOr<ToolSpec> ToolFromProto(const pb::Tool& t, int k) {
+  ToolSpec tool{t.id(), {}};
+  switch (t.shape_case()) {
+    case pb::Tool::kBall:
+      tool.cutter = Cutter::Ball(t.ball().radius());
+      break;
+    case pb::Tool::kFlat:
+      tool.cutter = Cutter::Flat(t.flat().radius());
+      break;
+    case pb::Tool::kBullNose:
+      tool.cutter = Cutter::BullNose(t.bull_nose().radius(),
+                                     t.bull_nose().corner_radius());
+      break;
+    case pb::Tool::kCone:
+      tool.cutter = Cutter::Cone(t.cone().radius(), t.cone().half_angle_deg(),
+                                 t.cone().tip_radius());
+      break;
+    case pb::Tool::kTaperedBall:
+      tool.cutter = Cutter::TaperedBall(t.tapered_ball().radius(),
+                                        t.tapered_ball().tip_radius(),
+                                        t.tapered_ball().half_angle_deg());
+      break;
+    case pb::Tool::SHAPE_NOT_SET:
+      return absl::InvalidArgumentError(absl::StrCat(
+          "tools[", k,
+          "]: a shape is required (ball, flat, bull_nose, cone or "
+          "tapered_ball)"));
+  }
+  if (absl::Status s = ValidateTool(tool, k); !s.ok()) return s;
+  return tool;
+}
+
+void ToolToProto(const ToolSpec& t, pb::Tool* out) {
+  out->set_id(t.id);
+  const Cutter& c = t.cutter;
+  switch (c.kind) {
+    case CutterKind::kBall:
+      out->mutable_ball()->set_radius(c.radius);
+      return;
+    case CutterKind::kFlat:
+      out->mutable_flat()->set_radius(c.radius);
+      return;
+    case CutterKind::kBullNose:
+      out->mutable_bull_nose()->set_radius(c.radius);
+      out->mutable_bull_nose()->set_corner_radius(c.corner_radius);
+      return;
+    case CutterKind::kCone:
+      out->mutable_cone()->set_radius(c.radius);
+      out->mutable_cone()->set_half_angle_deg(c.half_angle_deg);
+      out->mutable_cone()->set_tip_radius(c.tip_radius);
+      return;
+    case CutterKind::kTaperedBall:
+      out->mutable_tapered_ball()->set_radius(c.radius);
+      out->mutable_tapered_ball()->set_tip_radius(c.tip_radius);
+      out->mutable_tapered_ball()->set_half_angle_deg(c.half_angle_deg);
+      return;
+  }
+}
+
 absl::StatusOr<SessionSpec> SpecFromRequest(
     const pb::CreateSessionRequest& req) {
   SessionSpec spec;
@@ -110,21 +175,9 @@ absl::StatusOr<SessionSpec> SpecFromRequest(
   if (!scheme.ok()) return scheme.status();
   spec.scheme = *scheme;
   for (int k = 0; k < req.tools_size(); ++k) {
-    const pb::Tool& t = req.tools(k);
-    if (t.has_flat() || t.has_bull_nose()) {
-      return absl::UnimplementedError(absl::StrCat(
-          "tools[", k, "]: only ball-end cutters are simulated so far"));
-    }
-    if (!t.has_ball()) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("tools[", k, "]: a shape is required (ball)"));
-    }
-    if (absl::Status s = Finite(t.ball().radius(),
-                                absl::StrCat("tools[", k, "].ball.radius"));
-        !s.ok()) {
-      return s;
-    }
-    spec.tools.push_back({t.id(), t.ball().radius()});
+    auto tool = ToolFromProto(req.tools(k), k);
+    if (!tool.ok()) return tool.status();
+    spec.tools.push_back(*tool);
   }
   return spec;
 }
@@ -142,11 +195,7 @@ void FillSession(const Session& s, const std::string& replica,
   out->set_nx(spec.stock.nx);
   out->set_ny(spec.stock.ny);
   out->set_scheme(SchemeToProto(spec.scheme));
-  for (const ToolSpec& t : spec.tools) {
-    pb::Tool* tool = out->add_tools();
-    tool->set_id(t.id);
-    tool->mutable_ball()->set_radius(t.radius);
-  }
+  for (const ToolSpec& t : spec.tools) ToolToProto(t, out->add_tools());
   out->set_tile_size(kTileSize);
   // From the spec, as the workpiece computes them: an evicted session is
   // described without being reloaded.

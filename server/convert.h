@@ -23,6 +23,21 @@ namespace pb = ::swarf::v1;
 pb::Scheme SchemeToProto(SchemeKind kind);
 absl::StatusOr<SchemeKind> SchemeFromProto(int value, const std::string& field);
 
+// Tools. The API's shape oneof names the core's CutterKind one to one
+// (CutterKindName: ball, flat, bull_nose, cone, tapered_ball), so a field
+// is "tools[k].<shape>.<dimension>".
+//
+// ValidateCutter with the field prefix "tools[k].<shape>": the one
+// validation of a tool, used by ToolFromProto and Session::ValidateSpec.
+absl::Status ValidateTool(const ToolSpec& tool, int k);
+// The tool `tools[k]` of a request (or a journal's definition): its cutter,
+// validated. InvalidArgument naming "tools[k]" when it has no shape, or the
+// bad field.
+absl::StatusOr<ToolSpec> ToolFromProto(const pb::Tool& t, int k);
+// The inverse: ToolFromProto(ToolToProto(t)) == t for a valid tool (a ball
+// is written exactly as before cutters had kinds, so old journals restore).
+void ToolToProto(const ToolSpec& t, pb::Tool* out);
+
 absl::StatusOr<SessionSpec> SpecFromRequest(
     const pb::CreateSessionRequest& req);
 void FillSession(const Session& s, const std::string& replica,

@@ -22,10 +22,8 @@ absl::Status Session::ValidateSpec(const SessionSpec& spec) {
       return absl::InvalidArgumentError(
           absl::StrCat("tools[", k, "].id ", t.id, " is used twice"));
     }
-    if (!(t.radius >= kMinRadius && t.radius <= kMaxRadius)) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("tools[", k, "].ball.radius must be in [", kMinRadius,
-                       ", ", kMaxRadius, "] mm, got ", t.radius));
+    if (absl::Status s = ValidateTool(t, static_cast<int>(k)); !s.ok()) {
+      return s;
     }
   }
   return absl::OkStatus();
@@ -57,11 +55,7 @@ std::string Session::Definition(const SessionSpec& spec) {
   r.set_nx(spec.stock.nx);
   r.set_ny(spec.stock.ny);
   r.set_scheme(SchemeToProto(spec.scheme));
-  for (const ToolSpec& t : spec.tools) {
-    pb::Tool* tool = r.add_tools();
-    tool->set_id(t.id);
-    tool->mutable_ball()->set_radius(t.radius);
-  }
+  for (const ToolSpec& t : spec.tools) ToolToProto(t, r.add_tools());
   return r.SerializeAsString();
 }
 
@@ -227,7 +221,7 @@ std::vector<Move> Session::BatchMoves(const ToolSpec& tool,
   std::optional<Vec3> pos = reposition ? std::nullopt : last_position_;
   for (int64_t p = 0; p < points; ++p) {
     const Vec3 next{xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]};
-    if (pos.has_value()) moves.push_back({*pos, next, tool.radius});
+    if (pos.has_value()) moves.push_back({*pos, next, tool.cutter});
     pos = next;
   }
   *end = pos;

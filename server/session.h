@@ -16,6 +16,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/synchronization/mutex.h"
+#include "core/cutter/cutter.h"
 #include "core/geometry.h"
 #include "core/scheme.h"
 #include "core/stock.h"
@@ -27,7 +28,7 @@ namespace swarf::server {
 
 struct ToolSpec {
   int32_t id = 0;
-  double radius = 0;  // ball-end radius (mm)
+  Cutter cutter;  // valid per ValidateTool (server/convert.h)
 };
 
 struct SessionSpec {

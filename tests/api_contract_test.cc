@@ -213,6 +213,71 @@ TEST_P(ApiTest, EmptyBatchIsInvalidArgumentNamingTheFieldOnEveryServer) {
   EXPECT_EQ(Get("empty").last_seq(), 1u);
 }
 
+// ------------------------------------------------------- cutter shapes
+
+// Every cutter shape is accepted (never UNIMPLEMENTED), cuts, and GetSession
+// returns the tools exactly as created, also after a restart (from the
+// journal's definition).
+TEST_P(ApiTest, EveryCutterShapeRoundTripsThroughCreateAndGetSession) {
+  ASSERT_NO_FATAL_FAILURE(StartServer());
+  pb::CreateSessionRequest req;
+  req.set_session_id("shapes");
+  SetStock({0, 0, 10, 10, 0, 40, 40}, &req);
+  req.set_scheme(pb::SCHEME_TAYLOR);
+  auto add = [&](int32_t id) {
+    pb::Tool* t = req.add_tools();
+    t->set_id(id);
+    return t;
+  };
+  add(1)->mutable_ball()->set_radius(0.75);
+  add(2)->mutable_flat()->set_radius(0.5);
+  pb::BullNose* bull = add(3)->mutable_bull_nose();
+  bull->set_radius(1);
+  bull->set_corner_radius(0.25);
+  pb::Cone* vbit = add(4)->mutable_cone();
+  vbit->set_radius(1.5);
+  vbit->set_half_angle_deg(45);
+  vbit->set_tip_radius(0.1);
+  pb::Cone* sharp = add(5)->mutable_cone();
+  sharp->set_radius(1);
+  sharp->set_half_angle_deg(15);
+  pb::TaperedBall* taper = add(6)->mutable_tapered_ball();
+  taper->set_radius(2);
+  taper->set_tip_radius(0.5);
+  taper->set_half_angle_deg(5);
+  const grpc::Status created = Create(req);
+  ASSERT_TRUE(created.ok()) << created.error_code() << " "
+                            << created.error_message();
+  auto same_tools = [&](const pb::Session& s) {
+    ASSERT_EQ(s.tools_size(), req.tools_size());
+    for (int k = 0; k < req.tools_size(); ++k) {
+      EXPECT_EQ(s.tools(k).SerializeAsString(), req.tools(k).SerializeAsString())
+          << s.tools(k).ShortDebugString() << " vs "
+          << req.tools(k).ShortDebugString();
+    }
+  };
+  same_tools(Get("shapes"));
+  std::vector<pb::SimulateRequest> batches;
+  for (int32_t id = 1; id <= 6; ++id) {
+    batches.push_back(MovesRequest(id, id, Line(5, 1.5 * id, -0.3)));
+    batches.back().mutable_moves()->set_reposition(true);
+  }
+  const auto rs = Exchange("shapes", batches);
+  ASSERT_EQ(rs.size(), 6u);
+  for (const auto& r : rs) {
+    ASSERT_TRUE(r.has_ack()) << r.ShortDebugString();
+    EXPECT_GT(r.ack().node_lowerings(), 0) << r.ShortDebugString();
+  }
+  EXPECT_EQ(Get("shapes").moves_applied(), 24);
+  if (journaled()) {
+    ASSERT_NO_FATAL_FAILURE(StartServer());
+    const pb::Session restored = Get("shapes");
+    same_tools(restored);
+    EXPECT_EQ(restored.last_seq(), 6u);
+    EXPECT_EQ(restored.moves_applied(), 24);
+  }
+}
+
 // ------------------------------------------------------- resent seqs
 
 // Batch 2 again: the same, then altered in each part the digest covers.

@@ -208,6 +208,30 @@ pb::CreateSessionRequest SmallRequest(const std::string& id) {
   return r;
 }
 
+// Makes tool k of `r` a valid cutter of `shape` (radius 1 mm): flat,
+// bull_nose (corner 0.25), cone (45 degrees, tip 0.1), tapered_ball (tip
+// 0.25, 10 degrees); ball keeps it a ball.
+pb::Tool* Shape(pb::CreateSessionRequest* r, int k, const std::string& shape) {
+  pb::Tool* t = r->mutable_tools(k);
+  if (shape == "ball") {
+    t->mutable_ball()->set_radius(1);
+  } else if (shape == "flat") {
+    t->mutable_flat()->set_radius(1);
+  } else if (shape == "bull_nose") {
+    t->mutable_bull_nose()->set_radius(1);
+    t->mutable_bull_nose()->set_corner_radius(0.25);
+  } else if (shape == "cone") {
+    t->mutable_cone()->set_radius(1);
+    t->mutable_cone()->set_half_angle_deg(45);
+    t->mutable_cone()->set_tip_radius(0.1);
+  } else if (shape == "tapered_ball") {
+    t->mutable_tapered_ball()->set_radius(1);
+    t->mutable_tapered_ball()->set_tip_radius(0.25);
+    t->mutable_tapered_ball()->set_half_angle_deg(10);
+  }
+  return t;
+}
+
 pb::SimulateRequest BatchRequest(uint64_t seq, const std::vector<double>& xyz,
                                  int32_t tool = kToolId) {
   return MovesRequest(seq, tool, xyz);
@@ -545,6 +569,39 @@ TEST_F(BadInputTest, NonFiniteInEveryCreateSessionField) {
        [](auto* r, double v) { r->mutable_tools(0)->mutable_ball()->set_radius(v); }},
       {"tools[1].ball.radius", false,
        [](auto* r, double v) { r->mutable_tools(1)->mutable_ball()->set_radius(v); }},
+      // Every dimension of every other shape, the others valid.
+      {"tools[0].flat.radius", false,
+       [](auto* r, double v) { Shape(r, 0, "flat")->mutable_flat()->set_radius(v); }},
+      {"tools[1].bull_nose.radius", false,
+       [](auto* r, double v) {
+         Shape(r, 1, "bull_nose")->mutable_bull_nose()->set_radius(v);
+       }},
+      {"tools[1].bull_nose.corner_radius", false,
+       [](auto* r, double v) {
+         Shape(r, 1, "bull_nose")->mutable_bull_nose()->set_corner_radius(v);
+       }},
+      {"tools[0].cone.radius", false,
+       [](auto* r, double v) { Shape(r, 0, "cone")->mutable_cone()->set_radius(v); }},
+      {"tools[0].cone.half_angle_deg", false,
+       [](auto* r, double v) {
+         Shape(r, 0, "cone")->mutable_cone()->set_half_angle_deg(v);
+       }},
+      {"tools[0].cone.tip_radius", false,
+       [](auto* r, double v) {
+         Shape(r, 0, "cone")->mutable_cone()->set_tip_radius(v);
+       }},
+      {"tools[1].tapered_ball.radius", false,
+       [](auto* r, double v) {
+         Shape(r, 1, "tapered_ball")->mutable_tapered_ball()->set_radius(v);
+       }},
+      {"tools[1].tapered_ball.tip_radius", false,
+       [](auto* r, double v) {
+         Shape(r, 1, "tapered_ball")->mutable_tapered_ball()->set_tip_radius(v);
+       }},
+      {"tools[1].tapered_ball.half_angle_deg", false,
+       [](auto* r, double v) {
+         Shape(r, 1, "tapered_ball")->mutable_tapered_ball()->set_half_angle_deg(v);
+       }},
   };
   int n = 0;
   for (const Field& f : fields) {
@@ -638,9 +695,73 @@ TEST_F(BadInputTest, NegativeOrZeroSizesAndOtherBadFields) {
        kInvalid, "tools[1].id"},
       {"tool without shape", [](R* r) { r->mutable_tools(0)->clear_ball(); },
        kInvalid, "tools[0]"},
-      {"flat tool",
-       [](R* r) { r->mutable_tools(0)->mutable_flat()->set_radius(1); },
-       grpc::StatusCode::UNIMPLEMENTED, "tools[0]"},
+      // Each shape's negative, zero, huge and inconsistent dimensions
+      // (the other dimensions valid: see Shape).
+      {"flat radius 0",
+       [](R* r) { Shape(r, 0, "flat")->mutable_flat()->set_radius(0); },
+       kInvalid, "tools[0].flat.radius"},
+      {"flat radius -1",
+       [](R* r) { Shape(r, 1, "flat")->mutable_flat()->set_radius(-1); },
+       kInvalid, "tools[1].flat.radius"},
+      {"flat radius 1e6",
+       [](R* r) { Shape(r, 0, "flat")->mutable_flat()->set_radius(1e6); },
+       kInvalid, "tools[0].flat.radius"},
+      {"bull-nose radius -1",
+       [](R* r) { Shape(r, 0, "bull_nose")->mutable_bull_nose()->set_radius(-1); },
+       kInvalid, "tools[0].bull_nose.radius"},
+      {"bull-nose corner -0.1",
+       [](R* r) {
+         Shape(r, 0, "bull_nose")->mutable_bull_nose()->set_corner_radius(-0.1);
+       },
+       kInvalid, "tools[0].bull_nose.corner_radius"},
+      {"bull-nose corner above the radius",
+       [](R* r) {
+         Shape(r, 1, "bull_nose")->mutable_bull_nose()->set_corner_radius(1.5);
+       },
+       kInvalid, "tools[1].bull_nose.corner_radius"},
+      {"cone radius 0",
+       [](R* r) { Shape(r, 0, "cone")->mutable_cone()->set_radius(0); },
+       kInvalid, "tools[0].cone.radius"},
+      {"cone half angle 0",
+       [](R* r) { Shape(r, 0, "cone")->mutable_cone()->set_half_angle_deg(0); },
+       kInvalid, "tools[0].cone.half_angle_deg"},
+      {"cone half angle 90",
+       [](R* r) { Shape(r, 0, "cone")->mutable_cone()->set_half_angle_deg(90); },
+       kInvalid, "tools[0].cone.half_angle_deg"},
+      {"cone half angle -30",
+       [](R* r) { Shape(r, 1, "cone")->mutable_cone()->set_half_angle_deg(-30); },
+       kInvalid, "tools[1].cone.half_angle_deg"},
+      {"cone tip -0.1",
+       [](R* r) { Shape(r, 0, "cone")->mutable_cone()->set_tip_radius(-0.1); },
+       kInvalid, "tools[0].cone.tip_radius"},
+      {"cone tip above the radius",
+       [](R* r) { Shape(r, 0, "cone")->mutable_cone()->set_tip_radius(1.01); },
+       kInvalid, "tools[0].cone.tip_radius"},
+      {"tapered ball radius 1e6",
+       [](R* r) {
+         Shape(r, 0, "tapered_ball")->mutable_tapered_ball()->set_radius(1e6);
+       },
+       kInvalid, "tools[0].tapered_ball.radius"},
+      {"tapered ball tip 0",
+       [](R* r) {
+         Shape(r, 0, "tapered_ball")->mutable_tapered_ball()->set_tip_radius(0);
+       },
+       kInvalid, "tools[0].tapered_ball.tip_radius"},
+      {"tapered ball tip above the radius",
+       [](R* r) {
+         Shape(r, 1, "tapered_ball")->mutable_tapered_ball()->set_tip_radius(2);
+       },
+       kInvalid, "tools[1].tapered_ball.tip_radius"},
+      {"tapered ball half angle 90",
+       [](R* r) {
+         Shape(r, 0, "tapered_ball")->mutable_tapered_ball()->set_half_angle_deg(90);
+       },
+       kInvalid, "tools[0].tapered_ball.half_angle_deg"},
+      {"tapered ball half angle -1",
+       [](R* r) {
+         Shape(r, 0, "tapered_ball")->mutable_tapered_ball()->set_half_angle_deg(-1);
+       },
+       kInvalid, "tools[0].tapered_ball.half_angle_deg"},
       {"unknown scheme", [](R* r) { r->set_scheme(static_cast<pb::Scheme>(7)); },
        kInvalid, "scheme"},
       {"bad id", [](R* r) { r->set_session_id("no spaces"); }, kInvalid,

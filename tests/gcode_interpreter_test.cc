@@ -691,6 +691,30 @@ TEST(DroppedTest, MovesAfterM6AndWithoutZAreCountedAndNamed) {
                     HasSubstr("line 3 (Z unknown)"), testing::EndsWith(", ...")));
 }
 
+// Where each tool is first selected (for errors naming the T word's line):
+// a T word alone before any M6, then M6 and M61; programs appended keep
+// their first lines and start a run each.
+TEST(ToolSelectionTest, TheLineOfTheFirstSelectionOfEachTool) {
+  Toolpath tp = MustRun(
+      "G21\nT4\nG0 X0 Y0 Z5\nG1 Z-1\nT1 M6\nG0 X0 Y0 Z5\nG1 Z-1\nT2\n"
+      "G1 X1\nM6\nG0 X0 Y0 Z5\nG1 Z-1\nM61 Q7\nG1 X3\nT1 M6\nG0 X0 Y0 Z5\n");
+  EXPECT_EQ(tp.ToolSelectedAt(4), 2);
+  EXPECT_EQ(tp.ToolSelectedAt(1), 5);  // not 15
+  EXPECT_EQ(tp.ToolSelectedAt(2), 10);  // the M6, not the T word on line 8
+  EXPECT_EQ(tp.ToolSelectedAt(7), 13);
+  EXPECT_FALSE(tp.ToolSelectedAt(0).has_value());
+  EXPECT_FALSE(MustRun("G21 G0 X0 Y0 Z1\nG1 Z-1\n").ToolSelectedAt(0).has_value());
+  const Toolpath next = MustRun("G21\nT9 M6\nG0 X0 Y0 Z5\nG1 Z-1\nX4\n");
+  const int64_t points = tp.point_count(), runs = tp.run_count();
+  tp.AppendProgram(next);
+  EXPECT_EQ(tp.ToolSelectedAt(9), 2);
+  EXPECT_EQ(tp.ToolSelectedAt(1), 5);
+  EXPECT_EQ(tp.point_count(), points + next.point_count());
+  EXPECT_EQ(tp.run_count(), runs + next.run_count());
+  EXPECT_TRUE(tp.points()[points].starts_run);
+  EXPECT_EQ(tp.move_count(), tp.point_count() - tp.run_count());
+}
+
 TEST(DroppedTest, TheCutOutsideTheStockIsFound) {
   const Toolpath tp = MustRun(
       "G21 G0 X-5 Y0 Z5\nG1 Z-1\nX3\nX12 Y4\nG0 Z5\nG0 X30\nG1 X31 Z1\n");

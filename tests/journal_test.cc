@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "gtest/gtest.h"
+#include "server/convert.h"
 #include "server/registry.h"
 
 namespace swarf::server {
@@ -38,7 +39,7 @@ SessionSpec Spec(const std::string& id) {
   s.id = id;
   s.stock = {0, 0, 10, 10, 0, 100, 100};
   s.scheme = SchemeKind::kTaylor;
-  s.tools = {{1, 0.5}};
+  s.tools = {{1, Cutter::Ball(0.5)}};
   return s;
 }
 
@@ -178,6 +179,62 @@ TEST_F(JournalTest, RestartReplaysToTheSameStateAndContinues) {
   Registry r2(Limits{}, Durable());
   ASSERT_EQ(*r2.RestoreAll(), 1);
   EXPECT_TRUE(Take(**r2.Get("job")) == after);
+}
+
+// Journals written before cutters had kinds hold a ball as BallEnd in the
+// definition: the definition of a ball session is still those bytes, and
+// they restore to the same spec.
+TEST_F(JournalTest, BallDefinitionIsTheBytesOfEarlierJournals) {
+  const SessionSpec spec = Spec("old");
+  v1::CreateSessionRequest before;  // as Definition wrote it before
+  before.set_session_id("old");
+  before.mutable_stock()->set_x1(10);
+  before.mutable_stock()->set_y1(10);
+  before.set_nx(100);
+  before.set_ny(100);
+  before.set_scheme(v1::SCHEME_TAYLOR);
+  v1::Tool* tool = before.add_tools();
+  tool->set_id(1);
+  tool->mutable_ball()->set_radius(0.5);
+  EXPECT_EQ(Session::Definition(spec), before.SerializeAsString());
+  auto back = SpecFromRequest(before);
+  ASSERT_TRUE(back.ok()) << back.status();
+  ASSERT_EQ(back->tools.size(), 1u);
+  EXPECT_EQ(back->tools[0].id, 1);
+  EXPECT_EQ(back->tools[0].cutter, Cutter::Ball(0.5));
+}
+
+// A session with a tool of every shape, cut with each, restores from its
+// journal with the same tools and the same nodes.
+TEST_F(JournalTest, EveryCutterShapeRestoresWithItsTools) {
+  SessionSpec spec = Spec("shapes");
+  spec.tools = {{1, Cutter::Ball(0.5)},
+                {2, Cutter::Flat(0.4)},
+                {3, Cutter::BullNose(0.6, 0.2)},
+                {4, Cutter::Cone(0.7, 30, 0.05)},
+                {5, Cutter::TaperedBall(0.8, 0.25, 8)}};
+  NodeState cut;
+  {
+    Registry r(Limits{}, Durable());
+    ASSERT_TRUE(r.RestoreAll().ok());
+    auto s = r.Create(spec);
+    ASSERT_TRUE(s.ok()) << s.status();
+    for (int k = 1; k <= 10; ++k) {
+      ASSERT_TRUE((*s)->ApplyBatch(k, 1 + (k - 1) % 5, Points(k), 1000).ok());
+    }
+    cut = Take(**s);
+  }
+  Registry r(Limits{}, Durable());
+  ASSERT_EQ(*r.RestoreAll(), 1);
+  auto s = *r.Get("shapes");
+  EXPECT_EQ(s->recovery(), "");
+  ASSERT_EQ(s->spec().tools.size(), spec.tools.size());
+  for (size_t k = 0; k < spec.tools.size(); ++k) {
+    EXPECT_EQ(s->spec().tools[k].id, spec.tools[k].id);
+    EXPECT_EQ(s->spec().tools[k].cutter, spec.tools[k].cutter)
+        << CutterToString(s->spec().tools[k].cutter);
+  }
+  EXPECT_TRUE(Take(*s) == cut);
 }
 
 TEST_F(JournalTest, DamagedBatchRestoresUpToTheLastWholeOne) {

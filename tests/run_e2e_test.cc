@@ -213,6 +213,245 @@ TEST(RunE2eNeverSilentTest, DroppedMovesCutsOutsideAndErrors) {
   std::filesystem::remove_all(dir);
 }
 
+// ------------------------------------------------- tools and projects
+
+void WriteFile(const std::filesystem::path& path, const std::string& text) {
+  std::filesystem::create_directories(path.parent_path());
+  std::ofstream(path) << text;
+}
+
+// RunCommand with std::cerr captured into *err.
+int RunCapturing(const std::vector<std::string>& argv, std::string* err) {
+  std::stringstream captured;
+  std::streambuf* old = std::cerr.rdbuf(captured.rdbuf());
+  const int rc = RunCommand(argv);
+  std::cerr.rdbuf(old);
+  *err = captured.str();
+  return rc;
+}
+
+class RunProjectTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("swarf-e2e-project-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::remove_all(dir_);
+    // Two programs: a metric one with T1 (a 2 mm ball), an inch one in a
+    // subdirectory with T2 (a 1/8 in flat end, given in inches).
+    WriteFile(dir_ / "part1.nc",
+              "G21\nT1 M6\nG0 X2 Y2 Z5\nG1 Z-1 F100\nX18\nG0 Z5\n");
+    WriteFile(dir_ / "sub" / "part2.nc",
+              "G20\nT2 M6\nG0 X0.1 Y0.3 Z0.2\nG1 Z-0.02\nX0.6\nG0 Z0.2\n");
+  }
+  void TearDown() override { std::filesystem::remove_all(dir_); }
+
+  // A project over `files` with tools 1 and 2 as above (tool 2's shape
+  // `shape2`) and a 20 x 10 mm workpiece (margin 5, not automatic).
+  std::string Project(const std::string& files,
+                      const std::string& shape2 = "cylindrical") {
+    const std::string path = (dir_ / "job.camotics").string();
+    WriteFile(path, R"({
+      "units": "metric",
+      "tools": {
+        "1": {"units": "metric", "shape": "ballnose", "length": 10,
+              "diameter": 2},
+        "2": {"units": "imperial", "shape": ")" + shape2 + R"(", "length": 1,
+              "diameter": 0.125}
+      },
+      "workpiece": {"automatic": false, "margin": 5,
+                    "bounds": {"min": [0, 0, -5], "max": [20, 10, 0]}},
+      "files": [)" + files + "]}");
+    return path;
+  }
+
+  std::filesystem::path dir_;
+};
+
+TEST_F(RunProjectTest, RunsTheFilesInOrderWithTheProjectsToolsAndWorkpiece) {
+  const std::string out = (dir_ / "out").string();
+  std::string err;
+  ASSERT_EQ(RunCapturing({"--project", Project(R"("part1.nc", "sub/part2.nc")"),
+                          "--spacing", "0.25", "--out", out, "--quiet"},
+                         &err),
+            0)
+      << err;
+  const auto p1 = ReadToolpathFile((dir_ / "part1.nc").string());
+  const auto p2 = ReadToolpathFile((dir_ / "sub" / "part2.nc").string());
+  ASSERT_TRUE(p1.ok() && p2.ok());
+  const google::protobuf::Struct stats = ReadJson(out + "/stats.json");
+  const auto& f = stats.fields();
+  EXPECT_EQ(f.at("moves").number_value(), p1->move_count() + p2->move_count());
+  // The workpiece as given: CAMotics ignores the margin when not automatic.
+  const auto& st = f.at("stock").struct_value().fields();
+  EXPECT_EQ(st.at("x0").number_value(), 0);
+  EXPECT_EQ(st.at("y0").number_value(), 0);
+  EXPECT_EQ(st.at("x1").number_value(), 20);
+  EXPECT_EQ(st.at("y1").number_value(), 10);
+  EXPECT_EQ(st.at("top").number_value(), 0);
+  const auto& tools = f.at("tools").struct_value().fields();
+  ASSERT_EQ(tools.size(), 2u);
+  EXPECT_EQ(tools.at("1").string_value(), "ball d=2");
+  EXPECT_EQ(tools.at("2").string_value(), "flat d=3.175");  // inches
+  // The first file's groove reaches its tip depth on the nodes under it
+  // (the top surface's lowest vertex; the mesh's bottom plane is below).
+  const Stl stl = ReadStl(out + "/surface.stl");
+  float bottom = 1e30f;
+  for (const auto& t : stl.triangles) {
+    for (int v = 0; v < 3; ++v) bottom = std::min(bottom, t[3 * v + 2]);
+  }
+  float lowest_top = 1e30f;
+  for (const auto& t : stl.triangles) {
+    for (int v = 0; v < 3; ++v) {
+      if (t[3 * v + 2] > bottom + 1e-3f) {
+        lowest_top = std::min(lowest_top, t[3 * v + 2]);
+      }
+    }
+  }
+  EXPECT_NEAR(lowest_top, -1, 1e-5);
+}
+
+// "automatic": true: the stock from the toolpath (its XY bounds plus the
+// tool radius, top 0), grown by the margin, percent of its size, as CAMotics
+// grows its automatic workpiece.
+TEST_F(RunProjectTest, AutomaticWorkpieceGrowsByTheMarginPercent) {
+  std::string project = Project(R"("part1.nc")");
+  std::string text;
+  {
+    std::ifstream in(project);
+    text.assign(std::istreambuf_iterator<char>(in), {});
+  }
+  const std::string given = "\"automatic\": false, \"margin\": 5";
+  const size_t at = text.find(given);
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, given.size(), "\"automatic\": true, \"margin\": 10");
+  WriteFile(project, text);
+  std::stringstream out;
+  std::streambuf* old = std::cout.rdbuf(out.rdbuf());
+  std::string err;
+  const int rc = RunCapturing({"--project", project, "--spacing", "0.25",
+                               "--json", "--quiet"},
+                              &err);
+  std::cout.rdbuf(old);
+  ASSERT_EQ(rc, 0) << err;
+  google::protobuf::Struct stats;
+  ASSERT_TRUE(
+      google::protobuf::util::JsonStringToMessage(out.str(), &stats).ok());
+  // part1.nc: X2..18 at Y2 with a 2 mm ball: [1, 19] x [1, 3], then 10%.
+  const auto& st = stats.fields().at("stock").struct_value().fields();
+  EXPECT_DOUBLE_EQ(st.at("x0").number_value(), 1 - 1.8);
+  EXPECT_DOUBLE_EQ(st.at("x1").number_value(), 19 + 1.8);
+  EXPECT_DOUBLE_EQ(st.at("y0").number_value(), 1 - 0.2);
+  EXPECT_DOUBLE_EQ(st.at("y1").number_value(), 3 + 0.2);
+  EXPECT_EQ(st.at("top").number_value(), 0);
+}
+
+TEST_F(RunProjectTest, ToolErrorsNameTheLineAndTheTool) {
+  WriteFile(dir_ / "t3.nc", "G21\n(T3 is the tool)\nT3 M6\nG0 X1 Y1 Z5\nG1 Z-1\n");
+  std::string err;
+  EXPECT_EQ(RunCapturing({"--project", Project(R"("part1.nc", "t3.nc")"),
+                          "--quiet"},
+                         &err),
+            2);
+  EXPECT_NE(err.find("t3.nc line 3: T3 is not in the tool table " +
+                     (dir_ / "job.camotics").string() + " (T1, T2)"),
+            std::string::npos)
+      << err;
+  // A shape swarf can't simulate, used: an error naming the tool.
+  EXPECT_EQ(RunCapturing({"--project", Project(R"("sub/part2.nc")", "spheroid"),
+                          "--quiet"},
+                         &err),
+            2);
+  EXPECT_NE(err.find("part2.nc line 2: T2: "), std::string::npos) << err;
+  EXPECT_NE(err.find("job.camotics tool \"2\": spheroid"), std::string::npos)
+      << err;
+  // A program and --project at once; a project without files.
+  EXPECT_EQ(RunCapturing({(dir_ / "part1.nc").string(), "--project",
+                          Project(R"("part1.nc")"), "--quiet"},
+                         &err),
+            2);
+  EXPECT_EQ(RunCapturing({"--project", Project(""), "--quiet"}, &err), 2);
+  EXPECT_NE(err.find("the project lists no files"), std::string::npos) << err;
+  // A bad --tool names the option and its key.
+  EXPECT_EQ(RunCapturing({(dir_ / "part1.nc").string(), "--tool",
+                          "vbit:d=6,angle=200", "--quiet"},
+                         &err),
+            2);
+  EXPECT_NE(err.find("--tool \"vbit:d=6,angle=200\": angle must be"),
+            std::string::npos)
+      << err;
+}
+
+TEST_F(RunProjectTest, LinuxCncToolTableAndNumberedTools) {
+  const std::string tbl = (dir_ / "tools.tbl").string();
+  WriteFile(tbl, "T1 P1 D4 ;bull r=1\nT2 P2 D0.25 ;ball\n");
+  const std::string prog = (dir_ / "both.nc").string();
+  WriteFile(prog,
+            "G21\nT1 M6\nG0 X2 Y2 Z5\nG1 Z-1\nX18\nG0 Z5\n"
+            "T2 M6\nG0 X2 Y6 Z5\nG1 Z-0.5\nX18\nG0 Z5\n");
+  const std::string out = (dir_ / "out").string();
+  std::string err;
+  ASSERT_EQ(RunCapturing({prog, "--tools", tbl, "--tools-units", "inch",
+                          "--tool", "T2=vbit:d=3,angle=60", "--stock",
+                          "0,0,20,10,0", "--spacing", "0.25", "--out", out,
+                          "--quiet"},
+                         &err),
+            0)
+      << err;
+  const google::protobuf::Struct stats = ReadJson(out + "/stats.json");
+  const auto& tools = stats.fields().at("tools").struct_value().fields();
+  ASSERT_EQ(tools.size(), 2u);
+  EXPECT_EQ(tools.at("1").string_value(), "bull d=101.6 r=1");  // D in inches
+  EXPECT_EQ(tools.at("2").string_value(), "vbit d=3 angle=60");  // --tool wins
+
+  // Cutter compensation takes the radius of the table's tool D names.
+  const std::string comp = (dir_ / "comp.nc").string();
+  WriteFile(comp,
+            "G21 G17\nT1 M6\nG0 X-5 Y-5 Z1\nG1 Z-1\nG41 D1\nG1 X0 Y0\nX10\n"
+            "G40\nG1 X15 Y-5\n");
+  EXPECT_EQ(RunCapturing({comp, "--tools", tbl, "--spacing", "0.5", "--quiet"},
+                         &err),
+            0)
+      << err;
+  WriteFile(comp, "G21 G17\nT1 M6\nG0 X-5 Y-5 Z1\nG1 Z-1\nG41 D3\nG1 X0 Y0\n");
+  EXPECT_EQ(RunCapturing({comp, "--tools", tbl, "--quiet"}, &err), 1);
+  EXPECT_NE(err.find("line 5: G41: the radius of tool 3 is unknown"),
+            std::string::npos)
+      << err;
+}
+
+// The corpus' new projects run unmodified with the tools they name.
+TEST(RunCorpusProjectTest, FlowerMoldAndVcarve) {
+  if (!std::filesystem::exists(std::string(SWARF_CORPUS_DIR) + "/vcarve.camotics")) {
+    GTEST_SKIP() << "no corpus at " << SWARF_CORPUS_DIR;
+  }
+  for (const auto& [name, program, tool] :
+       {std::tuple{"vcarve", "vcarve.ngc", "vbit d=2 angle=53.1301"},
+        std::tuple{"flower_mold", "flower_mold.nc", "flat d=1"}}) {
+    SCOPED_TRACE(name);
+    const std::string dir = std::string(SWARF_CORPUS_DIR) + "/";
+    const std::string out =
+        (std::filesystem::temp_directory_path() /
+         ("swarf-e2e-" + std::string(name) + "-project-" + std::to_string(::getpid())))
+            .string();
+    std::string err;
+    ASSERT_EQ(RunCapturing({"--project", dir + name + ".camotics", "--spacing",
+                            "0.5", "--out", out, "--quiet"},
+                           &err),
+              0)
+        << err;
+    const google::protobuf::Struct stats = ReadJson(out + "/stats.json");
+    const auto& f = stats.fields();
+    EXPECT_EQ(f.at("moves").number_value(),
+              ReadToolpathFile(dir + program)->move_count());
+    // No T word in these programs: the project's only tool.
+    EXPECT_EQ(f.at("tools").struct_value().fields().at("0").string_value(), tool);
+    EXPECT_TRUE(std::isfinite(
+        f.at("error").struct_value().fields().at("max").number_value()));
+    std::filesystem::remove_all(out);
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(
     Corpus, RunE2eTest,
     ::testing::Values(std::tuple{"bear.nc", "ball:d=3.175"},

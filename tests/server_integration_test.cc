@@ -1307,15 +1307,15 @@ TEST_F(ServerTest, CreateSessionRejectsBadRequestsNamingTheField) {
        grpc::StatusCode::INVALID_ARGUMENT, "session_id"},
       {"id too long", [](auto* r) { r->set_session_id(std::string(65, 'a')); },
        grpc::StatusCode::INVALID_ARGUMENT, "session_id"},
-      {"flat tool",
-       [](auto* r) { r->mutable_tools(1)->mutable_flat()->set_radius(3); },
-       grpc::StatusCode::UNIMPLEMENTED, "tools[1]"},
-      {"bull-nose tool",
+      {"flat tool of zero radius",
+       [](auto* r) { r->mutable_tools(1)->mutable_flat()->set_radius(0); },
+       grpc::StatusCode::INVALID_ARGUMENT, "tools[1].flat.radius"},
+      {"bull-nose corner above the radius",
        [](auto* r) {
          r->mutable_tools(0)->mutable_bull_nose()->set_radius(3);
-         r->mutable_tools(0)->mutable_bull_nose()->set_corner_radius(1);
+         r->mutable_tools(0)->mutable_bull_nose()->set_corner_radius(4);
        },
-       grpc::StatusCode::UNIMPLEMENTED, "tools[0]"},
+       grpc::StatusCode::INVALID_ARGUMENT, "tools[0].bull_nose.corner_radius"},
   };
   for (const BadCreate& c : cases) {
     SCOPED_TRACE(c.what);

@@ -329,6 +329,58 @@ TEST_F(ViewerApiTest, ProbeMarksErrorMapAndPathAreTheApis) {
   EXPECT_EQ(local->status, 200);
 }
 
+// The page draws every tool from /api/session: each shape with its
+// dimensions, as the API gives them.
+TEST_F(ViewerApiTest, SessionListsEveryCutterShape) {
+  pb::CreateSessionRequest req;
+  req.set_session_id("viewer-shapes");
+  req.mutable_stock()->set_x1(10);
+  req.mutable_stock()->set_y1(10);
+  req.set_nx(10);
+  req.set_ny(10);
+  for (int k = 1; k <= 5; ++k) req.add_tools()->set_id(k);
+  req.mutable_tools(0)->mutable_ball()->set_radius(2);
+  req.mutable_tools(1)->mutable_flat()->set_radius(1.5);
+  req.mutable_tools(2)->mutable_bull_nose()->set_radius(3);
+  req.mutable_tools(2)->mutable_bull_nose()->set_corner_radius(0.5);
+  req.mutable_tools(3)->mutable_cone()->set_radius(3);
+  req.mutable_tools(3)->mutable_cone()->set_half_angle_deg(45);
+  req.mutable_tools(3)->mutable_cone()->set_tip_radius(0.1);
+  req.mutable_tools(4)->mutable_tapered_ball()->set_radius(2);
+  req.mutable_tools(4)->mutable_tapered_ball()->set_tip_radius(0.25);
+  req.mutable_tools(4)->mutable_tapered_ball()->set_half_angle_deg(5);
+  {
+    pb::Session s;
+    auto ctx = conn_->Context("viewer-shapes");
+    ASSERT_TRUE(conn_->stub().CreateSession(ctx.get(), req, &s).ok());
+  }
+  ViewerOptions o;
+  auto viewer = Viewer::Start(conn_.get(), "viewer-shapes", o);
+  ASSERT_TRUE(viewer.ok()) << viewer.status();
+  httplib::Client http("127.0.0.1", (*viewer)->port());
+  auto r = http.Get("/api/session");
+  ASSERT_TRUE(r && r->status == 200);
+  const auto session = Json(r->body);
+  const auto& tools = session.fields().at("tools").list_value().values();
+  ASSERT_EQ(tools.size(), 5);
+  auto field = [&](int k, const char* name) {
+    return tools[k].struct_value().fields().at(name);
+  };
+  const char* shapes[] = {"ball", "flat", "bull_nose", "cone", "tapered_ball"};
+  for (int k = 0; k < 5; ++k) {
+    EXPECT_EQ(field(k, "id").number_value(), k + 1);
+    EXPECT_EQ(field(k, "shape").string_value(), shapes[k]);
+  }
+  EXPECT_EQ(field(0, "radius").number_value(), 2);
+  EXPECT_EQ(field(1, "radius").number_value(), 1.5);
+  EXPECT_EQ(field(2, "corner_radius").number_value(), 0.5);
+  EXPECT_EQ(field(3, "half_angle_deg").number_value(), 45);
+  EXPECT_EQ(field(3, "tip_radius").number_value(), 0.1);
+  EXPECT_EQ(field(4, "radius").number_value(), 2);
+  EXPECT_EQ(field(4, "tip_radius").number_value(), 0.25);
+  EXPECT_EQ(field(4, "half_angle_deg").number_value(), 5);
+}
+
 TEST_F(ViewerApiTest, StartErrorsNameWhatIsWrong) {
   ViewerOptions o;
   auto missing = Viewer::Start(conn_.get(), "no-such-session", o);

@@ -364,6 +364,16 @@ class ViewerImpl {
         w.Key("shape").String("bull_nose");
         w.Key("radius").Double(t.bull_nose().radius());
         w.Key("corner_radius").Double(t.bull_nose().corner_radius());
+      } else if (t.has_cone()) {
+        w.Key("shape").String("cone");
+        w.Key("radius").Double(t.cone().radius());
+        w.Key("half_angle_deg").Double(t.cone().half_angle_deg());
+        w.Key("tip_radius").Double(t.cone().tip_radius());
+      } else if (t.has_tapered_ball()) {
+        w.Key("shape").String("tapered_ball");
+        w.Key("radius").Double(t.tapered_ball().radius());
+        w.Key("tip_radius").Double(t.tapered_ball().tip_radius());
+        w.Key("half_angle_deg").Double(t.tapered_ball().half_angle_deg());
       }
       w.EndObject();
     }

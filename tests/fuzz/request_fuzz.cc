@@ -76,7 +76,7 @@ std::shared_ptr<Session> NewSession(SchemeKind scheme, int32_t nx,
   spec.id = "fuzz";
   spec.stock = {0, 0, 10, 10, 0, nx, ny};
   spec.scheme = scheme;
-  spec.tools = {{1, 1.0}, {2, 0.25}};
+  spec.tools = {{1, Cutter::Ball(1.0)}, {2, Cutter::Ball(0.25)}};
   auto s = Session::Create(std::move(spec));
   FUZZ_CHECK(s.ok());
   return *s;
@@ -189,14 +189,14 @@ void FuzzCreate(const pb::CreateSessionRequest& req) {
   FUZZ_CHECK(spec2->tools.size() == got.tools.size());
   for (size_t k = 0; k < got.tools.size(); ++k) {
     FUZZ_CHECK(spec2->tools[k].id == got.tools[k].id &&
-               spec2->tools[k].radius == got.tools[k].radius);
+               spec2->tools[k].cutter == got.tools[k].cutter);
   }
   FUZZ_CHECK(out.tiles_x() * int64_t{out.tiles_y()} >= 1);
 
   // A diagonal plunge through the stock with the first tool; the memory
   // held stays within the admission estimate.
   if (nodes > kMaxCutNodes) return;
-  const double z = b.z_top - 0.5 * got.tools[0].radius;
+  const double z = b.z_top - 0.5 * got.tools[0].cutter.radius;
   const std::vector<double> xyz = {b.x0, b.y0, b.z_top + 1, b.x0, b.y0, z,
                                    b.x1, b.y1, z};
   auto r = (*session)->ApplyBatch(1, got.tools[0].id, xyz, 16);

@@ -125,6 +125,29 @@ int main(int argc, char** argv) {
     r.mutable_tools(0)->mutable_ball()->set_radius(-kInf);
     seeds.Write("create_inf_radius", kCreate, r.SerializeAsString());
   }
+  {
+    // One tool of every shape, then inconsistent dimensions.
+    pb::CreateSessionRequest r = Create(10, 10, 20, 20);
+    r.add_tools()->set_id(2);
+    r.mutable_tools(1)->mutable_flat()->set_radius(1);
+    r.add_tools()->set_id(3);
+    r.mutable_tools(2)->mutable_bull_nose()->set_radius(2);
+    r.mutable_tools(2)->mutable_bull_nose()->set_corner_radius(0.5);
+    r.add_tools()->set_id(4);
+    r.mutable_tools(3)->mutable_cone()->set_radius(1);
+    r.mutable_tools(3)->mutable_cone()->set_half_angle_deg(45);
+    r.mutable_tools(3)->mutable_cone()->set_tip_radius(0.1);
+    r.add_tools()->set_id(5);
+    r.mutable_tools(4)->mutable_tapered_ball()->set_radius(3);
+    r.mutable_tools(4)->mutable_tapered_ball()->set_tip_radius(0.5);
+    r.mutable_tools(4)->mutable_tapered_ball()->set_half_angle_deg(5);
+    seeds.Write("create_shapes", kCreate, r.SerializeAsString());
+    r.mutable_tools(3)->mutable_cone()->set_half_angle_deg(90);
+    seeds.Write("create_flat_cone", kCreate, r.SerializeAsString());
+    r.mutable_tools(3)->mutable_cone()->set_half_angle_deg(45);
+    r.mutable_tools(2)->mutable_bull_nose()->set_corner_radius(2.5);
+    seeds.Write("create_bad_corner", kCreate, r.SerializeAsString());
+  }
   seeds.Write("create_huge", kCreate,
               Create(1e4, 1e4, 1000000, 1000000).SerializeAsString());
   seeds.Write("create_limit", kCreate,

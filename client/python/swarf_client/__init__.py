@@ -9,12 +9,16 @@
             s.send(np.array([[10, 50, 5], [10, 50, -2], [90, 50, -2]]))
             h = s.heights()          # h.z[j, i] at (h.x[i], h.y[j]), mm
 
+Tools: a number is a ball-end radius; Ball, Flat, BullNose, Cone and
+TaperedBall describe every cutter (radii and half angles, as the API).
 Millimetres and degrees throughout; moves are tool-TIP positions. Errors
 are SwarfError carrying the gRPC status code.
 """
 
-from .client import (TILE_SIZE, Client, ErrorStats, Heights, Jets, Mark,
-                     ProbeResult, SendResult, Session, SwarfError)
+from .client import (TILE_SIZE, Ball, BullNose, Client, Cone, Cutter,
+                     ErrorStats, Flat, Heights, Jets, Mark, ProbeResult,
+                     SendResult, Session, SwarfError, TaperedBall)
 
 __all__ = ["Client", "Session", "SwarfError", "SendResult", "Heights",
-           "Jets", "ErrorStats", "Mark", "ProbeResult", "TILE_SIZE"]
+           "Jets", "ErrorStats", "Mark", "ProbeResult", "TILE_SIZE", "Ball",
+           "Flat", "BullNose", "Cone", "TaperedBall", "Cutter"]

@@ -26,7 +26,8 @@ from ._proto import swarf_pb2_grpc as pb_grpc
 
 __all__ = [
     "Client", "Session", "SwarfError", "SendResult", "Heights", "Jets",
-    "ErrorStats", "Mark", "ProbeResult", "TILE_SIZE",
+    "ErrorStats", "Mark", "ProbeResult", "TILE_SIZE", "Ball", "Flat",
+    "BullNose", "Cone", "TaperedBall", "Cutter",
 ]
 
 TILE_SIZE = 64  # nodes per tile side (Session.tile_size)
@@ -47,6 +48,93 @@ _CODES = {c.value[0]: c for c in grpc.StatusCode}
 
 FloatArray = npt.NDArray[np.float64]
 ArrayLike = npt.ArrayLike
+
+
+# ------------------------------------------------------------------ cutters
+# The proto's Tool shapes, in its terms: radii (mm) and HALF angles (degrees,
+# the flank against the axis: a 90 degree V-bit has 45). Every cutter is
+# positioned by its tip; the server validates the dimensions
+# (INVALID_ARGUMENT naming e.g. "tools[1].cone.half_angle_deg").
+
+
+@dataclasses.dataclass(frozen=True)
+class Ball:
+    """A ball-end cutter."""
+    radius: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Flat:
+    """A flat-end cutter: a flat disk bottom and a cylindrical side."""
+    radius: float
+
+
+@dataclasses.dataclass(frozen=True)
+class BullNose:
+    """A flat annulus of radius - corner_radius and a torus corner."""
+    radius: float
+    corner_radius: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Cone:
+    """A V-bit, chamfer mill or engraver: a flat tip of tip_radius (0:
+    sharp), a flank at half_angle_deg from the axis up to radius."""
+    radius: float
+    half_angle_deg: float
+    tip_radius: float = 0.0
+
+
+@dataclasses.dataclass(frozen=True)
+class TaperedBall:
+    """A ball tip of tip_radius tangent to a flank at half_angle_deg from
+    the axis, up to radius."""
+    radius: float
+    tip_radius: float
+    half_angle_deg: float
+
+
+Cutter = Union[Ball, Flat, BullNose, Cone, TaperedBall]
+
+
+def _tool_proto(tool_id: int, cutter: Union[float, Cutter]) -> Any:
+    """The proto Tool for a cutter (a bare number: a ball's radius)."""
+    t = pb.Tool(id=int(tool_id))
+    if isinstance(cutter, Ball):
+        t.ball.radius = float(cutter.radius)
+    elif isinstance(cutter, Flat):
+        t.flat.radius = float(cutter.radius)
+    elif isinstance(cutter, BullNose):
+        t.bull_nose.radius = float(cutter.radius)
+        t.bull_nose.corner_radius = float(cutter.corner_radius)
+    elif isinstance(cutter, Cone):
+        t.cone.radius = float(cutter.radius)
+        t.cone.half_angle_deg = float(cutter.half_angle_deg)
+        t.cone.tip_radius = float(cutter.tip_radius)
+    elif isinstance(cutter, TaperedBall):
+        t.tapered_ball.radius = float(cutter.radius)
+        t.tapered_ball.tip_radius = float(cutter.tip_radius)
+        t.tapered_ball.half_angle_deg = float(cutter.half_angle_deg)
+    else:
+        t.ball.radius = float(cutter)
+    return t
+
+
+def _cutter_of(t: Any) -> Optional[Cutter]:
+    """The cutter of a proto Tool (None without a shape)."""
+    shape = t.WhichOneof("shape")
+    if shape == "ball":
+        return Ball(t.ball.radius)
+    if shape == "flat":
+        return Flat(t.flat.radius)
+    if shape == "bull_nose":
+        return BullNose(t.bull_nose.radius, t.bull_nose.corner_radius)
+    if shape == "cone":
+        return Cone(t.cone.radius, t.cone.half_angle_deg, t.cone.tip_radius)
+    if shape == "tapered_ball":
+        return TaperedBall(t.tapered_ball.radius, t.tapered_ball.tip_radius,
+                           t.tapered_ball.half_angle_deg)
+    return None
 
 
 class SwarfError(Exception):
@@ -266,7 +354,8 @@ class Client:
                        spacing: Optional[float] = None,
                        nx: Optional[int] = None, ny: Optional[int] = None,
                        scheme: str = "taylor",
-                       tools: Union[Mapping[int, float], float] = 1.0,
+                       tools: Union[Mapping[int, Union[float, Cutter]],
+                                    float, Cutter] = 1.0,
                        session_id: str = "",
                        delete_on_exit: bool = False) -> "Session":
         """Creates a session.
@@ -277,11 +366,13 @@ class Client:
             counts along x and y (nodes: nx + 1, ny + 1).
           scheme: "taylor" (heights and derivatives, the paper's eq. 1-2),
             "zmap", "guarded" (the server's default) or "exact".
-          tools: {tool id: ball-end radius (mm)}, or one radius (tool id 1).
+          tools: {tool id: cutter}, or one cutter (tool id 1); a cutter is
+            Ball, Flat, BullNose, Cone or TaperedBall, or a number: a
+            ball-end radius (mm).
           session_id: 1-64 of [A-Za-z0-9_-]; generated when empty.
           delete_on_exit: the session's `with` block deletes it.
         Raises SwarfError (INVALID_ARGUMENT naming the field,
-        ALREADY_EXISTS, RESOURCE_EXHAUSTED, UNIMPLEMENTED).
+        ALREADY_EXISTS, RESOURCE_EXHAUSTED).
         """
         if scheme not in _SCHEMES:
             raise SwarfError(grpc.StatusCode.INVALID_ARGUMENT,
@@ -296,9 +387,9 @@ class Client:
         if nx is not None or ny is not None:
             req.nx, req.ny = int(nx or 0), int(ny or 0)
         if not isinstance(tools, Mapping):
-            tools = {1: float(tools)}
-        for tool_id, radius in tools.items():
-            req.tools.add(id=int(tool_id), ball=pb.BallEnd(radius=float(radius)))
+            tools = {1: tools}
+        for tool_id, cutter in tools.items():
+            req.tools.append(_tool_proto(tool_id, cutter))
         info = self._call("CreateSession", req, session_id)
         return Session(self, info, delete_on_exit=delete_on_exit)
 
@@ -424,8 +515,15 @@ class Session:
 
     @property
     def tools(self) -> Dict[int, float]:
-        """{tool id: ball radius (mm)}."""
-        return {t.id: t.ball.radius for t in self._info.tools}
+        """{tool id: the cutter's (outer) radius (mm)}."""
+        return {t.id: c.radius for t in self._info.tools
+                if (c := _cutter_of(t)) is not None}
+
+    @property
+    def cutters(self) -> Dict[int, Cutter]:
+        """{tool id: its cutter (Ball, Flat, BullNose, Cone, TaperedBall)}."""
+        return {t.id: c for t in self._info.tools
+                if (c := _cutter_of(t)) is not None}
 
     @property
     def last_seq(self) -> int:

@@ -147,6 +147,38 @@ def test_resume_after_the_server_is_killed_and_restarted(tmp_path):
         server.stop()
 
 
+def test_every_cutter_shape_round_trips(client):
+    cutters = {1: swarf_client.Ball(1.5), 2: swarf_client.Flat(0.5),
+               3: swarf_client.BullNose(1.0, 0.25),
+               4: swarf_client.Cone(1.5, 45.0, 0.1),
+               5: swarf_client.Cone(1.0, 15.0),
+               6: swarf_client.TaperedBall(2.0, 0.5, 5.0), 7: 0.75}
+    with client.create_session((0, 0, 10, 10, 0), spacing=0.25,
+                               tools=cutters, delete_on_exit=True) as s:
+        want = {k: swarf_client.Ball(c) if isinstance(c, float) else c
+                for k, c in cutters.items()}
+        assert s.cutters == want
+        assert s.tools == {k: c.radius for k, c in want.items()}
+        again = client.session(s.id)
+        assert again.cutters == want
+        for k in cutters:
+            r = s.send(np.array([[1, 1 + k, 1], [1, 1 + k, -0.3],
+                                 [9, 1 + k, -0.3]]), tool=k, reposition=True)
+            assert r.node_lowerings > 0
+    # Bad dimensions: INVALID_ARGUMENT naming the field.
+    for tools, field in [
+            ({1: swarf_client.Cone(1.0, 90.0)}, "tools[0].cone.half_angle_deg"),
+            ({1: 1.0, 2: swarf_client.BullNose(1.0, 2.0)},
+             "tools[1].bull_nose.corner_radius"),
+            ({1: swarf_client.TaperedBall(1.0, 0.0, 5.0)},
+             "tools[0].tapered_ball.tip_radius"),
+            ({1: swarf_client.Flat(float("nan"))}, "tools[0].flat.radius")]:
+        with pytest.raises(SwarfError) as e:
+            client.create_session((0, 0, 10, 10, 0), spacing=1, tools=tools)
+        assert e.value.code == grpc.StatusCode.INVALID_ARGUMENT
+        assert field in e.value.message
+
+
 def test_error_paths(client):
     with pytest.raises(SwarfError) as e:
         client.create_session((0, 0, -5, 10, 0), spacing=1)
