@@ -1069,6 +1069,120 @@ double NormalAngle(double ax, double ay, double bx, double by) {
   return std::atan2(std::sqrt(cx * cx + cy * cy + cz * cz), dot);
 }
 
+namespace {
+
+// Height and gradient of surface `id` (a move, or kStockTopOwner) at (x, y)
+// from the exact sweeps; false where the sweep does not reach.
+bool ExactSurface(const Workpiece& wp, int32_t id, double x, double y,
+                  SurfaceJet* j) {
+  if (id == kStockTopOwner) {
+    *j = SurfaceJet{wp.spec().z_top, 0, 0, 0, 0, 0};
+    return true;
+  }
+  if (id < 0 || id >= wp.move_count()) return false;
+  *j = wp.surfaces().Jet(id, x, y);
+  return j->w < kInf;
+}
+
+// The move lowest at (x, y) (kStockTopOwner where none is below the top),
+// over the moves indexed at that point.
+int32_t LowestMove(const Workpiece& wp, double x, double y, double* w) {
+  *w = wp.spec().z_top;
+  int32_t lowest = kStockTopOwner;
+  if (!wp.grid().bounds().Contains(x, y)) return lowest;
+  const MoveIndex& index = wp.index();
+  for (uint32_t id : index.Bin(index.BinOfElement(wp.grid().ElementX(x),
+                                                  wp.grid().ElementY(y)))) {
+    const double h = wp.MoveHeight(id, x, y);
+    if (h < *w) {
+      *w = h;
+      lowest = static_cast<int32_t>(id);
+    }
+  }
+  return lowest;
+}
+
+// Newton on (S_a - S_b, S_a - S_c) = 0: where three surfaces meet.
+bool TriplePoint(const Workpiece& wp, int32_t a_id, int32_t b_id,
+                 int32_t c_id, double max_step, double t1, double* x,
+                 double* y, SurfaceJet* a, SurfaceJet* b) {
+  SurfaceJet c;
+  const double x0 = *x, y0 = *y;
+  for (int it = 0; it < 16; ++it) {
+    if (!ExactSurface(wp, a_id, *x, *y, a) ||
+        !ExactSurface(wp, b_id, *x, *y, b) ||
+        !ExactSurface(wp, c_id, *x, *y, &c)) {
+      return false;
+    }
+    const double f0 = a->w - b->w, f1 = a->w - c.w;
+    if (std::fabs(f0) <= t1 && std::fabs(f1) <= t1) return true;
+    const double j00 = a->wx - b->wx, j01 = a->wy - b->wy;
+    const double j10 = a->wx - c.wx, j11 = a->wy - c.wy;
+    const double det = j00 * j11 - j01 * j10;
+    if (!(std::fabs(det) > 0)) return false;
+    double sx = -(j11 * f0 - j01 * f1) / det;
+    double sy = -(-j10 * f0 + j00 * f1) / det;
+    const double len = std::hypot(sx, sy);
+    if (len > max_step) {
+      sx *= max_step / len;
+      sy *= max_step / len;
+    }
+    *x += sx;
+    *y += sy;
+    if (std::hypot(*x - x0, *y - y0) > 2 * max_step) return false;
+  }
+  return false;
+}
+
+}  // namespace
+
+void ProjectOntoExactCrease(const Workpiece& wp,
+                            const std::array<int32_t, 2>& owners,
+                            double max_step, double t1, Vec3* v,
+                            double* angle_deg) {
+  // Newton on d = S_a - S_b along its gradient (the nearest point of the
+  // crease, to first order); each step at most max_step, so a vertex never
+  // jumps to another crease of the same two surfaces.
+  double x = v->x, y = v->y;
+  SurfaceJet a, b;
+  for (int it = 0; it < 16; ++it) {
+    if (!ExactSurface(wp, owners[0], x, y, &a) ||
+        !ExactSurface(wp, owners[1], x, y, &b)) {
+      return;
+    }
+    const double d = a.w - b.w;
+    if (std::fabs(d) <= t1) {
+      // On the crease of a and b; where a third surface lies below it, the
+      // vertex is a junction: where the three meet.
+      double w;
+      const int32_t c = LowestMove(wp, x, y, &w);
+      if (w < std::min(a.w, b.w) - t1 && c != owners[0] && c != owners[1] &&
+          !TriplePoint(wp, owners[0], owners[1], c, max_step, t1, &x, &y, &a,
+                       &b)) {
+        return;
+      }
+      v->x = x;
+      v->y = y;
+      v->z = std::min(a.w, wp.spec().z_top);
+      *angle_deg = NormalAngle(a.wx, a.wy, b.wx, b.wy) * 180 / std::numbers::pi;
+      return;
+    }
+    const double gx = a.wx - b.wx, gy = a.wy - b.wy;
+    const double g2 = gx * gx + gy * gy;
+    if (!(g2 > 0)) return;
+    double sx = -d * gx / g2, sy = -d * gy / g2;
+    const double len = std::hypot(sx, sy);
+    if (len > max_step) {
+      sx *= max_step / len;
+      sy *= max_step / len;
+    }
+    x += sx;
+    y += sy;
+    if (std::hypot(x - v->x, y - v->y) > 2 * max_step) return;  // diverged
+  }
+  // Not converged: the vertex stays where the patches put it.
+}
+
 absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
     const Workpiece& wp, const MarkOptions& options) {
   if (!wp.scheme().stores_derivatives()) {
@@ -1182,6 +1296,14 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
           p.vertices[k].z =
               std::max(p.vertices[k].z, ReachOf(wp.moves(), id, s.z_top).z_low);
         }
+      }
+    }
+  }
+  if (wp.scheme().kind() == SchemeKind::kExact) {
+    for (MarkPolyline& p : marks) {
+      for (size_t k = 0; k < p.vertices.size(); ++k) {
+        ProjectOntoExactCrease(wp, p.vertex_owners[k], h, s.t1, &p.vertices[k],
+                               &p.angle_deg[k]);
       }
     }
   }

@@ -4,8 +4,11 @@
 //
 // Contract:
 // - Units: millimetres; angles in degrees unless a name says otherwise.
-// - Needs the taylor scheme (the patches of eq. 1); a zmap workpiece gives
-//   FailedPrecondition.
+// - Needs node derivatives (the patches of eq. 1: taylor, guarded, exact); a
+//   zmap workpiece gives FailedPrecondition. For the exact scheme every
+//   vertex is then moved onto the exact crease of its two owners' swept
+//   surfaces (ProjectOntoExactCrease): x, y on the true crease within t1 in
+//   height, z the exact height.
 // - A "surface" is identified by the owner of the nodes it set: a move id, or
 //   -1 for the stock top (z_top, flat). In an element the surface of owner o
 //   is the minimum of the eq. (1) patches of the corners owned by o, and the
@@ -140,6 +143,19 @@ double SlopeDifference(double ax, double ay, double bx, double by);
 double NormalAngle(double ax, double ay, double bx, double by);
 
 // Accuracy, for tests and `swarf marks --check`.
+
+// For the exact scheme: moves vertex *v onto the exact crease between the
+// surfaces of `owners` (a move id or kStockTopOwner) by Newton steps of at
+// most max_step (mm) until the two exact heights agree within t1 (mm), and
+// sets its z to the exact height and *angle_deg to the exact normals'
+// angle. Where a third surface lies below that crease point, the vertex is
+// a junction and goes to where the three meet. Left unchanged where that
+// fails (a sweep not reaching, parallel gradients, no convergence within 2
+// max_step).
+void ProjectOntoExactCrease(const Workpiece& wp,
+                            const std::array<int32_t, 2>& owners,
+                            double max_step, double t1, Vec3* v,
+                            double* angle_deg);
 
 // Distance (mm, in XY) from (x, y) to the exact crease between the surfaces
 // of moves a and b (-1: the stock top), to first order:

@@ -526,6 +526,35 @@ TEST(CuttingMarksTest, VerticesAreCloseToTheExactCreases) {
   }
 }
 
+// The exact scheme's marks lie on the exact creases: every vertex where the
+// two owners' exact swept surfaces meet (to first order, 1e-9 of an element
+// instead of the patches' 1/50), at their exact height; the same marks as
+// the paper scheme's otherwise (count and owners).
+TEST(CuttingMarksTest, ExactSchemeVerticesAreOnTheExactCreases) {
+  for (const char* name : {"five-balls", "five-cylinders"}) {
+    auto inst = PaperInstance(name, 100);
+    ASSERT_TRUE(inst.ok());
+    auto taylor = Cut(inst->stock, inst->moves);
+    auto exact = Cut(inst->stock, inst->moves, SchemeKind::kExact);
+    const auto tm = Marks(*taylor);
+    const auto em = Marks(*exact);
+    ASSERT_EQ(em.size(), tm.size()) << name;
+    for (size_t k = 0; k < em.size(); ++k) {
+      EXPECT_EQ(em[k].owners, tm[k].owners) << name;
+    }
+    const MarkAccuracy t_acc = MeasureMarkAccuracy(*taylor, tm);
+    const MarkAccuracy e_acc = MeasureMarkAccuracy(*exact, em);
+    EXPECT_GT(t_acc.max_distance, 1e-4) << name;
+    EXPECT_LE(e_acc.max_distance, 1e-9 * Spacing(*exact))
+        << name << " at (" << e_acc.max_x << ", " << e_acc.max_y << ")";
+    for (const MarkPolyline& p : em) {
+      for (const Vec3& v : p.vertices) {
+        EXPECT_NEAR(v.z, exact->ExactHeight(v.x, v.y), 1e-8) << name;
+      }
+    }
+  }
+}
+
 // ---------------------------------------------------------------------------
 
 // Random cuts on coarse grids: whatever the geometry, polylines are well
