@@ -1,0 +1,19 @@
+#include "core/cutter/flat_sweep.h"
+
+namespace swarf {
+
+Profile FlatSweep::MakeProfile(double radius) {
+  Profile p;
+  p.radius = radius;
+  p.pieces = 1;
+  p.piece[0].kind = ProfilePiece::kFlat;
+  p.piece[0].rho0 = 0;
+  p.piece[0].rho1 = radius;
+  return p;
+}
+
+FlatSweep::FlatSweep(const Vec3& tip_from, const Vec3& tip_to, double radius)
+    : ProfileSweep(tip_from, tip_to, Cutter::Flat(radius),
+                   MakeProfile(radius)) {}
+
+}  // namespace swarf
