@@ -55,14 +55,16 @@ double TorusContact(double rho_c, double rc, double abs_m, double abs_n) {
     *df = -rc * t * c * c * c * s - (s > 0 ? rho * abs_m * mt / s : kInf);
     return rho * s - abs_n;
   };
-  // Start from the horizontal move's contact (cos(psi) = (|n| - rho_c) /
-  // rc), which is exact as m -> 0, where it lies inside the bracket.
-  double t = 0.5 * hi;
+  // Bounds on the root: rho(t) >= max(|n|, rho_c) (rho decreases in t,
+  // and S <= 1) bounds t above by the horizontal move's contact, and
+  // S(t) = |n| / rho(t) <= |n| / max(|n|, rho_c) bounds it below. Start
+  // from the upper one (exact as m -> 0) where it is finite.
   const double e = abs_n - rho_c;
-  if (e > 0 && e < rc) {
-    const double guess = Leg(rc, e) / e;
-    if (guess > lo && guess < hi) t = guess;
-  }
+  const double rho_min = std::max(abs_n, rho_c);
+  lo = std::max(lo, Leg(rho_min, abs_n) / (rho_min * abs_m));
+  if (e > 0) hi = std::min(hi, Leg(rc, e) / e);
+  if (!(lo < hi)) return hi;  // the bounds met: t is known to rounding
+  double t = e > 0 && hi < 1 / abs_m ? hi : lo;
   for (int iter = 0; iter < 100; ++iter) {
     double df;
     const double v = f(t, &df);
@@ -73,8 +75,11 @@ double TorusContact(double rho_c, double rc, double abs_m, double abs_n) {
       hi = t;
     }
     double next = t - v / df;
-    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
-    if (std::fabs(next - t) <= 2.3e-16 * std::max(t, next)) {
+    const bool newton = next > lo && next < hi;
+    if (!newton) next = 0.5 * (lo + hi);
+    // Newton converges quadratically: after a step below 1e-9 of t the
+    // next one would be below rounding.
+    if (std::fabs(next - t) <= (newton ? 1e-9 : 2.3e-16) * std::max(t, next)) {
       t = next;
       break;
     }
@@ -96,6 +101,21 @@ double ProfilePiece::Height(double rho) const {
       return hc - Leg(rc, rho - rho_c);
   }
   return h0;
+}
+
+double ProfilePiece::Slope(double rho) const {
+  switch (kind) {
+    case kFlat:
+      return 0;
+    case kLine:
+      return k;
+    case kSphere:
+    case kTorus: {
+      const double e = rho - rho_c, d = Leg(rc, e);
+      return d > 0 ? e / d : e > 0 ? kInf : 0;
+    }
+  }
+  return 0;
 }
 
 ProfileSweep::ProfileSweep(const Vec3& tip_from, const Vec3& tip_to,
@@ -156,6 +176,23 @@ ProfilePoint ProfileSweep::Locate(double x, double y) const {
   if (an > r) return best;  // the tool passes beside (x, y)
   const double z0 = from_.z, m = m_, am = std::fabs(m);
   auto inside = [&](double s) { return s >= 0 && s <= len_; };
+  // One-sided slopes of g(s) = z0 + m s + f(rho(s)) at the ends, d rho/ds
+  // = (s - a) / rho. An end the tool does not cover counts as falling
+  // (start) or rising (end): the reach begins or ends at the vertical wall.
+  auto slope_at = [&](double vx, double vy, double s_minus_a) {
+    const double rho = std::sqrt(vx * vx + vy * vy);
+    if (rho > r) return kInf;
+    if (rho == 0) return m;  // on the axis: f'(0) = 0 for the torus' band
+    return m + pf.Slope(rho) * s_minus_a / rho;
+  };
+  auto falls_at = [&](double vx, double vy, double a_) {
+    const double d = slope_at(vx, vy, -a_);
+    return d == kInf || d < 0;
+  };
+  auto rises_at = [&](double x_, double y_, double a_) {
+    const double d = slope_at(x_ - to_.x, y_ - to_.y, len_ - a_);
+    return d == kInf || d > 0;
+  };
 
   // 1. Stationary points of the smooth pieces (g'(s) = 0).
   for (int32_t i = 0; i < pf.pieces; ++i) {
@@ -194,6 +231,10 @@ ProfilePoint ProfileSweep::Locate(double x, double y) const {
       }
       case ProfilePiece::kTorus: {
         if (an < pc.rho_c && m == 0) break;  // only the flat band there
+        // g is convex: unless it falls at the move's start and rises at
+        // its end, its minimum over the move is an end, and the solve
+        // below can be skipped.
+        if (m != 0 && !(falls_at(px, py, a) && rises_at(x, y, a))) break;
         double sin_psi, cos_psi, u;
         if (m == 0) {
           // Horizontal move: the contact is abeam (u = 0), on the torus'

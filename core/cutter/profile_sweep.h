@@ -63,6 +63,7 @@ struct ProfilePiece {
   double hc = 0;     // arc: its centre's height above the tip
   double rc = 0;     // arc: its radius
   double Height(double rho) const;  // f on this piece
+  double Slope(double rho) const;   // f' on this piece (+inf at a rim)
 };
 
 // A cutter's lower surface as pieces, innermost first, ending at radius.
@@ -75,6 +76,7 @@ struct Profile {
     return (pieces > 1 && rho > piece[0].rho1) ? 1 : 0;
   }
   double Height(double rho) const { return piece[PieceAt(rho)].Height(rho); }
+  double Slope(double rho) const { return piece[PieceAt(rho)].Slope(rho); }
 };
 
 // Where (x, y) lies on the swept surface: which candidate set the height.
