@@ -607,6 +607,40 @@ TEST(ProfileSweep, HeightsAndJetsAreBitIdenticalToHeight) {
   }
 }
 
+// Extreme but valid input: tiny and huge tools, near-vertical ramps (slope
+// up to 1e12), far coordinates. Heights are never NaN and never below the
+// lowest tip; derivatives are finite and bounded.
+TEST(ProfileSweep, ExtremeMovesStayFinite) {
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> unit(0, 1);
+  const Cutter cutters[] = {
+      Cutter::Flat(1e-4),          Cutter::BullNose(1e-4, 5e-5),
+      Cutter::BullNose(1e5, 1),    Cutter::Cone(1e-4, 0.001, 0),
+      Cutter::Cone(50, 89.999, 1), Cutter::TaperedBall(1e5, 1e-4, 45),
+      Cutter::TaperedBall(3, 2.9, 0.01)};
+  for (const Cutter& c : cutters) {
+    ASSERT_TRUE(ValidateCutter(c, "t").ok()) << CutterToString(c);
+    for (double base : {0.0, 1e9 - 100}) {
+      for (double dxy : {0.0, 1e-9, 1e-6, 1e-3, 1.0, 100.0}) {
+        const Vec3 a{base, base, 1}, b{base + dxy, base + 0.5 * dxy, -2};
+        const Sweep s(a, b, c);
+        for (int k = 0; k < 200; ++k) {
+          const double x = base + (unit(rng) - 0.3) * (dxy + 2 * c.radius);
+          const double y = base + (unit(rng) - 0.5) * (dxy + 2 * c.radius);
+          const SurfaceJet j = s.JetAt(x, y);
+          ASSERT_FALSE(std::isnan(j.w)) << CutterToString(c) << " " << dxy;
+          if (std::isinf(j.w)) continue;
+          EXPECT_GE(j.w, s.lowest());
+          for (double d : {j.wx, j.wy, j.wxx, j.wxy, j.wyy}) {
+            ASSERT_TRUE(std::isfinite(d)) << CutterToString(c) << " " << dxy;
+            EXPECT_LE(std::fabs(d), kMaxDerivative);
+          }
+        }
+      }
+    }
+  }
+}
+
 // ---------------------------------------------------------------------------
 // The workpiece with each shape: every node is the minimum of the top and
 // of the moves' Sweep::Height (the lowest id on ties), and on taylor its
