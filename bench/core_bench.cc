@@ -13,6 +13,13 @@
 namespace swarf {
 namespace {
 
+// A counter of the wall time per iteration divided by `moves`.
+benchmark::Counter TimePerMove(size_t moves) {
+  return benchmark::Counter(static_cast<double>(moves),
+                            benchmark::Counter::kIsIterationInvariantRate |
+                                benchmark::Counter::kInvert);
+}
+
 // Sweep evaluation alone: a sloped move evaluated over the nodes of its
 // footprint, height only (Locate) or with derivatives (Jet).
 template <bool kJet>
@@ -103,10 +110,7 @@ void BM_FinishingMoves(benchmark::State& state, SchemeKind scheme) {
     state.ResumeTiming();
   }
   state.SetItemsProcessed(state.iterations() * moves.size());
-  state.counters["ns_per_move"] = benchmark::Counter(
-      static_cast<double>(moves.size()),
-      benchmark::Counter::kIsIterationInvariantRate |
-          benchmark::Counter::kInvert);
+  state.counters["ns_per_move"] = TimePerMove(moves.size());
 }
 BENCHMARK_CAPTURE(BM_FinishingMoves, zmap, SchemeKind::kZmap)
     ->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
@@ -121,36 +125,23 @@ BENCHMARK_CAPTURE(BM_FinishingMoves, taylor, SchemeKind::kTaylor)
 //   ramp then cleared by passes along x at 40% stepover in 10 mm moves
 //   (1,260 moves, mostly horizontal).
 // Counters: ns per move, and nodes lowered per second (node_lowerings).
-Cutter FinishingCutter(CutterKind kind) {
+// The shape of `kind` with outer radius r, in the proportions of common
+// tools: bull-nose corner 0.4 r, 90 degree V-bit with a flat tip of r / 6,
+// tapered ball tip r / 3 with a 10 degree half angle.
+Cutter ShapeCutter(CutterKind kind, double r) {
   switch (kind) {
     case CutterKind::kBall:
-      return Cutter::Ball(0.5);
+      return Cutter::Ball(r);
     case CutterKind::kFlat:
-      return Cutter::Flat(0.5);
+      return Cutter::Flat(r);
     case CutterKind::kBullNose:
-      return Cutter::BullNose(0.5, 0.2);
+      return Cutter::BullNose(r, 0.4 * r);
     case CutterKind::kCone:
-      return Cutter::Cone(0.5, 45, 0);
+      return Cutter::Cone(r, 45, r / 6);
     case CutterKind::kTaperedBall:
-      return Cutter::TaperedBall(0.5, 0.1, 10);
+      return Cutter::TaperedBall(r, r / 3, 10);
   }
-  return Cutter::Ball(0.5);
-}
-
-Cutter RoughingCutter(CutterKind kind) {
-  switch (kind) {
-    case CutterKind::kBall:
-      return Cutter::Ball(3);
-    case CutterKind::kFlat:
-      return Cutter::Flat(3);
-    case CutterKind::kBullNose:
-      return Cutter::BullNose(3, 1);
-    case CutterKind::kCone:
-      return Cutter::Cone(3, 45, 0.5);
-    case CutterKind::kTaperedBall:
-      return Cutter::TaperedBall(3, 1, 10);
-  }
-  return Cutter::Ball(3);
+  return Cutter::Ball(r);
 }
 
 std::vector<Move> WithCutter(std::vector<Move> moves, const Cutter& c) {
@@ -182,8 +173,8 @@ void BM_ShapePath(benchmark::State& state, CutterKind kind, bool finishing,
                   SchemeKind scheme) {
   const std::vector<Move> moves =
       finishing ? WithCutter(FinishingRaster(0.2, 0.1, 100),
-                             FinishingCutter(kind))
-                : RoughingPath(RoughingCutter(kind));
+                             ShapeCutter(kind, 0.5))
+                : RoughingPath(ShapeCutter(kind, 3));
   constexpr size_t kBatch = 10000;
   int64_t lowered = 0;
   for (auto _ : state) {
@@ -199,10 +190,7 @@ void BM_ShapePath(benchmark::State& state, CutterKind kind, bool finishing,
     wp.reset();
     state.ResumeTiming();
   }
-  state.counters["ns_per_move"] = benchmark::Counter(
-      static_cast<double>(moves.size()),
-      benchmark::Counter::kIsIterationInvariantRate |
-          benchmark::Counter::kInvert);
+  state.counters["ns_per_move"] = TimePerMove(moves.size());
   state.counters["nodes_per_s"] = benchmark::Counter(
       static_cast<double>(lowered), benchmark::Counter::kIsRate);
 }
@@ -245,10 +233,7 @@ void BM_RecordMoves(benchmark::State& state) {
     wp.reset();
     state.ResumeTiming();
   }
-  state.counters["ns_per_move"] = benchmark::Counter(
-      static_cast<double>(moves.size()),
-      benchmark::Counter::kIsIterationInvariantRate |
-          benchmark::Counter::kInvert);
+  state.counters["ns_per_move"] = TimePerMove(moves.size());
 }
 BENCHMARK(BM_RecordMoves)->Unit(benchmark::kMillisecond)->UseRealTime();
 

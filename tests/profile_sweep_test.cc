@@ -697,15 +697,14 @@ TEST(ProfileSweep, WorkpieceNodesAreTheSweeps) {
       for (int32_t j = 0; j <= g.ny(); ++j) {
         for (int32_t i = 0; i <= g.nx(); ++i) {
           const double x = g.NodeX(i), y = g.NodeY(j);
-          double w = spec.z_top;
-          int32_t owner = -1;
-          for (size_t m = 0; m < sweeps.size(); ++m) {
-            const double h = sweeps[m].Height(x, y);
-            if (h < w) {
-              w = h;
-              owner = static_cast<int32_t>(m);
-            }
-          }
+          std::vector<double> heights;
+          for (const Sweep& s : sweeps) heights.push_back(s.Height(x, y));
+          // The first of equal minima: the lowest id wins ties.
+          const auto low = std::min_element(heights.begin(), heights.end());
+          const bool below = *low < spec.z_top;
+          const double w = below ? *low : spec.z_top;
+          const int32_t owner =
+              below ? static_cast<int32_t>(low - heights.begin()) : -1;
           const NodeValue nv = wp->Node(i, j);
           ASSERT_EQ(std::bit_cast<uint64_t>(nv.jet.w),
                     std::bit_cast<uint64_t>(w))

@@ -9,17 +9,11 @@ Profile BullNoseSweep::MakeProfile(double radius, double corner_radius) {
   Profile p;
   p.radius = radius;
   const double flat = radius - corner_radius;
-  if (flat > 0) {
-    p.piece[p.pieces].kind = ProfilePiece::kFlat;
-    p.piece[p.pieces].rho0 = 0;
-    p.piece[p.pieces].rho1 = flat;
-    ++p.pieces;
-  }
-  ProfilePiece& arc = p.piece[p.pieces++];
+  if (flat > 0) p.Add(ProfilePiece::kFlat, 0, flat);
   // corner == radius: the centre circle shrinks to the axis, a sphere.
-  arc.kind = flat > 0 ? ProfilePiece::kTorus : ProfilePiece::kSphere;
-  arc.rho0 = flat > 0 ? flat : 0;
-  arc.rho1 = radius;
+  ProfilePiece& arc =
+      flat > 0 ? p.Add(ProfilePiece::kTorus, flat, radius)
+               : p.Add(ProfilePiece::kSphere, 0, radius);
   arc.rho_c = arc.rho0;
   arc.hc = corner_radius;
   arc.rc = corner_radius;

@@ -12,17 +12,8 @@ Profile ConeSweep::MakeProfile(double radius, double half_angle_deg,
   if (tip_radius >= radius) return FlatSweep::MakeProfile(radius);
   Profile p;
   p.radius = radius;
-  if (tip_radius > 0) {
-    p.piece[p.pieces].kind = ProfilePiece::kFlat;
-    p.piece[p.pieces].rho0 = 0;
-    p.piece[p.pieces].rho1 = tip_radius;
-    ++p.pieces;
-  }
-  ProfilePiece& flank = p.piece[p.pieces++];
-  flank.kind = ProfilePiece::kLine;
-  flank.rho0 = tip_radius;
-  flank.rho1 = radius;
-  flank.h0 = 0;
+  if (tip_radius > 0) p.Add(ProfilePiece::kFlat, 0, tip_radius);
+  ProfilePiece& flank = p.Add(ProfilePiece::kLine, tip_radius, radius);
   // As ProfileHeight (core/cutter/cutter.cc) computes the flank.
   flank.k = 1 / std::tan(half_angle_deg * (std::numbers::pi / 180));
   return p;

@@ -5,10 +5,7 @@ namespace swarf {
 Profile FlatSweep::MakeProfile(double radius) {
   Profile p;
   p.radius = radius;
-  p.pieces = 1;
-  p.piece[0].kind = ProfilePiece::kFlat;
-  p.piece[0].rho0 = 0;
-  p.piece[0].rho1 = radius;
+  p.Add(ProfilePiece::kFlat, 0, radius);
   return p;
 }
 

@@ -76,6 +76,15 @@ struct Profile {
     return (pieces > 1 && rho > piece[0].rho1) ? 1 : 0;
   }
   double Height(double rho) const { return piece[PieceAt(rho)].Height(rho); }
+  // Appends a piece of `kind` on [rho0, rho1] (its other fields zero).
+  ProfilePiece& Add(ProfilePiece::Kind kind, double rho0, double rho1) {
+    ProfilePiece& p = piece[pieces++];
+    p = ProfilePiece{};
+    p.kind = kind;
+    p.rho0 = rho0;
+    p.rho1 = rho1;
+    return p;
+  }
   double Slope(double rho) const { return piece[PieceAt(rho)].Slope(rho); }
 };
 
