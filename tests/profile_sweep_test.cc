@@ -219,6 +219,53 @@ TEST(ProfileSweep, HeightMatchesBruteForce) {
   }
 }
 
+// Random shapes and random moves (slopes from 0 to about 30, both
+// directions, cones whose flank is near the ramp's slope).
+TEST(ProfileSweep, RandomShapesAndMovesMatchBruteForce) {
+  std::mt19937_64 rng(2024);
+  std::uniform_real_distribution<double> unit(0, 1);
+  for (int c = 0; c < 60; ++c) {
+    const double r = 0.3 + 3 * unit(rng);
+    Cutter cutter;
+    switch (c % 4) {
+      case 0:
+        cutter = Cutter::Flat(r);
+        break;
+      case 1:
+        cutter = Cutter::BullNose(r, r * (0.05 + 0.9 * unit(rng)));
+        break;
+      case 2:
+        cutter = Cutter::Cone(r, 5 + 80 * unit(rng),
+                              unit(rng) < 0.5 ? 0 : r * unit(rng));
+        break;
+      default:
+        cutter = Cutter::TaperedBall(r, r * (0.05 + 0.9 * unit(rng)),
+                                     1 + 40 * unit(rng));
+        break;
+    }
+    ASSERT_TRUE(ValidateCutter(cutter, "t").ok()) << CutterToString(cutter);
+    const double len = 5 * unit(rng) * unit(rng);
+    const double dir = 6.3 * unit(rng);
+    const double slope = unit(rng) < 0.3 ? 0 : std::tan(1.55 * unit(rng));
+    const double dz = (unit(rng) < 0.5 ? -1 : 1) * slope * len;
+    MoveCase mc{"random", {1, 2, -1}, {1 + len * std::cos(dir),
+                                       2 + len * std::sin(dir), -1 + dz}};
+    SCOPED_TRACE(CutterToString(cutter) + " to " + std::to_string(mc.to.x) +
+                 "," + std::to_string(mc.to.y) + "," +
+                 std::to_string(mc.to.z));
+    const auto sweep = EngineFor(cutter, mc.from, mc.to);
+    for (const auto& [x, y] : PointsNear(cutter, mc, 100, c)) {
+      const double w = sweep->Height(x, y);
+      const Reference ref = ReferenceHeight(cutter, mc.from, mc.to, x, y);
+      if (std::isinf(ref.w)) {
+        EXPECT_TRUE(std::isinf(w)) << x << "," << y;
+        continue;
+      }
+      EXPECT_NEAR(w, ref.w, 1e-9) << x << "," << y;
+    }
+  }
+}
+
 // Derivatives of the reference by Richardson-extrapolated central
 // differences (step h and h / 2; finite differences in tests only).
 SurfaceJet ReferenceJet(const Cutter& c, const MoveCase& mc, double x,

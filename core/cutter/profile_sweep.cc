@@ -77,9 +77,10 @@ double TorusContact(double rho_c, double rc, double abs_m, double abs_n) {
     double next = t - v / df;
     const bool newton = next > lo && next < hi;
     if (!newton) next = 0.5 * (lo + hi);
-    // Newton converges quadratically: after a step below 1e-9 of t the
-    // next one would be below rounding.
-    if (std::fabs(next - t) <= (newton ? 1e-9 : 2.3e-16) * std::max(t, next)) {
+    // Newton converges quadratically: after a step below 1e-6 of t, t is
+    // within about 1e-12 of the root (the caller evaluates g at the
+    // resulting s, so the height is off by the square of that).
+    if (std::fabs(next - t) <= (newton ? 1e-6 : 2.3e-16) * std::max(t, next)) {
       t = next;
       break;
     }
@@ -251,8 +252,13 @@ ProfilePoint ProfileSweep::Locate(double x, double y) const {
         }
         const double s = a + u;
         if (inside(s)) {
-          Take(&best, ProfilePoint::kEnvelope, i,
-               z0 + m * s + pc.hc - pc.rc * sin_psi, n, sin_psi, cos_psi);
+          // g(s) itself, at the distance the contact's s really has: a
+          // value of g (so never below the true minimum), within the
+          // square of the solve's error of it.
+          const double w =
+              m == 0 ? z0 + pc.hc - pc.rc * sin_psi
+                     : z0 + m * s + pc.Height(std::sqrt(u * u + n * n));
+          Take(&best, ProfilePoint::kEnvelope, i, w, n, sin_psi, cos_psi);
         }
         break;
       }
