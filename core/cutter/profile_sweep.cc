@@ -259,6 +259,13 @@ ProfilePoint ProfileSweep::Locate(double x, double y) const {
               m == 0 ? z0 + pc.hc - pc.rc * sin_psi
                      : z0 + m * s + pc.Height(std::sqrt(u * u + n * n));
           Take(&best, ProfilePoint::kEnvelope, i, w, n, sin_psi, cos_psi);
+          // On a ramp g falls at the start and rises at the end (checked
+          // above), so its minimum is interior, where g' = 0: not on the
+          // flat band (g' = m there) nor at the wall, so this contact is
+          // the minimum and no other candidate can be lower. (A torus is
+          // only ever a bull-nose's corner: a flat band inside, the wall
+          // outside.)
+          if (m != 0) return best;
         }
         break;
       }
