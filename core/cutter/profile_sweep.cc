@@ -186,6 +186,23 @@ ProfilePoint ProfileSweep::Locate(double x, double y) const {
     if (rho == 0) return m;  // on the axis: f'(0) = 0 for the torus' band
     return m + pf.Slope(rho) * s_minus_a / rho;
   };
+  // Convexity: g rising from the start, or falling into the end, puts the
+  // minimum at that end. At a piece boundary slope_at takes the inner
+  // piece's f', which can only err towards not taking the shortcut (f' is
+  // nondecreasing); a NaN (0 * inf at a rim) never takes it.
+  const double rho_start2 = px * px + py * py;
+  const double ex = x - to_.x, ey = y - to_.y;
+  const double rho_end2 = ex * ex + ey * ey;
+  if (rho_start2 <= r2 && slope_at(px, py, -a) >= 0) {
+    Take(&best, ProfilePoint::kTool, 0, z0 + pf.Height(std::sqrt(rho_start2)),
+         px, py, 0);
+    return best;
+  }
+  if (rho_end2 <= r2 && slope_at(ex, ey, len_ - a) <= 0) {
+    Take(&best, ProfilePoint::kTool, 1, to_.z + pf.Height(std::sqrt(rho_end2)),
+         ex, ey, 0);
+    return best;
+  }
   auto falls_at = [&](double vx, double vy, double a_) {
     const double d = slope_at(vx, vy, -a_);
     return d == kInf || d < 0;
@@ -272,18 +289,13 @@ ProfilePoint ProfileSweep::Locate(double x, double y) const {
     }
   }
   // 2. The tool at the move's ends.
-  {
-    const double rho2 = px * px + py * py;
-    if (rho2 <= r2) {
-      Take(&best, ProfilePoint::kTool, 0, z0 + pf.Height(std::sqrt(rho2)),
-           px, py, 0);
-    }
-    const double qx = x - to_.x, qy = y - to_.y;
-    const double q2 = qx * qx + qy * qy;
-    if (q2 <= r2) {
-      Take(&best, ProfilePoint::kTool, 1, to_.z + pf.Height(std::sqrt(q2)),
-           qx, qy, 0);
-    }
+  if (rho_start2 <= r2) {
+    Take(&best, ProfilePoint::kTool, 0, z0 + pf.Height(std::sqrt(rho_start2)),
+         px, py, 0);
+  }
+  if (rho_end2 <= r2) {
+    Take(&best, ProfilePoint::kTool, 1, to_.z + pf.Height(std::sqrt(rho_end2)),
+         ex, ey, 0);
   }
   // 3. Kink circles: where the distance crosses a piece boundary (the last
   // is the wall at R): s = a -+ sqrt(rho_k^2 - n^2).
