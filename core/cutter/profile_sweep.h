@@ -17,7 +17,11 @@
 // distance crosses a kink circle rho = rho_k (a piece boundary, or the wall
 // at R), or a stationary point of one smooth piece (g' = 0). Locate takes
 // the least of all these candidates that are feasible: each is a value of g,
-// and the minimizer is among them, so the result is exact.
+// and the minimizer is among them, so the result is exact. Convexity also
+// prunes them: g rising from the start (or falling into the end) makes that
+// end the minimum, and a torus contact (the bull-nose on a ramp) is needed,
+// and then is the minimum, only where g falls at the start and rises at
+// the end.
 //
 // With a = (q - P0) . h and n = (q - P0) . h_perp (q = (x, y)), the
 // stationary points are in closed form for the flat (m = 0: any point; its
