@@ -15,6 +15,13 @@
 namespace swarf {
 namespace {
 
+// A counter of the wall time per iteration divided by `moves`.
+benchmark::Counter TimePerMove(size_t moves) {
+  return benchmark::Counter(static_cast<double>(moves),
+                            benchmark::Counter::kIsIterationInvariantRate |
+                                benchmark::Counter::kInvert);
+}
+
 // Sweep evaluation alone: a sloped move evaluated over the nodes of its
 // footprint, height only (Locate) or with derivatives (Jet).
 template <bool kJet>
@@ -105,15 +112,109 @@ void BM_FinishingMoves(benchmark::State& state, SchemeKind scheme) {
     state.ResumeTiming();
   }
   state.SetItemsProcessed(state.iterations() * moves.size());
-  state.counters["ns_per_move"] = benchmark::Counter(
-      static_cast<double>(moves.size()),
-      benchmark::Counter::kIsIterationInvariantRate |
-          benchmark::Counter::kInvert);
+  state.counters["ns_per_move"] = TimePerMove(moves.size());
 }
 BENCHMARK_CAPTURE(BM_FinishingMoves, zmap, SchemeKind::kZmap)
     ->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_FinishingMoves, taylor, SchemeKind::kTaylor)
     ->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Cutter shapes (issue 16): the same paths for the ball and each new shape,
+// applied to a 100 mm stock at 1000x1000 (0.1 mm) in batches of 10000.
+// - finishing: the zig-zag raster above (0.2 mm moves on a gentle wave,
+//   stepover 0.1 mm, 45,000 sloped moves) with 1 mm tools;
+// - roughing: 6 mm tools, three levels 1 mm apart, each entered by a 10 mm
+//   ramp then cleared by passes along x at 40% stepover in 10 mm moves
+//   (1,260 moves, mostly horizontal).
+// Counters: ns per move, and nodes lowered per second (node_lowerings).
+// The shape of `kind` with outer radius r, in the proportions of common
+// tools: bull-nose corner 0.4 r, 90 degree V-bit with a flat tip of r / 6,
+// tapered ball tip r / 3 with a 10 degree half angle.
+Cutter ShapeCutter(CutterKind kind, double r) {
+  switch (kind) {
+    case CutterKind::kBall:
+      return Cutter::Ball(r);
+    case CutterKind::kFlat:
+      return Cutter::Flat(r);
+    case CutterKind::kBullNose:
+      return Cutter::BullNose(r, 0.4 * r);
+    case CutterKind::kCone:
+      return Cutter::Cone(r, 45, r / 6);
+    case CutterKind::kTaperedBall:
+      return Cutter::TaperedBall(r, r / 3, 10);
+  }
+  return Cutter::Ball(r);
+}
+
+std::vector<Move> WithCutter(std::vector<Move> moves, const Cutter& c) {
+  for (Move& m : moves) m.cutter = c;
+  return moves;
+}
+
+std::vector<Move> RoughingPath(const Cutter& c) {
+  std::vector<Move> moves;
+  const double step = 0.8 * c.radius;
+  for (int level = 1; level <= 3; ++level) {
+    const double z = -1.0 * level;
+    moves.push_back({{5, 5, z + 1}, {15, 5, z}, c});  // ramp in
+    bool fwd = true;
+    for (double y = 5; y <= 95; y += step, fwd = !fwd) {
+      for (int k = 0; k < 9; ++k) {
+        const double xa = fwd ? 5 + 10 * k : 95 - 10 * k;
+        const double xb = fwd ? xa + 10 : xa - 10;
+        moves.push_back({{xa, y, z}, {xb, y, z}, c});
+      }
+      const double x_end = fwd ? 95 : 5;
+      moves.push_back({{x_end, y, z}, {x_end, y + step, z}, c});  // stepover
+    }
+  }
+  return moves;
+}
+
+void BM_ShapePath(benchmark::State& state, CutterKind kind, bool finishing,
+                  SchemeKind scheme) {
+  const std::vector<Move> moves =
+      finishing ? WithCutter(FinishingRaster(0.2, 0.1, 100),
+                             ShapeCutter(kind, 0.5))
+                : RoughingPath(ShapeCutter(kind, 3));
+  constexpr size_t kBatch = 10000;
+  int64_t lowered = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto wp = *Workpiece::Create({0, 0, 100, 100, 0, 1000, 1000}, scheme);
+    state.ResumeTiming();
+    for (size_t k = 0; k < moves.size(); k += kBatch) {
+      const size_t n = std::min(kBatch, moves.size() - k);
+      auto r = wp->Apply(std::span<const Move>(moves.data() + k, n));
+      lowered += r->node_lowerings;
+    }
+    state.PauseTiming();
+    wp.reset();
+    state.ResumeTiming();
+  }
+  state.counters["ns_per_move"] = TimePerMove(moves.size());
+  state.counters["nodes_per_s"] = benchmark::Counter(
+      static_cast<double>(lowered), benchmark::Counter::kIsRate);
+}
+#define SWARF_SHAPE_BENCH(name, kind)                                      \
+  BENCHMARK_CAPTURE(BM_ShapePath, name##_finishing_taylor, kind, true,     \
+                    SchemeKind::kTaylor)                                   \
+      ->Unit(benchmark::kMillisecond)->UseRealTime();                      \
+  BENCHMARK_CAPTURE(BM_ShapePath, name##_finishing_zmap, kind, true,       \
+                    SchemeKind::kZmap)                                     \
+      ->Unit(benchmark::kMillisecond)->UseRealTime();                      \
+  BENCHMARK_CAPTURE(BM_ShapePath, name##_roughing_taylor, kind, false,     \
+                    SchemeKind::kTaylor)                                   \
+      ->Unit(benchmark::kMillisecond)->UseRealTime();                      \
+  BENCHMARK_CAPTURE(BM_ShapePath, name##_roughing_zmap, kind, false,       \
+                    SchemeKind::kZmap)                                     \
+      ->Unit(benchmark::kMillisecond)->UseRealTime()
+SWARF_SHAPE_BENCH(ball, CutterKind::kBall);
+SWARF_SHAPE_BENCH(flat, CutterKind::kFlat);
+SWARF_SHAPE_BENCH(bull_nose, CutterKind::kBullNose);
+SWARF_SHAPE_BENCH(cone, CutterKind::kCone);
+SWARF_SHAPE_BENCH(tapered_ball, CutterKind::kTaperedBall);
+#undef SWARF_SHAPE_BENCH
 
 // Recording moves without cutting them (a restart from a snapshot): the
 // same finishing raster (45,000 moves) in batches of 10000. Reports ns per
@@ -134,10 +235,7 @@ void BM_RecordMoves(benchmark::State& state) {
     wp.reset();
     state.ResumeTiming();
   }
-  state.counters["ns_per_move"] = benchmark::Counter(
-      static_cast<double>(moves.size()),
-      benchmark::Counter::kIsIterationInvariantRate |
-          benchmark::Counter::kInvert);
+  state.counters["ns_per_move"] = TimePerMove(moves.size());
 }
 BENCHMARK(BM_RecordMoves)->Unit(benchmark::kMillisecond)->UseRealTime();
 

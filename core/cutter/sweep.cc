@@ -7,12 +7,20 @@ Sweep::Variant MakeVariant(const Vec3& a, const Vec3& b, const Cutter& c) {
   switch (c.kind) {
     case CutterKind::kBall:
       return BallSweep(a, b, c.radius);
-    default:
-      break;
+    case CutterKind::kFlat:
+      return FlatSweep(a, b, c.radius);
+    case CutterKind::kBullNose:
+      // The degenerate corners are those shapes, to the bit.
+      if (c.corner_radius == c.radius) return BallSweep(a, b, c.radius);
+      if (c.corner_radius == 0) return FlatSweep(a, b, c.radius);
+      return BullNoseSweep(a, b, c.radius, c.corner_radius);
+    case CutterKind::kCone:
+      return ConeSweep(a, b, c.radius, c.half_angle_deg, c.tip_radius);
+    case CutterKind::kTaperedBall:
+      return TaperedBallSweep(a, b, c.radius, c.tip_radius,
+                              c.half_angle_deg);
   }
-  // Shapes without their own sweep yet: unreachable once every kind has
-  // one (ValidateCutter admits only those).
-  return BallSweep(a, b, c.radius);
+  return BallSweep(a, b, c.radius);  // unreachable: ValidateCutter
 }
 
 }  // namespace
@@ -22,7 +30,9 @@ Sweep::Sweep(const Vec3& tip_from, const Vec3& tip_to, const Cutter& cutter)
 
 std::optional<Rect> FootprintBounds(const Vec3& tip_from, const Vec3& tip_to,
                                     const Cutter& cutter, double cap) {
-  if (cutter.kind == CutterKind::kBall) {
+  if (cutter.kind == CutterKind::kBall ||
+      (cutter.kind == CutterKind::kBullNose &&
+       cutter.corner_radius == cutter.radius)) {
     return BallSweep::FootprintBounds(tip_from, tip_to, cutter.radius, cap);
   }
   const Capsule c = Sweep(tip_from, tip_to, cutter).Footprint(cap);

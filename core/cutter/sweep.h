@@ -29,8 +29,12 @@
 #include <variant>
 
 #include "core/cutter/ball_sweep.h"
+#include "core/cutter/bull_nose_sweep.h"
 #include "core/cutter/capsule.h"
+#include "core/cutter/cone_sweep.h"
 #include "core/cutter/cutter.h"
+#include "core/cutter/flat_sweep.h"
+#include "core/cutter/tapered_ball_sweep.h"
 #include "core/geometry.h"
 #include "core/surface_jet.h"
 
@@ -39,9 +43,12 @@ namespace swarf {
 // The sweep of one straight move of any cutter. Immutable, thread-safe.
 class Sweep {
  public:
-  using Variant = std::variant<BallSweep>;
+  using Variant = std::variant<BallSweep, FlatSweep, BullNoseSweep,
+                               ConeSweep, TaperedBallSweep>;
 
-  // tip_from/tip_to finite; `cutter` valid (ValidateCutter).
+  // tip_from/tip_to finite; `cutter` valid (ValidateCutter). Exact for
+  // every CutterKind. A bull-nose whose corner is its radius is swept as the
+  // ball (BallSweep: the same bits), one whose corner is 0 as the flat end.
   Sweep(const Vec3& tip_from, const Vec3& tip_to, const Cutter& cutter);
 
   double lowest() const {
