@@ -21,11 +21,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <numbers>
+#include <string>
 
 #include "core/cutter/cutter.h"
 #include "core/geometry.h"
+#include "core/surface_jet.h"
 #include "tests/sweep_reference.h"
 
 namespace swarf::testing {
@@ -309,6 +312,65 @@ inline ReferenceJet GrooveJet(const Section& s, LD z, LD d, LD nx, LD ny) {
   j.wyy = s.f2 * ny * ny;
   j.smooth = true;
   return j;
+}
+
+// Where pieces of a swept surface meet (a move's end plane, a profile's
+// join circle, a wall) a height field has no derivative: a node there must
+// take the jet of one of the surfaces meeting there, i.e. a one-sided limit
+// of the jets around it. Checked per derivative: each of wx, ..., wyy at
+// (x, y) must lie within the range of the jets `jet_at` gives at the eight
+// points eps away (those on the surface), widened by rel * (|value| +
+// unit) (unit 1 for slopes, 1/radius for curvatures) plus, for the slopes,
+// the change over eps that the neighbours' curvatures allow. At a wall
+// (a neighbour steeper than kWallSlope) the derivatives are clamped
+// (core/cutter/ball_sweep.h: kRimDepthFraction) and the clamped values vary
+// along the rim, so there each derivative need only have the sign all the
+// neighbours agree on: the patch must lean and curve the way the wall does.
+// (Not w: at a wall it is not Lipschitz; the heights are checked against
+// the reference.) Returns "" when it holds, else what is out of range.
+inline constexpr double kWallSlope = 100;
+
+inline std::string CheckOneSidedLimit(
+    const std::function<SurfaceJet(double, double)>& jet_at, double x,
+    double y, const SurfaceJet& got, double radius, double eps = 1e-9,
+    double rel = 1e-6) {
+  double lo[6], hi[6];
+  std::fill(lo, lo + 6, std::numeric_limits<double>::infinity());
+  std::fill(hi, hi + 6, -std::numeric_limits<double>::infinity());
+  double max_curv = 0, max_slope = 0;
+  int on_surface = 0;
+  for (int k = 0; k < 8; ++k) {
+    const double a = k * std::numbers::pi / 4;
+    const SurfaceJet n = jet_at(x + eps * std::cos(a), y + eps * std::sin(a));
+    if (!std::isfinite(n.w)) continue;
+    ++on_surface;
+    const double v[6] = {n.w, n.wx, n.wy, n.wxx, n.wxy, n.wyy};
+    for (int c = 0; c < 6; ++c) {
+      lo[c] = std::min(lo[c], v[c]);
+      hi[c] = std::max(hi[c], v[c]);
+    }
+    max_slope = std::max({max_slope, std::fabs(n.wx), std::fabs(n.wy)});
+    max_curv = std::max(
+        {max_curv, std::fabs(n.wxx), std::fabs(n.wxy), std::fabs(n.wyy)});
+  }
+  if (on_surface == 0) return "";  // on the footprint's very edge
+  const double v[6] = {got.w, got.wx, got.wy, got.wxx, got.wxy, got.wyy};
+  const char* names[6] = {"w", "wx", "wy", "wxx", "wxy", "wyy"};
+  std::string out;
+  for (int c = 1; c < 6; ++c) {
+    const double unit = c < 3 ? 1 : 1 / radius;
+    double slack = rel * (std::fabs(v[c]) + unit);
+    if (c < 3) slack += 2 * eps * max_curv;
+    const bool ok = max_slope > kWallSlope
+                        ? !(lo[c] > 0 && !(v[c] > 0)) && !(hi[c] < 0 && !(v[c] < 0))
+                        : v[c] >= lo[c] - slack && v[c] <= hi[c] + slack;
+    if (!ok) {
+      out += std::string(names[c]) + " = " + std::to_string(v[c]) +
+             " outside [" + std::to_string(lo[c]) + ", " +
+             std::to_string(hi[c]) + "] ";
+    }
+  }
+  return out;
 }
 
 }  // namespace swarf::testing

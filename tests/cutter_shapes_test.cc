@@ -31,6 +31,7 @@ namespace swarf {
 namespace {
 
 using ::swarf::testing::ArcSection;
+using ::swarf::testing::CheckOneSidedLimit;
 using ::swarf::testing::DistanceToPath;
 using ::swarf::testing::GrooveJet;
 using ::swarf::testing::HeightRoundoff;
@@ -599,6 +600,54 @@ TEST_P(ReferenceTest, SweepContract) {
           << "below " << cap;
     }
   }
+}
+
+// Points ON the seams, where random points never fall but grid nodes with
+// round coordinates do: the ends' planes, the profile's join circles, the
+// walls, the axis. There the jet must be a one-sided limit of the jets
+// around (CheckOneSidedLimit): a patch built from anything else (a wrong
+// sign at a wall, a degenerate solve at a join) digs far below the surface.
+TEST_P(ReferenceTest, SeamPointsTakeOneSidedLimits) {
+  const Sweep sweep = MakeSweep();
+  const Cutter& c = cutter();
+  const Vec3& a = move().from;
+  const Vec3& b = move().to;
+  const double len = std::hypot(b.x - a.x, b.y - a.y);
+  const double ex = len > 0 ? (b.x - a.x) / len : 1;
+  const double ey = len > 0 ? (b.y - a.y) / len : 0;
+  std::vector<double> radii = {c.radius, 0.5 * c.radius};
+  if (ProfileJoin(c) > 0) radii.push_back(D(ProfileJoin(c)));
+  std::vector<std::pair<double, double>> pts = {{a.x, a.y}, {b.x, b.y}};
+  for (double rho : radii) {
+    for (const Vec3& t : {a, b}) {
+      for (int k = 0; k < 16; ++k) {
+        const double th = k * std::numbers::pi / 8;
+        pts.push_back({t.x + rho * std::cos(th), t.y + rho * std::sin(th)});
+      }
+      // On the end's plane, across the path.
+      pts.push_back({t.x - rho * ey, t.y + rho * ex});
+      pts.push_back({t.x + rho * ey, t.y - rho * ex});
+    }
+    for (double f : {1 / 3.0, 0.5}) {
+      const double px = a.x + f * (b.x - a.x), py = a.y + f * (b.y - a.y);
+      pts.push_back({px - rho * ey, py + rho * ex});
+      pts.push_back({px + rho * ey, py - rho * ex});
+      pts.push_back({px, py});
+    }
+  }
+  auto jet_at = [&](double x, double y) { return sweep.JetAt(x, y); };
+  int checked = 0;
+  for (auto [x, y] : pts) {
+    const SurfaceJet j = sweep.JetAt(x, y);
+    EXPECT_EQ(j.w, sweep.Height(x, y)) << At(x, y);
+    if (std::isinf(j.w)) continue;
+    for (double v : {j.wx, j.wy, j.wxx, j.wxy, j.wyy}) {
+      EXPECT_TRUE(std::isfinite(v)) << At(x, y);
+    }
+    EXPECT_EQ(CheckOneSidedLimit(jet_at, x, y, j, c.radius), "") << At(x, y);
+    ++checked;
+  }
+  EXPECT_GT(checked, 20);
 }
 
 // ---------------------------------------------------------------------------

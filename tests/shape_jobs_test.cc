@@ -20,6 +20,7 @@
 #include "core/valuation.h"
 #include "core/workpiece.h"
 #include "gtest/gtest.h"
+#include "tests/cutter_reference.h"
 
 namespace swarf {
 namespace {
@@ -110,6 +111,38 @@ TEST_P(ShapeInstancePrecisionTest, TaylorTenTimesBelowZmap) {
       << "taylor max " << taylor.max_error << " mm at (" << taylor.max_x
       << ", " << taylor.max_y << "), zmap max " << zmap.max_error
       << " mm at (" << zmap.max_x << ", " << zmap.max_y << ")";
+}
+
+// Every node the shape instances cut holds a jet of its owner's sweep that
+// is a one-sided limit of that sweep's jets round the node (see
+// CheckOneSidedLimit): grid nodes sit at round coordinates, on the seams
+// of the swept surfaces (a ramp's end plane meeting a join circle, a wall),
+// where a wrong jet makes the taylor patch dig.
+TEST_P(ShapeInstancePrecisionTest, NodesHoldOneSidedLimits) {
+  auto inst = NamedInstance(GetParam(), 100);
+  ASSERT_TRUE(inst.ok()) << inst.status();
+  auto wp = Cut(inst->stock, inst->moves, SchemeKind::kTaylor);
+  const double radius = inst->moves[0].cutter.radius;
+  int cut = 0, bad = 0;
+  for (int32_t j = 0; j <= wp->grid().ny(); ++j) {
+    for (int32_t i = 0; i <= wp->grid().nx(); ++i) {
+      const NodeValue n = wp->Node(i, j);
+      if (n.owner < 0) continue;
+      ++cut;
+      const double x = wp->grid().NodeX(i), y = wp->grid().NodeY(j);
+      auto jet_at = [&](double px, double py) {
+        return wp->MoveJet(n.owner, px, py);
+      };
+      const std::string why =
+          testing::CheckOneSidedLimit(jet_at, x, y, n.jet, radius);
+      if (!why.empty() && ++bad <= 10) {
+        ADD_FAILURE() << "node (" << i << ", " << j << ") at (" << x << ", "
+                      << y << "), move " << n.owner << ": " << why;
+      }
+    }
+  }
+  EXPECT_EQ(bad, 0) << "of " << cut << " cut nodes";
+  EXPECT_GT(cut, 1000);
 }
 
 INSTANTIATE_TEST_SUITE_P(
