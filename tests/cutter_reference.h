@@ -315,23 +315,31 @@ inline ReferenceJet GrooveJet(const Section& s, LD z, LD d, LD nx, LD ny) {
 }
 
 // Where pieces of a swept surface meet (a move's end plane, a profile's
-// join circle, a wall) a height field has no derivative: a node there must
-// take the jet of one of the surfaces meeting there, i.e. a one-sided limit
-// of the jets around it. Checked per derivative: each of wx, ..., wyy at
-// (x, y) must lie within the range of the jets `jet_at` gives at the eight
-// points eps away (those on the surface), widened by rel * (|value| +
-// unit) (unit 1 for slopes, 1/radius for curvatures) plus, for the slopes,
-// the change over eps that the neighbours' curvatures allow. At a wall
-// (a neighbour steeper than kWallSlope) the derivatives are clamped
-// (core/cutter/ball_sweep.h: kRimDepthFraction) and the clamped values vary
-// along the rim, so there each derivative need only have the sign all the
-// neighbours agree on: the patch must lean and curve the way the wall does.
-// (Not w: at a wall it is not Lipschitz; the heights are checked against
-// the reference.) Returns "" when it holds, else what is out of range.
+// join circle, a wall) a height field has no derivative. A node there may
+// take the jet of any surface meeting there, but its eq. (1) patch must
+// not dig into the swept surface: CheckSeamJet accepts the jet `got` at
+// (x, y) when either
+// - it is a one-sided limit of the jets round it: each derivative lies
+//   within the range of the jets `jet_at` gives at eight points eps away
+//   (those on the surface), widened by rel * (|value| + unit) (unit 1 for
+//   slopes, 1/radius for curvatures) and, for slopes, by the change over
+//   eps the neighbours' curvatures allow. At a wall (a neighbour steeper
+//   than kWallSlope) the derivatives are clamped (core/cutter/ball_sweep.h:
+//   kRimDepthFraction) and the clamped values vary along the rim, so there
+//   each derivative need only have the sign the neighbours agree on; or
+// - its patch stays on or above the surface (`height_at`) at 1e-4 and
+//   1e-3 mm in sixteen directions, to 1e-9 mm: a jet that is no limit (a
+//   triple point, a piece that sets the height only along a curve) is
+//   harmless as long as the patch does not dig.
+// The neighbours are off the axis directions, so that they do not lie on
+// the same axis-aligned seam as (x, y). w is not checked (at a wall it is
+// not Lipschitz; heights are checked against the reference). Returns ""
+// when the jet is accepted, else why not.
 inline constexpr double kWallSlope = 100;
 
-inline std::string CheckOneSidedLimit(
-    const std::function<SurfaceJet(double, double)>& jet_at, double x,
+inline std::string CheckSeamJet(
+    const std::function<SurfaceJet(double, double)>& jet_at,
+    const std::function<double(double, double)>& height_at, double x,
     double y, const SurfaceJet& got, double radius, double eps = 1e-9,
     double rel = 1e-6) {
   double lo[6], hi[6];
@@ -340,7 +348,7 @@ inline std::string CheckOneSidedLimit(
   double max_curv = 0, max_slope = 0;
   int on_surface = 0;
   for (int k = 0; k < 8; ++k) {
-    const double a = k * std::numbers::pi / 4;
+    const double a = (k + 0.5) * std::numbers::pi / 4;
     const SurfaceJet n = jet_at(x + eps * std::cos(a), y + eps * std::sin(a));
     if (!std::isfinite(n.w)) continue;
     ++on_surface;
@@ -356,21 +364,34 @@ inline std::string CheckOneSidedLimit(
   if (on_surface == 0) return "";  // on the footprint's very edge
   const double v[6] = {got.w, got.wx, got.wy, got.wxx, got.wxy, got.wyy};
   const char* names[6] = {"w", "wx", "wy", "wxx", "wxy", "wyy"};
-  std::string out;
+  std::string why;
   for (int c = 1; c < 6; ++c) {
     const double unit = c < 3 ? 1 : 1 / radius;
     double slack = rel * (std::fabs(v[c]) + unit);
     if (c < 3) slack += 2 * eps * max_curv;
-    const bool ok = max_slope > kWallSlope
-                        ? !(lo[c] > 0 && !(v[c] > 0)) && !(hi[c] < 0 && !(v[c] < 0))
-                        : v[c] >= lo[c] - slack && v[c] <= hi[c] + slack;
+    const bool ok =
+        max_slope > kWallSlope
+            ? !(lo[c] > 0 && !(v[c] > 0)) && !(hi[c] < 0 && !(v[c] < 0))
+            : v[c] >= lo[c] - slack && v[c] <= hi[c] + slack;
     if (!ok) {
-      out += std::string(names[c]) + " = " + std::to_string(v[c]) +
+      why += std::string(names[c]) + " = " + std::to_string(v[c]) +
              " outside [" + std::to_string(lo[c]) + ", " +
              std::to_string(hi[c]) + "] ";
     }
   }
-  return out;
+  if (why.empty()) return "";
+  // Not a limit: harmless only if the patch does not dig.
+  double dig = 0;
+  for (double r : {1e-4, 1e-3}) {
+    for (int k = 0; k < 16; ++k) {
+      const double a = (k + 0.5) * std::numbers::pi / 8;
+      const double qx = x + r * std::cos(a), qy = y + r * std::sin(a);
+      const double h = height_at(qx, qy);
+      if (std::isfinite(h)) dig = std::max(dig, h - EvaluatePatch(got, x, y, qx, qy));
+    }
+  }
+  if (dig <= 1e-9) return "";
+  return why + "and its patch digs " + std::to_string(dig) + " mm";
 }
 
 }  // namespace swarf::testing
