@@ -327,15 +327,19 @@ inline ReferenceJet GrooveJet(const Section& s, LD z, LD d, LD nx, LD ny) {
 //   than kWallSlope) the derivatives are clamped (core/cutter/ball_sweep.h:
 //   kRimDepthFraction) and the clamped values vary along the rim, so there
 //   each derivative need only have the sign the neighbours agree on; or
-// - its patch stays on or above the surface (`height_at`) at 1e-4 and
-//   1e-3 mm in sixteen directions, to 1e-9 mm: a jet that is no limit (a
-//   triple point, a piece that sets the height only along a curve) is
-//   harmless as long as the patch does not dig.
+// - its patch digs at most kHarmlessDig below the surface (`height_at`)
+//   at 1e-4 and 1e-3 mm in sixteen directions: a jet that is no limit (a
+//   triple point, a piece that sets the height only along a curve, a cone's
+//   apex) is harmless as long as the patch barely digs. (At a sharp apex no
+//   finite jet avoids digging: a patch k r^2 / 2 under a cone r cot a digs
+//   up to cot^2 a / (2 k); 1e-3 mm admits k >= 500 cot^2 a /mm, and is far
+//   below the valuation's errors and far above rounding.)
 // The neighbours are off the axis directions, so that they do not lie on
 // the same axis-aligned seam as (x, y). w is not checked (at a wall it is
 // not Lipschitz; heights are checked against the reference). Returns ""
 // when the jet is accepted, else why not.
 inline constexpr double kWallSlope = 100;
+inline constexpr double kHarmlessDig = 1e-3;  // mm
 
 inline std::string CheckSeamJet(
     const std::function<SurfaceJet(double, double)>& jet_at,
@@ -390,7 +394,7 @@ inline std::string CheckSeamJet(
       if (std::isfinite(h)) dig = std::max(dig, h - EvaluatePatch(got, x, y, qx, qy));
     }
   }
-  if (dig <= 1e-9) return "";
+  if (dig <= kHarmlessDig) return "";
   return why + "and its patch digs " + std::to_string(dig) + " mm";
 }
 
