@@ -327,19 +327,20 @@ inline ReferenceJet GrooveJet(const Section& s, LD z, LD d, LD nx, LD ny) {
 //   than kWallSlope) the derivatives are clamped (core/cutter/ball_sweep.h:
 //   kRimDepthFraction) and the clamped values vary along the rim, so there
 //   each derivative need only have the sign the neighbours agree on; or
-// - its patch digs at most kHarmlessDig below the surface (`height_at`)
-//   at 1e-4 and 1e-3 mm in sixteen directions: a jet that is no limit (a
-//   triple point, a piece that sets the height only along a curve, a cone's
-//   apex) is harmless as long as the patch barely digs. (At a sharp apex no
-//   finite jet avoids digging: a patch k r^2 / 2 under a cone r cot a digs
-//   up to cot^2 a / (2 k); 1e-3 mm admits k >= 500 cot^2 a /mm, and is far
-//   below the valuation's errors and far above rounding.)
+// - its patch digs no deeper below the surface (`height_at`), at distance
+//   r = 1e-4 and 1e-3 mm in sixteen directions, than a kink allows: the
+//   largest gap S between its gradient and a neighbour's, times r, plus
+//   (off walls) the neighbours' largest second derivative C times r^2, plus
+//   1e-6 mm. A jet that is no limit (a triple point, a piece that sets the
+//   height only along a curve, a sharp cone's apex, where no finite jet
+//   avoids digging) is harmless if its patch leaves the surface no faster
+//   than the surfaces meeting there leave each other; a wrong sign or a
+//   runaway curvature digs metres.
 // The neighbours are off the axis directions, so that they do not lie on
 // the same axis-aligned seam as (x, y). w is not checked (at a wall it is
 // not Lipschitz; heights are checked against the reference). Returns ""
 // when the jet is accepted, else why not.
 inline constexpr double kWallSlope = 100;
-inline constexpr double kHarmlessDig = 1e-3;  // mm
 
 inline std::string CheckSeamJet(
     const std::function<SurfaceJet(double, double)>& jet_at,
@@ -384,18 +385,32 @@ inline std::string CheckSeamJet(
     }
   }
   if (why.empty()) return "";
-  // Not a limit: harmless only if the patch does not dig.
-  double dig = 0;
+  // Not a limit: harmless only if the patch digs no faster than a kink.
+  double gap = 0;  // S
+  for (int k = 0; k < 8; ++k) {
+    const double a = (k + 0.5) * std::numbers::pi / 4;
+    const SurfaceJet n = jet_at(x + eps * std::cos(a), y + eps * std::sin(a));
+    if (std::isfinite(n.w)) gap = std::max(gap, std::hypot(n.wx - got.wx, n.wy - got.wy));
+  }
+  const bool wall = max_slope > kWallSlope;
+  double dig = 0, allowed = 0;
   for (double r : {1e-4, 1e-3}) {
+    const double allow = 1e-6 + gap * r + (wall ? 0 : max_curv * r * r);
     for (int k = 0; k < 16; ++k) {
       const double a = (k + 0.5) * std::numbers::pi / 8;
       const double qx = x + r * std::cos(a), qy = y + r * std::sin(a);
       const double h = height_at(qx, qy);
-      if (std::isfinite(h)) dig = std::max(dig, h - EvaluatePatch(got, x, y, qx, qy));
+      if (!std::isfinite(h)) continue;
+      const double d = h - EvaluatePatch(got, x, y, qx, qy);
+      if (d - allow > dig - allowed) {
+        dig = d;
+        allowed = allow;
+      }
     }
   }
-  if (dig <= kHarmlessDig) return "";
-  return why + "and its patch digs " + std::to_string(dig) + " mm";
+  if (dig <= allowed) return "";
+  return why + "and its patch digs " + std::to_string(dig) + " mm (a kink allows " +
+         std::to_string(allowed) + ")";
 }
 
 }  // namespace swarf::testing
