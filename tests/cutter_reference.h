@@ -142,12 +142,10 @@ struct CutterReference {
 };
 
 // Brute-force swept height at (x, y) of cutter `c` whose tip moves from
-// tip_from to tip_to (see the definition at the top): `samples` positions
-// evenly spaced over the t-interval whose tool covers (x, y), then golden
-// section (90 steps: the bracket shrinks below 1e-19 in t) around the best
-// one; the interval's ends are candidates too (a flat end's minimum lies
-// there). g is convex, so any number of samples brackets its minimum; they
-// only guard against a flat stretch fooling the first golden-section step.
+// tip_from to tip_to (see the definition at the top): g minimized over the
+// t-interval whose tool covers (x, y) by ConvexArgMin, `samples` positions
+// then 90 golden-section steps (the bracket shrinks below 1e-19 in t); the
+// interval's ends are candidates too (a flat end's minimum lies there).
 inline CutterReference ReferenceHeight(const Cutter& c, const Vec3& tip_from,
                                        const Vec3& tip_to, double x, double y,
                                        int samples = 32) {
@@ -155,68 +153,15 @@ inline CutterReference ReferenceHeight(const Cutter& c, const Vec3& tip_from,
   const LD ax = tip_from.x, ay = tip_from.y, az = tip_from.z;
   const LD ex = LD{tip_to.x} - ax, ey = LD{tip_to.y} - ay,
            ez = LD{tip_to.z} - az;
-  const LD d0x = ax - x, d0y = ay - y;
-  // t whose tool covers (x, y): |d0 + t e|^2 <= r^2.
-  const LD ee = ex * ex + ey * ey;
-  const LD de = d0x * ex + d0y * ey;
-  const LD dd = d0x * d0x + d0y * d0y - r * r;
-  LD lo = 0, hi = 1;
-  if (ee == 0) {
-    if (dd > 0) return {};
-  } else {
-    const LD disc = de * de - ee * dd;
-    if (disc < 0) return {};
-    const LD s = std::sqrt(disc);
-    lo = std::max(lo, (-de - s) / ee);
-    hi = std::min(hi, (-de + s) / ee);
-    if (lo > hi) return {};
-  }
-  auto rho_at = [&](LD t) {
-    return std::hypot(d0x + t * ex, d0y + t * ey);
-  };
+  LD lo, hi;
+  if (!CoveringInterval(ax, ay, ex, ey, r, x, y, &lo, &hi)) return {};
+  auto rho_at = [&](LD t) { return std::hypot(ax + t * ex - x, ay + t * ey - y); };
   const HandProfile profile(c);
   auto g = [&](LD t) { return az + t * ez + profile.At(rho_at(t)).f; };
-  const int n = std::max(samples, 2);
-  int best_k = 0;
-  LD best_g = kLdInf;
-  for (int k = 0; k < n; ++k) {
-    const LD v = g(lo + (hi - lo) * k / (n - 1));
-    if (v < best_g) {
-      best_g = v;
-      best_k = k;
-    }
-  }
-  LD l = lo + (hi - lo) * std::max(best_k - 1, 0) / (n - 1);
-  LD u = lo + (hi - lo) * std::min(best_k + 1, n - 1) / (n - 1);
-  const LD phi = (std::sqrt(LD{5}) - 1) / 2;
-  LD t1 = u - phi * (u - l), t2 = l + phi * (u - l);
-  LD f1 = g(t1), f2 = g(t2);
-  for (int it = 0; it < 90 && u - l > 0; ++it) {
-    if (f1 <= f2) {
-      u = t2;
-      t2 = t1;
-      f2 = f1;
-      t1 = u - phi * (u - l);
-      f1 = g(t1);
-    } else {
-      l = t1;
-      t1 = t2;
-      f1 = f2;
-      t2 = l + phi * (u - l);
-      f2 = g(t2);
-    }
-  }
   CutterReference best;
-  const LD candidates[] = {lo + (hi - lo) * best_k / (n - 1), l, u, t1, t2,
-                           lo, hi};
-  for (LD t : candidates) {
-    const LD v = g(t);
-    if (v < best.w) {
-      best.w = v;
-      best.t = t;
-      best.rho = std::min(rho_at(t), r);
-    }
-  }
+  best.t = ConvexArgMin(g, lo, hi, samples, 90);
+  best.w = g(best.t);
+  best.rho = std::min(rho_at(best.t), r);
   return best;
 }
 
