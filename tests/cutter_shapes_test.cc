@@ -8,14 +8,16 @@
 //   reference of tests/cutter_reference.h (heights to 1e-9 mm, derivatives
 //   to 1e-6 relative away from creases and walls);
 // - the Sweep contract (batch heights, jet heights, lowest(), footprint);
+// - points on the seams (end planes, join circles, walls, the axis), where
+//   random points never fall: jets that are one-sided limits or harmless;
 // - degenerate shapes against the shapes they degenerate to (1e-12);
 // - ValidateCutter's messages, ProfileHeight and FootprintRadius.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <functional>
-#include <memory>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <random>
 #include <string>
