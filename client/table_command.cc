@@ -1,4 +1,5 @@
-// swarf table: the paper's Tables 1 and 2 (both instances, both schemes).
+// swarf table: the paper's Tables 1 and 2 (both instances, every scheme),
+// and the same table for the cutter-shape instances (issue 16).
 #include <algorithm>
 #include <bit>
 #include <chrono>
@@ -22,9 +23,12 @@ namespace swarf::cli {
 namespace {
 
 constexpr char kUsage[] =
-    "usage: swarf table [--instance five-balls|five-cylinders] [--mesh N]\n"
+    "usage: swarf table [--instance NAME|paper|shapes|all] [--mesh N]\n"
     "                   [--runs N] [--json] [--heights DIR]\n"
-    "Prints the paper's Tables 1 and 2: for each instance, mesh (default 100\n"
+    "Prints the paper's Tables 1 and 2 (--instance paper, the default:\n"
+    "five-balls and five-cylinders) or the same rows for the cutter-shape\n"
+    "jobs (--instance shapes: flat-ramps, bull-ramps, cone-ramps,\n"
+    "taper-ramps; see the README): for each instance, mesh (default 100\n"
     "and 1000) and scheme, the nodes, parameters, error against the exact\n"
     "surface (21 samples per element) and the time to apply the moves\n"
     "(median of --runs runs; default 11 for meshes up to 200, else 5).\n"
@@ -34,6 +38,7 @@ constexpr char kUsage[] =
 
 struct Row {
   std::string instance;
+  std::string cutter;  // CutterToString of the instance's tool
   int mesh;
   SchemeKind scheme;
   int64_t nodes, parameters;
@@ -96,6 +101,7 @@ absl::StatusOr<Row> MeasureRow(const Instance& inst, int mesh,
   if (!err.ok()) return err.status();
   Row row;
   row.instance = inst.name;
+  row.cutter = inst.moves.empty() ? "" : CutterToString(inst.moves[0].cutter);
   row.mesh = mesh;
   row.scheme = scheme;
   row.nodes = wp->grid().node_count();
@@ -111,6 +117,7 @@ void PrintJson(const std::vector<Row>& rows) {
   for (const Row& r : rows) {
     j.BeginObject()
         .Key("instance").String(r.instance)
+        .Key("cutter").String(r.cutter)
         .Key("mesh").Int(r.mesh)
         .Key("scheme").String(GetScheme(r.scheme).name())
         .Key("nodes").Int(r.nodes)
@@ -134,9 +141,13 @@ void PrintText(const std::vector<Row>& rows) {
     while (end < rows.size() && rows[end].instance == rows[start].instance) {
       ++end;
     }
-    const bool balls = rows[start].instance == "five-balls";
-    std::cout << rows[start].instance << " (paper Table " << (balls ? 1 : 2)
-              << ")\n";
+    const std::string& name = rows[start].instance;
+    if (name == "five-balls" || name == "five-cylinders") {
+      std::cout << name << " (paper Table " << (name == "five-balls" ? 1 : 2)
+                << ")\n";
+    } else {
+      std::cout << name << " (" << rows[start].cutter << ")\n";
+    }
     auto line = [&](const std::string& label, auto cell) {
       std::cout << absl::StrFormat("  %-20s", label);
       for (size_t k = start; k < end; ++k) {
@@ -184,9 +195,17 @@ int TableCommand(const std::vector<std::string>& argv) {
               << "\"\n" << kUsage;
     return 2;
   }
-  std::vector<std::string> instances(std::begin(kPaperInstances),
-                                     std::end(kPaperInstances));
-  if (auto i = args->Get("instance")) instances = {*i};
+  std::vector<std::string> instances;
+  const std::string which = args->Get("instance").value_or("paper");
+  if (which == "paper" || which == "all") {
+    instances.insert(instances.end(), std::begin(kPaperInstances),
+                     std::end(kPaperInstances));
+  }
+  if (which == "shapes" || which == "all") {
+    instances.insert(instances.end(), std::begin(kShapeInstances),
+                     std::end(kShapeInstances));
+  }
+  if (instances.empty()) instances = {which};
   std::vector<int> meshes = {100, 1000};
   auto mesh = args->GetInt("mesh");
   auto runs = args->GetInt("runs");
@@ -208,7 +227,7 @@ int TableCommand(const std::vector<std::string>& argv) {
          {SchemeKind::kZmap, SchemeKind::kTaylor, SchemeKind::kGuarded,
           SchemeKind::kExact}) {
       for (int m : meshes) {
-        auto inst = PaperInstance(name, m);
+        auto inst = NamedInstance(name, m);
         if (!inst.ok()) {
           std::cerr << "swarf table: " << inst.status().message() << "\n";
           return 2;

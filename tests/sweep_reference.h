@@ -55,46 +55,40 @@ inline LD BallLow(const LD a[3], const LD e[3], LD r, LD x, LD y, LD t,
   return cz - depth;
 }
 
-// Brute-force swept height at (x, y) of the ball of radius r whose tip moves
-// from tip_from to tip_to: `samples` balls evenly spaced over the part of
-// the move whose balls cover (x, y), then golden-section refinement around
-// the best one. The height of the covering balls is convex in t, so the
-// minimum lies between the best sample's neighbours and golden section
-// converges to it.
-inline ReferencePoint BruteForceHeight(const Vec3& tip_from, const Vec3& tip_to,
-                                       double radius, double x, double y,
-                                       int samples = 20001) {
-  const LD r = radius;
-  const LD a[3] = {tip_from.x, tip_from.y, LD{tip_from.z} + r};
-  const LD e[3] = {LD{tip_to.x} - tip_from.x, LD{tip_to.y} - tip_from.y,
-                   LD{tip_to.z} - tip_from.z};
-  const LD px = x, py = y;
-  // Parameters t in [0, 1] whose ball covers (x, y): |d0 + t e|^2 <= r^2.
-  const LD d0x = a[0] - px, d0y = a[1] - py;
-  const LD ee = e[0] * e[0] + e[1] * e[1];
-  const LD de = d0x * e[0] + d0y * e[1];
+// The parameters t in [0, 1] at which a tool of radius r whose axis moves
+// (in XY) from (ax, ay) by (ex, ey) covers (x, y): |d0 + t e|^2 <= r^2,
+// d0 = a - (x, y). False when there are none.
+inline bool CoveringInterval(LD ax, LD ay, LD ex, LD ey, LD r, LD x, LD y,
+                             LD* lo, LD* hi) {
+  const LD d0x = ax - x, d0y = ay - y;
+  const LD ee = ex * ex + ey * ey;
+  const LD de = d0x * ex + d0y * ey;
   const LD dd = d0x * d0x + d0y * d0y - r * r;
-  LD lo = 0, hi = 1;
-  if (ee == 0) {
-    if (dd > 0) return {};
-  } else {
-    const LD disc = de * de - ee * dd;
-    if (disc < 0) return {};
-    const LD s = std::sqrt(disc);
-    lo = std::max(lo, (-de - s) / ee);
-    hi = std::min(hi, (-de + s) / ee);
-    if (lo > hi) return {};
-  }
-  ReferencePoint best;
-  // Sampling only picks the bracket; double precision is plenty for that.
-  int best_k = 0;
-  double best_w = std::numeric_limits<double>::infinity();
+  *lo = 0;
+  *hi = 1;
+  if (ee == 0) return dd <= 0;
+  const LD disc = de * de - ee * dd;
+  if (disc < 0) return false;
+  const LD s = std::sqrt(disc);
+  *lo = std::max(*lo, (-de - s) / ee);
+  *hi = std::min(*hi, (-de + s) / ee);
+  return *lo <= *hi;
+}
+
+// The t in [lo, hi] minimizing f, convex there: `samples` evenly spaced
+// values pick the best one's neighbours as the bracket, golden section
+// (`iterations` steps) refines it; the lowest of everything evaluated
+// (bracket ends, golden points, best sample, lo and hi) wins. The samples
+// only guard against a flat stretch fooling the first golden-section step.
+template <class F>
+LD ConvexArgMin(const F& f, LD lo, LD hi, int samples, int iterations) {
   const int n = std::max(samples, 2);
+  int best_k = 0;
+  LD best_f = std::numeric_limits<LD>::infinity();
   for (int k = 0; k < n; ++k) {
-    const LD t = lo + (hi - lo) * k / (n - 1);
-    const double w = static_cast<double>(BallLow(a, e, r, px, py, t));
-    if (w < best_w) {
-      best_w = w;
+    const LD v = f(lo + (hi - lo) * k / (n - 1));
+    if (v < best_f) {
+      best_f = v;
       best_k = k;
     }
   }
@@ -102,34 +96,53 @@ inline ReferencePoint BruteForceHeight(const Vec3& tip_from, const Vec3& tip_to,
   LD u = lo + (hi - lo) * std::min(best_k + 1, n - 1) / (n - 1);
   const LD phi = (std::sqrt(LD{5}) - 1) / 2;
   LD t1 = u - phi * (u - l), t2 = l + phi * (u - l);
-  LD f1 = BallLow(a, e, r, px, py, t1), f2 = BallLow(a, e, r, px, py, t2);
-  for (int it = 0; it < 120 && u - l > 0; ++it) {
+  LD f1 = f(t1), f2 = f(t2);
+  for (int it = 0; it < iterations && u - l > 0; ++it) {
     if (f1 <= f2) {
       u = t2;
       t2 = t1;
       f2 = f1;
       t1 = u - phi * (u - l);
-      f1 = BallLow(a, e, r, px, py, t1);
+      f1 = f(t1);
     } else {
       l = t1;
       t1 = t2;
       f1 = f2;
       t2 = l + phi * (u - l);
-      f2 = BallLow(a, e, r, px, py, t2);
+      f2 = f(t2);
     }
   }
-  // The minimum over everything evaluated, with its slope.
-  const LD candidates[] = {l, u, t1, t2,
-                           lo + (hi - lo) * best_k / (n - 1), lo, hi};
-  for (LD t : candidates) {
-    LD slope = 0;
-    const LD w = BallLow(a, e, r, px, py, t, &slope);
-    if (w < best.w) {
-      best.w = w;
-      best.slope = slope;
-      best.t = t;
+  LD best_t = lo;
+  best_f = std::numeric_limits<LD>::infinity();
+  for (LD t : {lo + (hi - lo) * best_k / (n - 1), l, u, t1, t2, lo, hi}) {
+    const LD v = f(t);
+    if (v < best_f) {
+      best_f = v;
+      best_t = t;
     }
   }
+  return best_t;
+}
+
+// Brute-force swept height at (x, y) of the ball of radius r whose tip moves
+// from tip_from to tip_to: `samples` balls evenly spaced over the part of
+// the move whose balls cover (x, y), then golden-section refinement around
+// the best one (ConvexArgMin: the height of the covering balls is convex
+// in t).
+inline ReferencePoint BruteForceHeight(const Vec3& tip_from, const Vec3& tip_to,
+                                       double radius, double x, double y,
+                                       int samples = 20001) {
+  const LD r = radius;
+  const LD a[3] = {tip_from.x, tip_from.y, LD{tip_from.z} + r};
+  const LD e[3] = {LD{tip_to.x} - tip_from.x, LD{tip_to.y} - tip_from.y,
+                   LD{tip_to.z} - tip_from.z};
+  LD lo, hi;
+  if (!CoveringInterval(a[0], a[1], e[0], e[1], r, x, y, &lo, &hi)) return {};
+  const LD t = ConvexArgMin(
+      [&](LD t) { return BallLow(a, e, r, x, y, t); }, lo, hi, samples, 120);
+  ReferencePoint best;
+  best.t = t;
+  best.w = BallLow(a, e, r, x, y, t, &best.slope);
   return best;
 }
 
