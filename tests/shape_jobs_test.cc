@@ -15,6 +15,7 @@
 #include <string_view>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "core/cutting_marks.h"
 #include "core/instances.h"
 #include "core/valuation.h"
@@ -82,35 +83,64 @@ TEST(ShapeInstanceTest, Definitions) {
 class ShapeInstancePrecisionTest
     : public ::testing::TestWithParam<std::string_view> {};
 
-// The paper's claim carried to every shape: derivatives buy an order of
-// magnitude. At mesh 100 (1 mm elements against 5-6 mm tools), from the
-// valuation's 21 samples per element against the exact sweeps.
-TEST_P(ShapeInstancePrecisionTest, TaylorTenTimesBelowZmap) {
-  auto inst = NamedInstance(GetParam(), 100);
-  ASSERT_TRUE(inst.ok()) << inst.status();
-  ErrorStats stats[2];
-  const SchemeKind schemes[2] = {SchemeKind::kZmap, SchemeKind::kTaylor};
-  for (int s = 0; s < 2; ++s) {
-    auto wp = Cut(inst->stock, inst->moves, schemes[s]);
-    auto measured = MeasureError(*wp);
-    ASSERT_TRUE(measured.ok()) << measured.status();
-    EXPECT_EQ(measured->samples, int64_t{100} * 100 * 21);
-    stats[s] = *measured;
-  }
-  const ErrorStats& zmap = stats[0];
-  const ErrorStats& taylor = stats[1];
-  RecordProperty("zmap_max_error", std::to_string(zmap.max_error));
-  RecordProperty("zmap_mean_error", std::to_string(zmap.mean_error));
-  RecordProperty("taylor_max_error", std::to_string(taylor.max_error));
-  RecordProperty("taylor_mean_error", std::to_string(taylor.mean_error));
+// The valuation of `scheme` on the instance at mesh 100 (1 mm elements
+// against 5-6 mm tools): 21 samples per element against the exact sweeps.
+ErrorStats Measure(std::string_view name, int mesh, SchemeKind scheme) {
+  auto inst = NamedInstance(name, mesh);
+  EXPECT_TRUE(inst.ok()) << inst.status();
+  auto wp = Cut(inst->stock, inst->moves, scheme);
+  auto measured = MeasureError(*wp);
+  EXPECT_TRUE(measured.ok()) << measured.status();
+  EXPECT_EQ(measured->samples, int64_t{mesh} * mesh * 21);
+  const std::string key =
+      absl::StrCat(std::string(GetScheme(scheme).name()), "_", mesh);
+  ::testing::Test::RecordProperty(key + "_max",
+                                  std::to_string(measured->max_error));
+  ::testing::Test::RecordProperty(key + "_mean",
+                                  std::to_string(measured->mean_error));
+  return *measured;
+}
+
+// The paper's claim carried to every shape, derivatives buy an order of
+// magnitude, holds for the exact scheme: the mean error at least 10x below
+// the z-map's and the max not above it. (The paper's own eq. (2), the
+// taylor scheme, does not carry it: the minimum of corner patches puts a
+// flat end's full depth beyond its vertical walls and a V-bit's flank
+// planes below the V's bottom; measured figures in docs/benchmarks.md,
+// "Cutter shapes: precision".)
+TEST_P(ShapeInstancePrecisionTest, ExactTenTimesBelowZmap) {
+  const ErrorStats zmap = Measure(GetParam(), 100, SchemeKind::kZmap);
+  const ErrorStats exact = Measure(GetParam(), 100, SchemeKind::kExact);
   EXPECT_GT(zmap.mean_error, 0);
-  EXPECT_LE(10 * taylor.mean_error, zmap.mean_error)
-      << "taylor mean " << taylor.mean_error << " mm, zmap mean "
+  EXPECT_LE(10 * exact.mean_error, zmap.mean_error)
+      << "exact mean " << exact.mean_error << " mm, zmap mean "
       << zmap.mean_error << " mm";
-  EXPECT_LE(taylor.max_error, zmap.max_error)
-      << "taylor max " << taylor.max_error << " mm at (" << taylor.max_x
-      << ", " << taylor.max_y << "), zmap max " << zmap.max_error
-      << " mm at (" << zmap.max_x << ", " << zmap.max_y << ")";
+  EXPECT_LE(exact.max_error, zmap.max_error)
+      << "exact max " << exact.max_error << " mm at (" << exact.max_x << ", "
+      << exact.max_y << ")";
+}
+
+// The default (guarded) scheme keeps a flat end's patches inside its
+// footprint, whose edge is the wall: there it carries the claim too.
+TEST(ShapeInstancePrecision, GuardedFlatTenTimesBelowZmap) {
+  const ErrorStats zmap = Measure("flat-ramps", 100, SchemeKind::kZmap);
+  const ErrorStats guarded = Measure("flat-ramps", 100, SchemeKind::kGuarded);
+  EXPECT_LE(10 * guarded.mean_error, zmap.mean_error);
+  EXPECT_LE(guarded.max_error, zmap.max_error);
+}
+
+// On the smooth torus corner the paper's scheme beats the z-map, and more
+// so as the mesh refines (the patches' error falls as h^3, the bilinear's
+// as h^2).
+TEST(ShapeInstancePrecision, TaylorBullNoseBelowZmapAndConverging) {
+  const ErrorStats z100 = Measure("bull-ramps", 100, SchemeKind::kZmap);
+  const ErrorStats t100 = Measure("bull-ramps", 100, SchemeKind::kTaylor);
+  const ErrorStats z200 = Measure("bull-ramps", 200, SchemeKind::kZmap);
+  const ErrorStats t200 = Measure("bull-ramps", 200, SchemeKind::kTaylor);
+  EXPECT_LT(t100.mean_error, z100.mean_error);
+  EXPECT_LT(t200.mean_error, z200.mean_error);
+  EXPECT_LT(t200.mean_error / z200.mean_error,
+            t100.mean_error / z100.mean_error);
 }
 
 // Every node the shape instances cut holds a jet of its owner's sweep that
