@@ -18,6 +18,8 @@
 #include "absl/synchronization/mutex.h"
 #include "client/args.h"
 #include "client/json_writer.h"
+#include "core/scheme.h"
+#include "server/convert.h"
 #include "httplib.h"
 
 // The page (client/viewer/index.html), embedded by cmake/embed_file.cmake.
@@ -344,8 +346,12 @@ class ViewerImpl {
     w.Key("z_top").Double(st.z_top());
     w.EndObject();
     w.Key("nx").Int(session_.nx()).Key("ny").Int(session_.ny());
-    w.Key("scheme").String(session_.scheme() == pb::SCHEME_ZMAP ? "zmap"
-                                                                : "taylor");
+    // The scheme's name, as --scheme spells it (unknown values: guarded,
+    // what SCHEME_UNSPECIFIED means).
+    const absl::StatusOr<SchemeKind> scheme =
+        server::SchemeFromProto(session_.scheme(), "scheme");
+    w.Key("scheme").String(std::string(
+        GetScheme(scheme.ok() ? *scheme : SchemeKind::kGuarded).name()));
     w.Key("tile_size").Int(session_.tile_size());
     w.Key("tiles_x").Int(session_.tiles_x());
     w.Key("tiles_y").Int(session_.tiles_y());
