@@ -25,6 +25,7 @@
 #include "core/cutter/tapered_ball_sweep.h"
 #include "core/workpiece.h"
 #include "gtest/gtest.h"
+#include "tests/cutter_reference.h"
 
 namespace swarf {
 namespace {
@@ -617,6 +618,35 @@ TEST(ProfileSweep, TaperedBallWithTinyTaperIsTheBall) {
                           {jt.wxx, jb.wxx}, {jt.wxy, jb.wxy},
                           {jt.wyy, jb.wyy}}) {
         EXPECT_NEAR(u, v, 1e-9 * std::max(1.0, std::fabs(v))) << x << "," << y;
+      }
+    }
+  }
+}
+
+// Grid nodes exactly on a bull-nose ramp's end planes, at the edge of the
+// flat band (|n| = R - rc) and at the wall (|n| = R): the bull-ramps
+// instance's first move with the heights its job computes (-0.1 * 1.6 is
+// -0.16000000000000003). At (90, 10) rounding put z0 + m L below to.z, so
+// the wall circle's crossing at the end (half chord 0) beat the end's tool
+// and, taken with the sign of the crossing the ramp climbs from, gave a
+// mirrored wall (wy = 160, wyy = -3.2e9) among neighbours with wy = -1e4,
+// wyy = +5e11. Written -0.16 the same move gave the end's tool. Every jet
+// must be a one-sided limit of its neighbours' or a harmless patch.
+TEST(ProfileSweep, BullRampEndPlaneAtTheFlatBandEdgeTakesALimit) {
+  const Cutter bull = Cutter::BullNose(5, 2);
+  for (const auto& [z0, z1] :
+       {std::pair{-0.1 * 1.6, -0.9 * 1.6}, std::pair{-0.16, -1.44}}) {
+    SCOPED_TRACE(z0);
+    const Sweep s({10, 15, z0}, {90, 15, z1}, bull);
+    auto jet_at = [&](double x, double y) { return s.JetAt(x, y); };
+    auto height_at = [&](double x, double y) { return s.Height(x, y); };
+    for (double x : {90.0, 10.0}) {
+      for (double y : {12.0, 18.0, 10.0, 20.0}) {
+        const SurfaceJet j = s.JetAt(x, y);
+        EXPECT_EQ(std::bit_cast<uint64_t>(j.w),
+                  std::bit_cast<uint64_t>(s.Height(x, y)));
+        EXPECT_EQ(testing::CheckSeamJet(jet_at, height_at, x, y, j, 5), "")
+            << x << "," << y << ": wy " << j.wy << " wyy " << j.wyy;
       }
     }
   }

@@ -19,7 +19,8 @@ double Leg(double a, double b) {
 }
 
 // A candidate replaces the best only when strictly lower, so on exact ties
-// the earlier kind wins (envelopes, then move ends, then kink circles).
+// the earlier kind wins (envelopes, then move ends, then kink circles, of
+// a circle's two crossings the one the ramp descends to).
 void Take(ProfilePoint* best, ProfilePoint::Contact contact, int32_t index,
           double w, double p0, double p1, double p2) {
   if (w < best->w) {
@@ -298,11 +299,15 @@ ProfilePoint ProfileSweep::Locate(double x, double y) const {
          ex, ey, 0);
   }
   // 3. Kink circles: where the distance crosses a piece boundary (the last
-  // is the wall at R): s = a -+ sqrt(rho_k^2 - n^2).
+  // is the wall at R): s = a -+ sqrt(rho_k^2 - n^2). The crossing the ramp
+  // descends to comes first: it is the lower one, so where the two meet
+  // (the circle's side, half = 0, or a half lost to rounding) it wins the
+  // tie and gives the jet of the surface inside, not its mirror image.
+  const double first = m < 0 ? 1.0 : -1.0;
   auto kink = [&](int32_t index, double rho_k, double f_k) {
     if (an > rho_k) return;
     const double half = Leg(rho_k, an);
-    for (double sigma : {-1.0, 1.0}) {
+    for (double sigma : {first, -first}) {
       const double s = a + sigma * half;
       if (inside(s)) {
         Take(&best, ProfilePoint::kKink, index, z0 + m * s + f_k, n, half,
@@ -315,6 +320,21 @@ ProfilePoint ProfileSweep::Locate(double x, double y) const {
   }
   for (int32_t i = 0; i < pf.pieces; ++i) {
     kink(i, pf.piece[i].rho1, pf.piece[i].Height(pf.piece[i].rho1));
+  }
+  // The crossing the ramp climbs from (sigma m > 0) is never the minimum: g
+  // falls on from it (g' <= m < 0 just after it on a descending ramp). It
+  // wins only where the other crossing lies past the move's end and the
+  // end's tool, exactly no higher, was lost to rounding (rho_end^2 a hair
+  // above R^2, or z0 + m L below to.z): the reach of (x, y) has shrunk to
+  // that end, whose tool is the surface round it. Its height stays (the
+  // same value of g to rounding); the jet is the end tool's.
+  if (best.contact == ProfilePoint::kKink && best.p2 * m > 0) {
+    const bool end = m < 0;
+    best.contact = ProfilePoint::kTool;
+    best.index = end ? 1 : 0;
+    best.p0 = end ? ex : px;
+    best.p1 = end ? ey : py;
+    best.p2 = 0;
   }
   return best;
 }

@@ -41,7 +41,10 @@
 // (kRimDepthFraction of the relevant radius: the arc's depth, the circle's
 // half chord, the apex distance; for the torus on a ramp its contact angle
 // from the equator to kRimDepthFraction of its range), then bounded with
-// ClampedJet. The height is never clamped.
+// ClampedJet. The height is never clamped. Seams take one-sided limits: at
+// a circle's side (half chord 0) the crossing the ramp descends to, where
+// the move's reach of (x, y) shrinks to an end (the other crossing past
+// it) that end's tool.
 //
 // A ProfileSweep is an immutable value; all methods are thread-safe.
 #ifndef SWARF_CORE_CUTTER_PROFILE_SWEEP_H_
