@@ -215,7 +215,8 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   }
   if (options.moves != nullptr) {
     grid->moves = *options.moves;
-    grid->surfaces = std::make_shared<const MoveSweeps>(*options.moves);
+    grid->surfaces =
+        std::make_shared<const MoveSweeps>(*options.moves, grid->spec);
   }
   ErrorRaster raster;
   raster.region = {stock.x0, stock.y0, stock.x1, stock.y1};

@@ -32,7 +32,7 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
   for (int64_t id = 0; id < wp.move_count(); ++id) {
     g->moves.push_back(wp.move(id));
   }
-  g->surfaces = std::make_shared<const MoveSweeps>(g->moves);
+  g->surfaces = std::make_shared<const MoveSweeps>(g->moves, g->spec);
   std::vector<double> w(kTileNodes);
   std::vector<float> dbuf(5 * kTileNodes);
   std::vector<int32_t> owner(kTileNodes);
@@ -117,10 +117,10 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
       e.reach[k] = ReachOf(moves, o, spec.z_top);
     }
   }
-  if (GetScheme(scheme).uses_stencil() && surfaces != nullptr) {
-    e.surfaces = surfaces.get();
-    FillStencil(ei, ej, spec.nx, spec.ny,
-                [&](int32_t i, int32_t j) { return owner(i, j); }, &e);
+  if (GetScheme(scheme).uses_candidates() && surfaces != nullptr) {
+    int32_t corner_owner[4];
+    for (int k = 0; k < 4; ++k) corner_owner[k] = owner(is[k], js[k]);
+    surfaces->FillCandidates(ei, ej, corner_owner, &e);
   }
   return e;
 }

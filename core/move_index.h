@@ -24,6 +24,7 @@ class MoveIndex {
   // (BallSweep::FootprintBounds) touches.
   void Add(uint32_t id, const Rect& bounds);
 
+  const GridGeometry& grid() const { return grid_; }
   int32_t bins_x() const { return bins_x_; }
   int32_t bins_y() const { return bins_y_; }
   int32_t BinOfElement(int32_t ei, int32_t ej) const {

@@ -263,10 +263,10 @@ class ExactScheme final : public Scheme {
   int parameters_per_node() const override { return 1; }
   bool stores_derivatives() const override { return true; }  // on demand
   int bytes_per_node() const override { return 12; }
-  bool uses_stencil() const override { return true; }
+  bool uses_candidates() const override { return true; }
   double Reconstruct(const ElementCorners& e, double x,
                      double y) const override {
-    return ExactStencilHeight(e, x, y);
+    return ExactCandidatesHeight(e, x, y);
   }
   void Gradient(const ElementCorners& e, double x, double y, double* gx,
                 double* gy) const override {
@@ -277,11 +277,11 @@ class ExactScheme final : public Scheme {
     }
     double w = e.z_top;
     int32_t lowest = -1;
-    for (int k = 0; k < e.owner_count; ++k) {
-      const double h = e.surfaces->Height(e.owners[k], x, y);
+    for (const int32_t id : e.candidates) {
+      const double h = e.surfaces->Height(id, x, y);
       if (h < w) {
         w = h;
-        lowest = e.owners[k];
+        lowest = id;
       }
     }
     if (lowest < 0) return;
@@ -293,11 +293,11 @@ class ExactScheme final : public Scheme {
 
 }  // namespace
 
-double ExactStencilHeight(const ElementCorners& e, double x, double y) {
+double ExactCandidatesHeight(const ElementCorners& e, double x, double y) {
   if (e.surfaces == nullptr) return MinOfPatches(e, x, y);
   double w = e.z_top;
-  for (int k = 0; k < e.owner_count; ++k) {
-    w = std::min(w, e.surfaces->Height(e.owners[k], x, y));
+  for (const int32_t id : e.candidates) {
+    w = std::min(w, e.surfaces->Height(id, x, y));
   }
   return w;
 }

@@ -9,6 +9,7 @@
 #include <limits>
 #include <string_view>
 
+#include "absl/container/inlined_vector.h"
 #include "absl/status/statusor.h"
 #include "core/surface_jet.h"
 
@@ -17,8 +18,8 @@ namespace swarf {
 // kZmap: eq. (16). kTaylor: the paper's eq. (1)-(2), unchanged. kGuarded (the
 // default of sessions and `swarf run`): eq. (1)-(2) where the patches are
 // trustworthy, the bilinear elsewhere (see GuardedHeight). kExact: the
-// minimum of the exact swept surfaces of the moves owning the nodes around
-// the element (see ExactStencilHeight). The values are stored in snapshots:
+// minimum of the exact swept surfaces of the moves that can reach the
+// element (see ExactCandidatesHeight). The values are stored in snapshots:
 // append only.
 enum class SchemeKind { kZmap, kTaylor, kGuarded, kExact };
 
@@ -62,12 +63,11 @@ struct ElementCorners {
   double z_top = 0;  // stock top: no reconstruction lies above it
   SurfaceJet c[4];
   CornerReach reach[4];  // filled where the scheme uses_reach()
-  // Filled where the scheme uses_stencil(): the distinct owners (>= 0) of
-  // the kStencil x kStencil nodes around the element (those of the grid),
-  // and the surfaces of the moves (not owned; outlives the corners).
-  static constexpr int kStencil = 4;
-  int owner_count = 0;
-  int32_t owners[kStencil * kStencil];
+  // Filled where the scheme uses_candidates(): every move whose swept
+  // surface can be the lowest somewhere in the element (MoveSweeps::
+  // FillCandidates), ascending, and the surfaces of the moves (not owned;
+  // outlives the corners).
+  absl::InlinedVector<int32_t, 32> candidates;
   const MoveSurfaces* surfaces = nullptr;
 };
 
@@ -84,8 +84,8 @@ class Scheme {
   // Whether Reconstruct reads ElementCorners::reach (else it may be left
   // unbounded, saving the work of filling it).
   virtual bool uses_reach() const { return false; }
-  // Whether Reconstruct reads ElementCorners::owners and surfaces.
-  virtual bool uses_stencil() const { return false; }
+  // Whether Reconstruct reads ElementCorners::candidates and surfaces.
+  virtual bool uses_candidates() const { return false; }
   // Bytes per allocated node, including the owning move id.
   virtual int bytes_per_node() const = 0;
   // Height at (x, y) inside the element. Thread-safe.
@@ -148,39 +148,12 @@ enum class PatchTrust { kFull, kLowerBound, kNone };
 // The trust of the patch with jet `j` at offset (dx, dy) from its node.
 PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy);
 
-// Fills e's stencil (owners, not surfaces) for element (ei, ej) of a grid
-// of nx x ny elements, from owner_at(i, j) (-1: uncut). Shared by every
-// holder of nodes, so that their reconstructions agree bit for bit.
-template <class OwnerAt>
-void FillStencil(int32_t ei, int32_t ej, int32_t nx, int32_t ny,
-                 OwnerAt owner_at, ElementCorners* e) {
-  constexpr int kBefore = (ElementCorners::kStencil - 2) / 2;
-  const int32_t i0 = ei - kBefore < 0 ? 0 : ei - kBefore;
-  const int32_t j0 = ej - kBefore < 0 ? 0 : ej - kBefore;
-  const int32_t i_end = i0 + ElementCorners::kStencil - 1;
-  const int32_t j_end = j0 + ElementCorners::kStencil - 1;
-  const int32_t i1 = i_end < nx ? i_end : nx;
-  const int32_t j1 = j_end < ny ? j_end : ny;
-  e->owner_count = 0;
-  for (int32_t j = j0; j <= j1; ++j) {
-    for (int32_t i = i0; i <= i1; ++i) {
-      const int32_t o = owner_at(i, j);
-      if (o < 0) continue;
-      bool seen = false;
-      for (int q = 0; q < e->owner_count && !seen; ++q) {
-        seen = e->owners[q] == o;
-      }
-      if (!seen) e->owners[e->owner_count++] = o;
-    }
-  }
-}
-
 // The exact reconstruction (kExact): the minimum of the stock top and of
-// the exact swept surfaces of the element's stencil owners at (x, y). Exact
-// wherever the move lowest at (x, y) owns a node of the stencil, which
-// misses only moves that pass between nodes without owning any node within
-// one element of this one. Without surfaces, MinOfPatches.
-double ExactStencilHeight(const ElementCorners& e, double x, double y);
+// the exact swept surfaces of the element's candidates at (x, y). The
+// candidates hold every move that can be the lowest anywhere in the element,
+// so this is the true machined surface (Workpiece::ExactHeight), bit for
+// bit. Without surfaces, MinOfPatches.
+double ExactCandidatesHeight(const ElementCorners& e, double x, double y);
 
 const Scheme& GetScheme(SchemeKind kind);
 // "zmap", "taylor", "guarded" or "exact"; InvalidArgument otherwise.

@@ -218,14 +218,15 @@ double Workpiece::TileTop(int32_t t, const Tile& tile) const {
   return zmax;
 }
 
-std::optional<Rect> Workpiece::IndexMove(uint32_t id, const Move& move) {
+std::optional<Rect> IndexMove(uint32_t id, const Move& move, double z_top,
+                              MoveIndex* index) {
   const std::optional<Rect> b =
-      FootprintBounds(move.from, move.to, move.cutter, spec().z_top);
-  if (!b.has_value() || !b->Intersects(grid_.bounds())) {
+      FootprintBounds(move.from, move.to, move.cutter, z_top);
+  if (!b.has_value() || !b->Intersects(index->grid().bounds())) {
     return std::nullopt;  // above the top, or beside the stock
   }
   // Indexed even when it cuts no node: the exact surface still sees it.
-  index_.Add(id, *b);
+  index->Add(id, *b);
   return b;
 }
 
@@ -251,8 +252,9 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
   std::vector<std::pair<int32_t, uint32_t>> pairs;
   for (size_t m = 0; m < moves.size(); ++m) {
     sweeps.emplace_back(moves[m].from, moves[m].to, moves[m].cutter);
-    const std::optional<Rect> footprint = IndexMove(
-        static_cast<uint32_t>(result.first_move_id + m), moves[m]);
+    const std::optional<Rect> footprint =
+        IndexMove(static_cast<uint32_t>(result.first_move_id + m), moves[m],
+                  spec().z_top, &index_);
     if (!footprint.has_value()) continue;
     const Rect& b = *footprint;
     const auto [i_lo, i_hi] =
@@ -485,34 +487,79 @@ CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
   return r;
 }
 
-MoveSweeps::MoveSweeps(const std::vector<Move>* moves)
-    : moves_(moves), serial_(NextSerial()) {}
+MoveSweeps::MoveSweeps(const std::vector<Move>* moves, const MoveIndex* index)
+    : moves_(moves), index_(index), serial_(NextSerial()) {}
 
-MoveSweeps::MoveSweeps(std::vector<Move> moves)
-    : owned_(std::move(moves)), moves_(&owned_), serial_(NextSerial()) {}
+MoveSweeps::MoveSweeps(std::vector<Move> moves, const StockSpec& spec)
+    : owned_(std::move(moves)),
+      moves_(&owned_),
+      owned_index_(std::make_unique<MoveIndex>(GridGeometry(spec))),
+      index_(owned_index_.get()),
+      serial_(NextSerial()) {
+  for (size_t id = 0; id < owned_.size(); ++id) {
+    IndexMove(static_cast<uint32_t>(id), owned_[id], spec.z_top,
+              owned_index_.get());
+  }
+}
 
 const Sweep* MoveSweeps::SweepOf(int32_t id) const {
   if (id < 0 || id >= static_cast<int64_t>(moves_->size())) return nullptr;
-  // The stencil's owners come back for every sample of an element and for
-  // its neighbours: a few per thread cover them.
+  // An element's candidates come back for every sample of it and for its
+  // neighbours; they are mostly consecutive ids, which a direct-mapped
+  // cache keeps apart.
   struct Entry {
     uint64_t serial = 0;
     int32_t id = -1;
     std::optional<Sweep> sweep;
   };
-  constexpr int kEntries = 16;
+  constexpr int kEntries = 64;
   thread_local Entry cache[kEntries];
-  thread_local int next = 0;
-  for (const Entry& e : cache) {
-    if (e.id == id && e.serial == serial_) return &*e.sweep;
-  }
-  Entry& e = cache[next];
-  next = (next + 1) % kEntries;
+  Entry& e = cache[id & (kEntries - 1)];
+  if (e.id == id && e.serial == serial_) return &*e.sweep;
   const Move& m = (*moves_)[id];
   e.sweep.emplace(m.from, m.to, m.cutter);
   e.id = id;
   e.serial = serial_;
   return &*e.sweep;
+}
+
+void MoveSweeps::FillCandidates(int32_t ei, int32_t ej,
+                                const int32_t corner_owner[4],
+                                ElementCorners* e) const {
+  e->surfaces = this;
+  e->candidates.clear();
+  const double xs[4] = {e->x0, e->x1, e->x1, e->x0};
+  const double ys[4] = {e->y0, e->y0, e->y1, e->y1};
+  double cap = e->z_top;
+  for (int k = 0; k < 4; ++k) {
+    const int32_t o = corner_owner[k];
+    if (o < 0 || o >= static_cast<int64_t>(moves_->size())) continue;
+    bool seen = false;
+    for (int q = 0; q < k && !seen; ++q) seen = corner_owner[q] == o;
+    if (seen) continue;
+    e->candidates.push_back(o);
+    double highest = -kInf;
+    for (int q = 0; q < 4; ++q) {
+      highest = std::max(highest, Height(o, xs[q], ys[q]));
+    }
+    cap = std::min(cap, highest);
+  }
+  const size_t owners = e->candidates.size();
+  const Rect box{e->x0, e->y0, e->x1, e->y1};
+  for (const uint32_t id : index_->Bin(index_->BinOfElement(ei, ej))) {
+    const Move& m = (*moves_)[id];
+    if (!(std::min(m.from.z, m.to.z) < cap)) continue;
+    bool owner = false;
+    for (size_t q = 0; q < owners && !owner; ++q) {
+      owner = e->candidates[q] == static_cast<int32_t>(id);
+    }
+    if (owner) continue;
+    const std::optional<Rect> b = FootprintBounds(m.from, m.to, m.cutter, cap);
+    if (b.has_value() && b->Intersects(box)) {
+      e->candidates.push_back(static_cast<int32_t>(id));
+    }
+  }
+  std::sort(e->candidates.begin(), e->candidates.end());
 }
 
 double MoveSweeps::Height(int32_t id, double x, double y) const {
@@ -542,10 +589,10 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
       e.reach[k] = ReachOf(moves_, n.owner, e.z_top);
     }
   }
-  if (scheme_->uses_stencil()) {
-    e.surfaces = &surfaces_;
-    FillStencil(ei, ej, grid_.nx(), grid_.ny(),
-                [&](int32_t i, int32_t j) { return OwnerAt(i, j); }, &e);
+  if (scheme_->uses_candidates()) {
+    int32_t owners[4];
+    for (int k = 0; k < 4; ++k) owners[k] = OwnerAt(is[k], js[k]);
+    surfaces_.FillCandidates(ei, ej, owners, &e);
   }
   return e;
 }
@@ -682,7 +729,8 @@ void Workpiece::SaveState(
 absl::Status Workpiece::Record(std::span<const Move> moves) {
   SWARF_RETURN_IF_ERROR(AdmitMoves(moves));
   for (size_t m = 0; m < moves.size(); ++m) {
-    IndexMove(static_cast<uint32_t>(move_count() + m), moves[m]);
+    IndexMove(static_cast<uint32_t>(move_count() + m), moves[m], spec().z_top,
+              &index_);
   }
   moves_.insert(moves_.end(), moves.begin(), moves.end());
   return absl::OkStatus();

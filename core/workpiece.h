@@ -64,27 +64,51 @@ struct Move {
 // lowest tip.
 CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top);
 
-// The exact swept surfaces of a list of moves, by index: the exact
-// scheme's MoveSurfaces. Thread-safe (each thread keeps the last few sweeps
-// it built). `moves` (not owned) must outlive it; it may grow between
-// calls, not during them.
+// The exact swept surfaces of a list of moves, by index, and where each
+// can reach: the exact scheme's MoveSurfaces. Thread-safe (each thread keeps
+// the sweeps it built last). `moves` and `index` (not owned) must outlive
+// it; they may grow between calls, not during them.
 class MoveSweeps final : public MoveSurfaces {
  public:
-  explicit MoveSweeps(const std::vector<Move>* moves);
-  // Owning its own copy of the moves.
-  explicit MoveSweeps(std::vector<Move> moves);
+  // `index` lists the moves by the bins their footprints reach (as
+  // Workpiece indexes them).
+  MoveSweeps(const std::vector<Move>* moves, const MoveIndex* index);
+  // Owning its own copy of the moves, indexed over the grid of `spec`
+  // (validated) as a workpiece of that stock indexes them.
+  MoveSweeps(std::vector<Move> moves, const StockSpec& spec);
   MoveSweeps(const MoveSweeps&) = delete;
   MoveSweeps& operator=(const MoveSweeps&) = delete;
   // +inf (and a zero jet) for an id outside the list.
   double Height(int32_t id, double x, double y) const override;
   SurfaceJet Jet(int32_t id, double x, double y) const override;
 
+  // Fills e->candidates (and e->surfaces) for element (ei, ej) of the
+  // index's grid, whose corners e->c[k] are owned by corner_owner[k] (-1:
+  // uncut): the corners' owners, and every other move of the element's bin
+  // that can dip below their surfaces somewhere in the element. Each sweep
+  // is convex (the lower surface of a convex tool swept along a segment),
+  // so over the element's rectangle it is highest at a corner: the least
+  // of the owners' highest corner values bounds the machined surface over
+  // the element from above (cap), and a move whose footprint below cap
+  // (FootprintBounds) misses the rectangle cannot lower it. So the minimum
+  // over the candidates is the exact surface everywhere in the element.
+  void FillCandidates(int32_t ei, int32_t ej, const int32_t corner_owner[4],
+                      ElementCorners* e) const;
+
  private:
   const Sweep* SweepOf(int32_t id) const;
   std::vector<Move> owned_;
   const std::vector<Move>* moves_;
+  std::unique_ptr<MoveIndex> owned_index_;
+  const MoveIndex* index_;
   uint64_t serial_;  // tells this list's cached sweeps from others'
 };
+
+// Indexes move `id` in `index` when its footprint below z_top reaches the
+// index's grid; returns the footprint's bounds then (nullopt: above the
+// top or beside the stock).
+std::optional<Rect> IndexMove(uint32_t id, const Move& move, double z_top,
+                              MoveIndex* index);
 
 // Physical bounds on moves (mm). With kMinRadius and kMaxRadius
 // (core/cutter/cutter.h) they keep every intermediate value of the sweep
@@ -224,9 +248,6 @@ class Workpiece {
   std::unique_ptr<Tile> NewTile() const;
   // ValidateMoves, and ResourceExhausted past kMaxMoves (Apply and Record).
   absl::Status AdmitMoves(std::span<const Move> moves) const;
-  // Indexes move `id` when its footprint below the top reaches the stock;
-  // returns the footprint's bounds then.
-  std::optional<Rect> IndexMove(uint32_t id, const Move& move);
   // The highest node of tile t (what CutTile caps cuts with).
   double TileTop(int32_t t, const Tile& tile) const;
   int64_t CutTile(int32_t t, Tile* tile, std::span<const Sweep> sweeps,
@@ -252,7 +273,7 @@ class Workpiece {
   std::vector<Move> moves_;
   MoveIndex index_;
   uint64_t serial_;  // changes when LoadState replaces the nodes
-  MoveSweeps surfaces_{&moves_};
+  MoveSweeps surfaces_{&moves_, &index_};
   mutable std::mutex jets_mu_;
   mutable std::vector<std::shared_ptr<const TileJets>> jets_;  // per tile
   mutable std::deque<int32_t> jets_order_;  // cached tiles, oldest first
