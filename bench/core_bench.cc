@@ -2,8 +2,10 @@
 // the paper's two instances at 1000x1000, and reads of a cut workpiece. Run: build/bin/swarf_bench
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "core/cutter/ball_sweep.h"
@@ -256,7 +258,11 @@ std::unique_ptr<Workpiece> FinishedWorkpiece(SchemeKind scheme) {
   return wp;
 }
 
-enum class Read { kTiles, kValuation, kMarks };
+// kTiles reads as the service answers GetTiles: chunks of 16 tiles, each
+// chunk's derivatives computed on the pool first (PrepareJets), then read
+// one by one; kTilesSerial reads them one by one only (each first read
+// computes its tile's derivatives on the calling thread).
+enum class Read { kTiles, kTilesSerial, kValuation, kMarks };
 
 void BM_Read(benchmark::State& state, Read what) {
   std::vector<double> w(kTileNodes);
@@ -269,7 +275,24 @@ void BM_Read(benchmark::State& state, Read what) {
     auto wp = FinishedWorkpiece(SchemeKind::kTaylor);
     state.ResumeTiming();
     switch (what) {
-      case Read::kTiles:
+      case Read::kTiles: {
+        std::vector<int32_t> tiles;
+        for (int32_t t = 0; t < wp->tile_count(); ++t) {
+          if (wp->TileAllocated(t)) tiles.push_back(t);
+        }
+        constexpr size_t kChunk = 16;  // as SwarfService::GetTiles
+        for (size_t k = 0; k < tiles.size(); k += kChunk) {
+          const std::span<const int32_t> chunk(
+              tiles.data() + k, std::min(kChunk, tiles.size() - k));
+          wp->PrepareJets(chunk);
+          for (const int32_t t : chunk) {
+            wp->ReadTile(t, w.data(), dp, owner.data());
+            benchmark::DoNotOptimize(d.data());
+          }
+        }
+        break;
+      }
+      case Read::kTilesSerial:
         for (int32_t t = 0; t < wp->tile_count(); ++t) {
           if (!wp->TileAllocated(t)) continue;
           wp->ReadTile(t, w.data(), dp, owner.data());
@@ -289,6 +312,8 @@ void BM_Read(benchmark::State& state, Read what) {
   }
 }
 BENCHMARK_CAPTURE(BM_Read, tiles_with_derivatives, Read::kTiles)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Read, tiles_with_derivatives_serial, Read::kTilesSerial)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Read, valuation, Read::kValuation)
     ->Unit(benchmark::kMillisecond)->UseRealTime();

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <type_traits>
 
 #include "absl/strings/str_cat.h"
 #include "core/status_macros.h"
@@ -35,6 +36,9 @@ struct Workpiece::Tile {
 struct Workpiece::TileJets {
   uint64_t serial = 0;   // the workpiece state they were computed from
   uint64_t version = 0;  // the tile's version then
+  // Per row, the first and last cut column (lo > hi: none). d holds the
+  // nodes of [lo, hi] only; the rest are uncut, their jets zeros.
+  int8_t lo[kTileSize], hi[kTileSize];
   float d[5][kTileNodes];  // wx, wy, wxx, wxy, wyy
 };
 
@@ -81,6 +85,7 @@ Workpiece::Workpiece(const StockSpec& spec, const Scheme& scheme,
                                          scheme.bytes_per_node())),
       index_(grid_),
       serial_(NextSerial()),
+      derivatives_(scheme.stores_derivatives()),
       jets_(tiles_.size()) {}
 
 Workpiece::~Workpiece() {
@@ -313,75 +318,265 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
   return result;
 }
 
+namespace {
+
+// ComputeJets' working memory, one per thread that computes jets (about
+// 0.6 MB: too large for a stack, too costly to allocate per tile).
+struct JetScratch {
+  // The frames of recent owners, direct-mapped: (tag << 32 | owner) -> frame
+  // index, the tag distinct per tile computed (no clearing). An owner whose
+  // entry was taken by another gets a second frame: harmless.
+  static constexpr int32_t kRecentBits = 10;
+  uint64_t recent_key[1 << kRecentBits] = {};
+  int32_t recent_frame[1 << kRecentBits];
+  uint64_t tag = 0;
+  // Runs of one owner in row-major order: each node's run, each run's owner
+  // and frame index.
+  int32_t run_of[kTileNodes];
+  int32_t run_owner[kTileNodes];
+  int32_t run_frame[kTileNodes];
+  // Per node: the index into `frames` of its owner (0: uncut).
+  alignas(64) int32_t frame_of[kTileNodes];
+  // Per distinct owner f >= 1: its move id, its ball frame (NoFrame() for
+  // the rest), and the index into `others` of a sweep evaluated on its own
+  // (-1: none).
+  int32_t owner_of[kTileNodes + 1];
+  BallSweep::Frame frames[kTileNodes + 1];
+  uint8_t general[kTileNodes + 1];
+  bool ball[kTileNodes + 1];  // SweptAsBall(its cutter)
+  int32_t other[kTileNodes + 1];
+  std::vector<Sweep> others;
+  // MakeFrames' input, a block of owners at a time.
+  static constexpr int32_t kBlock = 256;
+  Vec3 from[kBlock], to[kBlock];
+  double radius[kBlock];
+  alignas(64) double xs[kTileSize];
+  alignas(64) double ys[kTileSize];
+  BallSweep::Points points;
+};
+
+
+}  // namespace
+
 void Workpiece::ComputeJets(int32_t t, const Tile& tile,
                             TileJets* out) const {
+  thread_local std::unique_ptr<JetScratch> scratch;
+  if (scratch == nullptr) scratch = std::make_unique<JetScratch>();
+  JetScratch& s = *scratch;
   const TileExtent e = Extent(t);
-  for (int c = 0; c < 5; ++c) std::fill_n(out->d[c], kTileNodes, 0.0f);
-  // Nodes of one owner come in runs along rows: one sweep per run.
-  int32_t last = -1;
-  std::optional<Sweep> sweep;
+  const int32_t* owner = tile.owner;
+
+  // Each distinct owner's sweep is built once per tile: owners change every
+  // few nodes along a finishing pass, and building a sweep costs more than
+  // evaluating it. First the runs of one owner (branch-free: run ends are
+  // as frequent as they are irregular), and which columns of each row are
+  // cut.
+  for (int32_t j = 0; j < e.ny; ++j) {
+    int32_t lo = kTileSize, hi = -1;
+    const int32_t* row = owner + j * kTileSize;
+#pragma omp simd reduction(min : lo) reduction(max : hi)
+    for (int32_t i = 0; i < kTileSize; ++i) {
+      const bool cut = row[i] >= 0;
+      lo = std::min(lo, cut ? i : kTileSize);
+      hi = std::max(hi, cut ? i : -1);
+    }
+    out->lo[j] = static_cast<int8_t>(lo);
+    out->hi[j] = static_cast<int8_t>(hi);
+  }
+  int32_t run = -1, prev = -2;  // -2: no owner
+  for (int32_t j = 0; j < e.ny; ++j) {
+    const int32_t k0 = j * kTileSize;
+    for (int32_t k = k0 + out->lo[j]; k <= k0 + out->hi[j]; ++k) {
+      const int32_t o = owner[k];
+      run += o != prev;
+      s.run_owner[run] = o;
+      s.run_of[k] = run;
+      prev = o;
+    }
+  }
+  const int32_t runs = run + 1;
+  // Frame indices from 1, per distinct owner (nearly).
+  const uint64_t tag = ++s.tag << 32;
+  int32_t owners = 0;
+  for (int32_t r = 0; r < runs; ++r) {
+    const int32_t o = s.run_owner[r];
+    if (o < 0) {
+      s.run_frame[r] = 0;
+      continue;
+    }
+    const uint32_t h = static_cast<uint32_t>(o) &
+                       ((1u << JetScratch::kRecentBits) - 1);
+    const uint64_t key = tag | static_cast<uint32_t>(o);
+    if (s.recent_key[h] != key) {
+      s.recent_key[h] = key;
+      s.recent_frame[h] = ++owners;
+      s.owner_of[owners] = o;
+    }
+    s.run_frame[r] = s.recent_frame[h];
+  }
+  for (int32_t j = 0; j < e.ny; ++j) {
+    const int32_t k0 = j * kTileSize;
+#pragma omp simd
+    for (int32_t k = k0 + out->lo[j]; k <= k0 + out->hi[j]; ++k) {
+      s.frame_of[k] = s.run_frame[s.run_of[k]];
+    }
+  }
+
+  // The owners' frames, as if each were a BallSweep (the others' are
+  // replaced below): general ball moves are evaluated a row at a time with
+  // each lane its own sweep; points, vertical moves and other shapes (few
+  // nodes, or many of one owner) on their own.
+  s.frames[0] = BallSweep::NoFrame();
+  s.other[0] = -1;
+  s.others.clear();
+  for (int32_t f0 = 1; f0 <= owners; f0 += JetScratch::kBlock) {
+    const int32_t m = std::min(JetScratch::kBlock, owners + 1 - f0);
+    for (int32_t q = 0; q < m; ++q) {
+      // Owners are scattered over the moves: fetch ahead (a move spans two
+      // cache lines).
+      const char* ahead = reinterpret_cast<const char*>(
+          &moves_[s.owner_of[std::min(f0 + q + 16, owners)]]);
+      __builtin_prefetch(ahead);
+      __builtin_prefetch(ahead + sizeof(Move) - 1);
+      const Move& move = moves_[s.owner_of[f0 + q]];
+      s.from[q] = move.from;
+      s.to[q] = move.to;
+      s.radius[q] = move.cutter.radius;
+      s.ball[f0 + q] = SweptAsBall(move.cutter);
+    }
+    BallSweep::MakeFrames(m, s.from, s.to, s.radius, s.frames + f0,
+                          s.general + f0);
+  }
+  for (int32_t f = 1; f <= owners; ++f) {
+    s.other[f] = -1;
+    if (s.general[f] && s.ball[f]) continue;
+    const Move& move = moves_[s.owner_of[f]];
+    s.frames[f] = BallSweep::NoFrame();
+    s.other[f] = static_cast<int32_t>(s.others.size());
+    s.others.emplace_back(move.from, move.to, move.cutter);
+  }
+
+  // The jets, a row at a time over its cut columns (uncut nodes between
+  // them get NoFrame()'s zeros).
+  for (int32_t i = 0; i < kTileSize; ++i) s.xs[i] = grid_.NodeX(e.i0 + i);
+  for (int32_t j = 0; j < e.ny; ++j) {
+    const int32_t lo = out->lo[j], hi = out->hi[j];
+    if (lo > hi) continue;
+    const int32_t k = j * kTileSize + lo;
+    float* const d[5] = {out->d[0] + k, out->d[1] + k, out->d[2] + k,
+                         out->d[3] + k, out->d[4] + k};
+    BallSweep::JetsOfFrames(s.frames, s.frame_of + k, s.xs + lo,
+                            grid_.NodeY(e.j0 + j), hi - lo + 1, d);
+  }
+  if (s.others.empty()) return;
+
+  // The other owners' nodes, a run of one owner along a row at a time.
   for (int32_t j = 0; j < e.ny; ++j) {
     const double y = grid_.NodeY(e.j0 + j);
-    for (int32_t i = 0; i < e.nx; ++i) {
-      const int32_t k = j * kTileSize + i;
-      const int32_t o = tile.owner[k];
-      if (o < 0) continue;
-      if (o != last) {
-        sweep.emplace(MoveSweep(o));
-        last = o;
+    const int32_t k0 = j * kTileSize;
+    for (int32_t i = out->lo[j]; i <= out->hi[j];) {
+      const int32_t f = s.frame_of[k0 + i];
+      int32_t end = i + 1;
+      while (end <= out->hi[j] && s.frame_of[k0 + end] == f) ++end;
+      if (s.other[f] >= 0) {
+        const int32_t n = end - i, k = k0 + i;
+        float* const d[5] = {out->d[0] + k, out->d[1] + k, out->d[2] + k,
+                             out->d[3] + k, out->d[4] + k};
+        s.others[s.other[f]].Visit([&](const auto& shape) {
+          if constexpr (std::is_same_v<std::decay_t<decltype(shape)>,
+                                       BallSweep>) {
+            // A point or vertical move: its own vectorized kernels,
+            // bit-identical to JetAt.
+            std::fill_n(s.ys, n, y);
+            shape.Locate(s.xs + i, s.ys, n, &s.points);
+            shape.Jets(s.points, n, d);
+          } else {
+            for (int32_t q = 0; q < n; ++q) {
+              const SurfaceJet jet = shape.JetAt(s.xs[i + q], y);
+              d[0][q] = static_cast<float>(jet.wx);
+              d[1][q] = static_cast<float>(jet.wy);
+              d[2][q] = static_cast<float>(jet.wxx);
+              d[3][q] = static_cast<float>(jet.wxy);
+              d[4][q] = static_cast<float>(jet.wyy);
+            }
+          }
+        });
       }
-      // The node's coordinates as the cut computed them: the jet's w is
-      // the stored height, bit for bit.
-      const SurfaceJet jet = sweep->JetAt(grid_.NodeX(e.i0 + i), y);
-      out->d[0][k] = static_cast<float>(jet.wx);
-      out->d[1][k] = static_cast<float>(jet.wy);
-      out->d[2][k] = static_cast<float>(jet.wxx);
-      out->d[3][k] = static_cast<float>(jet.wxy);
-      out->d[4][k] = static_cast<float>(jet.wyy);
+      i = end;
     }
   }
 }
 
+std::shared_ptr<const Workpiece::TileJets> Workpiece::CachedJets(
+    int32_t t, uint64_t version) const {
+  std::lock_guard<std::mutex> lock(jets_mu_);
+  const auto& cached = jets_[t];
+  if (cached != nullptr && cached->serial == serial_ &&
+      cached->version == version) {
+    return cached;
+  }
+  return nullptr;
+}
+
+std::shared_ptr<const Workpiece::TileJets> Workpiece::NewJets(
+    int32_t t, uint64_t version) const {
+  // Not value-initialised: ComputeJets writes every node of the tile's
+  // rows.
+  std::shared_ptr<TileJets> fresh(new TileJets);
+  fresh->serial = serial_;
+  fresh->version = version;
+  ComputeJets(t, *tiles_[t], fresh.get());
+  std::lock_guard<std::mutex> lock(jets_mu_);
+  if (jets_[t] == nullptr) {
+    jets_order_.push_back(t);
+    if (jets_order_.size() > kJetCacheTiles) {
+      jets_[jets_order_.front()] = nullptr;
+      jets_order_.pop_front();
+    }
+  }
+  jets_[t] = fresh;
+  return fresh;
+}
+
 const Workpiece::TileJets& Workpiece::Jets(int32_t t) const {
-  const Tile* tile = tiles_[t].get();
   const uint64_t version = tile_version_[t];
-  // The last tile this thread read: most reads stay in one tile.
-  thread_local std::shared_ptr<const TileJets> last;
+  // The last tile this thread read: most reads stay in one tile. The test
+  // reads plain thread-locals only (no guard); `holder` keeps them alive.
+  thread_local const TileJets* last = nullptr;
   thread_local int32_t last_tile = -1;
-  if (last != nullptr && last_tile == t && last->serial == serial_ &&
-      last->version == version) {
+  thread_local uint64_t last_serial = 0, last_version = 0;
+  if (last != nullptr && last_tile == t && last_serial == serial_ &&
+      last_version == version) {
     return *last;
   }
-  std::shared_ptr<const TileJets> jets;
-  {
-    std::lock_guard<std::mutex> lock(jets_mu_);
-    const auto& cached = jets_[t];
-    if (cached != nullptr && cached->serial == serial_ &&
-        cached->version == version) {
-      jets = cached;
-    }
-  }
-  if (jets == nullptr) {
-    // Computed outside the lock; two threads may both compute a tile, with
-    // the same result.
-    auto fresh = std::make_shared<TileJets>();
-    fresh->serial = serial_;
-    fresh->version = version;
-    ComputeJets(t, *tile, fresh.get());
-    jets = std::move(fresh);
-    std::lock_guard<std::mutex> lock(jets_mu_);
-    if (jets_[t] == nullptr) {
-      jets_order_.push_back(t);
-      if (jets_order_.size() > kJetCacheTiles) {
-        jets_[jets_order_.front()] = nullptr;
-        jets_order_.pop_front();
-      }
-    }
-    jets_[t] = jets;
-  }
-  last = std::move(jets);
+  thread_local std::shared_ptr<const TileJets> holder;
+  std::shared_ptr<const TileJets> jets = CachedJets(t, version);
+  // Computed outside the lock; two threads may both compute a tile, with
+  // the same result.
+  if (jets == nullptr) jets = NewJets(t, version);
+  holder = std::move(jets);
+  last = holder.get();
   last_tile = t;
+  last_serial = serial_;
+  last_version = version;
   return *last;
+}
+
+void Workpiece::PrepareJets(std::span<const int32_t> tiles) const {
+  if (!derivatives_) return;
+  std::vector<int32_t> todo;
+  for (const int32_t t : tiles) {
+    if (todo.size() == kJetCacheTiles) break;
+    if (t < 0 || t >= tile_count() || tiles_[t] == nullptr) continue;
+    if (CachedJets(t, tile_version_[t]) == nullptr) todo.push_back(t);
+  }
+  if (todo.size() < 2) {
+    for (const int32_t t : todo) NewJets(t, tile_version_[t]);
+    return;
+  }
+  pool_->ParallelFor(static_cast<int64_t>(todo.size()), [&](int64_t k) {
+    NewJets(todo[k], tile_version_[todo[k]]);
+  });
 }
 
 int32_t Workpiece::OwnerAt(int32_t i, int32_t j) const {
@@ -402,7 +597,7 @@ NodeValue Workpiece::Node(int32_t i, int32_t j) const {
   const int32_t k = (j & (kTileSize - 1)) * kTileSize + (i & (kTileSize - 1));
   v.jet.w = tile->w[k];
   v.owner = tile->owner[k];
-  if (v.owner >= 0 && scheme_->stores_derivatives()) {
+  if (v.owner >= 0 && derivatives_) {
     const TileJets& jets = Jets(t);
     v.jet.wx = jets.d[0][k];
     v.jet.wy = jets.d[1][k];
@@ -426,22 +621,36 @@ void Workpiece::ReadTile(int32_t t, double* w, float* const d[5],
                          int32_t* owner) const {
   const TileExtent e = Extent(t);
   const Tile* tile = tiles_[t].get();
-  const TileJets* jets = nullptr;
-  if (d != nullptr && tile != nullptr && scheme_->stores_derivatives()) {
-    jets = &Jets(t);
+  const int32_t n = e.nx * e.ny;
+  if (tile == nullptr) {
+    if (w != nullptr) std::fill_n(w, n, spec().z_top);
+    if (owner != nullptr) std::fill_n(owner, n, -1);
+    for (int c = 0; d != nullptr && c < 5; ++c) std::fill_n(d[c], n, 0.0f);
+    return;
   }
+  // Uncut nodes hold the top and owner -1: rows are copied whole.
+  const TileJets* jets = d != nullptr && derivatives_ ? &Jets(t) : nullptr;
   for (int32_t j = 0; j < e.ny; ++j) {
-    for (int32_t i = 0; i < e.nx; ++i) {
-      const int32_t out = j * e.nx + i;
-      const int32_t k = j * kTileSize + i;
-      const bool cut = tile != nullptr && tile->owner[k] >= 0;
-      if (w != nullptr) w[out] = tile != nullptr ? tile->w[k] : spec().z_top;
-      if (owner != nullptr) owner[out] = cut ? tile->owner[k] : -1;
-      if (d != nullptr) {
-        for (int c = 0; c < 5; ++c) {
-          d[c][out] = jets != nullptr ? jets->d[c][k] : 0.0f;
-        }
+    const int32_t out = j * e.nx, k = j * kTileSize;
+    if (w != nullptr) std::memcpy(w + out, tile->w + k, e.nx * sizeof(double));
+    if (owner != nullptr) {
+      std::memcpy(owner + out, tile->owner + k, e.nx * sizeof(int32_t));
+    }
+    if (d == nullptr) continue;
+    // Jets of the cut columns [lo, hi], zeros around them.
+    const int32_t lo = jets != nullptr ? std::min<int32_t>(jets->lo[j], e.nx)
+                                       : e.nx;
+    const int32_t hi = jets != nullptr ? std::min<int32_t>(jets->hi[j], e.nx - 1)
+                                       : -1;
+    for (int c = 0; c < 5; ++c) {
+      float* row = d[c] + out;
+      if (lo > hi) {
+        std::fill_n(row, e.nx, 0.0f);
+        continue;
       }
+      std::fill_n(row, lo, 0.0f);
+      std::memcpy(row + lo, jets->d[c] + k + lo, (hi - lo + 1) * sizeof(float));
+      std::fill_n(row + hi + 1, e.nx - 1 - hi, 0.0f);
     }
   }
 }

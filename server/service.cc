@@ -521,6 +521,8 @@ class SimulateReactor
     }
     if (!job_tiles.empty() || !push_tiles.empty()) {
       session_->Read([&](const Workpiece& wp) {
+        if (job_options.derivatives) wp.PrepareJets(job_tiles);
+        if (push_options.derivatives) wp.PrepareJets(push_tiles);
         for (int32_t t : job_tiles) {
           FillTile(wp, t, job_options, responses.emplace_back().mutable_tile());
         }
@@ -887,6 +889,12 @@ grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(
         constexpr size_t kChunk = 16;
         const size_t end = std::min(state->tiles.size(), state->next + kChunk);
         state->session->Read([&](const Workpiece& wp) {
+          // The chunk's derivatives on the workpiece's pool, then the
+          // tiles one by one.
+          if (state->options.derivatives) {
+            wp.PrepareJets(std::span<const int32_t>(
+                state->tiles.data() + state->next, end - state->next));
+          }
           for (; state->next < end; ++state->next) {
             FillTile(wp, state->tiles[state->next], state->options,
                      &out->emplace_back());

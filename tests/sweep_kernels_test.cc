@@ -1,38 +1,60 @@
 // The vectorized row kernels against the scalar sweep: bit-identical heights,
-// points and derivatives; and the frame-form cylinder jet against eq. (14).
+// points and derivatives, also for many sweeps at once (MakeFrames,
+// JetsOfFrames); Hypot against the C library's; and the frame-form cylinder
+// jet against eq. (14).
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <random>
 #include <vector>
 
 #include "core/cutter/ball_sweep.h"
+#include "core/cutter/hypot.h"
 #include "gtest/gtest.h"
 
 namespace swarf {
 namespace {
 
+struct BallMove {
+  Vec3 from, to;
+  double radius;
+};
+
 // Random moves of every kind a toolpath contains.
-std::vector<BallSweep> RandomSweeps(int count, uint64_t seed) {
+std::vector<BallMove> RandomMoves(int count, uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(-5, 5), r(0.2, 4);
-  std::vector<BallSweep> out;
+  std::vector<BallMove> out;
   for (int k = 0; k < count; ++k) {
     const Vec3 a{u(rng), u(rng), u(rng) - 3};
     Vec3 b{u(rng), u(rng), u(rng) - 3};
-    switch (k % 6) {
+    switch (k % 8) {
       case 0: b = {a.x, a.y, b.z}; break;             // plunge or retract
       case 1: b = a; break;                           // zero length
       case 2: b.z = a.z; break;                       // horizontal
       case 3: b = {a.x + 1e-7, a.y, a.z - 4}; break;  // near vertical
+      case 4: b = {a.x + 1e-12, a.y, a.z - 4}; break;  // vertical to 1e-12
+      case 5: b = {a.x + 0.2, a.y, a.z - 1e-3}; break;  // finishing step
       default: break;                                 // sloped
     }
-    out.emplace_back(a, b, r(rng));
+    out.push_back({a, b, r(rng)});
+  }
+  return out;
+}
+
+std::vector<BallSweep> RandomSweeps(int count, uint64_t seed) {
+  std::vector<BallSweep> out;
+  for (const BallMove& m : RandomMoves(count, seed)) {
+    out.emplace_back(m.from, m.to, m.radius);
   }
   return out;
 }
 
 bool SameBits(double a, double b) { return std::memcmp(&a, &b, 8) == 0; }
+bool SameBits(float a, float b) { return std::memcmp(&a, &b, 4) == 0; }
 
 // Grid-like points: rows of nodes, as the tile kernel sends them.
 void RowPoints(double y, std::vector<double>* xs, std::vector<double>* ys) {
@@ -98,6 +120,139 @@ TEST(SweepKernelsTest, LocateAndJetsMatchTheScalarPath) {
     }
   }
   EXPECT_GT(checked, 10000);
+}
+
+// Many moves' frames at once are each move's own, bit for bit.
+TEST(SweepKernelsTest, MakeFramesMatchTheConstructor) {
+  const std::vector<BallMove> moves = RandomMoves(1000, 13);
+  const int32_t n = static_cast<int32_t>(moves.size());
+  std::vector<Vec3> from, to;
+  std::vector<double> radius;
+  for (const BallMove& m : moves) {
+    from.push_back(m.from);
+    to.push_back(m.to);
+    radius.push_back(m.radius);
+  }
+  // Counts that leave remainders in the kernel's blocks and vectors.
+  for (const int32_t count : {n, int32_t{67}, int32_t{1}}) {
+    std::vector<BallSweep::Frame> frames(count);
+    std::vector<uint8_t> general(count);
+    BallSweep::MakeFrames(count, from.data(), to.data(), radius.data(),
+                          frames.data(), general.data());
+    int generals = 0;
+    for (int32_t q = 0; q < count; ++q) {
+      const BallSweep s(from[q], to[q], radius[q]);
+      ASSERT_EQ(general[q] != 0, s.general()) << "move " << q;
+      generals += s.general();
+      const BallSweep::Frame want = s.frame();
+      ASSERT_EQ(std::memcmp(&frames[q], &want, sizeof want), 0)
+          << "move " << q;
+    }
+    if (count == n) {
+      EXPECT_GT(generals, n / 2);
+    }
+  }
+}
+
+// Rows whose nodes belong to different sweeps, and to none (NoFrame()):
+// each lane is its sweep's JetAt, bit for bit, and zeros off every sweep.
+TEST(SweepKernelsTest, JetsOfFramesMatchJetAt) {
+  std::vector<BallSweep> sweeps;
+  std::vector<BallSweep::Frame> frames = {BallSweep::NoFrame()};
+  for (const BallSweep& s : RandomSweeps(400, 17)) {
+    if (!s.general()) continue;
+    sweeps.push_back(s);
+    frames.push_back(s.frame());
+  }
+  std::mt19937_64 rng(19);
+  std::vector<double> xs, ys;
+  int on_surface = 0, off = 0;
+  for (double y = -8; y < 8; y += 0.11) {
+    RowPoints(y, &xs, &ys);
+    const int32_t n = static_cast<int32_t>(xs.size());
+    // Runs of one sweep of 1 to 4 nodes, an uncut node now and then.
+    std::vector<int32_t> frame_of(n);
+    for (int32_t q = 0; q < n;) {
+      const int32_t f = rng() % 9 == 0 ? 0 : 1 + rng() % sweeps.size();
+      for (int32_t len = 1 + rng() % 4; len > 0 && q < n; --len) {
+        frame_of[q++] = f;
+      }
+    }
+    for (int32_t count : {n, int32_t{37}, int32_t{1}}) {
+      std::vector<float> store(5 * count, 7.0f);
+      float* d[5];
+      for (int c = 0; c < 5; ++c) d[c] = store.data() + c * count;
+      BallSweep::JetsOfFrames(frames.data(), frame_of.data(), xs.data(), y,
+                              count, d);
+      for (int32_t q = 0; q < count; ++q) {
+        SurfaceJet j;  // zeros
+        if (frame_of[q] > 0) j = sweeps[frame_of[q] - 1].JetAt(xs[q], y);
+        const double want[5] = {j.wx, j.wy, j.wxx, j.wxy, j.wyy};
+        for (int c = 0; c < 5; ++c) {
+          ASSERT_TRUE(SameBits(d[c][q], static_cast<float>(want[c])))
+              << "lane " << q << " component " << c << ": " << d[c][q]
+              << " vs " << want[c];
+        }
+        const bool on = frame_of[q] > 0 && std::isfinite(j.w);
+        on_surface += on;
+        off += !on;
+      }
+    }
+  }
+  EXPECT_GT(on_surface, 1500);
+  EXPECT_GT(off, 1500);
+}
+
+// Hypot is the C library's hypot where that is glibc 2.35 or later (the
+// same algorithm), bit for bit; elsewhere within an ulp of it. Random bit
+// patterns, inputs a few binades apart (the scaled and negligible regimes
+// included), coordinate differences, and the special values.
+TEST(SweepKernelsTest, HypotIsTheLibraryHypot) {
+#if defined(__GLIBC__) && (__GLIBC__ > 2 || __GLIBC_MINOR__ >= 35)
+  constexpr bool kSameAlgorithm = true;
+#else
+  constexpr bool kSameAlgorithm = false;
+#endif
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> mantissa(1, 2), coord(-1e3, 1e3);
+  std::uniform_int_distribution<int> exponent(-1074, 1023), apart(-60, 60);
+  int checked = 0;
+  auto check = [&](double x, double y) {
+    const double mine = Hypot(x, y), libm = std::hypot(x, y);
+    ++checked;
+    if (std::isnan(libm)) {
+      ASSERT_TRUE(std::isnan(mine)) << x << ", " << y;
+    } else if (kSameAlgorithm) {
+      ASSERT_TRUE(SameBits(mine, libm))
+          << std::hexfloat << x << ", " << y << ": " << mine << " vs " << libm;
+    } else {
+      ASSERT_LE(std::fabs(mine - libm),
+                std::nextafter(libm, std::numeric_limits<double>::infinity()) -
+                    libm)
+          << x << ", " << y;
+    }
+  };
+  for (int k = 0; k < 300000; ++k) {
+    uint64_t bits[2] = {rng(), rng()};
+    double v[2];
+    std::memcpy(v, bits, sizeof v);
+    check(v[0], v[1]);
+    const int e = exponent(rng);
+    const double a = std::ldexp(mantissa(rng), e);
+    const double b = std::ldexp(mantissa(rng),
+                                std::clamp(e + apart(rng), -1074, 1023));
+    check(k % 2 ? -a : a, b);
+    check(coord(rng), coord(rng) * (k % 3 ? 1 : 1e-7));
+  }
+  const double inf = std::numeric_limits<double>::infinity();
+  const double special[] = {0.0,     -0.0,    4.9e-324, 0x1p-1022, 0x1p-459,
+                            0x1p-460, 1.0,     3.0,      4.0,       0x1p511,
+                            0x1.0000000000001p511, 1.7976931348623157e308,
+                            inf,     -inf,    std::numeric_limits<double>::quiet_NaN()};
+  for (double x : special) {
+    for (double y : special) check(x, y);
+  }
+  EXPECT_GT(checked, 900000);
 }
 
 TEST(SweepKernelsTest, FrameFormCylinderJetEqualsEquation14) {

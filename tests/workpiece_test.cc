@@ -13,9 +13,11 @@
 #include <set>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "absl/status/status.h"
+#include "core/thread_pool.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 
@@ -839,6 +841,144 @@ TEST(WorkpieceStateTest, RecordedMovesAreIndexedAndValidated) {
   EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_THAT(std::string(s.message()), HasSubstr("moves[1].to.y"));
   EXPECT_EQ(recorded->move_count(), 300);
+}
+
+// Derivatives on demand. Every shape and kind of move in one workpiece of
+// 225 tiles (more than the jet cache keeps): a finishing raster of short
+// ball moves (owners change every two nodes), bull-noses swept as the ball,
+// the other shapes, plunges and zero-length moves (one sphere), and a
+// coarse raster reaching every tile.
+std::vector<Move> JetMixMoves() {
+  std::vector<Move> moves;
+  for (double y = 2.5; y < 95; y += 5) {  // every tile
+    moves.push_back({{-5, y, 9.5}, {95, y, 9.5}, Cutter::Ball(3)});
+  }
+  moves.push_back({{-5, 89.8, 9.5}, {95, 89.8, 9.5}, Cutter::Ball(3)});
+  for (int k = 0; k < 60; ++k) {  // finishing raster, rows of 0.2 mm moves
+    const double y = 30 + 0.1 * k;
+    for (double x = 20; x < 50; x += 0.2) {
+      auto z = [&](double u) { return 9 + 0.3 * std::sin(0.2 * u + y); };
+      moves.push_back({{x, y, z(x)}, {x + 0.2, y, z(x + 0.2)},
+                       Cutter::Ball(0.5)});
+    }
+  }
+  const Cutter shapes[] = {Cutter::BullNose(1, 1),   Cutter::Flat(1),
+                           Cutter::BullNose(1, 0.4), Cutter::Cone(1, 45, 0.2),
+                           Cutter::TaperedBall(1, 0.3, 10), Cutter::Ball(1)};
+  for (int k = 0; k < 240; ++k) {  // short moves of every shape, interleaved
+    const double x = 55 + 0.3 * (k % 40), y = 60 + 1.5 * (k / 40);
+    moves.push_back(
+        {{x, y, 9.2 + 0.01 * (k % 7)}, {x + 0.4, y + 0.1, 9.1}, shapes[k % 6]});
+  }
+  moves.push_back({{70, 20, 12}, {70, 20, 6}, Cutter::Ball(4)});    // plunge
+  moves.push_back({{80, 30, 8}, {80, 30, 8}, Cutter::Ball(2)});     // a point
+  moves.push_back({{75, 75, 9}, {75, 75, 5}, Cutter::BullNose(2, 2)});
+  moves.push_back({{60, 80, 8}, {60, 80, 6}, Cutter::Flat(2)});
+  return moves;
+}
+
+// Every node's derivatives, as ReadTile and Node give them, are its
+// owner's JetAt rounded to float, bit for bit; zeros for uncut nodes.
+void ExpectJetsOfOwners(const Workpiece& wp) {
+  const GridGeometry& g = wp.grid();
+  std::vector<double> w(kTileNodes);
+  std::vector<float> d(5 * kTileNodes);
+  std::vector<int32_t> owner(kTileNodes);
+  float* dp[5];
+  for (int c = 0; c < 5; ++c) dp[c] = d.data() + c * kTileNodes;
+  int64_t cut = 0;
+  for (int32_t t = 0; t < wp.tile_count(); ++t) {
+    wp.ReadTile(t, w.data(), dp, owner.data());
+    const Workpiece::TileExtent e = wp.Extent(t);
+    for (int32_t j = 0; j < e.ny; ++j) {
+      for (int32_t i = 0; i < e.nx; ++i) {
+        const int32_t q = j * e.nx + i, o = owner[q];
+        const double x = g.NodeX(e.i0 + i), y = g.NodeY(e.j0 + j);
+        SurfaceJet want;
+        if (o >= 0) want = wp.MoveJet(o, x, y);
+        const double wd[5] = {want.wx, want.wy, want.wxx, want.wxy, want.wyy};
+        for (int c = 0; c < 5; ++c) {
+          const float f = static_cast<float>(wd[c]);
+          ASSERT_EQ(std::memcmp(&dp[c][q], &f, sizeof f), 0)
+              << "tile " << t << " node " << i << "," << j << " owner " << o
+              << (o >= 0 ? CutterToString(wp.move(o).cutter) : "") << " component "
+              << c << ": " << dp[c][q] << " vs " << f;
+        }
+        ASSERT_EQ(o, wp.Node(e.i0 + i, e.j0 + j).owner);
+        if (o >= 0) {
+          const SurfaceJet stored = {w[q],
+                                     static_cast<float>(wd[0]),
+                                     static_cast<float>(wd[1]),
+                                     static_cast<float>(wd[2]),
+                                     static_cast<float>(wd[3]),
+                                     static_cast<float>(wd[4])};
+          ASSERT_TRUE(SameJet(wp.Node(e.i0 + i, e.j0 + j).jet, stored));
+        }
+        cut += o >= 0;
+      }
+    }
+  }
+  EXPECT_GT(cut, 100000);
+}
+
+TEST(WorkpieceJetsTest, EveryNodeHasItsOwnersJet) {
+  const StockSpec spec{0, 0, 90, 90, 10, 900, 900};
+  const std::vector<Move> moves = JetMixMoves();
+  ThreadPool pool(4);
+  auto wp = MakeWorkpiece(spec, SchemeKind::kTaylor, &pool);
+  ASSERT_TRUE(wp->Apply(moves).ok());
+  ASSERT_EQ(wp->allocated_tiles(), wp->tile_count());
+  ASSERT_GT(wp->tile_count(), static_cast<int>(Workpiece::kJetCacheTiles));
+  {
+    SCOPED_TRACE("read one by one");
+    ExpectJetsOfOwners(*wp);
+  }
+  {
+    // Chunks computed on the pool from two threads at once, then read.
+    SCOPED_TRACE("prepared");
+    std::vector<int32_t> all(wp->tile_count());
+    std::iota(all.begin(), all.end(), 0);
+    std::thread other([&] { wp->PrepareJets(std::span(all).subspan(64, 100)); });
+    wp->PrepareJets(std::span(all).subspan(0, 100));
+    other.join();
+    ExpectJetsOfOwners(*wp);
+  }
+  {
+    // Tiles cut again have new versions: their jets are computed anew.
+    SCOPED_TRACE("after more cuts");
+    ASSERT_TRUE(wp->Apply(std::vector<Move>{
+                          {{10, 10, 9}, {40, 35, 8.5}, Cutter::Ball(1.5)},
+                          {{30, 31, 9}, {31, 31, 8}, Cutter::Cone(1, 30, 0)}})
+                    .ok());
+    ExpectJetsOfOwners(*wp);
+  }
+  {
+    // A restored state: the same nodes, jets computed from its moves.
+    SCOPED_TRACE("restored");
+    auto restored = MakeWorkpiece(spec, SchemeKind::kTaylor, &pool);
+    ASSERT_TRUE(restored->Record(wp->moves()).ok());
+    ASSERT_TRUE(restored->LoadState(SavedState(*wp)).ok());
+    ExpectJetsOfOwners(*restored);
+  }
+}
+
+// The z-map has no derivatives: zeros, and PrepareJets does nothing.
+TEST(WorkpieceJetsTest, ZmapReadsZeros) {
+  auto wp = MakeWorkpiece(MixedStock(), SchemeKind::kZmap);
+  ASSERT_TRUE(wp->Apply(MixedMoves(4, 200)).ok());
+  std::vector<int32_t> all(wp->tile_count());
+  std::iota(all.begin(), all.end(), 0);
+  wp->PrepareJets(all);
+  std::vector<float> d(5 * kTileNodes, 1.0f);
+  float* dp[5];
+  for (int c = 0; c < 5; ++c) dp[c] = d.data() + c * kTileNodes;
+  for (int32_t t = 0; t < wp->tile_count(); ++t) {
+    wp->ReadTile(t, nullptr, dp, nullptr);
+    const Workpiece::TileExtent e = wp->Extent(t);
+    for (int c = 0; c < 5; ++c) {
+      for (int32_t q = 0; q < e.nx * e.ny; ++q) ASSERT_EQ(dp[c][q], 0.0f);
+    }
+  }
 }
 
 }  // namespace

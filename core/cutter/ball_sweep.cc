@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/cutter/hypot.h"
+
 namespace swarf {
 namespace {
 
@@ -34,8 +36,8 @@ BallSweep::BallSweep(const Vec3& tip_from, const Vec3& tip_to, double radius)
       len_(0),
       k1_(0), k2_(0), k3_(0), g_(0), inv_g_(0), h1_(0), h2_(0) {
   const double dx = b_.x - a_.x, dy = b_.y - a_.y, dz = b_.z - a_.z;
-  const double dxy = std::hypot(dx, dy);
-  len_ = std::hypot(dxy, dz);
+  const double dxy = Hypot(dx, dy);
+  len_ = Hypot(dxy, dz);
   if (len_ == 0) {
     kind_ = kPoint;
     return;
@@ -68,8 +70,9 @@ SWARF_TARGET_CLONES
 void BallSweep::Heights(const double* x, const double* y, int32_t n,
                         double* out) const {
   if (kind_ == kGeneral) {
+    const Frame f = frame();
 #pragma omp simd
-    for (int32_t q = 0; q < n; ++q) out[q] = LocateGeneral(x[q], y[q]).w;
+    for (int32_t q = 0; q < n; ++q) out[q] = LocateGeneral(f, x[q], y[q]).w;
     return;
   }
   const Vec3 c = LowestCentre();
@@ -87,9 +90,10 @@ void BallSweep::Locate(const double* x, const double* y, int32_t n,
   double* __restrict odepth = out->depth;
   int32_t* __restrict opiece = out->piece;
   if (kind_ == kGeneral) {
+    const Frame f = frame();
 #pragma omp simd
     for (int32_t q = 0; q < n; ++q) {
-      const SweepPoint p = LocateGeneral(x[q], y[q]);
+      const SweepPoint p = LocateGeneral(f, x[q], y[q]);
       ow[q] = p.w;
       opx[q] = p.px;
       opy[q] = p.py;
@@ -123,6 +127,7 @@ void BallSweep::Jets(const Points& pts, int32_t n, float* const d[5]) const {
   float* __restrict d2 = d[2];
   float* __restrict d3 = d[3];
   float* __restrict d4 = d[4];
+  const Frame f = frame();
 #pragma omp simd
   for (int32_t q = 0; q < n; ++q) {
     SweepPoint p;
@@ -131,7 +136,90 @@ void BallSweep::Jets(const Points& pts, int32_t n, float* const d[5]) const {
     p.px = px[q];
     p.py = py[q];
     p.depth = depth[q];
-    const SurfaceJet j = Jet(p);
+    const SurfaceJet j = JetIn(f, p);
+    d0[q] = static_cast<float>(j.wx);
+    d1[q] = static_cast<float>(j.wy);
+    d2[q] = static_cast<float>(j.wxx);
+    d3[q] = static_cast<float>(j.wxy);
+    d4[q] = static_cast<float>(j.wyy);
+  }
+}
+
+SWARF_TARGET_CLONES
+void BallSweep::MakeFrames(int32_t n, const Vec3* tip_from,
+                           const Vec3* tip_to, const double* radius,
+                           Frame* frames, uint8_t* general) {
+  // The constructor's steps over blocks of moves, vectorized (Hypot is
+  // branch-free).
+  constexpr int32_t kBlock = 64;
+  alignas(64) double dx[kBlock], dy[kBlock], dz[kBlock];
+  alignas(64) double k3[kBlock], g[kBlock], inv_g[kBlock], h1[kBlock],
+      h2[kBlock], len[kBlock];
+  alignas(64) double gen[kBlock];  // 1: general (a double: vectorizes)
+  for (int32_t q0 = 0; q0 < n; q0 += kBlock) {
+    const int32_t m = std::min(kBlock, n - q0);
+    for (int32_t q = 0; q < m; ++q) {
+      const Vec3& from = tip_from[q0 + q];
+      const Vec3& to = tip_to[q0 + q];
+      const double r = radius[q0 + q];
+      Frame& f = frames[q0 + q];
+      f.ax = from.x;
+      f.ay = from.y;
+      f.az = from.z + r;
+      f.bx = to.x;
+      f.by = to.y;
+      f.bz = to.z + r;
+      f.r2 = r * r;
+      f.rim_depth = kRimDepthFraction * r;
+      dx[q] = f.bx - f.ax;
+      dy[q] = f.by - f.ay;
+      dz[q] = f.bz - f.az;
+    }
+#pragma omp simd
+    for (int32_t q = 0; q < m; ++q) {
+      const double dxy = Hypot(dx[q], dy[q]);
+      const double l = Hypot(dxy, dz[q]);
+      // A point (length 0) or a vertical move is not general; the
+      // constructor leaves their h1 .. inv_g zero.
+      const bool c = l != 0 && !(dxy <= kVerticalFraction * l);
+      gen[q] = c ? 1.0 : 0.0;
+      len[q] = l;
+      k3[q] = c ? dz[q] / l : 0;
+      g[q] = c ? dxy / l : 0;
+      inv_g[q] = c ? l / dxy : 0;
+      h1[q] = c ? dx[q] / dxy : 0;
+      h2[q] = c ? dy[q] / dxy : 0;
+    }
+    for (int32_t q = 0; q < m; ++q) {
+      Frame& f = frames[q0 + q];
+      general[q0 + q] = gen[q] != 0;
+      f.h1 = h1[q];
+      f.h2 = h2[q];
+      f.k3 = k3[q];
+      f.g = g[q];
+      f.inv_g = inv_g[q];
+      f.len = len[q];
+    }
+  }
+}
+
+SWARF_TARGET_CLONES
+void BallSweep::JetsOfFrames(const Frame* frames, const int32_t* frame_of,
+                             const double* x, double y, int32_t n,
+                             float* const d[5]) {
+  float* __restrict d0 = d[0];
+  float* __restrict d1 = d[1];
+  float* __restrict d2 = d[2];
+  float* __restrict d3 = d[3];
+  float* __restrict d4 = d[4];
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) {
+    // Each lane its own sweep: the frame's values are gathered (one by
+    // one: a struct copy would not vectorize).
+    const Frame* g = frames + frame_of[q];
+    const Frame f{g->ax, g->ay, g->az, g->bx,    g->by,    g->bz, g->r2,
+                  g->rim_depth, g->h1, g->h2, g->k3, g->g, g->inv_g, g->len};
+    const SurfaceJet j = JetIn(f, LocateGeneral(f, x[q], y));
     d0[q] = static_cast<float>(j.wx);
     d1[q] = static_cast<float>(j.wy);
     d2[q] = static_cast<float>(j.wxx);

@@ -86,7 +86,7 @@ class BallSweep {
 
   // Locates (x, y) on the swept surface.
   [[gnu::always_inline]] SweepPoint Locate(double x, double y) const {
-    return kind_ == kGeneral ? LocateGeneral(x, y)
+    return kind_ == kGeneral ? LocateGeneral(frame(), x, y)
                              : LocateSphere(LowestCentre(), LowestPiece(),
                                             x, y);
   }
@@ -131,23 +131,49 @@ class BallSweep {
   // Height and derivatives at a located point; for kNone, +inf and zeros.
   // Branch-free (both forms computed, one selected) so that it vectorizes.
   [[gnu::always_inline]] SurfaceJet Jet(const SweepPoint& p) const {
-    const double depth = std::max(p.depth, kRimDepthFraction * r_);
-    const SurfaceJet cyl = CylinderJet(p.w, p.px, p.py, depth);
-    const SurfaceJet sph = SphereJet(p.w, p.px, p.py, depth);
-    const bool c = p.piece == SweepPoint::kCylinder;
-    const bool none = p.piece == SweepPoint::kNone;
-    SurfaceJet j;
-    j.w = p.w;
-    j.wx = none ? 0 : c ? cyl.wx : sph.wx;
-    j.wy = none ? 0 : c ? cyl.wy : sph.wy;
-    j.wxx = none ? 0 : c ? cyl.wxx : sph.wxx;
-    j.wxy = none ? 0 : c ? cyl.wxy : sph.wxy;
-    j.wyy = none ? 0 : c ? cyl.wyy : sph.wyy;
-    return ClampedJet(j);
+    return JetIn(frame(), p);
   }
 
   // Jet(Locate(x, y)): the seam's entry point (core/cutter/sweep.h).
   SurfaceJet JetAt(double x, double y) const { return Jet(Locate(x, y)); }
+
+  // The values that Locate and Jet read, for kernels that evaluate the
+  // nodes of many sweeps at once (JetsOfFrames) with the same operations.
+  struct Frame {
+    double ax, ay, az, bx, by, bz;  // ball centres at the start and end
+    double r2;                      // radius squared
+    double rim_depth;               // kRimDepthFraction * radius
+    double h1, h2;                  // unit XY direction of the move
+    double k3, g, inv_g;            // eq. (10)
+    double len;                     // |b - a|
+  };
+  Frame frame() const {
+    return {a_.x, a_.y, a_.z, b_.x, b_.y, b_.z, r2_, kRimDepthFraction * r_,
+            h1_, h2_, k3_, g_, inv_g_, len_};
+  }
+  // Whether Locate is the general (cylinder and end spheres) form, the one
+  // JetsOfFrames evaluates: false for points and vertical moves (one
+  // sphere).
+  bool general() const { return kind_ == kGeneral; }
+  // For q in [0, n): frames[q] = BallSweep(tip_from[q], tip_to[q],
+  // radius[q]).frame() and general[q] = its general(), bit for bit (the
+  // constructor's operations, the divisions of several moves at a time).
+  static void MakeFrames(int32_t n, const Vec3* tip_from, const Vec3* tip_to,
+                         const double* radius, Frame* frames,
+                         uint8_t* general);
+  // A frame off whose surface every point lies: JetsOfFrames gives zeros,
+  // as Jet does for kNone.
+  static Frame NoFrame() {
+    return {0, 0, 0, 0, 0, 0, -1, 1, 1, 0, 0, 1, 1, 1};
+  }
+  // For q in [0, n): d[c][q] = float(component c of JetAt(x[q], y)) of the
+  // general sweep whose frame is frames[frame_of[q]] (components wx, wy,
+  // wxx, wxy, wyy), bit-identical to it. Vectorized across sweeps, so that
+  // nodes of different owners share the vector units. `frames` of general
+  // sweeps (frame()) or NoFrame() only.
+  static void JetsOfFrames(const Frame* frames, const int32_t* frame_of,
+                           const double* x, double y, int32_t n,
+                           float* const d[5]);
 
   // Eq. (14) as the paper writes it (C1, C2, C3 and their derivatives), at a
   // point on the cylinder. Jet() uses the equivalent closed form of
@@ -192,11 +218,20 @@ class BallSweep {
   }
   // The general move: cylinder where its contact lies inside the move, else
   // the sphere on the contact's side. Branch-free, so that it vectorizes.
-  [[gnu::always_inline]] SweepPoint LocateGeneral(double x, double y) const;
+  // Static over the frame, so that JetsOfFrames runs the same operations.
+  [[gnu::always_inline]] static SweepPoint LocateGeneral(const Frame& f,
+                                                         double x, double y);
+  // Jet() for the sweep of frame f (any kind: a point's or vertical move's
+  // frame has h1 = h2 = k3 = inv_g = 0, and its cylinder form is never
+  // selected).
+  [[gnu::always_inline]] static SurfaceJet JetIn(const Frame& f,
+                                                 const SweepPoint& p);
   // Eq. (14) in the move's own frame, at offset (px, py) from a with the
   // clamped root `depth` = sqrt(r^2 - n^2).
-  [[gnu::always_inline]] SurfaceJet CylinderJet(double w, double px, double py,
-                                                double depth) const;
+  [[gnu::always_inline]] static SurfaceJet CylinderJet(const Frame& f,
+                                                       double w, double px,
+                                                       double py,
+                                                       double depth);
 
   // The footprint's ends and radius (not its direction), for ball centres
   // a and b of radius r (r2 = r * r).
@@ -212,26 +247,43 @@ class BallSweep {
   double h1_, h2_;         // unit XY direction of the move
 };
 
-inline SurfaceJet BallSweep::CylinderJet(double w, double px, double py,
-                                         double depth) const {
+inline SurfaceJet BallSweep::CylinderJet(const Frame& f, double w,
+                                         double px, double py, double depth) {
   // In the move's frame the cylinder is z = za + (k3 along - R) / g with
   // R = sqrt(r^2 - n^2): its slope along the move is k3 / g, across it
   // dz/dn = n / (g R) and d2z/dn2 = r^2 / (g R^3). With d along =
   // h . d(x, y) and dn = (-h2, h1) . d(x, y) that gives the gradient and
   // Hessian below: the same values as eq. (14), for a third of the work.
-  const double n = h1_ * py - h2_ * px;
+  const double h1 = f.h1, h2 = f.h2;
+  const double n = h1 * py - h2 * px;
   const double inv_r = 1 / depth;
-  const double slope_along = k3_ * inv_g_;
-  const double slope_across = n * inv_r * inv_g_;
-  const double kappa = r2_ * inv_r * inv_r * inv_r * inv_g_;
+  const double slope_along = f.k3 * f.inv_g;
+  const double slope_across = n * inv_r * f.inv_g;
+  const double kappa = f.r2 * inv_r * inv_r * inv_r * f.inv_g;
   SurfaceJet j;
   j.w = w;
-  j.wx = slope_along * h1_ - slope_across * h2_;
-  j.wy = slope_along * h2_ + slope_across * h1_;
-  j.wxx = kappa * h2_ * h2_;
-  j.wxy = -kappa * h1_ * h2_;
-  j.wyy = kappa * h1_ * h1_;
+  j.wx = slope_along * h1 - slope_across * h2;
+  j.wy = slope_along * h2 + slope_across * h1;
+  j.wxx = kappa * h2 * h2;
+  j.wxy = -kappa * h1 * h2;
+  j.wyy = kappa * h1 * h1;
   return j;  // unbounded, like SphereJet
+}
+
+inline SurfaceJet BallSweep::JetIn(const Frame& f, const SweepPoint& p) {
+  const double depth = std::max(p.depth, f.rim_depth);
+  const SurfaceJet cyl = CylinderJet(f, p.w, p.px, p.py, depth);
+  const SurfaceJet sph = SphereJet(p.w, p.px, p.py, depth);
+  const bool c = p.piece == SweepPoint::kCylinder;
+  const bool none = p.piece == SweepPoint::kNone;
+  SurfaceJet j;
+  j.w = p.w;
+  j.wx = none ? 0 : c ? cyl.wx : sph.wx;
+  j.wy = none ? 0 : c ? cyl.wy : sph.wy;
+  j.wxx = none ? 0 : c ? cyl.wxx : sph.wxx;
+  j.wxy = none ? 0 : c ? cyl.wxy : sph.wxy;
+  j.wyy = none ? 0 : c ? cyl.wyy : sph.wyy;
+  return ClampedJet(j);
 }
 
 inline SweepPoint BallSweep::LocateSphere(Vec3 c, SweepPoint::Piece piece,
@@ -248,39 +300,41 @@ inline SweepPoint BallSweep::LocateSphere(Vec3 c, SweepPoint::Piece piece,
   return p;
 }
 
-inline SweepPoint BallSweep::LocateGeneral(double x, double y) const {
+inline SweepPoint BallSweep::LocateGeneral(const Frame& f, double x,
+                                           double y) {
   // Horizontal coordinates of (x, y) relative to a: `along` the move's XY
   // direction and `n` across it (the horizontal distance to the axis line,
   // which is also the distance from the vertical line at (x, y) to it).
   // Both centres in locals: selecting values (not addresses) below keeps
   // the loop free of gathers.
-  const double ax = a_.x, ay = a_.y, az = a_.z;
-  const double bx = b_.x, by = b_.y, bz = b_.z;
+  const double ax = f.ax, ay = f.ay, az = f.az;
+  const double bx = f.bx, by = f.by, bz = f.bz;
+  const double h1 = f.h1, h2 = f.h2, k3 = f.k3, g = f.g;
   const double px = x - ax, py = y - ay;
-  const double n = h1_ * py - h2_ * px;
-  const double along = h1_ * px + h2_ * py;
-  const double root2 = r2_ - n * n;
+  const double n = h1 * py - h2 * px;
+  const double along = h1 * px + h2 * py;
+  const double root2 = f.r2 - n * n;
   const double root = std::sqrt(std::max(root2, 0.0));
   // Eq. (12)-(13). With k = (g h, k3), eq. (12) reduces to
   // g^2 s^2 - 2 g k3 along s + (k3^2 along^2 + n^2 - r^2) = 0 (s = z - za),
   // whose lower root is (k3 along - root) / g. When k3 along > 0 that
   // difference cancels; the product of the roots then gives the same root
   // without cancellation.
-  const double q = k3_ * along;
-  const double s_stable = (q * q - root2) / (g_ * (q + root));
-  const double s_plain = (q - root) * inv_g_;
+  const double q = k3 * along;
+  const double s_stable = (q * q - root2) / (g * (q + root));
+  const double s_plain = (q - root) * f.inv_g;
   const double s = q > 0 ? s_stable : s_plain;
   // Axial coordinate of the cylinder's contact point, measured from a. The
   // height along the move is convex, so outside [0, L] the lowest point is
   // the end sphere on that side.
-  const double t = g_ * along + k3_ * s;
-  const bool before = t < 0, after = t > len_;
+  const double t = g * along + k3 * s;
+  const bool before = t < 0, after = t > f.len;
   const bool cylinder = !before && !after;
   const double cx = before ? ax : bx;
   const double cy = before ? ay : by;
   const double cz = before ? az : bz;
   const double qx = x - cx, qy = y - cy;
-  const double d2 = r2_ - (qx * qx + qy * qy);
+  const double d2 = f.r2 - (qx * qx + qy * qy);
   const double depth = std::sqrt(std::max(d2, 0.0));
   const bool hit = root2 >= 0;  // else the vertical line misses every ball
   const bool sphere_hit = d2 >= 0;

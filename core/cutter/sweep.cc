@@ -4,14 +4,14 @@ namespace swarf {
 namespace {
 
 Sweep::Variant MakeVariant(const Vec3& a, const Vec3& b, const Cutter& c) {
+  // The degenerate bull-noses are those shapes, to the bit.
+  if (SweptAsBall(c)) return BallSweep(a, b, c.radius);
   switch (c.kind) {
     case CutterKind::kBall:
       return BallSweep(a, b, c.radius);
     case CutterKind::kFlat:
       return FlatSweep(a, b, c.radius);
     case CutterKind::kBullNose:
-      // The degenerate corners are those shapes, to the bit.
-      if (c.corner_radius == c.radius) return BallSweep(a, b, c.radius);
       if (c.corner_radius == 0) return FlatSweep(a, b, c.radius);
       return BullNoseSweep(a, b, c.radius, c.corner_radius);
     case CutterKind::kCone:
@@ -30,9 +30,7 @@ Sweep::Sweep(const Vec3& tip_from, const Vec3& tip_to, const Cutter& cutter)
 
 std::optional<Rect> FootprintBounds(const Vec3& tip_from, const Vec3& tip_to,
                                     const Cutter& cutter, double cap) {
-  if (cutter.kind == CutterKind::kBall ||
-      (cutter.kind == CutterKind::kBullNose &&
-       cutter.corner_radius == cutter.radius)) {
+  if (SweptAsBall(cutter)) {
     return BallSweep::FootprintBounds(tip_from, tip_to, cutter.radius, cap);
   }
   const Capsule c = Sweep(tip_from, tip_to, cutter).Footprint(cap);

@@ -40,6 +40,14 @@
 
 namespace swarf {
 
+// Whether Sweep holds a BallSweep(tip_from, tip_to, cutter.radius) for
+// `cutter`: the ball, and the bull-nose whose corner is its radius.
+inline bool SweptAsBall(const Cutter& cutter) {
+  return cutter.kind == CutterKind::kBall ||
+         (cutter.kind == CutterKind::kBullNose &&
+          cutter.corner_radius == cutter.radius);
+}
+
 // The sweep of one straight move of any cutter. Immutable, thread-safe.
 class Sweep {
  public:
