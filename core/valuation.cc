@@ -154,7 +154,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const int32_t corner_j[4] = {ej, ej, ej + 1, ej + 1};
         int32_t owners[4];
         for (int k = 0; k < 4; ++k) {
-          owners[k] = wp.Node(corner_i[k], corner_j[k]).owner;
+          owners[k] = wp.OwnerAt(corner_i[k], corner_j[k]);
           bool seen = owners[k] < 0;
           for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
           if (seen) continue;

@@ -324,12 +324,13 @@ namespace {
 // 0.6 MB: too large for a stack, too costly to allocate per tile).
 struct JetScratch {
   // The frames of recent owners, direct-mapped: (tag << 32 | owner) -> frame
-  // index, the tag distinct per tile computed (no clearing). An owner whose
-  // entry was taken by another gets a second frame: harmless.
+  // index, the tag distinct per tile computed, so that the table needs no
+  // clearing (but when the tag wraps). An owner whose entry was taken by
+  // another gets a second frame: harmless.
   static constexpr int32_t kRecentBits = 10;
-  uint64_t recent_key[1 << kRecentBits] = {};
+  uint64_t recent_key[1 << kRecentBits] = {};  // 0: none (tags start at 1)
   int32_t recent_frame[1 << kRecentBits];
-  uint64_t tag = 0;
+  uint32_t tag = 0;
   // Runs of one owner in row-major order: each node's run, each run's owner
   // and frame index.
   int32_t run_of[kTileNodes];
@@ -338,10 +339,13 @@ struct JetScratch {
   // Per node: the index into `frames` of its owner (0: uncut).
   alignas(64) int32_t frame_of[kTileNodes];
   // Per distinct owner f >= 1: its move id, its ball frame (NoFrame() for
-  // the rest), and the index into `others` of a sweep evaluated on its own
-  // (-1: none).
+  // the rest, and for f = 0), and the index into `others` of a sweep
+  // evaluated on its own (-1: none).
   int32_t owner_of[kTileNodes + 1];
-  BallSweep::Frame frames[kTileNodes + 1];
+  static constexpr int32_t kFrameStride =
+      kTileNodes + 1 + BallSweep::kFramePadding;
+  alignas(64) double frame_data[BallSweep::kFrameValues * kFrameStride] = {};
+  BallSweep::FrameTable frames{frame_data, kFrameStride};
   uint8_t general[kTileNodes + 1];
   bool ball[kTileNodes + 1];  // SweptAsBall(its cutter)
   int32_t other[kTileNodes + 1];
@@ -355,7 +359,6 @@ struct JetScratch {
   BallSweep::Points points;
 };
 
-
 }  // namespace
 
 void Workpiece::ComputeJets(int32_t t, const Tile& tile,
@@ -368,18 +371,14 @@ void Workpiece::ComputeJets(int32_t t, const Tile& tile,
 
   // Each distinct owner's sweep is built once per tile: owners change every
   // few nodes along a finishing pass, and building a sweep costs more than
-  // evaluating it. First the runs of one owner (branch-free: run ends are
-  // as frequent as they are irregular), and which columns of each row are
-  // cut.
+  // evaluating it. First which columns of each row are cut, then the runs
+  // of one owner along them (branch-free: run ends are as frequent as they
+  // are irregular).
   for (int32_t j = 0; j < e.ny; ++j) {
-    int32_t lo = kTileSize, hi = -1;
     const int32_t* row = owner + j * kTileSize;
-#pragma omp simd reduction(min : lo) reduction(max : hi)
-    for (int32_t i = 0; i < kTileSize; ++i) {
-      const bool cut = row[i] >= 0;
-      lo = std::min(lo, cut ? i : kTileSize);
-      hi = std::max(hi, cut ? i : -1);
-    }
+    int32_t lo = 0, hi = kTileSize - 1;
+    while (lo < kTileSize && row[lo] < 0) ++lo;
+    while (hi >= lo && row[hi] < 0) --hi;
     out->lo[j] = static_cast<int8_t>(lo);
     out->hi[j] = static_cast<int8_t>(hi);
   }
@@ -396,7 +395,11 @@ void Workpiece::ComputeJets(int32_t t, const Tile& tile,
   }
   const int32_t runs = run + 1;
   // Frame indices from 1, per distinct owner (nearly).
-  const uint64_t tag = ++s.tag << 32;
+  if (++s.tag == 0) {
+    std::fill_n(s.recent_key, 1 << JetScratch::kRecentBits, 0);
+    s.tag = 1;
+  }
+  const uint64_t tag = uint64_t{s.tag} << 32;
   int32_t owners = 0;
   for (int32_t r = 0; r < runs; ++r) {
     const int32_t o = s.run_owner[r];
@@ -426,7 +429,7 @@ void Workpiece::ComputeJets(int32_t t, const Tile& tile,
   // replaced below): general ball moves are evaluated a row at a time with
   // each lane its own sweep; points, vertical moves and other shapes (few
   // nodes, or many of one owner) on their own.
-  s.frames[0] = BallSweep::NoFrame();
+  s.frames.Set(0, BallSweep::NoFrame());
   s.other[0] = -1;
   s.others.clear();
   for (int32_t f0 = 1; f0 <= owners; f0 += JetScratch::kBlock) {
@@ -444,14 +447,14 @@ void Workpiece::ComputeJets(int32_t t, const Tile& tile,
       s.radius[q] = move.cutter.radius;
       s.ball[f0 + q] = SweptAsBall(move.cutter);
     }
-    BallSweep::MakeFrames(m, s.from, s.to, s.radius, s.frames + f0,
+    BallSweep::MakeFrames(m, s.from, s.to, s.radius, s.frames, f0,
                           s.general + f0);
   }
   for (int32_t f = 1; f <= owners; ++f) {
     s.other[f] = -1;
     if (s.general[f] && s.ball[f]) continue;
     const Move& move = moves_[s.owner_of[f]];
-    s.frames[f] = BallSweep::NoFrame();
+    s.frames.Set(f, BallSweep::NoFrame());
     s.other[f] = static_cast<int32_t>(s.others.size());
     s.others.emplace_back(move.from, move.to, move.cutter);
   }
@@ -538,28 +541,40 @@ std::shared_ptr<const Workpiece::TileJets> Workpiece::NewJets(
   return fresh;
 }
 
-const Workpiece::TileJets& Workpiece::Jets(int32_t t) const {
-  const uint64_t version = tile_version_[t];
-  // The last tile this thread read: most reads stay in one tile. The test
-  // reads plain thread-locals only (no guard); `holder` keeps them alive.
-  thread_local const TileJets* last = nullptr;
-  thread_local int32_t last_tile = -1;
-  thread_local uint64_t last_serial = 0, last_version = 0;
-  if (last != nullptr && last_tile == t && last_serial == serial_ &&
-      last_version == version) {
-    return *last;
+namespace {
+
+// The tile jets this thread read last (Workpiece::Jets): most reads stay in
+// one tile. Plain values, constant-initialised, so that the hit test costs
+// no TLS guard; `holder` (touched on misses only) keeps `jets` alive.
+struct LastJets {
+  const void* jets = nullptr;
+  int32_t tile = -1;
+  uint64_t serial = 0, version = 0;
+};
+thread_local LastJets last_jets;
+thread_local std::shared_ptr<const void> last_jets_holder;
+
+}  // namespace
+
+inline const Workpiece::TileJets& Workpiece::Jets(int32_t t) const {
+  const LastJets& last = last_jets;
+  if (last.tile == t && last.serial == serial_ &&
+      last.version == tile_version_[t] && last.jets != nullptr) {
+    return *static_cast<const TileJets*>(last.jets);
   }
-  thread_local std::shared_ptr<const TileJets> holder;
+  return JetsMiss(t);
+}
+
+const Workpiece::TileJets& Workpiece::JetsMiss(int32_t t) const {
+  const uint64_t version = tile_version_[t];
   std::shared_ptr<const TileJets> jets = CachedJets(t, version);
   // Computed outside the lock; two threads may both compute a tile, with
   // the same result.
   if (jets == nullptr) jets = NewJets(t, version);
-  holder = std::move(jets);
-  last = holder.get();
-  last_tile = t;
-  last_serial = serial_;
-  last_version = version;
-  return *last;
+  const TileJets* p = jets.get();
+  last_jets_holder = std::move(jets);
+  last_jets = {p, t, serial_, version};
+  return *p;
 }
 
 void Workpiece::PrepareJets(std::span<const int32_t> tiles) const {

@@ -184,6 +184,8 @@ class Workpiece {
 
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
   NodeValue Node(int32_t i, int32_t j) const;
+  // Node (i, j)'s owner (-1: uncut), without computing its derivatives.
+  int32_t OwnerAt(int32_t i, int32_t j) const;
   // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with each cut corner's
   // reach (ReachOf its owner) and the stencil's owners and the moves'
   // surfaces, where the scheme uses them.
@@ -217,7 +219,8 @@ class Workpiece {
   // derivatives (zeros for schemes without them, and for uncut nodes), and
   // owners (-1 for uncut nodes).
   // With derivatives, the first read of a tile version computes them from
-  // the owners' sweeps (about 2 ns a node on AVX-512, see PrepareJets) and
+  // the owners' sweeps on the calling thread (about 10 ns a cut node of a
+  // finishing raster on AVX-512: docs/benchmarks.md; see PrepareJets) and
   // keeps them for later reads.
   void ReadTile(int32_t t, double* w, float* const d[5], int32_t* owner) const;
   // Computes the derivatives of the listed tiles (any order; unallocated
@@ -269,14 +272,13 @@ class Workpiece {
   // the owners' sweeps once and cached (thread-safe). The reference stays
   // valid until this thread's next call (the thread keeps the last one).
   const TileJets& Jets(int32_t t) const;
+  const TileJets& JetsMiss(int32_t t) const;  // Jets() past its hit test
   // Tile t's cached jets if they are of `version` (and this state), else
   // null.
   std::shared_ptr<const TileJets> CachedJets(int32_t t,
                                              uint64_t version) const;
   // Computes tile t's jets (at `version`, its current one) and caches them.
   std::shared_ptr<const TileJets> NewJets(int32_t t, uint64_t version) const;
-  // Node (i, j)'s owner (-1: uncut), without its jet.
-  int32_t OwnerAt(int32_t i, int32_t j) const;
   void ComputeJets(int32_t t, const Tile& tile, TileJets* out) const;
 
   const GridGeometry grid_;

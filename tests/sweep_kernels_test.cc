@@ -135,18 +135,20 @@ TEST(SweepKernelsTest, MakeFramesMatchTheConstructor) {
   }
   // Counts that leave remainders in the kernel's blocks and vectors.
   for (const int32_t count : {n, int32_t{67}, int32_t{1}}) {
-    std::vector<BallSweep::Frame> frames(count);
+    // Written from frame 3 on, into a table with room to spare.
+    const int32_t stride = count + 3 + BallSweep::kFramePadding;
+    std::vector<double> data(BallSweep::kFrameValues * stride);
+    const BallSweep::FrameTable table{data.data(), stride};
     std::vector<uint8_t> general(count);
-    BallSweep::MakeFrames(count, from.data(), to.data(), radius.data(),
-                          frames.data(), general.data());
+    BallSweep::MakeFrames(count, from.data(), to.data(), radius.data(), table,
+                          3, general.data());
     int generals = 0;
     for (int32_t q = 0; q < count; ++q) {
       const BallSweep s(from[q], to[q], radius[q]);
       ASSERT_EQ(general[q] != 0, s.general()) << "move " << q;
       generals += s.general();
-      const BallSweep::Frame want = s.frame();
-      ASSERT_EQ(std::memcmp(&frames[q], &want, sizeof want), 0)
-          << "move " << q;
+      const BallSweep::Frame want = s.frame(), got = table.Get(3 + q);
+      ASSERT_EQ(std::memcmp(&got, &want, sizeof want), 0) << "move " << q;
     }
     if (count == n) {
       EXPECT_GT(generals, n / 2);
@@ -158,11 +160,16 @@ TEST(SweepKernelsTest, MakeFramesMatchTheConstructor) {
 // each lane is its sweep's JetAt, bit for bit, and zeros off every sweep.
 TEST(SweepKernelsTest, JetsOfFramesMatchJetAt) {
   std::vector<BallSweep> sweeps;
-  std::vector<BallSweep::Frame> frames = {BallSweep::NoFrame()};
   for (const BallSweep& s : RandomSweeps(400, 17)) {
-    if (!s.general()) continue;
-    sweeps.push_back(s);
-    frames.push_back(s.frame());
+    if (s.general()) sweeps.push_back(s);
+  }
+  const int32_t stride =
+      static_cast<int32_t>(sweeps.size()) + 1 + BallSweep::kFramePadding;
+  std::vector<double> data(BallSweep::kFrameValues * stride);
+  const BallSweep::FrameTable table{data.data(), stride};
+  table.Set(0, BallSweep::NoFrame());
+  for (size_t k = 0; k < sweeps.size(); ++k) {
+    table.Set(static_cast<int32_t>(k) + 1, sweeps[k].frame());
   }
   std::mt19937_64 rng(19);
   std::vector<double> xs, ys;
@@ -170,10 +177,16 @@ TEST(SweepKernelsTest, JetsOfFramesMatchJetAt) {
   for (double y = -8; y < 8; y += 0.11) {
     RowPoints(y, &xs, &ys);
     const int32_t n = static_cast<int32_t>(xs.size());
-    // Runs of one sweep of 1 to 4 nodes, an uncut node now and then.
+    // Runs of one sweep of 1 to 4 nodes, an uncut node now and then; the
+    // sweeps of one row far apart in the table, or (as a tile's rows
+    // number them) consecutive.
     std::vector<int32_t> frame_of(n);
+    const bool consecutive = rng() % 2 == 0;
+    int32_t next = 1 + rng() % (sweeps.size() - n);
     for (int32_t q = 0; q < n;) {
-      const int32_t f = rng() % 9 == 0 ? 0 : 1 + rng() % sweeps.size();
+      const int32_t f = rng() % 9 == 0 ? 0
+                        : consecutive  ? next++
+                                       : 1 + rng() % sweeps.size();
       for (int32_t len = 1 + rng() % 4; len > 0 && q < n; --len) {
         frame_of[q++] = f;
       }
@@ -182,8 +195,8 @@ TEST(SweepKernelsTest, JetsOfFramesMatchJetAt) {
       std::vector<float> store(5 * count, 7.0f);
       float* d[5];
       for (int c = 0; c < 5; ++c) d[c] = store.data() + c * count;
-      BallSweep::JetsOfFrames(frames.data(), frame_of.data(), xs.data(), y,
-                              count, d);
+      BallSweep::JetsOfFrames(table, frame_of.data(), xs.data(), y, count,
+                              d);
       for (int32_t q = 0; q < count; ++q) {
         SurfaceJet j;  // zeros
         if (frame_of[q] > 0) j = sweeps[frame_of[q] - 1].JetAt(xs[q], y);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "core/cutter/hypot.h"
 
@@ -145,87 +146,192 @@ void BallSweep::Jets(const Points& pts, int32_t n, float* const d[5]) const {
   }
 }
 
+void BallSweep::FrameTable::Set(int32_t f, const Frame& frame) const {
+  double v[kFrameValues];
+  std::memcpy(v, &frame, sizeof v);
+  for (int32_t k = 0; k < kFrameValues; ++k) data[k * stride + f] = v[k];
+}
+
+BallSweep::Frame BallSweep::FrameTable::Get(int32_t f) const {
+  double v[kFrameValues];
+  for (int32_t k = 0; k < kFrameValues; ++k) v[k] = data[k * stride + f];
+  Frame frame;
+  std::memcpy(&frame, v, sizeof v);
+  return frame;
+}
+
 SWARF_TARGET_CLONES
 void BallSweep::MakeFrames(int32_t n, const Vec3* tip_from,
                            const Vec3* tip_to, const double* radius,
-                           Frame* frames, uint8_t* general) {
+                           const FrameTable& table, int32_t first,
+                           uint8_t* general) {
   // The constructor's steps over blocks of moves, vectorized (Hypot is
-  // branch-free).
+  // branch-free), written value by value.
   constexpr int32_t kBlock = 64;
-  alignas(64) double dx[kBlock], dy[kBlock], dz[kBlock];
-  alignas(64) double k3[kBlock], g[kBlock], inv_g[kBlock], h1[kBlock],
-      h2[kBlock], len[kBlock];
   alignas(64) double gen[kBlock];  // 1: general (a double: vectorizes)
+  const int32_t stride = table.stride;
   for (int32_t q0 = 0; q0 < n; q0 += kBlock) {
     const int32_t m = std::min(kBlock, n - q0);
+    double* __restrict ax = table.data + 0 * stride + first + q0;
+    double* __restrict ay = table.data + 1 * stride + first + q0;
+    double* __restrict az = table.data + 2 * stride + first + q0;
+    double* __restrict bx = table.data + 3 * stride + first + q0;
+    double* __restrict by = table.data + 4 * stride + first + q0;
+    double* __restrict bz = table.data + 5 * stride + first + q0;
+    double* __restrict r2 = table.data + 6 * stride + first + q0;
+    double* __restrict rim = table.data + 7 * stride + first + q0;
+    double* __restrict h1 = table.data + 8 * stride + first + q0;
+    double* __restrict h2 = table.data + 9 * stride + first + q0;
+    double* __restrict k3 = table.data + 10 * stride + first + q0;
+    double* __restrict g = table.data + 11 * stride + first + q0;
+    double* __restrict inv_g = table.data + 12 * stride + first + q0;
+    double* __restrict len = table.data + 13 * stride + first + q0;
     for (int32_t q = 0; q < m; ++q) {
       const Vec3& from = tip_from[q0 + q];
       const Vec3& to = tip_to[q0 + q];
       const double r = radius[q0 + q];
-      Frame& f = frames[q0 + q];
-      f.ax = from.x;
-      f.ay = from.y;
-      f.az = from.z + r;
-      f.bx = to.x;
-      f.by = to.y;
-      f.bz = to.z + r;
-      f.r2 = r * r;
-      f.rim_depth = kRimDepthFraction * r;
-      dx[q] = f.bx - f.ax;
-      dy[q] = f.by - f.ay;
-      dz[q] = f.bz - f.az;
+      ax[q] = from.x;
+      ay[q] = from.y;
+      az[q] = from.z + r;
+      bx[q] = to.x;
+      by[q] = to.y;
+      bz[q] = to.z + r;
+      r2[q] = r * r;
+      rim[q] = kRimDepthFraction * r;
     }
 #pragma omp simd
     for (int32_t q = 0; q < m; ++q) {
-      const double dxy = Hypot(dx[q], dy[q]);
-      const double l = Hypot(dxy, dz[q]);
+      const double dx = bx[q] - ax[q], dy = by[q] - ay[q], dz = bz[q] - az[q];
+      const double dxy = Hypot(dx, dy);
+      const double l = Hypot(dxy, dz);
       // A point (length 0) or a vertical move is not general; the
       // constructor leaves their h1 .. inv_g zero.
       const bool c = l != 0 && !(dxy <= kVerticalFraction * l);
       gen[q] = c ? 1.0 : 0.0;
       len[q] = l;
-      k3[q] = c ? dz[q] / l : 0;
+      k3[q] = c ? dz / l : 0;
       g[q] = c ? dxy / l : 0;
       inv_g[q] = c ? l / dxy : 0;
-      h1[q] = c ? dx[q] / dxy : 0;
-      h2[q] = c ? dy[q] / dxy : 0;
+      h1[q] = c ? dx / dxy : 0;
+      h2[q] = c ? dy / dxy : 0;
     }
-    for (int32_t q = 0; q < m; ++q) {
-      Frame& f = frames[q0 + q];
-      general[q0 + q] = gen[q] != 0;
-      f.h1 = h1[q];
-      f.h2 = h2[q];
-      f.k3 = k3[q];
-      f.g = g[q];
-      f.inv_g = inv_g[q];
-      f.len = len[q];
-    }
+    for (int32_t q = 0; q < m; ++q) general[q0 + q] = gen[q] != 0;
   }
 }
 
+// The kernels over many frames (friends of BallSweep: they run its private
+// LocateGeneral and JetIn).
+struct BallSweepKernels {
+  // JetsOfFrames over chunks of lanes: each lane's frame values are first
+  // copied to arrays of the chunk, then the chunk is evaluated with plain
+  // vector loads. kPermute (AVX-512 only): 8 lanes spanning at most 8
+  // consecutive frames load each value of those frames at once and permute
+  // it into place, instead of 8 scalar loads.
+  template <bool kPermute>
+  [[gnu::always_inline]] static void JetsOfFrames(
+      const BallSweep::FrameTable& table, const int32_t* frame_of,
+      const double* x, double y, int32_t n, float* const d[5]) {
+    using Frame = BallSweep::Frame;
+    constexpr int32_t kValues = BallSweep::kFrameValues;
+    constexpr int32_t kChunk = 64;
+    alignas(64) double lane[kValues][kChunk];
+    const double* const data = table.data;
+    const int32_t stride = table.stride;
+    for (int32_t q0 = 0; q0 < n; q0 += kChunk) {
+      const int32_t m = std::min(kChunk, n - q0);
+      const int32_t* f = frame_of + q0;
+      int32_t q = 0;
+      if constexpr (kPermute) {
+        using V8 = double __attribute__((vector_size(64)));
+        using I8 = int64_t __attribute__((vector_size(64)));
+        for (; q + 8 <= m; q += 8) {
+          int32_t lo = f[q], hi = f[q];
+          for (int32_t l = 1; l < 8; ++l) {
+            lo = std::min(lo, f[q + l]);
+            hi = std::max(hi, f[q + l]);
+          }
+          if (hi - lo >= 8) {
+            for (int32_t l = 0; l < 8; ++l) {
+              for (int32_t v = 0; v < kValues; ++v) {
+                lane[v][q + l] = data[v * stride + f[q + l]];
+              }
+            }
+            continue;
+          }
+          const I8 index = {f[q] - lo,     f[q + 1] - lo, f[q + 2] - lo,
+                            f[q + 3] - lo, f[q + 4] - lo, f[q + 5] - lo,
+                            f[q + 6] - lo, f[q + 7] - lo};
+          for (int32_t v = 0; v < kValues; ++v) {
+            V8 values;
+            std::memcpy(&values, data + v * stride + lo, sizeof values);
+            const V8 placed = __builtin_shuffle(values, index);
+            std::memcpy(&lane[v][q], &placed, sizeof placed);
+          }
+        }
+      }
+      for (; q < m; ++q) {
+        for (int32_t v = 0; v < kValues; ++v) {
+          lane[v][q] = data[v * stride + f[q]];
+        }
+      }
+      const double* const xs = x + q0;
+      float* __restrict d0 = d[0] + q0;
+      float* __restrict d1 = d[1] + q0;
+      float* __restrict d2 = d[2] + q0;
+      float* __restrict d3 = d[3] + q0;
+      float* __restrict d4 = d[4] + q0;
+#pragma omp simd
+      for (int32_t q = 0; q < m; ++q) {
+        const Frame fr{lane[0][q],  lane[1][q],  lane[2][q],  lane[3][q],
+                       lane[4][q],  lane[5][q],  lane[6][q],  lane[7][q],
+                       lane[8][q],  lane[9][q],  lane[10][q], lane[11][q],
+                       lane[12][q], lane[13][q]};
+        const SurfaceJet j =
+            BallSweep::JetIn(fr, BallSweep::LocateGeneral(fr, xs[q], y));
+        d0[q] = static_cast<float>(j.wx);
+        d1[q] = static_cast<float>(j.wy);
+        d2[q] = static_cast<float>(j.wxx);
+        d3[q] = static_cast<float>(j.wxy);
+        d4[q] = static_cast<float>(j.wyy);
+      }
+    }
+  }
+};
+
+namespace {
+
 SWARF_TARGET_CLONES
-void BallSweep::JetsOfFrames(const Frame* frames, const int32_t* frame_of,
+void JetsOfFramesAnyCpu(const BallSweep::FrameTable& table,
+                        const int32_t* frame_of, const double* x, double y,
+                        int32_t n, float* const d[5]) {
+  BallSweepKernels::JetsOfFrames<false>(table, frame_of, x, y, n, d);
+}
+
+// GCC's vector extensions (variable shuffles) on x86-64: the permuting
+// kernel for AVX-512 CPUs.
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && \
+    !defined(SWARF_NO_TARGET_CLONES)
+#define SWARF_PERMUTED_FRAMES 1
+__attribute__((target("arch=x86-64-v4"))) void JetsOfFramesAvx512(
+    const BallSweep::FrameTable& table, const int32_t* frame_of,
+    const double* x, double y, int32_t n, float* const d[5]) {
+  BallSweepKernels::JetsOfFrames<true>(table, frame_of, x, y, n, d);
+}
+#endif
+
+}  // namespace
+
+void BallSweep::JetsOfFrames(const FrameTable& table, const int32_t* frame_of,
                              const double* x, double y, int32_t n,
                              float* const d[5]) {
-  float* __restrict d0 = d[0];
-  float* __restrict d1 = d[1];
-  float* __restrict d2 = d[2];
-  float* __restrict d3 = d[3];
-  float* __restrict d4 = d[4];
-#pragma omp simd
-  for (int32_t q = 0; q < n; ++q) {
-    // Each lane its own sweep: the frame's values are gathered (one by
-    // one: a struct copy would not vectorize).
-    const Frame* g = frames + frame_of[q];
-    const Frame f{g->ax, g->ay, g->az, g->bx,    g->by,    g->bz, g->r2,
-                  g->rim_depth, g->h1, g->h2, g->k3, g->g, g->inv_g, g->len};
-    const SurfaceJet j = JetIn(f, LocateGeneral(f, x[q], y));
-    d0[q] = static_cast<float>(j.wx);
-    d1[q] = static_cast<float>(j.wy);
-    d2[q] = static_cast<float>(j.wxx);
-    d3[q] = static_cast<float>(j.wxy);
-    d4[q] = static_cast<float>(j.wyy);
+#ifdef SWARF_PERMUTED_FRAMES
+  static const bool avx512 = __builtin_cpu_supports("x86-64-v4");
+  if (avx512) {
+    JetsOfFramesAvx512(table, frame_of, x, y, n, d);
+    return;
   }
+#endif
+  JetsOfFramesAnyCpu(table, frame_of, x, y, n, d);
 }
 
 SurfaceJet BallSweep::CylinderJetEq14(const SweepPoint& p) const {

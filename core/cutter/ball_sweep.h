@@ -155,23 +155,38 @@ class BallSweep {
   // JetsOfFrames evaluates: false for points and vertical moves (one
   // sphere).
   bool general() const { return kind_ == kGeneral; }
-  // For q in [0, n): frames[q] = BallSweep(tip_from[q], tip_to[q],
-  // radius[q]).frame() and general[q] = its general(), bit for bit (the
-  // constructor's operations, the divisions of several moves at a time).
-  static void MakeFrames(int32_t n, const Vec3* tip_from, const Vec3* tip_to,
-                         const double* radius, Frame* frames,
-                         uint8_t* general);
   // A frame off whose surface every point lies: JetsOfFrames gives zeros,
   // as Jet does for kNone.
   static Frame NoFrame() {
     return {0, 0, 0, 0, 0, 0, -1, 1, 1, 0, 0, 1, 1, 1};
   }
+  // Frames of many sweeps value by value (structure of arrays), so that a
+  // kernel loads one value of several frames at once: value v (the v-th
+  // member of Frame) of frame f is data[v * stride + f]. Kernels read
+  // kFramePadding entries past the last frame they are given (and do not
+  // use them): stride >= frames + kFramePadding. Not owned.
+  static constexpr int32_t kFrameValues = sizeof(Frame) / sizeof(double);
+  static constexpr int32_t kFramePadding = 8;
+  struct FrameTable {
+    double* data = nullptr;
+    int32_t stride = 0;
+    void Set(int32_t f, const Frame& frame) const;
+    Frame Get(int32_t f) const;
+  };
+  // For q in [0, n): frame first + q of `table` = BallSweep(tip_from[q],
+  // tip_to[q], radius[q]).frame() and general[q] = its general(), bit for
+  // bit (the constructor's operations, several moves at a time).
+  static void MakeFrames(int32_t n, const Vec3* tip_from, const Vec3* tip_to,
+                         const double* radius, const FrameTable& table,
+                         int32_t first, uint8_t* general);
   // For q in [0, n): d[c][q] = float(component c of JetAt(x[q], y)) of the
-  // general sweep whose frame is frames[frame_of[q]] (components wx, wy,
-  // wxx, wxy, wyy), bit-identical to it. Vectorized across sweeps, so that
-  // nodes of different owners share the vector units. `frames` of general
-  // sweeps (frame()) or NoFrame() only.
-  static void JetsOfFrames(const Frame* frames, const int32_t* frame_of,
+  // general sweep whose frame is frame_of[q] of `table` (components wx,
+  // wy, wxx, wxy, wyy), bit-identical to it. Vectorized across sweeps, so
+  // that nodes of different owners share the vector units; fastest where
+  // each 8 consecutive lanes span at most 8 consecutive frames (on
+  // AVX-512, frame values are then permuted, not gathered). Frames of
+  // general sweeps (frame()) or NoFrame() only.
+  static void JetsOfFrames(const FrameTable& table, const int32_t* frame_of,
                            const double* x, double y, int32_t n,
                            float* const d[5]);
 
@@ -201,6 +216,7 @@ class BallSweep {
                                              double radius, double cap);
 
  private:
+  friend struct BallSweepKernels;  // the kernels over many frames
   enum Kind : uint8_t { kPoint, kVertical, kGeneral };
 
   // Vertical moves and points: the lowest ball is the whole envelope.
