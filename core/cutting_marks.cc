@@ -1299,7 +1299,10 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
       }
     }
   }
-  if (wp.scheme().kind() == SchemeKind::kExact) {
+  // Sessions whose reconstruction uses the exact surfaces have their marks
+  // on the exact creases too.
+  if (wp.scheme().kind() == SchemeKind::kExact ||
+      wp.scheme().kind() == SchemeKind::kGuarded) {
     for (MarkPolyline& p : marks) {
       for (size_t k = 0; k < p.vertices.size(); ++k) {
         ProjectOntoExactCrease(wp, p.vertex_owners[k], h, s.t1, &p.vertices[k],
