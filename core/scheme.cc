@@ -198,26 +198,40 @@ double RimDistance(const SurfaceJet& j) {
   return CircleRimDistance(s2, k);
 }
 
-PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
-  const double delta = RimDistance(j);
-  if (delta == kInfinity) return PatchTrust::kFull;
+PatchTrustRegion TrustRegion(const SurfaceJet& j) {
+  PatchTrustRegion r;
+  r.delta = RimDistance(j);
+  if (r.delta == kInfinity) return r;
+  r.everywhere = false;
   // The same along the direction of the larger principal curvature (a
   // ramp's cylinder: its cross-section, where the gradient mixes in the
   // flat slope along the axis).
   const Principal p = PrincipalCurvatures(j);
   const double k1 = p.m + p.q;
-  const double ex = p.ex, ey = p.ey;
-  const double se = j.wx * ex + j.wy * ey;
-  const double de = k1 > 0 ? CircleRimDistance(se * se, k1) : kInfinity;
-  const double reach = kPatchReach * std::min(delta, de);
-  if (dx * dx + dy * dy > reach * reach) return PatchTrust::kNone;
-  const double s = std::hypot(j.wx, j.wy);
-  if (s > 0 && (dx * j.wx + dy * j.wy) / s > kPatchUphill * delta) {
+  r.ex = p.ex;
+  r.ey = p.ey;
+  r.se = j.wx * r.ex + j.wy * r.ey;
+  r.de = k1 > 0 ? CircleRimDistance(r.se * r.se, k1) : kInfinity;
+  r.reach = kPatchReach * std::min(r.delta, r.de);
+  r.gx = j.wx;
+  r.gy = j.wy;
+  r.s = std::hypot(j.wx, j.wy);
+  return r;
+}
+
+PatchTrust Trust(const PatchTrustRegion& r, double dx, double dy) {
+  if (r.everywhere) return PatchTrust::kFull;
+  if (dx * dx + dy * dy > r.reach * r.reach) return PatchTrust::kNone;
+  if (r.s > 0 && (dx * r.gx + dy * r.gy) / r.s > kPatchUphill * r.delta) {
     return PatchTrust::kLowerBound;  // uphill, towards the rim
   }
-  const double along = (dx * ex + dy * ey) * (se < 0 ? -1 : 1);
-  if (se != 0 && along > kPatchUphill * de) return PatchTrust::kLowerBound;
+  const double along = (dx * r.ex + dy * r.ey) * (r.se < 0 ? -1 : 1);
+  if (r.se != 0 && along > kPatchUphill * r.de) return PatchTrust::kLowerBound;
   return PatchTrust::kFull;
+}
+
+PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
+  return Trust(TrustRegion(j), dx, dy);
 }
 
 double GuardedHeight(const ElementCorners& e, double x, double y) {
@@ -231,10 +245,14 @@ void PrepareGuarded(ElementCorners* e) {
   bool smooth = true;
   for (int k = 0; k < 4; ++k) smooth &= e->owner[k] >= 0;
   for (int k = 0; k < 4; ++k) {
+    // The trust region is convex: trusted at the other corners, the patch
+    // is trusted over the whole element.
+    const PatchTrustRegion trust =
+        smooth ? TrustRegion(e->c[k]) : PatchTrustRegion{};
     for (int q = 0; q < 4; ++q) {
       if (q == k) continue;
       const double dx = c.x[q] - c.x[k], dy = c.y[q] - c.y[k];
-      if (smooth && TrustPatch(e->c[k], dx, dy) != PatchTrust::kFull) {
+      if (smooth && Trust(trust, dx, dy) != PatchTrust::kFull) {
         smooth = false;
       }
       // A node outside the owner's reach says nothing of its surface.

@@ -192,6 +192,16 @@ inline constexpr double kPatchUphill = 0.9;
 enum class PatchTrust { kFull, kLowerBound, kNone };
 // The trust of the patch with jet `j` at offset (dx, dy) from its node.
 PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy);
+// The same in two steps, for many offsets of one patch: its trust region
+// (from the jet alone), then the trust at an offset, as TrustPatch.
+struct PatchTrustRegion {
+  bool everywhere = true;  // a plane: trusted everywhere
+  double delta = 0, de = 0, reach = 0;  // rim distances, trusted radius
+  double gx = 0, gy = 0, s = 0;         // gradient and its length
+  double ex = 0, ey = 0, se = 0;        // larger principal direction
+};
+PatchTrustRegion TrustRegion(const SurfaceJet& j);
+PatchTrust Trust(const PatchTrustRegion& region, double dx, double dy);
 
 // The exact reconstruction (kExact): the minimum of the stock top and of
 // the exact swept surfaces of the element's candidates at (x, y). The

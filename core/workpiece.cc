@@ -525,6 +525,25 @@ const Sweep* MoveSweeps::SweepOf(int32_t id) const {
   return &*e.sweep;
 }
 
+CornerReach MoveSweeps::Reach(int32_t id, double z_top) const {
+  struct Entry {
+    uint64_t serial = 0;
+    int32_t id = -1;
+    double z_top = 0;
+    CornerReach reach;
+  };
+  constexpr int kEntries = 256;
+  thread_local Entry cache[kEntries];
+  Entry& e = cache[id & (kEntries - 1)];
+  if (e.id != id || e.serial != serial_ || e.z_top != z_top) {
+    e.reach = ReachOf(*moves_, id, z_top);
+    e.id = id;
+    e.serial = serial_;
+    e.z_top = z_top;
+  }
+  return e.reach;
+}
+
 double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
                             double cap, int32_t* id) const {
   double w = cap;
@@ -611,7 +630,7 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
     e.c[k] = n.jet;
     e.owner[k] = n.owner;
     if (n.owner >= 0 && scheme_->uses_reach()) {
-      e.reach[k] = ReachOf(moves_, n.owner, e.z_top);
+      e.reach[k] = surfaces_.Reach(n.owner, e.z_top);
     }
   }
   if (scheme_->uses_candidates()) surfaces_.FillCandidates(&e);

@@ -83,6 +83,9 @@ class MoveSweeps final : public MoveSurfaces {
   SurfaceJet Jet(int32_t id, double x, double y) const override;
   double LowestAt(int32_t ei, int32_t ej, double x, double y, double cap,
                   int32_t* id = nullptr) const override;
+  // ReachOf(moves, id, z_top), kept per thread for the owners met last (a
+  // node is a corner of four elements, an owner of many nodes).
+  CornerReach Reach(int32_t id, double z_top) const;
 
   // Fills e->candidates (and e->surfaces) for element (e->ei, e->ej) of the
   // index's grid, whose corners e->c[k] are owned by e->owner[k] (-1:
