@@ -102,6 +102,8 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
   // bit for bit.
   const GridGeometry g(spec);
   ElementCorners e;
+  e.ei = ei;
+  e.ej = ej;
   e.x0 = g.NodeX(ei);
   e.x1 = g.NodeX(ei + 1);
   e.y0 = g.NodeY(ej);
@@ -112,16 +114,18 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
   for (int k = 0; k < 4; ++k) {
     e.c[k] = jet(is[k], js[k]);
     const int32_t o = owner(is[k], js[k]);
+    e.owner[k] = o;
     if (o >= 0 && o < static_cast<int64_t>(moves.size()) &&
         GetScheme(scheme).uses_reach()) {
-      e.reach[k] = ReachOf(moves, o, spec.z_top);
+      e.reach[k] = surfaces != nullptr ? surfaces->Reach(o, spec.z_top)
+                                       : ReachOf(moves, o, spec.z_top);
     }
   }
   if (GetScheme(scheme).uses_candidates() && surfaces != nullptr) {
-    int32_t corner_owner[4];
-    for (int k = 0; k < 4; ++k) corner_owner[k] = owner(is[k], js[k]);
-    surfaces->FillCandidates(ei, ej, corner_owner, &e);
+    surfaces->FillCandidates(&e);
   }
+  if (GetScheme(scheme).uses_reach()) e.surfaces = surfaces.get();
+  GetScheme(scheme).Prepare(&e);
   return e;
 }
 

@@ -53,48 +53,105 @@ void BilinearGradient(const ElementCorners& e, double x, double y, double* gx,
   *gy = ((1 - s) * (w3 - w0) + s * (w2 - w1)) / ly;
 }
 
-// Corner k's term of the guarded minimum at (x, y), for (x, y) in its
-// footprint: its patch (held at its owner's lowest point) within its trust
-// radius, the bilinear `b` beyond. Sets *patch when the patch is used.
-double GuardedTerm(const ElementCorners& e, int k, double x, double y,
-                   double b, bool* patch) {
-  const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
-  const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
-  const double dx = x - xs[k], dy = y - ys[k];
-  const PatchTrust trust = TrustPatch(e.c[k], dx, dy);
-  *patch = trust != PatchTrust::kNone;
-  if (!*patch) return b;
-  const double p = std::max(EvaluatePatch(e.c[k], xs[k], ys[k], x, y),
-                            e.reach[k].z_low);
-  if (trust == PatchTrust::kLowerBound && b > p) {
-    *patch = false;
-    return b;
-  }
-  return p;
+// Corner coordinates, in the order of ElementCorners::c.
+struct CornerXY {
+  double x[4], y[4];
+};
+CornerXY CornersOf(const ElementCorners& e) {
+  return {{e.x0, e.x1, e.x1, e.x0}, {e.y0, e.y0, e.y1, e.y1}};
 }
 
-// The guarded minimum: the index of the corner that gives it (-1: the top),
-// or -2 when it is the bilinear.
-int GuardedMin(const ElementCorners& e, double x, double y, double* w) {
-  const double b = BilinearHeight(e, x, y);
-  *w = e.z_top;
-  int best = -1;
-  bool any = false;
+// What gives the guarded height: corner `corner`'s lifted patch, or the
+// exact surface of move `move`, or (neither) the top; kBilinear: eq. (16).
+constexpr int kBilinear = -2;
+struct GuardedValue {
+  double w = 0;
+  int corner = -1;
+  int32_t move = -1;
+};
+
+// The bilinear interpolation of corner k's shortfalls, at the element's
+// fractions (s, t).
+double LiftAt(const ElementCorners& e, int k, double s, double t) {
+  const double* d = e.guard.lift[k];
+  return std::lerp(std::lerp(d[0], d[1], s), std::lerp(d[3], d[2], s), t);
+}
+
+// The true surface at (x, y) where it is below v: a cut between the nodes.
+void TakeLowest(const ElementCorners& e, double x, double y, GuardedValue* v) {
+  int32_t id = -1;
+  const double w = e.surfaces->LowestAt(e.ei, e.ej, x, y, v->w, &id);
+  if (w < v->w) {
+    v->w = w;
+    v->corner = -1;
+    v->move = id;
+  }
+}
+
+GuardedValue Guarded(const ElementCorners& e, double x, double y) {
+  const CornerXY c = CornersOf(e);
+  GuardedValue v;
+  v.w = e.z_top;
+  if (e.guard.smooth || e.surfaces == nullptr) {
+    const double s = (x - e.x0) / (e.x1 - e.x0);
+    const double t = (y - e.y0) / (e.y1 - e.y0);
+    bool any = false;
+    for (int k = 0; k < 4; ++k) {
+      if (!e.reach[k].Contains(x, y)) continue;
+      any = true;
+      const double p = std::max(
+          EvaluatePatch(e.c[k], c.x[k], c.y[k], x, y) + LiftAt(e, k, s, t),
+          e.reach[k].z_low);
+      if (p < v.w) {
+        v.w = p;
+        v.corner = k;
+      }
+    }
+    if (e.surfaces == nullptr) {
+      if (!any) {
+        v.w = BilinearHeight(e, x, y);
+        v.corner = kBilinear;
+      }
+      return v;
+    }
+    bool hidden = !any;
+    for (int k = 0; k < 4; ++k) {
+      hidden |= !e.reach[k].Contains(x, y) && e.c[k].w < v.w;
+    }
+    if (hidden) TakeLowest(e, x, y, &v);
+    return v;
+  }
+  // The exact surfaces of the corners' owners and of the moves continuing
+  // them.
+  double h[4];
   for (int k = 0; k < 4; ++k) {
-    if (!e.reach[k].Contains(x, y)) continue;
-    any = true;
-    bool patch;
-    const double v = GuardedTerm(e, k, x, y, b, &patch);
-    if (v < *w) {
-      *w = v;
-      best = patch ? k : -2;
+    h[k] = kInfinity;
+    if (e.owner[k] < 0) continue;
+    for (int q = 0; q < e.reach[k].count; ++q) {
+      const int32_t id = e.reach[k].id[q];
+      const double hk = e.surfaces->Height(id, x, y);
+      h[k] = std::min(h[k], hk);
+      if (hk < v.w) {
+        v.w = hk;
+        v.move = id;
+      }
     }
   }
-  if (!any) {
-    *w = b;
-    return -2;
+  // An uncut element may still hold a cut between its nodes: its
+  // candidates (PrepareGuarded).
+  for (const int32_t id : e.candidates) {
+    const double hk = e.surfaces->Height(id, x, y);
+    if (hk < v.w) {
+      v.w = hk;
+      v.move = id;
+    }
   }
-  return best;
+  bool hidden = false;
+  for (int k = 0; k < 4; ++k) {
+    hidden |= e.owner[k] >= 0 && h[k] > v.w && e.c[k].w < v.w;
+  }
+  if (hidden) TakeLowest(e, x, y, &v);
+  return v;
 }
 
 }  // namespace
@@ -141,40 +198,84 @@ double RimDistance(const SurfaceJet& j) {
   return CircleRimDistance(s2, k);
 }
 
-PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
-  const double delta = RimDistance(j);
-  if (delta == kInfinity) return PatchTrust::kFull;
+PatchTrustRegion TrustRegion(const SurfaceJet& j) {
+  PatchTrustRegion r;
+  r.delta = RimDistance(j);
+  if (r.delta == kInfinity) return r;
+  r.everywhere = false;
   // The same along the direction of the larger principal curvature (a
   // ramp's cylinder: its cross-section, where the gradient mixes in the
   // flat slope along the axis).
   const Principal p = PrincipalCurvatures(j);
   const double k1 = p.m + p.q;
-  const double ex = p.ex, ey = p.ey;
-  const double se = j.wx * ex + j.wy * ey;
-  const double de = k1 > 0 ? CircleRimDistance(se * se, k1) : kInfinity;
-  const double reach = kPatchReach * std::min(delta, de);
-  if (dx * dx + dy * dy > reach * reach) return PatchTrust::kNone;
-  const double s = std::hypot(j.wx, j.wy);
-  if (s > 0 && (dx * j.wx + dy * j.wy) / s > kPatchUphill * delta) {
+  r.ex = p.ex;
+  r.ey = p.ey;
+  r.se = j.wx * r.ex + j.wy * r.ey;
+  r.de = k1 > 0 ? CircleRimDistance(r.se * r.se, k1) : kInfinity;
+  r.reach = kPatchReach * std::min(r.delta, r.de);
+  r.gx = j.wx;
+  r.gy = j.wy;
+  r.s = std::hypot(j.wx, j.wy);
+  return r;
+}
+
+PatchTrust Trust(const PatchTrustRegion& r, double dx, double dy) {
+  if (r.everywhere) return PatchTrust::kFull;
+  if (dx * dx + dy * dy > r.reach * r.reach) return PatchTrust::kNone;
+  if (r.s > 0 && (dx * r.gx + dy * r.gy) / r.s > kPatchUphill * r.delta) {
     return PatchTrust::kLowerBound;  // uphill, towards the rim
   }
-  const double along = (dx * ex + dy * ey) * (se < 0 ? -1 : 1);
-  if (se != 0 && along > kPatchUphill * de) return PatchTrust::kLowerBound;
+  const double along = (dx * r.ex + dy * r.ey) * (r.se < 0 ? -1 : 1);
+  if (r.se != 0 && along > kPatchUphill * r.de) return PatchTrust::kLowerBound;
   return PatchTrust::kFull;
 }
 
+PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
+  return Trust(TrustRegion(j), dx, dy);
+}
+
 double GuardedHeight(const ElementCorners& e, double x, double y) {
-  double w;
-  GuardedMin(e, x, y, &w);
-  return w;
+  return Guarded(e, x, y).w;
+}
+
+void PrepareGuarded(ElementCorners* e) {
+  const CornerXY c = CornersOf(*e);
+  e->guard = {};
+  const double tau = kGuardConsistency * std::max(e->x1 - e->x0, e->y1 - e->y0);
+  bool smooth = true;
+  for (int k = 0; k < 4; ++k) smooth &= e->owner[k] >= 0;
+  for (int k = 0; k < 4; ++k) {
+    // The trust region is convex: trusted at the other corners, the patch
+    // is trusted over the whole element.
+    const PatchTrustRegion trust =
+        smooth ? TrustRegion(e->c[k]) : PatchTrustRegion{};
+    for (int q = 0; q < 4; ++q) {
+      if (q == k) continue;
+      const double dx = c.x[q] - c.x[k], dy = c.y[q] - c.y[k];
+      if (smooth && Trust(trust, dx, dy) != PatchTrust::kFull) {
+        smooth = false;
+      }
+      // A node outside the owner's reach says nothing of its surface.
+      if (!e->reach[k].Contains(c.x[q], c.y[q])) continue;
+      const double r =
+          e->c[q].w - EvaluatePatch(e->c[k], c.x[k], c.y[k], c.x[q], c.y[q]);
+      if (r > 0) e->guard.lift[k][q] = r;
+      if (r > tau) smooth = false;
+    }
+  }
+  e->guard.smooth = smooth;
+  // An uncut element: the moves that may cut it between its nodes.
+  if (e->surfaces != nullptr && e->owner[0] < 0 && e->owner[1] < 0 &&
+      e->owner[2] < 0 && e->owner[3] < 0) {
+    e->surfaces->FillCandidates(e);
+  }
 }
 
 double MinOfPatches(const ElementCorners& e, double x, double y) {
-  const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
-  const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
+  const CornerXY c = CornersOf(e);
   double w = e.z_top;
   for (int k = 0; k < 4; ++k) {
-    w = std::min(w, EvaluatePatch(e.c[k], xs[k], ys[k], x, y));
+    w = std::min(w, EvaluatePatch(e.c[k], c.x[k], c.y[k], x, y));
   }
   return w;
 }
@@ -212,15 +313,14 @@ class TaylorScheme final : public Scheme {
   }
   void Gradient(const ElementCorners& e, double x, double y, double* gx,
                 double* gy) const override {
-    const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
-    const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
+    const CornerXY c = CornersOf(e);
     double w = e.z_top;
     *gx = *gy = 0;  // the stock top
     for (int k = 0; k < 4; ++k) {
-      const double wk = EvaluatePatch(e.c[k], xs[k], ys[k], x, y);
+      const double wk = EvaluatePatch(e.c[k], c.x[k], c.y[k], x, y);
       if (wk < w) {
         w = wk;
-        PatchGradient(e.c[k], xs[k], ys[k], x, y, gx, gy);
+        PatchGradient(e.c[k], c.x[k], c.y[k], x, y, gx, gy);
       }
     }
   }
@@ -234,24 +334,32 @@ class GuardedScheme final : public Scheme {
   bool stores_derivatives() const override { return true; }
   int bytes_per_node() const override { return 12; }  // as taylor
   bool uses_reach() const override { return true; }
+  void Prepare(ElementCorners* e) const override { PrepareGuarded(e); }
   double Reconstruct(const ElementCorners& e, double x,
                      double y) const override {
     return GuardedHeight(e, x, y);
   }
   void Gradient(const ElementCorners& e, double x, double y, double* gx,
                 double* gy) const override {
-    double w;
-    const int k = GuardedMin(e, x, y, &w);
-    if (k == -2) {
-      BilinearGradient(e, x, y, gx, gy);
-      return;
-    }
+    const GuardedValue v = Guarded(e, x, y);
     *gx = *gy = 0;  // the top, or a patch held at its owner's lowest point
-    if (k < 0) return;
-    const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
-    const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
-    if (EvaluatePatch(e.c[k], xs[k], ys[k], x, y) < e.reach[k].z_low) return;
-    PatchGradient(e.c[k], xs[k], ys[k], x, y, gx, gy);
+    if (v.corner == kBilinear) {
+      BilinearGradient(e, x, y, gx, gy);
+    } else if (v.move >= 0) {
+      const SurfaceJet j = e.surfaces->Jet(v.move, x, y);
+      *gx = j.wx;
+      *gy = j.wy;
+    } else if (v.corner >= 0 && v.w > e.reach[v.corner].z_low) {
+      const CornerXY c = CornersOf(e);
+      const int k = v.corner;
+      PatchGradient(e.c[k], c.x[k], c.y[k], x, y, gx, gy);
+      // The lift's: bilinear in (s, t).
+      const double lx = e.x1 - e.x0, ly = e.y1 - e.y0;
+      const double s = (x - e.x0) / lx, t = (y - e.y0) / ly;
+      const double* d = e.guard.lift[k];
+      *gx += ((1 - t) * (d[1] - d[0]) + t * (d[2] - d[3])) / lx;
+      *gy += ((1 - s) * (d[3] - d[0]) + s * (d[2] - d[1])) / ly;
+    }
   }
 };
 
