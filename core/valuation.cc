@@ -150,11 +150,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         // can lower a sample further; the rest of the bin is skipped.
         // Heights() is bit-identical to Height(), several samples at once.
         std::fill_n(est.begin(), count, z_top);
-        const int32_t corner_i[4] = {ei, ei + 1, ei + 1, ei};
-        const int32_t corner_j[4] = {ej, ej, ej + 1, ej + 1};
-        int32_t owners[4];
+        const int32_t* owners = e.owner;
         for (int k = 0; k < 4; ++k) {
-          owners[k] = wp.OwnerAt(corner_i[k], corner_j[k]);
           bool seen = owners[k] < 0;
           for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
           if (seen) continue;

@@ -188,8 +188,6 @@ class Workpiece {
 
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
   NodeValue Node(int32_t i, int32_t j) const;
-  // Node (i, j)'s owner (-1: uncut), without computing its derivatives.
-  int32_t OwnerAt(int32_t i, int32_t j) const;
   // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with each cut corner's
   // reach (ReachOf its owner) and the stencil's owners and the moves'
   // surfaces, where the scheme uses them.
@@ -277,6 +275,8 @@ class Workpiece {
   // valid until this thread's next call (the thread keeps the last one).
   const TileJets& Jets(int32_t t) const;
   const TileJets& JetsMiss(int32_t t) const;  // Jets() past its hit test
+  // Node (i, j)'s owner (-1: uncut), without its jet.
+  int32_t OwnerAt(int32_t i, int32_t j) const;
   // Tile t's cached jets if they are of `version` (and this state), else
   // null.
   std::shared_ptr<const TileJets> CachedJets(int32_t t,
