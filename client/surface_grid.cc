@@ -1,6 +1,8 @@
 #include "client/surface_grid.h"
 
 #include <algorithm>
+#include <span>
+#include <vector>
 
 #include "absl/strings/str_format.h"
 
@@ -38,15 +40,26 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
   std::vector<int32_t> owner(kTileNodes);
   float* const d[5] = {&dbuf[0], &dbuf[kTileNodes], &dbuf[2 * kTileNodes],
                        &dbuf[3 * kTileNodes], &dbuf[4 * kTileNodes]};
+  // Unallocated tiles are untouched stock, which Uncut already holds.
+  std::vector<int32_t> tiles;
   for (int32_t t = 0; t < wp.tile_count(); ++t) {
-    // Unallocated tiles are untouched stock, which Uncut already holds.
-    if (!wp.TileAllocated(t)) continue;
-    const Workpiece::TileExtent e = wp.Extent(t);
-    wp.ReadTile(t, w.data(), d, owner.data());
-    if (absl::Status st = g->SetNodes(e.i0, e.j0, e.nx, e.ny, w.data(), d,
-                                      owner.data());
-        !st.ok()) {
-      return st;
+    if (wp.TileAllocated(t)) tiles.push_back(t);
+  }
+  // A chunk's derivatives on the workpiece's threads, then its reads.
+  constexpr size_t kChunk = 64;
+  static_assert(kChunk <= Workpiece::kJetCacheTiles);
+  for (size_t c = 0; c < tiles.size(); c += kChunk) {
+    const std::span<const int32_t> chunk(
+        tiles.data() + c, std::min(kChunk, tiles.size() - c));
+    wp.PrepareJets(chunk);
+    for (const int32_t t : chunk) {
+      const Workpiece::TileExtent e = wp.Extent(t);
+      wp.ReadTile(t, w.data(), d, owner.data());
+      if (absl::Status st = g->SetNodes(e.i0, e.j0, e.nx, e.ny, w.data(), d,
+                                        owner.data());
+          !st.ok()) {
+        return st;
+      }
     }
   }
   return g;
