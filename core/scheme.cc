@@ -96,8 +96,10 @@ GuardedValue Guarded(const ElementCorners& e, double x, double y) {
     const double s = (x - e.x0) / (e.x1 - e.x0);
     const double t = (y - e.y0) / (e.y1 - e.y0);
     bool any = false;
+    bool in[4];
     for (int k = 0; k < 4; ++k) {
-      if (!e.reach[k].Contains(x, y)) continue;
+      in[k] = e.guard.inside[k] || e.reach[k].Contains(x, y);
+      if (!in[k]) continue;
       any = true;
       const double p = std::max(
           EvaluatePatch(e.c[k], c.x[k], c.y[k], x, y) + LiftAt(e, k, s, t),
@@ -115,42 +117,19 @@ GuardedValue Guarded(const ElementCorners& e, double x, double y) {
       return v;
     }
     bool hidden = !any;
-    for (int k = 0; k < 4; ++k) {
-      hidden |= !e.reach[k].Contains(x, y) && e.c[k].w < v.w;
-    }
+    for (int k = 0; k < 4; ++k) hidden |= !in[k] && e.c[k].w < v.w;
     if (hidden) TakeLowest(e, x, y, &v);
     return v;
   }
-  // The exact surfaces of the corners' owners and of the moves continuing
-  // them.
-  double h[4];
-  for (int k = 0; k < 4; ++k) {
-    h[k] = kInfinity;
-    if (e.owner[k] < 0) continue;
-    for (int q = 0; q < e.reach[k].count; ++q) {
-      const int32_t id = e.reach[k].id[q];
-      const double hk = e.surfaces->Height(id, x, y);
-      h[k] = std::min(h[k], hk);
-      if (hk < v.w) {
-        v.w = hk;
-        v.move = id;
-      }
-    }
-  }
-  // An uncut element may still hold a cut between its nodes: its
-  // candidates (PrepareGuarded).
+  // The exact surface: the element's candidates (PrepareGuarded) hold
+  // every move that can be the lowest in it.
   for (const int32_t id : e.candidates) {
-    const double hk = e.surfaces->Height(id, x, y);
-    if (hk < v.w) {
-      v.w = hk;
+    const double h = e.surfaces->Height(id, x, y);
+    if (h < v.w) {
+      v.w = h;
       v.move = id;
     }
   }
-  bool hidden = false;
-  for (int k = 0; k < 4; ++k) {
-    hidden |= e.owner[k] >= 0 && h[k] > v.w && e.c[k].w < v.w;
-  }
-  if (hidden) TakeLowest(e, x, y, &v);
   return v;
 }
 
@@ -264,11 +243,21 @@ void PrepareGuarded(ElementCorners* e) {
     }
   }
   e->guard.smooth = smooth;
-  // An uncut element: the moves that may cut it between its nodes.
-  if (e->surfaces != nullptr && e->owner[0] < 0 && e->owner[1] < 0 &&
-      e->owner[2] < 0 && e->owner[3] < 0) {
-    e->surfaces->FillCandidates(e);
+  // A capsule is convex: holding the element's corners, it holds it all.
+  for (int k = 0; k < 4; ++k) {
+    const CornerReach& r = e->reach[k];
+    bool inside = !r.bounded;
+    for (int q = 0; q < r.count && !inside; ++q) {
+      inside = true;
+      for (int j = 0; j < 4 && inside; ++j) {
+        inside = r.capsule[q].Contains(c.x[j], c.y[j]);
+      }
+    }
+    e->guard.inside[k] = inside;
   }
+  // Elsewhere the exact surface: every move that can be the lowest in the
+  // element (an uncut one too: a cut may pass between its nodes).
+  if (!smooth && e->surfaces != nullptr) e->surfaces->FillCandidates(e);
 }
 
 double MinOfPatches(const ElementCorners& e, double x, double y) {

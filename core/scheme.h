@@ -62,7 +62,6 @@ struct CornerReach {
   bool bounded = false;
   int count = 0;  // capsules in use
   Capsule capsule[3];
-  int32_t id[3] = {-1, -1, -1};  // the moves of the capsules
   double z_low = -std::numeric_limits<double>::infinity();
 
   // Whether (x, y) lies in a capsule (always, when unbounded).
@@ -89,6 +88,7 @@ struct ElementCorners {
   // What Scheme::Prepare found out about the element (kGuarded).
   struct Guard {
     bool smooth = false;  // the patches hold over the whole element
+    bool inside[4] = {};  // reach[k] holds the whole element
     double lift[4][4] = {};  // [k][q]: patch k's shortfall at corner q
   } guard;
 };
@@ -149,15 +149,18 @@ double MinOfPatches(const ElementCorners& e, double x, double y);
 //   that every patch passes at or above every node it should: the
 //   reconstruction interpolates the nodes) and held at or above its owner's
 //   lowest tip.
-// - otherwise: the least of the top and the exact swept surfaces of the
-//   corners' owners and the moves continuing them: exact wherever one of
-//   them is the lowest move, and never below the true surface.
-// In both, where a corner lies lower than the value found and nothing found
-// explains it (its owner's reach misses (x, y), or its surfaces there are
-// higher), a cut passes between the nodes: the true surface there
-// (MoveSurfaces::LowestAt). Without surfaces (a grid whose moves are not
-// known) every element is taken as smooth, and the bilinear answers where
-// no corner's reach holds (x, y). See docs/benchmarks.md, "Guarded scheme".
+//   Where a corner lies lower than the value found and its owner's reach
+//   misses (x, y), a cut passes between the nodes: the true surface there
+//   (MoveSurfaces::LowestAt).
+// - otherwise (a rim, a wall, a cutter's own kink, a patch that disagrees
+//   with its neighbours, an uncut element a cut may cross between its
+//   nodes): the exact surface, as the exact scheme gives it (the minimum
+//   over the element's candidates, MoveSurfaces::FillCandidates).
+// Without surfaces (a grid whose moves are not known) every element is
+// taken as smooth, and the bilinear answers where no corner's reach holds
+// (x, y). So patches serve the smooth interiors, where they are accurate to
+// third order, and the exact sweeps the rest. See docs/benchmarks.md,
+// "Guarded scheme".
 double GuardedHeight(const ElementCorners& e, double x, double y);
 // The per-element part of the guarded reconstruction (ElementCorners::
 // guard), from e's corners, reach and surfaces.

@@ -466,8 +466,7 @@ CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
   r.bounded = true;
   // Where each sweep is below the top (beyond, the top is lower anyway): a
   // rapid above the stock continues no surface.
-  auto add = [&](int64_t k) {
-    const Move& m = moves[k];
+  auto add = [&](const Move& m) {
     const Capsule c = Sweep(m.from, m.to, m.cutter).Footprint(z_top);
     if (c.empty) return;
     // The footprint's exact radius (Footprint widens it by a margin for
@@ -475,16 +474,15 @@ CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
     // exact surface).
     const double rho =
         FootprintRadius(m.cutter, std::min(m.from.z, m.to.z), z_top);
-    r.id[r.count] = static_cast<int32_t>(k);
     r.capsule[r.count++] = {c.x0, c.y0, c.x1, c.y1, rho};
   };
   const Move& m = moves[id];
-  add(id);
+  add(m);
   r.z_low = std::min(m.from.z, m.to.z);
-  if (id > 0 && SamePoint(moves[id - 1].to, m.from)) add(id - 1);
+  if (id > 0 && SamePoint(moves[id - 1].to, m.from)) add(moves[id - 1]);
   if (id + 1 < static_cast<int64_t>(moves.size()) &&
       SamePoint(moves[id + 1].from, m.to)) {
-    add(id + 1);
+    add(moves[id + 1]);
   }
   return r;
 }
