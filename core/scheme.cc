@@ -36,10 +36,7 @@ bool CornerReach::Capsule::Contains(double x, double y) const {
 
 bool CornerReach::Contains(double x, double y) const {
   if (!bounded) return true;
-  for (int k = 0; k < count; ++k) {
-    if (capsule[k].Contains(x, y)) return true;
-  }
-  return false;
+  return !empty && capsule.Contains(x, y);
 }
 
 namespace {
@@ -245,13 +242,9 @@ void PrepareGuarded(ElementCorners* e) {
   e->guard.smooth = smooth;
   // A capsule is convex: holding the element's corners, it holds it all.
   for (int k = 0; k < 4; ++k) {
-    const CornerReach& r = e->reach[k];
-    bool inside = !r.bounded;
-    for (int q = 0; q < r.count && !inside; ++q) {
-      inside = true;
-      for (int j = 0; j < 4 && inside; ++j) {
-        inside = r.capsule[q].Contains(c.x[j], c.y[j]);
-      }
+    bool inside = true;
+    for (int j = 0; j < 4 && inside; ++j) {
+      inside = e->reach[k].Contains(c.x[j], c.y[j]);
     }
     e->guard.inside[k] = inside;
   }
