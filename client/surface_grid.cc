@@ -117,7 +117,8 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
     e.owner[k] = o;
     if (o >= 0 && o < static_cast<int64_t>(moves.size()) &&
         GetScheme(scheme).uses_reach()) {
-      e.reach[k] = ReachOf(moves, o, spec.z_top);
+      e.reach[k] = surfaces != nullptr ? surfaces->Reach(o, spec.z_top)
+                                       : ReachOf(moves, o, spec.z_top);
     }
   }
   if (GetScheme(scheme).uses_candidates() && surfaces != nullptr) {

@@ -36,10 +36,7 @@ bool CornerReach::Capsule::Contains(double x, double y) const {
 
 bool CornerReach::Contains(double x, double y) const {
   if (!bounded) return true;
-  for (int k = 0; k < count; ++k) {
-    if (capsule[k].Contains(x, y)) return true;
-  }
-  return false;
+  return !empty && capsule.Contains(x, y);
 }
 
 namespace {
@@ -96,8 +93,10 @@ GuardedValue Guarded(const ElementCorners& e, double x, double y) {
     const double s = (x - e.x0) / (e.x1 - e.x0);
     const double t = (y - e.y0) / (e.y1 - e.y0);
     bool any = false;
+    bool in[4];
     for (int k = 0; k < 4; ++k) {
-      if (!e.reach[k].Contains(x, y)) continue;
+      in[k] = e.guard.inside[k] || e.reach[k].Contains(x, y);
+      if (!in[k]) continue;
       any = true;
       const double p = std::max(
           EvaluatePatch(e.c[k], c.x[k], c.y[k], x, y) + LiftAt(e, k, s, t),
@@ -115,42 +114,19 @@ GuardedValue Guarded(const ElementCorners& e, double x, double y) {
       return v;
     }
     bool hidden = !any;
-    for (int k = 0; k < 4; ++k) {
-      hidden |= !e.reach[k].Contains(x, y) && e.c[k].w < v.w;
-    }
+    for (int k = 0; k < 4; ++k) hidden |= !in[k] && e.c[k].w < v.w;
     if (hidden) TakeLowest(e, x, y, &v);
     return v;
   }
-  // The exact surfaces of the corners' owners and of the moves continuing
-  // them.
-  double h[4];
-  for (int k = 0; k < 4; ++k) {
-    h[k] = kInfinity;
-    if (e.owner[k] < 0) continue;
-    for (int q = 0; q < e.reach[k].count; ++q) {
-      const int32_t id = e.reach[k].id[q];
-      const double hk = e.surfaces->Height(id, x, y);
-      h[k] = std::min(h[k], hk);
-      if (hk < v.w) {
-        v.w = hk;
-        v.move = id;
-      }
-    }
-  }
-  // An uncut element may still hold a cut between its nodes: its
-  // candidates (PrepareGuarded).
+  // The exact surface: the element's candidates (PrepareGuarded) hold
+  // every move that can be the lowest in it.
   for (const int32_t id : e.candidates) {
-    const double hk = e.surfaces->Height(id, x, y);
-    if (hk < v.w) {
-      v.w = hk;
+    const double h = e.surfaces->Height(id, x, y);
+    if (h < v.w) {
+      v.w = h;
       v.move = id;
     }
   }
-  bool hidden = false;
-  for (int k = 0; k < 4; ++k) {
-    hidden |= e.owner[k] >= 0 && h[k] > v.w && e.c[k].w < v.w;
-  }
-  if (hidden) TakeLowest(e, x, y, &v);
   return v;
 }
 
@@ -198,26 +174,40 @@ double RimDistance(const SurfaceJet& j) {
   return CircleRimDistance(s2, k);
 }
 
-PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
-  const double delta = RimDistance(j);
-  if (delta == kInfinity) return PatchTrust::kFull;
+PatchTrustRegion TrustRegion(const SurfaceJet& j) {
+  PatchTrustRegion r;
+  r.delta = RimDistance(j);
+  if (r.delta == kInfinity) return r;
+  r.everywhere = false;
   // The same along the direction of the larger principal curvature (a
   // ramp's cylinder: its cross-section, where the gradient mixes in the
   // flat slope along the axis).
   const Principal p = PrincipalCurvatures(j);
   const double k1 = p.m + p.q;
-  const double ex = p.ex, ey = p.ey;
-  const double se = j.wx * ex + j.wy * ey;
-  const double de = k1 > 0 ? CircleRimDistance(se * se, k1) : kInfinity;
-  const double reach = kPatchReach * std::min(delta, de);
-  if (dx * dx + dy * dy > reach * reach) return PatchTrust::kNone;
-  const double s = std::hypot(j.wx, j.wy);
-  if (s > 0 && (dx * j.wx + dy * j.wy) / s > kPatchUphill * delta) {
+  r.ex = p.ex;
+  r.ey = p.ey;
+  r.se = j.wx * r.ex + j.wy * r.ey;
+  r.de = k1 > 0 ? CircleRimDistance(r.se * r.se, k1) : kInfinity;
+  r.reach = kPatchReach * std::min(r.delta, r.de);
+  r.gx = j.wx;
+  r.gy = j.wy;
+  r.s = std::hypot(j.wx, j.wy);
+  return r;
+}
+
+PatchTrust Trust(const PatchTrustRegion& r, double dx, double dy) {
+  if (r.everywhere) return PatchTrust::kFull;
+  if (dx * dx + dy * dy > r.reach * r.reach) return PatchTrust::kNone;
+  if (r.s > 0 && (dx * r.gx + dy * r.gy) / r.s > kPatchUphill * r.delta) {
     return PatchTrust::kLowerBound;  // uphill, towards the rim
   }
-  const double along = (dx * ex + dy * ey) * (se < 0 ? -1 : 1);
-  if (se != 0 && along > kPatchUphill * de) return PatchTrust::kLowerBound;
+  const double along = (dx * r.ex + dy * r.ey) * (r.se < 0 ? -1 : 1);
+  if (r.se != 0 && along > kPatchUphill * r.de) return PatchTrust::kLowerBound;
   return PatchTrust::kFull;
+}
+
+PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
+  return Trust(TrustRegion(j), dx, dy);
 }
 
 double GuardedHeight(const ElementCorners& e, double x, double y) {
@@ -231,10 +221,14 @@ void PrepareGuarded(ElementCorners* e) {
   bool smooth = true;
   for (int k = 0; k < 4; ++k) smooth &= e->owner[k] >= 0;
   for (int k = 0; k < 4; ++k) {
+    // The trust region is convex: trusted at the other corners, the patch
+    // is trusted over the whole element.
+    const PatchTrustRegion trust =
+        smooth ? TrustRegion(e->c[k]) : PatchTrustRegion{};
     for (int q = 0; q < 4; ++q) {
       if (q == k) continue;
       const double dx = c.x[q] - c.x[k], dy = c.y[q] - c.y[k];
-      if (smooth && TrustPatch(e->c[k], dx, dy) != PatchTrust::kFull) {
+      if (smooth && Trust(trust, dx, dy) != PatchTrust::kFull) {
         smooth = false;
       }
       // A node outside the owner's reach says nothing of its surface.
@@ -246,11 +240,17 @@ void PrepareGuarded(ElementCorners* e) {
     }
   }
   e->guard.smooth = smooth;
-  // An uncut element: the moves that may cut it between its nodes.
-  if (e->surfaces != nullptr && e->owner[0] < 0 && e->owner[1] < 0 &&
-      e->owner[2] < 0 && e->owner[3] < 0) {
-    e->surfaces->FillCandidates(e);
+  // A capsule is convex: holding the element's corners, it holds it all.
+  for (int k = 0; k < 4; ++k) {
+    bool inside = true;
+    for (int j = 0; j < 4 && inside; ++j) {
+      inside = e->reach[k].Contains(c.x[j], c.y[j]);
+    }
+    e->guard.inside[k] = inside;
   }
+  // Elsewhere the exact surface: every move that can be the lowest in the
+  // element (an uncut one too: a cut may pass between its nodes).
+  if (!smooth && e->surfaces != nullptr) e->surfaces->FillCandidates(e);
 }
 
 double MinOfPatches(const ElementCorners& e, double x, double y) {

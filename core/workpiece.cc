@@ -455,37 +455,22 @@ void Workpiece::ReconstructGradient(double x, double y, double* gx,
                     gy);
 }
 
-namespace {
-bool SamePoint(const Vec3& a, const Vec3& b) {
-  return a.x == b.x && a.y == b.y && a.z == b.z;
-}
-}  // namespace
-
 CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
   CornerReach r;
   r.bounded = true;
-  // Where each sweep is below the top (beyond, the top is lower anyway): a
-  // rapid above the stock continues no surface.
-  auto add = [&](int64_t k) {
-    const Move& m = moves[k];
-    const Capsule c = Sweep(m.from, m.to, m.cutter).Footprint(z_top);
-    if (c.empty) return;
-    // The footprint's exact radius (Footprint widens it by a margin for
-    // the cut; here a point just outside must stay outside, as for the
-    // exact surface).
-    const double rho =
-        FootprintRadius(m.cutter, std::min(m.from.z, m.to.z), z_top);
-    r.id[r.count] = static_cast<int32_t>(k);
-    r.capsule[r.count++] = {c.x0, c.y0, c.x1, c.y1, rho};
-  };
   const Move& m = moves[id];
-  add(id);
   r.z_low = std::min(m.from.z, m.to.z);
-  if (id > 0 && SamePoint(moves[id - 1].to, m.from)) add(id - 1);
-  if (id + 1 < static_cast<int64_t>(moves.size()) &&
-      SamePoint(moves[id + 1].from, m.to)) {
-    add(id + 1);
+  // Where the sweep is below the top (beyond, the top is lower anyway).
+  const Capsule c = Sweep(m.from, m.to, m.cutter).Footprint(z_top);
+  if (c.empty) {
+    r.empty = true;
+    return r;
   }
+  // The footprint's exact radius (Footprint widens it by a margin for the
+  // cut; here a point just outside must stay outside, as for the exact
+  // surface).
+  const double rho = FootprintRadius(m.cutter, r.z_low, z_top);
+  r.capsule = {c.x0, c.y0, c.x1, c.y1, rho};
   return r;
 }
 
@@ -523,6 +508,25 @@ const Sweep* MoveSweeps::SweepOf(int32_t id) const {
   e.id = id;
   e.serial = serial_;
   return &*e.sweep;
+}
+
+CornerReach MoveSweeps::Reach(int32_t id, double z_top) const {
+  struct Entry {
+    uint64_t serial = 0;
+    int32_t id = -1;
+    double z_top = 0;
+    CornerReach reach;
+  };
+  constexpr int kEntries = 256;
+  thread_local Entry cache[kEntries];
+  Entry& e = cache[id & (kEntries - 1)];
+  if (e.id != id || e.serial != serial_ || e.z_top != z_top) {
+    e.reach = ReachOf(*moves_, id, z_top);
+    e.id = id;
+    e.serial = serial_;
+    e.z_top = z_top;
+  }
+  return e.reach;
 }
 
 double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
@@ -611,7 +615,7 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
     e.c[k] = n.jet;
     e.owner[k] = n.owner;
     if (n.owner >= 0 && scheme_->uses_reach()) {
-      e.reach[k] = ReachOf(moves_, n.owner, e.z_top);
+      e.reach[k] = surfaces_.Reach(n.owner, e.z_top);
     }
   }
   if (scheme_->uses_candidates()) surfaces_.FillCandidates(&e);

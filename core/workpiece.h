@@ -58,10 +58,8 @@ struct Move {
 };
 
 // Where the swept surface of moves[id] exists and how low it goes (for the
-// guarded scheme): the XY capsule where it goes below z_top (BallSweep::
-// Footprint), with those of the moves before and after it when they
-// continue the same path (one's end is the other's start), and its own
-// lowest tip.
+// guarded scheme): the XY capsule where it goes below z_top (the sweep's
+// Footprint, at the footprint's exact radius) and its lowest tip.
 CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top);
 
 // The exact swept surfaces of a list of moves, by index, and where each
@@ -83,6 +81,9 @@ class MoveSweeps final : public MoveSurfaces {
   SurfaceJet Jet(int32_t id, double x, double y) const override;
   double LowestAt(int32_t ei, int32_t ej, double x, double y, double cap,
                   int32_t* id = nullptr) const override;
+  // ReachOf(moves, id, z_top), kept per thread for the owners met last (a
+  // node is a corner of four elements, an owner of many nodes).
+  CornerReach Reach(int32_t id, double z_top) const;
 
   // Fills e->candidates (and e->surfaces) for element (e->ei, e->ej) of the
   // index's grid, whose corners e->c[k] are owned by e->owner[k] (-1:
@@ -185,9 +186,10 @@ class Workpiece {
 
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
   NodeValue Node(int32_t i, int32_t j) const;
-  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with each cut corner's
-  // reach (ReachOf its owner) and the stencil's owners and the moves'
-  // surfaces, where the scheme uses them.
+  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with the corners'
+  // owners, each cut corner's reach (ReachOf its owner), the candidates and
+  // the moves' surfaces where the scheme uses them, prepared by the scheme
+  // (Scheme::Prepare).
   ElementCorners Corners(int32_t ei, int32_t ej) const;
   // The scheme's reconstructed surface at a point of the stock (clamped to
   // the stock rectangle).
