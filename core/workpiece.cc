@@ -461,7 +461,7 @@ CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
   const Move& m = moves[id];
   r.z_low = std::min(m.from.z, m.to.z);
   // Where the sweep is below the top (beyond, the top is lower anyway).
-  const Capsule c = Sweep(m.from, m.to, m.cutter).Footprint(z_top);
+  const Capsule c = FootprintCapsule(m.from, m.to, m.cutter, z_top);
   if (c.empty) {
     r.empty = true;
     return r;
@@ -499,7 +499,7 @@ const Sweep* MoveSweeps::SweepOf(int32_t id) const {
     int32_t id = -1;
     std::optional<Sweep> sweep;
   };
-  constexpr int kEntries = 64;
+  constexpr int kEntries = 256;
   thread_local Entry cache[kEntries];
   Entry& e = cache[id & (kEntries - 1)];
   if (e.id == id && e.serial == serial_) return &*e.sweep;
