@@ -213,11 +213,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     return absl::FailedPreconditionError(
         absl::StrCat("cannot create --out ", options.dir, ": ", ec.message()));
   }
-  if (options.moves != nullptr) {
-    grid->moves = *options.moves;
-    grid->surfaces =
-        std::make_shared<const MoveSweeps>(*options.moves, grid->spec);
-  }
+  if (options.moves != nullptr) grid->SetMoves(*options.moves);
   ErrorRaster raster;
   raster.region = {stock.x0, stock.y0, stock.x1, stock.y1};
   raster.cols = report->error.map_cols();

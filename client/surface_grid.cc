@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "absl/strings/str_format.h"
+#include "core/thread_pool.h"
 
 namespace swarf::cli {
 
@@ -28,11 +29,7 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::Uncut(const StockSpec& spec,
 absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
   absl::StatusOr<SurfaceGrid> g = Uncut(wp.spec(), wp.scheme().kind());
   if (!g.ok()) return g.status();
-  g->moves.reserve(wp.move_count());
-  for (int64_t id = 0; id < wp.move_count(); ++id) {
-    g->moves.push_back(wp.move(id));
-  }
-  g->surfaces = std::make_shared<const MoveSweeps>(g->moves, g->spec);
+  g->SetMoves(std::vector<Move>(wp.moves().begin(), wp.moves().end()));
   std::vector<double> w(kTileNodes);
   std::vector<float> dbuf(5 * kTileNodes);
   std::vector<int32_t> owner(kTileNodes);
@@ -50,6 +47,22 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
     }
   }
   return g;
+}
+
+void SurfaceGrid::SetMoves(std::vector<Move> list) {
+  moves = std::move(list);
+  surfaces = std::make_shared<const MoveSweeps>(moves, spec);
+  // Every element's corners need their owners' reach (up to three sweeps
+  // each): once per move instead.
+  auto r = std::make_shared<std::vector<CornerReach>>(moves.size());
+  constexpr int64_t kChunk = 1024;
+  const int64_t n = static_cast<int64_t>(moves.size());
+  ThreadPool::Default().ParallelFor((n + kChunk - 1) / kChunk, [&](int64_t c) {
+    for (int64_t id = c * kChunk; id < std::min(n, (c + 1) * kChunk); ++id) {
+      (*r)[id] = ReachOf(moves, id, spec.z_top);
+    }
+  });
+  reaches = std::move(r);
 }
 
 absl::Status SurfaceGrid::SetNodes(int32_t i0, int32_t j0, int32_t nx,
@@ -114,7 +127,9 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
     const int32_t o = owner(is[k], js[k]);
     if (o >= 0 && o < static_cast<int64_t>(moves.size()) &&
         GetScheme(scheme).uses_reach()) {
-      e.reach[k] = ReachOf(moves, o, spec.z_top);
+      e.reach[k] = reaches != nullptr && reaches->size() == moves.size()
+                       ? (*reaches)[o]
+                       : ReachOf(moves, o, spec.z_top);
     }
   }
   if (GetScheme(scheme).uses_candidates() && surfaces != nullptr) {
@@ -122,6 +137,7 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
     for (int k = 0; k < 4; ++k) corner_owner[k] = owner(is[k], js[k]);
     surfaces->FillCandidates(ei, ej, corner_owner, &e);
   }
+  GetScheme(scheme).Prepare(&e);
   return e;
 }
 
@@ -142,10 +158,8 @@ double SurfaceGrid::HeightAndGradient(double x, double y, double* gx,
   const GridGeometry g(spec);
   x = std::clamp(x, spec.x0, spec.x1);
   y = std::clamp(y, spec.y0, spec.y1);
-  const ElementCorners e = Corners(g.ElementX(x), g.ElementY(y));
-  const Scheme& s = GetScheme(scheme);
-  s.Gradient(e, x, y, gx, gy);
-  return s.Reconstruct(e, x, y);
+  return GetScheme(scheme).HeightAndGradient(
+      Corners(g.ElementX(x), g.ElementY(y)), x, y, gx, gy);
 }
 
 double SurfaceGrid::MinNodeHeight() const {

@@ -35,6 +35,14 @@ struct SurfaceGrid {
   // The same moves' exact surfaces, for the exact scheme (null: that
   // scheme falls back to the patches). Immutable, shared by copies.
   std::shared_ptr<const MoveSweeps> surfaces;
+  // ReachOf each of those moves, for the guarded scheme (null, or not one
+  // per move: computed for every corner, the same values). Immutable,
+  // shared by copies.
+  std::shared_ptr<const std::vector<CornerReach>> reaches;
+
+  // Sets moves, surfaces and reaches (reaches in parallel on
+  // ThreadPool::Default()).
+  void SetMoves(std::vector<Move> moves);
 
   // Untouched stock: every node at z_top, flat, owner -1. InvalidArgument
   // for a spec ValidateStock rejects, or more than kMaxGridNodes nodes.

@@ -61,7 +61,8 @@ double GuardedTerm(const ElementCorners& e, int k, double x, double y,
   const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
   const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
   const double dx = x - xs[k], dy = y - ys[k];
-  const PatchTrust trust = TrustPatch(e.c[k], dx, dy);
+  const PatchTrust trust =
+      e.has_trust ? TrustPatch(e.trust[k], dx, dy) : TrustPatch(e.c[k], dx, dy);
   *patch = trust != PatchTrust::kNone;
   if (!*patch) return b;
   const double p = std::max(EvaluatePatch(e.c[k], xs[k], ys[k], x, y),
@@ -141,26 +142,43 @@ double RimDistance(const SurfaceJet& j) {
   return CircleRimDistance(s2, k);
 }
 
-PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
+PatchTrustFrame TrustFrameOf(const SurfaceJet& j) {
+  PatchTrustFrame f;
   const double delta = RimDistance(j);
-  if (delta == kInfinity) return PatchTrust::kFull;
+  if (delta == kInfinity) return f;
+  f.unbounded = false;
   // The same along the direction of the larger principal curvature (a
   // ramp's cylinder: its cross-section, where the gradient mixes in the
   // flat slope along the axis).
   const Principal p = PrincipalCurvatures(j);
   const double k1 = p.m + p.q;
-  const double ex = p.ex, ey = p.ey;
-  const double se = j.wx * ex + j.wy * ey;
-  const double de = k1 > 0 ? CircleRimDistance(se * se, k1) : kInfinity;
+  f.wx = j.wx;
+  f.wy = j.wy;
+  f.ex = p.ex;
+  f.ey = p.ey;
+  f.se = j.wx * f.ex + j.wy * f.ey;
+  const double de = k1 > 0 ? CircleRimDistance(f.se * f.se, k1) : kInfinity;
   const double reach = kPatchReach * std::min(delta, de);
-  if (dx * dx + dy * dy > reach * reach) return PatchTrust::kNone;
-  const double s = std::hypot(j.wx, j.wy);
-  if (s > 0 && (dx * j.wx + dy * j.wy) / s > kPatchUphill * delta) {
+  f.reach2 = reach * reach;
+  f.s = std::hypot(j.wx, j.wy);
+  f.uphill = kPatchUphill * delta;
+  f.uphill_e = kPatchUphill * de;
+  return f;
+}
+
+PatchTrust TrustPatch(const PatchTrustFrame& f, double dx, double dy) {
+  if (f.unbounded) return PatchTrust::kFull;
+  if (dx * dx + dy * dy > f.reach2) return PatchTrust::kNone;
+  if (f.s > 0 && (dx * f.wx + dy * f.wy) / f.s > f.uphill) {
     return PatchTrust::kLowerBound;  // uphill, towards the rim
   }
-  const double along = (dx * ex + dy * ey) * (se < 0 ? -1 : 1);
-  if (se != 0 && along > kPatchUphill * de) return PatchTrust::kLowerBound;
+  const double along = (dx * f.ex + dy * f.ey) * (f.se < 0 ? -1 : 1);
+  if (f.se != 0 && along > f.uphill_e) return PatchTrust::kLowerBound;
   return PatchTrust::kFull;
+}
+
+PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
+  return TrustPatch(TrustFrameOf(j), dx, dy);
 }
 
 double GuardedHeight(const ElementCorners& e, double x, double y) {
@@ -234,24 +252,33 @@ class GuardedScheme final : public Scheme {
   bool stores_derivatives() const override { return true; }
   int bytes_per_node() const override { return 12; }  // as taylor
   bool uses_reach() const override { return true; }
+  void Prepare(ElementCorners* e) const override {
+    for (int k = 0; k < 4; ++k) e->trust[k] = TrustFrameOf(e->c[k]);
+    e->has_trust = true;
+  }
   double Reconstruct(const ElementCorners& e, double x,
                      double y) const override {
     return GuardedHeight(e, x, y);
   }
   void Gradient(const ElementCorners& e, double x, double y, double* gx,
                 double* gy) const override {
+    HeightAndGradient(e, x, y, gx, gy);
+  }
+  double HeightAndGradient(const ElementCorners& e, double x, double y,
+                           double* gx, double* gy) const override {
     double w;
     const int k = GuardedMin(e, x, y, &w);
     if (k == -2) {
       BilinearGradient(e, x, y, gx, gy);
-      return;
+      return w;
     }
     *gx = *gy = 0;  // the top, or a patch held at its owner's lowest point
-    if (k < 0) return;
+    if (k < 0) return w;
     const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
     const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
-    if (EvaluatePatch(e.c[k], xs[k], ys[k], x, y) < e.reach[k].z_low) return;
+    if (EvaluatePatch(e.c[k], xs[k], ys[k], x, y) < e.reach[k].z_low) return w;
     PatchGradient(e.c[k], xs[k], ys[k], x, y, gx, gy);
+    return w;
   }
 };
 

@@ -56,6 +56,21 @@ struct CornerReach {
   bool Contains(double x, double y) const;
 };
 
+// What TrustPatch derives from a jet alone (the rim distances, the
+// principal direction, the slope), so that it is computed once per corner
+// instead of once per sample. TrustPatch(TrustFrameOf(j), dx, dy) ==
+// TrustPatch(j, dx, dy) for every offset.
+struct PatchTrustFrame {
+  bool unbounded = true;  // RimDistance is infinite: kFull everywhere
+  double wx = 0, wy = 0;  // the jet's slope
+  double s = 0;           // |slope|
+  double ex = 0, ey = 0;  // direction of the larger principal curvature
+  double se = 0;          // slope along it
+  double reach2 = 0;      // (kPatchReach * min of the rim distances)^2
+  double uphill = 0;      // kPatchUphill * RimDistance
+  double uphill_e = 0;    // kPatchUphill * the rim distance along (ex, ey)
+};
+
 // The four corner nodes of element [x0,x1] x [y0,y1]: c[0] at (x0,y0),
 // c[1] at (x1,y0), c[2] at (x1,y1), c[3] at (x0,y1) (the paper's i, j, k, m).
 struct ElementCorners {
@@ -69,6 +84,10 @@ struct ElementCorners {
   // outlives the corners).
   absl::InlinedVector<int32_t, 32> candidates;
   const MoveSurfaces* surfaces = nullptr;
+  // With has_trust (Scheme::Prepare of the guarded scheme): TrustFrameOf
+  // each c[k], valid while c[] is unchanged; without, computed when used.
+  bool has_trust = false;
+  PatchTrustFrame trust[4];
 };
 
 class Scheme {
@@ -88,6 +107,11 @@ class Scheme {
   virtual bool uses_candidates() const { return false; }
   // Bytes per allocated node, including the owning move id.
   virtual int bytes_per_node() const = 0;
+  // Fills what Reconstruct and Gradient would otherwise derive from the
+  // corners at every point (the guarded scheme's trust frames), once, after
+  // the rest of `e` is filled. Optional: the results are the same bits
+  // either way.
+  virtual void Prepare(ElementCorners* /*e*/) const {}
   // Height at (x, y) inside the element. Thread-safe.
   virtual double Reconstruct(const ElementCorners& e, double x,
                              double y) const = 0;
@@ -95,6 +119,13 @@ class Scheme {
   // the piece Reconstruct picks).
   virtual void Gradient(const ElementCorners& e, double x, double y,
                         double* gx, double* gy) const = 0;
+  // Both: returns Reconstruct(e, x, y) and sets the Gradient, bit for bit
+  // (schemes that find both at once override it).
+  virtual double HeightAndGradient(const ElementCorners& e, double x,
+                                   double y, double* gx, double* gy) const {
+    Gradient(e, x, y, gx, gy);
+    return Reconstruct(e, x, y);
+  }
 };
 
 // Eq. (16): bilinear interpolation of the corner heights.
@@ -147,6 +178,9 @@ inline constexpr double kPatchUphill = 0.9;
 enum class PatchTrust { kFull, kLowerBound, kNone };
 // The trust of the patch with jet `j` at offset (dx, dy) from its node.
 PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy);
+// The same from the jet's frame (TrustFrameOf), without its libm calls.
+PatchTrustFrame TrustFrameOf(const SurfaceJet& j);
+PatchTrust TrustPatch(const PatchTrustFrame& f, double dx, double dy);
 
 // The exact reconstruction (kExact): the minimum of the stock top and of
 // the exact swept surfaces of the element's candidates at (x, y). The

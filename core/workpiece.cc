@@ -573,6 +573,31 @@ SurfaceJet MoveSweeps::Jet(int32_t id, double x, double y) const {
   return s->JetAt(x, y);
 }
 
+const CornerReach& Workpiece::CachedReach(int32_t id) const {
+  // Neighbouring elements share their corners' owners, and ReachOf builds
+  // up to three sweeps: a per-thread direct-mapped cache. A move's reach
+  // depends on it and its neighbours in the list, which only grows (the
+  // serial changes when LoadState replaces the state): an entry holds while
+  // whether the move has a successor is unchanged.
+  struct Entry {
+    uint64_t serial = 0;
+    int32_t id = -1;
+    bool last = false;
+    CornerReach reach;
+  };
+  constexpr int kEntries = 256;
+  thread_local Entry cache[kEntries];
+  Entry& e = cache[id & (kEntries - 1)];
+  const bool last = id + 1 >= move_count();
+  if (e.id != id || e.serial != serial_ || e.last != last) {
+    e.reach = ReachOf(moves_, id, spec().z_top);
+    e.id = id;
+    e.serial = serial_;
+    e.last = last;
+  }
+  return e.reach;
+}
+
 ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
   ElementCorners e;
   e.x0 = grid_.NodeX(ei);
@@ -586,7 +611,7 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
     const NodeValue n = Node(is[k], js[k]);
     e.c[k] = n.jet;
     if (n.owner >= 0 && scheme_->uses_reach()) {
-      e.reach[k] = ReachOf(moves_, n.owner, e.z_top);
+      e.reach[k] = CachedReach(n.owner);
     }
   }
   if (scheme_->uses_candidates()) {
@@ -594,6 +619,7 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
     for (int k = 0; k < 4; ++k) owners[k] = OwnerAt(is[k], js[k]);
     surfaces_.FillCandidates(ei, ej, owners, &e);
   }
+  scheme_->Prepare(&e);
   return e;
 }
 

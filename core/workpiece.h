@@ -260,6 +260,9 @@ class Workpiece {
   const TileJets& Jets(int32_t t) const;
   // Node (i, j)'s owner (-1: uncut), without its jet.
   int32_t OwnerAt(int32_t i, int32_t j) const;
+  // ReachOf(moves_, id, z_top), kept per thread; valid until this thread's
+  // next call.
+  const CornerReach& CachedReach(int32_t id) const;
   void ComputeJets(int32_t t, const Tile& tile, TileJets* out) const;
 
   const GridGeometry grid_;
