@@ -187,6 +187,113 @@ double GuardedHeight(const ElementCorners& e, double x, double y) {
   return w;
 }
 
+namespace {
+
+// Clones for wider vectors, picked at load time; the same IEEE operations in
+// every clone (no FMA: -ffp-contract=off), so the same bits (as the sweeps'
+// kernels, core/cutter/ball_sweep.cc).
+#ifdef SWARF_NO_TARGET_CLONES
+#define SWARF_TARGET_CLONES
+#else
+#define SWARF_TARGET_CLONES \
+  __attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
+#endif
+
+// GuardedHeights on at most kGuardedChunk points. Corner by corner, each
+// point sees the same operations in the same order as GuardedMin: the
+// bilinear, then for k = 0..3 whether its reach holds the point
+// (CornerReach::Contains), its term (GuardedTerm) and the running minimum.
+constexpr int32_t kGuardedChunk = 64;
+
+SWARF_TARGET_CLONES
+void GuardedChunk(const ElementCorners& e, const double* __restrict x,
+                  const double* __restrict y, int32_t n,
+                  double* __restrict out) {
+  // Flags as doubles (0 or 1), and loop-invariant conditions folded into
+  // the thresholds, so that every loop is selects the vectorizer takes.
+  constexpr double kInf = std::numeric_limits<double>::infinity();
+  double b[kGuardedChunk], w[kGuardedChunk];
+  double any[kGuardedChunk], in[kGuardedChunk];
+  for (int32_t q = 0; q < n; ++q) {
+    b[q] = BilinearHeight(e, x[q], y[q]);
+    w[q] = e.z_top;
+    any[q] = 0;
+  }
+  const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
+  const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
+  for (int k = 0; k < 4; ++k) {
+    const CornerReach& r = e.reach[k];
+    // in[q]: r.Contains(x[q], y[q]).
+    const double in_all = r.bounded ? 0.0 : 1.0;
+    for (int32_t q = 0; q < n; ++q) in[q] = in_all;
+    for (int c = 0; r.bounded && c < r.count; ++c) {
+      const CornerReach::Capsule& cap = r.capsule[c];
+      const double ax = cap.ax, ay = cap.ay;
+      const double ux = cap.bx - ax, uy = cap.by - ay;
+      const double len2 = ux * ux + uy * uy;
+      const double r2 = cap.radius * cap.radius;
+      if (len2 > 0) {
+#pragma omp simd
+        for (int32_t q = 0; q < n; ++q) {
+          const double px = x[q] - ax, py = y[q] - ay;
+          // std::clamp(v, 0, 1) by value: min(max(v, 0), 1).
+          const double v = (px * ux + py * uy) / len2;
+          const double v0 = v < 0.0 ? 0.0 : v;
+          const double t = 1.0 < v0 ? 1.0 : v0;
+          const double dx = px - t * ux, dy = py - t * uy;
+          in[q] = dx * dx + dy * dy <= r2 ? 1.0 : in[q];
+        }
+      } else {
+#pragma omp simd
+        for (int32_t q = 0; q < n; ++q) {
+          const double px = x[q] - ax, py = y[q] - ay;
+          const double t = 0.0;
+          const double dx = px - t * ux, dy = py - t * uy;
+          in[q] = dx * dx + dy * dy <= r2 ? 1.0 : in[q];
+        }
+      }
+    }
+    // TrustPatch(f, dx, dy): kNone past reach2; kLowerBound uphill along
+    // the gradient (when s > 0) or along (ex, ey) (when se != 0). A test
+    // that does not apply gets an infinite threshold, which nothing passes.
+    const PatchTrustFrame f =
+        e.has_trust ? e.trust[k] : TrustFrameOf(e.c[k]);
+    const double reach2 = f.unbounded ? kInf : f.reach2;
+    const double uphill = f.unbounded || !(f.s > 0) ? kInf : f.uphill;
+    const double uphill_e = f.unbounded || !(f.se != 0) ? kInf : f.uphill_e;
+    const double sign = f.se < 0 ? -1 : 1;
+    const double s = f.s, wx = f.wx, wy = f.wy, ex = f.ex, ey = f.ey;
+    const SurfaceJet& j = e.c[k];
+    const double xk = xs[k], yk = ys[k], z_low = r.z_low;
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) {
+      const double dx = x[q] - xk, dy = y[q] - yk;
+      const bool none = dx * dx + dy * dy > reach2;
+      const bool lower = ((dx * wx + dy * wy) / s > uphill) |
+                         ((dx * ex + dy * ey) * sign > uphill_e);
+      // GuardedTerm: the patch held at z_low (std::max(raw, z_low)), the
+      // bilinear where it is not trusted or only a lower bound below it.
+      const double raw = EvaluatePatch(j, xk, yk, x[q], y[q]);
+      const double p = raw < z_low ? z_low : raw;
+      const double v = none | (lower & (b[q] > p)) ? b[q] : p;
+      const bool inside = in[q] != 0;
+      any[q] = inside ? 1.0 : any[q];
+      w[q] = inside & (v < w[q]) ? v : w[q];
+    }
+  }
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) out[q] = any[q] != 0 ? w[q] : b[q];
+}
+
+}  // namespace
+
+void GuardedHeights(const ElementCorners& e, const double* x, const double* y,
+                    int32_t n, double* out) {
+  for (int32_t q0 = 0; q0 < n; q0 += kGuardedChunk) {
+    GuardedChunk(e, x + q0, y + q0, std::min(kGuardedChunk, n - q0), out + q0);
+  }
+}
+
 double MinOfPatches(const ElementCorners& e, double x, double y) {
   const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
   const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
@@ -259,6 +366,11 @@ class GuardedScheme final : public Scheme {
   double Reconstruct(const ElementCorners& e, double x,
                      double y) const override {
     return GuardedHeight(e, x, y);
+  }
+  void ReconstructMany(const ElementCorners& e, const double* x,
+                       const double* y, int32_t n,
+                       double* out) const override {
+    GuardedHeights(e, x, y, n, out);
   }
   void Gradient(const ElementCorners& e, double x, double y, double* gx,
                 double* gy) const override {

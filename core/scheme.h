@@ -119,6 +119,12 @@ class Scheme {
   // the piece Reconstruct picks).
   virtual void Gradient(const ElementCorners& e, double x, double y,
                         double* gx, double* gy) const = 0;
+  // Reconstruct at n points of the element: out[q] = Reconstruct(e, x[q],
+  // y[q]), bit for bit (schemes with per-element work override it).
+  virtual void ReconstructMany(const ElementCorners& e, const double* x,
+                               const double* y, int32_t n, double* out) const {
+    for (int32_t q = 0; q < n; ++q) out[q] = Reconstruct(e, x[q], y[q]);
+  }
   // Both: returns Reconstruct(e, x, y) and sets the Gradient, bit for bit
   // (schemes that find both at once override it).
   virtual double HeightAndGradient(const ElementCorners& e, double x,
@@ -151,6 +157,10 @@ double MinOfPatches(const ElementCorners& e, double x, double y);
 // a patch inside its owner's reach held above the owner's lowest tip: never
 // below the lowest tip of the moves owning the corners.
 double GuardedHeight(const ElementCorners& e, double x, double y);
+// GuardedHeight at n points of one element, bit for bit: the corners'
+// frames and capsules once, the points in vectorized loops.
+void GuardedHeights(const ElementCorners& e, const double* x, const double* y,
+                    int32_t n, double* out);
 
 // Along the gradient, with slope s and curvature k, a patch is the
 // osculating parabola of a circle of radius (1 + s^2)^(3/2) / |k| (a ball's

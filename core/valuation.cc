@@ -125,7 +125,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       return *o.sweep;
     };
     const size_t lattice = fx.size();
-    std::vector<double> xs(lattice), ys(lattice), est(lattice), h(lattice);
+    std::vector<double> xs(lattice), ys(lattice), est(lattice), h(lattice),
+        rec(lattice);
     Partial& p = partials[b];
     for (int32_t ej = ej0; ej < ej1; ++ej) {
       for (int32_t ei = ei0; ei < ei1; ++ei) {
@@ -174,12 +175,13 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         // An element's samples mostly share a map cell: their max goes in
         // once per run of one cell (the same max: cells start at 0 and
         // take only larger values).
+        wp.scheme().ReconstructMany(e, xs.data(), ys.data(), count,
+                                    rec.data());
         int64_t run_cell = -1;
         float run_max = 0;
         for (int32_t q = 0; q < count; ++q) {
           const double x = xs[q], y = ys[q];
-          const double err =
-              SampleError(wp.scheme().Reconstruct(e, x, y), est[q]);
+          const double err = SampleError(rec[q], est[q]);
           if (mapped) {
             const int64_t c = map_cell(x, y);
             if (c != run_cell) {
