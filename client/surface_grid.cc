@@ -137,7 +137,6 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
     for (int k = 0; k < 4; ++k) corner_owner[k] = owner(is[k], js[k]);
     surfaces->FillCandidates(ei, ej, corner_owner, &e);
   }
-  GetScheme(scheme).Prepare(&e);
   return e;
 }
 

@@ -177,6 +177,11 @@ PatchTrust TrustPatch(const PatchTrustFrame& f, double dx, double dy) {
   return PatchTrust::kFull;
 }
 
+void FillTrust(ElementCorners* e) {
+  for (int k = 0; k < 4; ++k) e->trust[k] = TrustFrameOf(e->c[k]);
+  e->has_trust = true;
+}
+
 PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
   return TrustPatch(TrustFrameOf(j), dx, dy);
 }
@@ -359,10 +364,7 @@ class GuardedScheme final : public Scheme {
   bool stores_derivatives() const override { return true; }
   int bytes_per_node() const override { return 12; }  // as taylor
   bool uses_reach() const override { return true; }
-  void Prepare(ElementCorners* e) const override {
-    for (int k = 0; k < 4; ++k) e->trust[k] = TrustFrameOf(e->c[k]);
-    e->has_trust = true;
-  }
+  bool uses_trust() const override { return true; }
   double Reconstruct(const ElementCorners& e, double x,
                      double y) const override {
     return GuardedHeight(e, x, y);

@@ -84,8 +84,8 @@ struct ElementCorners {
   // outlives the corners).
   absl::InlinedVector<int32_t, 32> candidates;
   const MoveSurfaces* surfaces = nullptr;
-  // With has_trust (Scheme::Prepare of the guarded scheme): TrustFrameOf
-  // each c[k], valid while c[] is unchanged; without, computed when used.
+  // With has_trust (FillTrust): TrustFrameOf each c[k], valid while c[] is
+  // unchanged; without, computed where used (Scheme::uses_trust).
   bool has_trust = false;
   PatchTrustFrame trust[4];
 };
@@ -107,11 +107,9 @@ class Scheme {
   virtual bool uses_candidates() const { return false; }
   // Bytes per allocated node, including the owning move id.
   virtual int bytes_per_node() const = 0;
-  // Fills what Reconstruct and Gradient would otherwise derive from the
-  // corners at every point (the guarded scheme's trust frames), once, after
-  // the rest of `e` is filled. Optional: the results are the same bits
-  // either way.
-  virtual void Prepare(ElementCorners* /*e*/) const {}
+  // Whether Reconstruct reads ElementCorners::trust (when has_trust; else it
+  // derives the frames at every point: the same bits, more work).
+  virtual bool uses_trust() const { return false; }
   // Height at (x, y) inside the element. Thread-safe.
   virtual double Reconstruct(const ElementCorners& e, double x,
                              double y) const = 0;
@@ -191,6 +189,9 @@ PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy);
 // The same from the jet's frame (TrustFrameOf), without its libm calls.
 PatchTrustFrame TrustFrameOf(const SurfaceJet& j);
 PatchTrust TrustPatch(const PatchTrustFrame& f, double dx, double dy);
+// Sets e->trust[k] = TrustFrameOf(e->c[k]) and e->has_trust: worth it when
+// the guarded scheme reconstructs the element at several points.
+void FillTrust(ElementCorners* e);
 
 // The exact reconstruction (kExact): the minimum of the stock top and of
 // the exact swept surfaces of the element's candidates at (x, y). The

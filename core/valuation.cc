@@ -56,11 +56,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
   auto cell_index = [](double f, int32_t n) {
     return f >= n - 1 ? n - 1 : f > 0 ? static_cast<int32_t>(f) : 0;
   };
-  auto map_cell = [&](double x, double y) {
-    const int32_t cx = cell_index((x - region.x0) / cell_x, options.map_cols);
-    const int32_t cy = cell_index((y - region.y0) / cell_y, options.map_rows);
-    return int64_t{cy} * options.map_cols + cx;
-  };
   // Samples of different bins can share a cell: a lock-free max.
   auto map_max = [&](int64_t c, float e) {
     std::atomic_ref<float> cell(map[c]);
@@ -73,17 +68,19 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
   std::vector<Partial> partials(bins);
 
   ThreadPool& pool = options.pool != nullptr ? *options.pool : wp.pool();
-  // The lattice's offsets inside an element (fractions of its sides), the
-  // corners left out.
-  std::vector<double> fx, fy;
+  // The lattice's points inside an element, row by row, the corners left
+  // out: column si and row sj of n.
+  std::vector<int> lattice_i, lattice_j;
   for (int sj = 0; sj < n; ++sj) {
     for (int si = 0; si < n; ++si) {
       if ((si == 0 || si == n - 1) && (sj == 0 || sj == n - 1)) continue;
-      fx.push_back(si);
-      fy.push_back(sj);
+      lattice_i.push_back(si);
+      lattice_j.push_back(sj);
     }
   }
   const double z_top = wp.spec().z_top;
+  const Scheme& scheme = wp.scheme();
+  const bool trust = scheme.uses_trust();
   pool.ParallelFor(bins, [&](int64_t b) {
     const int32_t bx = static_cast<int32_t>(b % index.bins_x());
     const int32_t by = static_cast<int32_t>(b / index.bins_x());
@@ -106,6 +103,19 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       const Sweep s = wp.MoveSweep(id);
       bin.push_back({s, s.Footprint(z_top).Bounds()});
     }
+    // The guarded scheme's trust frames, a function of each node's jet:
+    // once per node of the bin instead of once per element corner.
+    const int32_t frame_w = ei1 - ei0 + 1;
+    std::vector<PatchTrustFrame> frames;
+    if (trust) {
+      frames.resize(static_cast<size_t>(frame_w) * (ej1 - ej0 + 1));
+      for (int32_t j = ej0; j <= ej1; ++j) {
+        for (int32_t i = ei0; i <= ei1; ++i) {
+          frames[(j - ej0) * frame_w + (i - ei0)] =
+              TrustFrameOf(wp.Node(i, j).jet);
+        }
+      }
+    }
     // The sweeps of recent corner owners: neighbouring elements share most.
     struct Owner {
       int32_t id = -1;
@@ -124,24 +134,59 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       o.sweep.emplace(wp.MoveSweep(id));
       return *o.sweep;
     };
-    const size_t lattice = fx.size();
+    const size_t lattice = lattice_i.size();
     std::vector<double> xs(lattice), ys(lattice), est(lattice), h(lattice),
         rec(lattice);
+    std::vector<int64_t> cells(lattice);
+    // Per lattice column and row of an element: the coordinate and the map
+    // cell (the same values per point, computed n times instead of n^2).
+    std::vector<double> col_x(n), row_y(n);
+    std::vector<int64_t> col_cell(n), row_cell(n);
+    std::vector<const Candidate*> row_bin;
     Partial& p = partials[b];
     for (int32_t ej = ej0; ej < ej1; ++ej) {
+      const double ey0 = grid.NodeY(ej), ey1 = grid.NodeY(ej + 1);
+      if (ey0 > region.y1 || ey1 < region.y0) continue;
+      // The moves whose box meets this row of elements (in bin order).
+      row_bin.clear();
+      for (const Candidate& c : bin) {
+        if (c.box.y0 <= ey1 && ey0 <= c.box.y1) row_bin.push_back(&c);
+      }
+      for (int32_t sj = 0; sj < n; ++sj) {
+        row_y[sj] = ey0 + (ey1 - ey0) * sj / (n - 1);
+        if (mapped) {
+          row_cell[sj] = int64_t{cell_index((row_y[sj] - region.y0) / cell_y,
+                                            options.map_rows)} *
+                         options.map_cols;
+        }
+      }
       for (int32_t ei = ei0; ei < ei1; ++ei) {
-        const ElementCorners e = wp.Corners(ei, ej);
-        if (e.x0 > region.x1 || e.x1 < region.x0 || e.y0 > region.y1 ||
-            e.y1 < region.y0) {
-          continue;
+        const double ex0 = grid.NodeX(ei), ex1 = grid.NodeX(ei + 1);
+        if (ex0 > region.x1 || ex1 < region.x0) continue;
+        ElementCorners e = wp.Corners(ei, ej);
+        if (trust) {
+          const int32_t f = (ej - ej0) * frame_w + (ei - ei0);
+          e.trust[0] = frames[f];
+          e.trust[1] = frames[f + 1];
+          e.trust[2] = frames[f + frame_w + 1];
+          e.trust[3] = frames[f + frame_w];
+          e.has_trust = true;
+        }
+        for (int32_t si = 0; si < n; ++si) {
+          col_x[si] = e.x0 + (e.x1 - e.x0) * si / (n - 1);
+          if (mapped) {
+            col_cell[si] =
+                cell_index((col_x[si] - region.x0) / cell_x, options.map_cols);
+          }
         }
         int32_t count = 0;
         for (size_t q = 0; q < lattice; ++q) {
-          const double x = e.x0 + (e.x1 - e.x0) * fx[q] / (n - 1);
-          const double y = e.y0 + (e.y1 - e.y0) * fy[q] / (n - 1);
+          const double x = col_x[lattice_i[q]];
+          const double y = row_y[lattice_j[q]];
           if (!region.Contains(x, y)) continue;
           xs[count] = x;
           ys[count] = y;
+          if (mapped) cells[count] = row_cell[lattice_j[q]] + col_cell[lattice_i[q]];
           ++count;
         }
         if (count == 0) continue;
@@ -165,25 +210,23 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         }
         const double cap = *std::max_element(est.begin(), est.begin() + count);
         const Rect box{e.x0, e.y0, e.x1, e.y1};
-        for (const Candidate& c : bin) {
-          if (!c.box.Intersects(box) || !(c.sweep.lowest() < cap)) continue;
-          const Capsule f = c.sweep.Footprint(cap);
+        for (const Candidate* c : row_bin) {
+          if (!c->box.Intersects(box) || !(c->sweep.lowest() < cap)) continue;
+          const Capsule f = c->sweep.Footprint(cap);
           if (f.empty || !f.Bounds().Intersects(box)) continue;
-          c.sweep.Heights(xs.data(), ys.data(), count, h.data());
+          c->sweep.Heights(xs.data(), ys.data(), count, h.data());
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
+        scheme.ReconstructMany(e, xs.data(), ys.data(), count, rec.data());
         // An element's samples mostly share a map cell: their max goes in
         // once per run of one cell (the same max: cells start at 0 and
         // take only larger values).
-        wp.scheme().ReconstructMany(e, xs.data(), ys.data(), count,
-                                    rec.data());
         int64_t run_cell = -1;
         float run_max = 0;
         for (int32_t q = 0; q < count; ++q) {
-          const double x = xs[q], y = ys[q];
           const double err = SampleError(rec[q], est[q]);
           if (mapped) {
-            const int64_t c = map_cell(x, y);
+            const int64_t c = cells[q];
             if (c != run_cell) {
               if (run_cell >= 0) map_max(run_cell, run_max);
               run_cell = c;
@@ -197,8 +240,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           ++p.n;
           if (err > p.max) {
             p.max = err;
-            p.max_x = x;
-            p.max_y = y;
+            p.max_x = xs[q];
+            p.max_y = ys[q];
           }
         }
         if (run_cell >= 0) map_max(run_cell, run_max);

@@ -619,7 +619,6 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
     for (int k = 0; k < 4; ++k) owners[k] = OwnerAt(is[k], js[k]);
     surfaces_.FillCandidates(ei, ej, owners, &e);
   }
-  scheme_->Prepare(&e);
   return e;
 }
 
