@@ -204,11 +204,105 @@ namespace {
   __attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
 #endif
 
+// The squared distance from (x, y) to a capsule's segment exactly as
+// CornerReach::Capsule::Contains computes it.
+double CapsuleDistance2(const CornerReach::Capsule& c, double x, double y) {
+  const double ux = c.bx - c.ax, uy = c.by - c.ay;
+  const double px = x - c.ax, py = y - c.ay;
+  const double len2 = ux * ux + uy * uy;
+  const double t =
+      len2 > 0 ? std::clamp((px * ux + py * uy) / len2, 0.0, 1.0) : 0.0;
+  const double dx = px - t * ux, dy = py - t * uy;
+  return dx * dx + dy * dy;
+}
+
+// Whether Contains, as computed, holds at every point of the finite box
+// [x0, x1] x [y0, y1] (kInside), at none (kOutside), or either is possible
+// (kMixed). The distance to a segment is convex, so over the box it is
+// largest at a corner, and it is at least the gap between the box and the
+// segment's bounding box. The computed distance is within a few ulps of
+// the coordinates of the true one (the point on the segment it measures
+// to is off by as little); E, a thousand times that, separates the cases.
+enum class BoxSide { kInside, kOutside, kMixed };
+BoxSide CapsuleBoxSide(const CornerReach::Capsule& c, double x0, double y0,
+                       double x1, double y1) {
+  const double scale = 1 + std::fabs(c.ax) + std::fabs(c.ay) +
+                       std::fabs(c.bx) + std::fabs(c.by) + std::fabs(x0) +
+                       std::fabs(x1) + std::fabs(y0) + std::fabs(y1) +
+                       std::fabs(c.radius);
+  const double tol = 1e-12 * scale;
+  const double far = std::max(
+      std::max(CapsuleDistance2(c, x0, y0), CapsuleDistance2(c, x1, y0)),
+      std::max(CapsuleDistance2(c, x1, y1), CapsuleDistance2(c, x0, y1)));
+  if (std::sqrt(far) + 4 * tol <= c.radius * (1 - 1e-12)) {
+    return BoxSide::kInside;
+  }
+  const double gap_x = std::max(x0 - std::max(c.ax, c.bx),
+                                std::min(c.ax, c.bx) - x1);
+  const double gap_y = std::max(y0 - std::max(c.ay, c.by),
+                                std::min(c.ay, c.by) - y1);
+  if (std::max(gap_x, gap_y) - 4 * tol >= c.radius * (1 + 1e-12)) {
+    return BoxSide::kOutside;
+  }
+  return BoxSide::kMixed;
+}
+
+// std::lerp(a, b, t) (libstdc++'s, which BilinearHeight uses) as selects,
+// for vectorized loops: the same operations on every path.
+inline double LerpSelect(double a, double b, double t) {
+  const bool opposite = ((a <= 0) & (b >= 0)) | ((a >= 0) & (b <= 0));
+  const double r1 = t * b + (1 - t) * a;
+  const double x = a + t * (b - a);
+  const double r2 =
+      (t > 1) == (b > a) ? (b < x ? x : b) : (b > x ? x : b);
+  return opposite ? r1 : (t == 1 ? b : r2);
+}
+
+// out[q] = std::lerp(a, b, t[q]) for loop-invariant a and b: their tests
+// decided once (the vectorizer takes no select on a scalar condition).
+// Inlined into its callers' clones.
+inline void LerpInvariant(double a, double b, const double* __restrict t, int32_t n,
+                   double* __restrict out) {
+  if ((a <= 0 && b >= 0) || (a >= 0 && b <= 0)) {
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) out[q] = t[q] * b + (1 - t[q]) * a;
+  } else if (b > a) {
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) {
+      const double x = a + t[q] * (b - a);
+      out[q] = t[q] == 1 ? b : t[q] > 1 ? (b < x ? x : b) : (b > x ? x : b);
+    }
+  } else {
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) {
+      const double x = a + t[q] * (b - a);
+      out[q] = t[q] == 1 ? b : t[q] > 1 ? (b > x ? x : b) : (b < x ? x : b);
+    }
+  }
+}
+
+// out[q] = BilinearHeight(e, x[q], y[q]) for n <= kGuardedChunk points.
+constexpr int32_t kGuardedChunk = 64;
+SWARF_TARGET_CLONES
+void BilinearHeights(const ElementCorners& e, const double* __restrict x,
+                     const double* __restrict y, int32_t n,
+                     double* __restrict out) {
+  double s[kGuardedChunk], l0[kGuardedChunk], l1[kGuardedChunk];
+  const double x0 = e.x0, lx = e.x1 - e.x0, y0 = e.y0, ly = e.y1 - e.y0;
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) s[q] = (x[q] - x0) / lx;
+  LerpInvariant(e.c[0].w, e.c[1].w, s, n, l0);
+  LerpInvariant(e.c[3].w, e.c[2].w, s, n, l1);
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) {
+    out[q] = LerpSelect(l0[q], l1[q], (y[q] - y0) / ly);
+  }
+}
+
 // GuardedHeights on at most kGuardedChunk points. Corner by corner, each
 // point sees the same operations in the same order as GuardedMin: the
 // bilinear, then for k = 0..3 whether its reach holds the point
 // (CornerReach::Contains), its term (GuardedTerm) and the running minimum.
-constexpr int32_t kGuardedChunk = 64;
 
 SWARF_TARGET_CLONES
 void GuardedChunk(const ElementCorners& e, const double* __restrict x,
@@ -219,13 +313,23 @@ void GuardedChunk(const ElementCorners& e, const double* __restrict x,
   constexpr double kInf = std::numeric_limits<double>::infinity();
   double b[kGuardedChunk], w[kGuardedChunk];
   double any[kGuardedChunk], in[kGuardedChunk];
+  BilinearHeights(e, x, y, n, b);
   for (int32_t q = 0; q < n; ++q) {
-    b[q] = BilinearHeight(e, x[q], y[q]);
     w[q] = e.z_top;
     any[q] = 0;
   }
   const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
   const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
+  // The points' box, for capsules that hold all of it or none.
+  double box_x0 = x[0], box_x1 = x[0], box_y0 = y[0], box_y1 = y[0];
+  bool finite = true;
+  for (int32_t q = 0; q < n; ++q) {
+    finite &= std::isfinite(x[q]) & std::isfinite(y[q]);
+    box_x0 = std::min(box_x0, x[q]);
+    box_x1 = std::max(box_x1, x[q]);
+    box_y0 = std::min(box_y0, y[q]);
+    box_y1 = std::max(box_y1, y[q]);
+  }
   for (int k = 0; k < 4; ++k) {
     const CornerReach& r = e.reach[k];
     // in[q]: r.Contains(x[q], y[q]).
@@ -233,6 +337,15 @@ void GuardedChunk(const ElementCorners& e, const double* __restrict x,
     for (int32_t q = 0; q < n; ++q) in[q] = in_all;
     for (int c = 0; r.bounded && c < r.count; ++c) {
       const CornerReach::Capsule& cap = r.capsule[c];
+      if (finite) {
+        const BoxSide side =
+            CapsuleBoxSide(cap, box_x0, box_y0, box_x1, box_y1);
+        if (side == BoxSide::kOutside) continue;
+        if (side == BoxSide::kInside) {
+          for (int32_t q = 0; q < n; ++q) in[q] = 1;
+          break;
+        }
+      }
       const double ax = cap.ax, ay = cap.ay;
       const double ux = cap.bx - ax, uy = cap.by - ay;
       const double len2 = ux * ux + uy * uy;

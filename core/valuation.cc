@@ -95,13 +95,14 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     }
     // The bin's moves, with the XY box where each can cut below the top.
     struct Candidate {
+      const Move* move;
       Sweep sweep;
       Rect box;
     };
     std::vector<Candidate> bin;
     for (uint32_t id : index.Bin(static_cast<int32_t>(b))) {
       const Sweep s = wp.MoveSweep(id);
-      bin.push_back({s, s.Footprint(z_top).Bounds()});
+      bin.push_back({&wp.move(id), s, s.Footprint(z_top).Bounds()});
     }
     // The guarded scheme's trust frames, a function of each node's jet:
     // once per node of the bin instead of once per element corner.
@@ -136,14 +137,15 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     };
     const size_t lattice = lattice_i.size();
     std::vector<double> xs(lattice), ys(lattice), est(lattice), h(lattice),
-        rec(lattice);
+        rec(lattice), err(lattice);
     std::vector<int64_t> cells(lattice);
     // Per lattice column and row of an element: the coordinate and the map
     // cell (the same values per point, computed n times instead of n^2).
     std::vector<double> col_x(n), row_y(n);
     std::vector<int64_t> col_cell(n), row_cell(n);
     std::vector<const Candidate*> row_bin;
-    Partial& p = partials[b];
+    // The bin's sums in locals (registers), stored once at the end.
+    Partial p = partials[b];
     for (int32_t ej = ej0; ej < ej1; ++ej) {
       const double ey0 = grid.NodeY(ej), ey1 = grid.NodeY(ej + 1);
       if (ey0 > region.y1 || ey1 < region.y0) continue;
@@ -208,45 +210,66 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
                                          h.data());
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
-        const double cap = *std::max_element(est.begin(), est.begin() + count);
+        // *std::max_element(est, est + count), kept in a register.
+        double highest = est[0];
+        for (int32_t q = 1; q < count; ++q) {
+          if (highest < est[q]) highest = est[q];
+        }
+        const double cap = highest;
         const Rect box{e.x0, e.y0, e.x1, e.y1};
         for (const Candidate* c : row_bin) {
           if (!c->box.Intersects(box) || !(c->sweep.lowest() < cap)) continue;
-          const Capsule f = c->sweep.Footprint(cap);
-          if (f.empty || !f.Bounds().Intersects(box)) continue;
+          // Footprint(cap).Bounds(), without the capsule's direction.
+          const std::optional<Rect> f =
+              FootprintBounds(c->move->from, c->move->to, c->move->cutter, cap);
+          if (!f.has_value() || !f->Intersects(box)) continue;
           c->sweep.Heights(xs.data(), ys.data(), count, h.data());
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
         scheme.ReconstructMany(e, xs.data(), ys.data(), count, rec.data());
-        // An element's samples mostly share a map cell: their max goes in
-        // once per run of one cell (the same max: cells start at 0 and
-        // take only larger values).
-        int64_t run_cell = -1;
-        float run_max = 0;
         for (int32_t q = 0; q < count; ++q) {
-          const double err = SampleError(rec[q], est[q]);
-          if (mapped) {
+          err[q] = SampleError(rec[q], est[q]);
+        }
+        if (mapped) {
+          // An element's samples mostly share a map cell: their max goes
+          // in once per run of one cell (the same max: cells start at 0
+          // and take only larger values).
+          int64_t run_cell = -1;
+          float run_max = 0;
+          for (int32_t q = 0; q < count; ++q) {
             const int64_t c = cells[q];
             if (c != run_cell) {
               if (run_cell >= 0) map_max(run_cell, run_max);
               run_cell = c;
               run_max = 0;
             }
-            const float ef = static_cast<float>(err);
+            const float ef = static_cast<float>(err[q]);
             if (ef > run_max) run_max = ef;
           }
-          p.sum += err;
-          p.sum_sq += err * err;
-          ++p.n;
-          if (err > p.max) {
-            p.max = err;
-            p.max_x = xs[q];
-            p.max_y = ys[q];
+          if (run_cell >= 0) map_max(run_cell, run_max);
+        }
+        // The sums in sample order, as one loop over the samples adds them.
+        double sum = p.sum, sum_sq = p.sum_sq, max = p.max;
+        int32_t max_q = -1;
+        for (int32_t q = 0; q < count; ++q) {
+          sum += err[q];
+          sum_sq += err[q] * err[q];
+          if (err[q] > max) {
+            max = err[q];
+            max_q = q;
           }
         }
-        if (run_cell >= 0) map_max(run_cell, run_max);
+        p.sum = sum;
+        p.sum_sq = sum_sq;
+        p.n += count;
+        if (max_q >= 0) {
+          p.max = max;
+          p.max_x = xs[max_q];
+          p.max_y = ys[max_q];
+        }
       }
     }
+    partials[b] = p;
   });
 
   ErrorStats stats;
