@@ -1288,13 +1288,15 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
       Chain(kept, tol, 0.1 * h, kJunctionMargin * h);
   if (wp.scheme().kind() == SchemeKind::kGuarded) {
     // A crease lies on both owners' surfaces: never below either's lowest
-    // point (patches met far from their nodes can cross lower).
+    // point (patches met far from their nodes can cross lower): the owner's
+    // lowest tip, ReachOf(...).z_low, without building its reach.
     for (MarkPolyline& p : marks) {
       for (size_t k = 0; k < p.vertices.size(); ++k) {
         for (int32_t id : p.vertex_owners[k]) {
           if (id < 0 || id >= wp.move_count()) continue;
+          const Move& m = wp.move(id);
           p.vertices[k].z =
-              std::max(p.vertices[k].z, ReachOf(wp.moves(), id, s.z_top).z_low);
+              std::max(p.vertices[k].z, std::min(m.from.z, m.to.z));
         }
       }
     }
