@@ -192,22 +192,31 @@ absl::StatusOr<Image> RenderRelief(const SurfaceGrid& grid,
   const size_t n = static_cast<size_t>(f.width) * f.height;
   std::vector<float> height(n), shade(n);
   std::vector<double> row_min(f.height, z_top);
-  ThreadPool::Default().ParallelFor(f.height, [&](int64_t py) {
-    const double y = f.Y(py);
-    double lo = z_top;
-    for (int px = 0; px < f.width; ++px) {
-      double gx, gy;
-      const double z = grid.HeightAndGradient(f.X(px), y, &gx, &gy);
-      const double dot = (-gx * kLightX - gy * kLightY + kLightZ) /
-                         std::sqrt(gx * gx + gy * gy + 1);
-      const size_t k = static_cast<size_t>(py) * f.width + px;
-      // Stored relative to the top in float: depth resolution ~1e-7 of it.
-      height[k] = static_cast<float>(z - z_top);
-      shade[k] = static_cast<float>(
-          kAmbient + (1 - kAmbient) * std::max(dot, 0.0) / kLightZ);
-      lo = std::min(lo, z);
+  // Blocks of rows, each with one sampler: neighbouring rows share nodes.
+  constexpr int kBlockRows = 16;
+  const int blocks = (f.height + kBlockRows - 1) / kBlockRows;
+  ThreadPool::Default().ParallelFor(blocks, [&](int64_t block) {
+    SurfaceSampler sampler(grid);
+    const int py0 = static_cast<int>(block) * kBlockRows;
+    const int py1 = std::min(f.height, py0 + kBlockRows);
+    for (int py = py0; py < py1; ++py) {
+      const double y = f.Y(py);
+      double lo = z_top;
+      for (int px = 0; px < f.width; ++px) {
+        double gx, gy;
+        const double z = sampler.HeightAndGradient(f.X(px), y, &gx, &gy);
+        const double dot = (-gx * kLightX - gy * kLightY + kLightZ) /
+                           std::sqrt(gx * gx + gy * gy + 1);
+        const size_t k = static_cast<size_t>(py) * f.width + px;
+        // Stored relative to the top in float: depth resolution ~1e-7 of
+        // it.
+        height[k] = static_cast<float>(z - z_top);
+        shade[k] = static_cast<float>(
+            kAmbient + (1 - kAmbient) * std::max(dot, 0.0) / kLightZ);
+        lo = std::min(lo, z);
+      }
+      row_min[py] = lo;
     }
-    row_min[py] = lo;
   });
   const double depth = z_top - *std::min_element(row_min.begin(),
                                                  row_min.end());

@@ -161,6 +161,50 @@ double SurfaceGrid::HeightAndGradient(double x, double y, double* gx,
       Corners(g.ElementX(x), g.ElementY(y)), x, y, gx, gy);
 }
 
+SurfaceSampler::SurfaceSampler(const SurfaceGrid& grid)
+    : grid_(grid), scheme_(GetScheme(grid.scheme)) {}
+
+const PatchTrustFrame& SurfaceSampler::Frame(int32_t i, int32_t j) {
+  int k = 0;
+  while (k < kRows && row_[k] != j) ++k;
+  if (k == kRows) {
+    // A new row replaces the oldest.
+    k = next_;
+    next_ = (next_ + 1) % kRows;
+    row_[k] = j;
+    frames_[k].resize(grid_.nodes_x());
+    has_[k].assign(grid_.nodes_x(), 0);
+  }
+  if (!has_[k][i]) {
+    frames_[k][i] = TrustFrameOf(grid_.jet(i, j));
+    has_[k][i] = 1;
+  }
+  return frames_[k][i];
+}
+
+double SurfaceSampler::HeightAndGradient(double x, double y, double* gx,
+                                         double* gy) {
+  // As SurfaceGrid::HeightAndGradient.
+  const GridGeometry g(grid_.spec);
+  x = std::clamp(x, grid_.spec.x0, grid_.spec.x1);
+  y = std::clamp(y, grid_.spec.y0, grid_.spec.y1);
+  const int32_t ei = g.ElementX(x), ej = g.ElementY(y);
+  if (ei != ei_ || ej != ej_) {
+    e_ = grid_.Corners(ei, ej);
+    if (scheme_.uses_trust()) {
+      // The corners' frames (FillTrust's values), once per node.
+      e_.trust[0] = Frame(ei, ej);
+      e_.trust[1] = Frame(ei + 1, ej);
+      e_.trust[2] = Frame(ei + 1, ej + 1);
+      e_.trust[3] = Frame(ei, ej + 1);
+      e_.has_trust = true;
+    }
+    ei_ = ei;
+    ej_ = ej;
+  }
+  return scheme_.HeightAndGradient(e_, x, y, gx, gy);
+}
+
 double SurfaceGrid::MinNodeHeight() const {
   double lo = spec.z_top;
   for (const SurfaceJet& j : jets) lo = std::min(lo, j.w);
