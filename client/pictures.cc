@@ -389,12 +389,17 @@ void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
   y1 = std::min(y1, row1 - 1);
   const double dx = s.bx - s.ax, dy = s.by - s.ay;
   const double len2 = dx * dx + dy * dy;
+  // Pixels at squared distance r2 or more have no coverage: sqrt is
+  // monotonic and sqrt(fl(r * r)) == r, so sqrt(d2) >= r there.
+  const double r = half + 0.5, r2 = r * r;
   for (int py = y0; py <= y1; ++py) {
     for (int px = x0; px <= x1; ++px) {
       double t = len2 > 0 ? ((px - s.ax) * dx + (py - s.ay) * dy) / len2 : 0;
       t = std::clamp(t, 0.0, 1.0);
       const double ex = s.ax + t * dx - px, ey = s.ay + t * dy - py;
-      const double coverage = half + 0.5 - std::sqrt(ex * ex + ey * ey);
+      const double d2 = ex * ex + ey * ey;
+      if (d2 >= r2) continue;
+      const double coverage = r - std::sqrt(d2);
       if (coverage <= 0) continue;
       const Rgb c = halo ? kHalo
                          : AngleColor(s.angle_a + t * (s.angle_b - s.angle_a));

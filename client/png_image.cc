@@ -26,15 +26,6 @@ Image::Image(int width, int height, int channels, Rgb fill)
   }
 }
 
-void Image::Blend(int x, int y, Rgb c, double a) {
-  a = std::clamp(a, 0.0, 1.0);
-  uint8_t* p = &pixels_[Offset(x, y)];
-  const uint8_t src[3] = {c.r, c.g, c.b};
-  for (int k = 0; k < 3; ++k) {
-    p[k] = static_cast<uint8_t>(p[k] + (src[k] - p[k]) * a + 0.5);
-  }
-}
-
 void Image::FillRect(int x0, int y0, int x1, int y1, Rgb c) {
   x0 = std::max(x0, 0);
   y0 = std::max(y0, 0);
