@@ -218,11 +218,12 @@ double CapsuleDistance2(const CornerReach::Capsule& c, double x, double y) {
 
 // Whether Contains, as computed, holds at every point of the finite box
 // [x0, x1] x [y0, y1] (kInside), at none (kOutside), or either is possible
-// (kMixed). The distance to a segment is convex, so over the box it is
-// largest at a corner, and it is at least the gap between the box and the
-// segment's bounding box. The computed distance is within a few ulps of
-// the coordinates of the true one (the point on the segment it measures
-// to is off by as little); E, a thousand times that, separates the cases.
+// (kMixed). The distance to a segment is 1-Lipschitz, so over the box it is
+// at most its value at the centre plus the half diagonal, and it is at
+// least the gap between the box and the segment's bounding box. The
+// computed distance is within a few ulps of the coordinates of the true
+// one (the point on the segment it measures to is off by as little); tol,
+// a thousand times that, separates the cases.
 enum class BoxSide { kInside, kOutside, kMixed };
 BoxSide CapsuleBoxSide(const CornerReach::Capsule& c, double x0, double y0,
                        double x1, double y1) {
@@ -231,10 +232,11 @@ BoxSide CapsuleBoxSide(const CornerReach::Capsule& c, double x0, double y0,
                        std::fabs(x1) + std::fabs(y0) + std::fabs(y1) +
                        std::fabs(c.radius);
   const double tol = 1e-12 * scale;
-  const double far = std::max(
-      std::max(CapsuleDistance2(c, x0, y0), CapsuleDistance2(c, x1, y0)),
-      std::max(CapsuleDistance2(c, x1, y1), CapsuleDistance2(c, x0, y1)));
-  if (std::sqrt(far) + 4 * tol <= c.radius * (1 - 1e-12)) {
+  const double centre = std::sqrt(
+      CapsuleDistance2(c, 0.5 * (x0 + x1), 0.5 * (y0 + y1)));
+  const double half_diagonal =
+      0.5 * std::sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0));
+  if (centre + half_diagonal + 4 * tol <= c.radius * (1 - 1e-12)) {
     return BoxSide::kInside;
   }
   const double gap_x = std::max(x0 - std::max(c.ax, c.bx),

@@ -16,6 +16,38 @@ struct Partial {
   int64_t n = 0;
 };
 
+// The largest of v[0..n), n >= 1. Heights are never NaN (minima that start
+// at the stock top), so the order of comparison does not matter: a
+// vectorized reduction, in registers.
+double Highest(const double* v, int32_t n) {
+  double m = v[0];
+#pragma omp simd reduction(max : m)
+  for (int32_t q = 1; q < n; ++q) m = std::max(m, v[q]);
+  return m;
+}
+
+// Adds err[0..n) to the sums in sample order (the same additions as one
+// loop over the samples) and returns the index of the first error above
+// *max (-1: none), updating *max. Its own function keeps the sums in
+// registers.
+int32_t Accumulate(const double* err, int32_t n, double* sum, double* sum_sq,
+                   double* max) {
+  double s = *sum, s2 = *sum_sq, m = *max;
+  int32_t at = -1;
+  for (int32_t q = 0; q < n; ++q) {
+    s += err[q];
+    s2 += err[q] * err[q];
+    if (err[q] > m) {
+      m = err[q];
+      at = q;
+    }
+  }
+  *sum = s;
+  *sum_sq = s2;
+  *max = m;
+  return at;
+}
+
 }  // namespace
 
 absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
@@ -202,7 +234,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const int32_t corner_j[4] = {ej, ej, ej + 1, ej + 1};
         int32_t owners[4];
         for (int k = 0; k < 4; ++k) {
-          owners[k] = wp.Node(corner_i[k], corner_j[k]).owner;
+          owners[k] = wp.OwnerAt(corner_i[k], corner_j[k]);
           bool seen = owners[k] < 0;
           for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
           if (seen) continue;
@@ -210,12 +242,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
                                          h.data());
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
-        // *std::max_element(est, est + count), kept in a register.
-        double highest = est[0];
-        for (int32_t q = 1; q < count; ++q) {
-          if (highest < est[q]) highest = est[q];
-        }
-        const double cap = highest;
+        const double cap = Highest(est.data(), count);
         const Rect box{e.x0, e.y0, e.x1, e.y1};
         for (const Candidate* c : row_bin) {
           if (!c->box.Intersects(box) || !(c->sweep.lowest() < cap)) continue;
@@ -248,22 +275,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           }
           if (run_cell >= 0) map_max(run_cell, run_max);
         }
-        // The sums in sample order, as one loop over the samples adds them.
-        double sum = p.sum, sum_sq = p.sum_sq, max = p.max;
-        int32_t max_q = -1;
-        for (int32_t q = 0; q < count; ++q) {
-          sum += err[q];
-          sum_sq += err[q] * err[q];
-          if (err[q] > max) {
-            max = err[q];
-            max_q = q;
-          }
-        }
-        p.sum = sum;
-        p.sum_sq = sum_sq;
+        const int32_t max_q =
+            Accumulate(err.data(), count, &p.sum, &p.sum_sq, &p.max);
         p.n += count;
         if (max_q >= 0) {
-          p.max = max;
           p.max_x = xs[max_q];
           p.max_y = ys[max_q];
         }

@@ -184,6 +184,8 @@ class Workpiece {
 
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
   NodeValue Node(int32_t i, int32_t j) const;
+  // Node (i, j)'s owner (-1: uncut), without its jet: Node(i, j).owner.
+  int32_t OwnerAt(int32_t i, int32_t j) const;
   // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with each cut corner's
   // reach (ReachOf its owner) and the stencil's owners and the moves'
   // surfaces, where the scheme uses them.
@@ -258,8 +260,6 @@ class Workpiece {
   // the owners' sweeps once and cached (thread-safe). The reference stays
   // valid until this thread's next call (the thread keeps the last one).
   const TileJets& Jets(int32_t t) const;
-  // Node (i, j)'s owner (-1: uncut), without its jet.
-  int32_t OwnerAt(int32_t i, int32_t j) const;
   // ReachOf(moves_, id, z_top), kept per thread; valid until this thread's
   // next call.
   const CornerReach& CachedReach(int32_t id) const;
