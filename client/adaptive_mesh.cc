@@ -175,7 +175,8 @@ bool CornersFit(const Lattice& l, const Leaf& f, double tolerance,
       LineDeviation(l, a, d) > tolerance || LineDeviation(l, b, c) > tolerance) {
     return false;
   }
-  std::vector<P> t;
+  thread_local std::vector<P> t;
+  t.clear();
   CornerTriangles(l, f, &t);
   const double d0 = l.TriangleDeviation(t[0], t[1], t[2], tolerance);
   if (!(d0 <= tolerance)) return false;
@@ -328,25 +329,36 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
     }
     pool.ParallelFor(static_cast<int64_t>(leaves.size()), [&](int64_t k) {
       const Leaf& f = leaves[k];
-      // The sides' lattice vertices, counter-clockwise from (i0, j0).
-      std::vector<P> side;
-      for (int64_t d = 0; d < f.w; ++d) side.push_back({f.i0 + d, f.j0});
-      for (int64_t d = 0; d < f.h; ++d) side.push_back({f.i0 + f.w, f.j0 + d});
-      for (int64_t d = f.w; d > 0; --d) side.push_back({f.i0 + d, f.j0 + f.h});
-      for (int64_t d = f.h; d > 0; --d) side.push_back({f.i0, f.j0 + d});
+      // Calls fn(p) for the sides' lattice vertices, counter-clockwise
+      // from (i0, j0), until it returns false.
+      auto sides = [&f](auto&& fn) {
+        for (int64_t d = 0; d < f.w; ++d) {
+          if (!fn(P{f.i0 + d, f.j0})) return;
+        }
+        for (int64_t d = 0; d < f.h; ++d) {
+          if (!fn(P{f.i0 + f.w, f.j0 + d})) return;
+        }
+        for (int64_t d = f.w; d > 0; --d) {
+          if (!fn(P{f.i0 + d, f.j0 + f.h})) return;
+        }
+        for (int64_t d = f.h; d > 0; --d) {
+          if (!fn(P{f.i0, f.j0 + d})) return;
+        }
+      };
       if (!dirty[k]) {
-        for (const P& p : side) {
+        sides([&](const P& p) {
           if (used[l.Index(p.i, p.j)] != old_used[l.Index(p.i, p.j)]) {
             dirty[k] = 1;
-            break;
           }
-        }
+          return !dirty[k];
+        });
         if (!dirty[k]) return;
       }
       std::vector<P> ring;
-      for (const P& p : side) {
+      sides([&](const P& p) {
         if (used[l.Index(p.i, p.j)]) ring.push_back(p);
-      }
+        return true;
+      });
       std::vector<P>& t = tris[k];
       t.clear();
       dirty[k] = 0;
