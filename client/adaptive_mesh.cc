@@ -118,10 +118,21 @@ class Lattice {
         at(static_cast<double>(k - s) / static_cast<double>(df));
       }
     };
-    crossings(p.i, di);
-    crossings(p.j, dj);
-    crossings(p.i - p.j, di - dj);
-    crossings(p.i + p.j, di + dj);
+    // Along an axis or a diagonal several families cross at the same t
+    // (the same doubles: m / d and (2m) / (2d), or the same quotient of
+    // negated integers): measuring them once gives the same maximum.
+    if (dj == 0 || di == 0) {
+      crossings(dj == 0 ? p.i : p.j, dj == 0 ? di : dj);
+    } else if (di == dj) {
+      crossings(p.i + p.j, di + dj);
+    } else if (di == -dj) {
+      crossings(p.i - p.j, di - dj);
+    } else {
+      crossings(p.i, di);
+      crossings(p.j, dj);
+      crossings(p.i - p.j, di - dj);
+      crossings(p.i + p.j, di + dj);
+    }
     return dev;
   }
 
