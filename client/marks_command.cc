@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "client/args.h"
@@ -21,10 +22,12 @@ namespace {
 constexpr char kUsage[] =
     "usage: swarf marks --instance five-balls|five-cylinders --mesh N\n"
     "                   [--region x0,y0,x1,y1] [--t2 DEG] [--threshold MM]\n"
+    "                   [--scheme taylor|guarded|exact]\n"
     "                   [--json [--vertex-owners]] [--check]\n"
-    "Finds the cutting marks (creases) of a paper instance simulated with the\n"
-    "taylor scheme on an N x N mesh and prints a summary: polylines, total\n"
-    "length, angle range between the meeting surfaces' normals.\n"
+    "Finds the cutting marks (creases) of a paper instance simulated on an\n"
+    "N x N mesh (with the paper's taylor scheme unless --scheme says\n"
+    "otherwise) and prints a summary: polylines, total length, angle range\n"
+    "between the meeting surfaces' normals.\n"
     "  --json           the polylines: {\"polylines\":[{\"closed\":..,\n"
     "                   \"owners\":[a,b],\"vertices\":[[x,y,z],..],\n"
     "                   \"angle_deg\":[..]}]}; owner -1 is the stock top\n"
@@ -65,7 +68,9 @@ absl::StatusOr<Rect> ParseRegion(const std::string& v) {
 }  // namespace
 
 int MarksCommand(const std::vector<std::string>& argv) {
-  auto args = Args::Parse(argv, {"instance", "mesh", "region", "t2", "threshold"},
+  auto args = Args::Parse(argv,
+                          {"instance", "mesh", "region", "t2", "threshold",
+                           "scheme"},
                           {"json", "vertex-owners", "check", "help"});
   if (!args.ok()) {
     std::cerr << "swarf marks: " << args.status().message() << "\n" << kUsage;
@@ -134,7 +139,14 @@ int MarksCommand(const std::vector<std::string>& argv) {
               << ": " << inst.status().message() << "\n";
     return 2;
   }
-  auto wp = Workpiece::Create(inst->stock, SchemeKind::kTaylor);
+  SchemeKind scheme = SchemeKind::kTaylor;
+  if (auto v = args->Get("scheme")) {
+    auto k = ParseScheme(*v);
+    if (!k.ok()) return fail(absl::InvalidArgumentError(
+        absl::StrCat("--scheme: ", k.status().message())));
+    scheme = *k;
+  }
+  auto wp = Workpiece::Create(inst->stock, scheme);
   if (!wp.ok()) {
     std::cerr << "swarf marks: " << wp.status().message() << "\n";
     return 1;

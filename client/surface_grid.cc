@@ -115,6 +115,8 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
   // bit for bit.
   const GridGeometry g(spec);
   ElementCorners e;
+  e.ei = ei;
+  e.ej = ej;
   e.x0 = g.NodeX(ei);
   e.x1 = g.NodeX(ei + 1);
   e.y0 = g.NodeY(ej);
@@ -125,18 +127,20 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
   for (int k = 0; k < 4; ++k) {
     e.c[k] = jet(is[k], js[k]);
     const int32_t o = owner(is[k], js[k]);
+    e.owner[k] = o;
     if (o >= 0 && o < static_cast<int64_t>(moves.size()) &&
         GetScheme(scheme).uses_reach()) {
       e.reach[k] = reaches != nullptr && reaches->size() == moves.size()
                        ? (*reaches)[o]
-                       : ReachOf(moves, o, spec.z_top);
+                   : surfaces != nullptr ? surfaces->Reach(o, spec.z_top)
+                                         : ReachOf(moves, o, spec.z_top);
     }
   }
   if (GetScheme(scheme).uses_candidates() && surfaces != nullptr) {
-    int32_t corner_owner[4];
-    for (int k = 0; k < 4; ++k) corner_owner[k] = owner(is[k], js[k]);
-    surfaces->FillCandidates(ei, ej, corner_owner, &e);
+    surfaces->FillCandidates(&e);
   }
+  if (GetScheme(scheme).uses_reach()) e.surfaces = surfaces.get();
+  GetScheme(scheme).Prepare(&e);
   return e;
 }
 
@@ -164,24 +168,6 @@ double SurfaceGrid::HeightAndGradient(double x, double y, double* gx,
 SurfaceSampler::SurfaceSampler(const SurfaceGrid& grid)
     : grid_(grid), scheme_(GetScheme(grid.scheme)) {}
 
-const PatchTrustFrame& SurfaceSampler::Frame(int32_t i, int32_t j) {
-  int k = 0;
-  while (k < kRows && row_[k] != j) ++k;
-  if (k == kRows) {
-    // A new row replaces the oldest.
-    k = next_;
-    next_ = (next_ + 1) % kRows;
-    row_[k] = j;
-    frames_[k].resize(grid_.nodes_x());
-    has_[k].assign(grid_.nodes_x(), 0);
-  }
-  if (!has_[k][i]) {
-    frames_[k][i] = TrustFrameOf(grid_.jet(i, j));
-    has_[k][i] = 1;
-  }
-  return frames_[k][i];
-}
-
 double SurfaceSampler::HeightAndGradient(double x, double y, double* gx,
                                          double* gy) {
   // As SurfaceGrid::HeightAndGradient.
@@ -191,14 +177,6 @@ double SurfaceSampler::HeightAndGradient(double x, double y, double* gx,
   const int32_t ei = g.ElementX(x), ej = g.ElementY(y);
   if (ei != ei_ || ej != ej_) {
     e_ = grid_.Corners(ei, ej);
-    if (scheme_.uses_trust()) {
-      // The corners' frames (FillTrust's values), once per node.
-      e_.trust[0] = Frame(ei, ej);
-      e_.trust[1] = Frame(ei + 1, ej);
-      e_.trust[2] = Frame(ei + 1, ej + 1);
-      e_.trust[3] = Frame(ei, ej + 1);
-      e_.has_trust = true;
-    }
     ei_ = ei;
     ej_ = ej;
   }

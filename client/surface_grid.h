@@ -87,10 +87,9 @@ struct SurfaceGrid {
 };
 
 // Reconstructs a grid at many points for one thread, as
-// SurfaceGrid::HeightAndGradient does bit for bit, keeping what neighbouring
-// points share: the last element's corners, and the guarded scheme's trust
-// frames (TrustFrameOf) of the nodes of the last few node rows. Cheapest
-// when points come row by row. Not thread-safe; `grid` must outlive it and
+// SurfaceGrid::HeightAndGradient does bit for bit, keeping the last
+// element's corners (with the scheme's per-element work, Scheme::Prepare)
+// for the next points in it. Not thread-safe; `grid` must outlive it and
 // stay unchanged.
 class SurfaceSampler {
  public:
@@ -98,18 +97,10 @@ class SurfaceSampler {
   double HeightAndGradient(double x, double y, double* gx, double* gy);
 
  private:
-  const PatchTrustFrame& Frame(int32_t i, int32_t j);
-
   const SurfaceGrid& grid_;
   const Scheme& scheme_;
   int32_t ei_ = -1, ej_ = -1;  // the element e_ holds
   ElementCorners e_;
-  // Frames of node rows row_[k] (-1: none), computed where has_[k] says.
-  static constexpr int kRows = 4;
-  int32_t row_[kRows] = {-1, -1, -1, -1};
-  std::vector<PatchTrustFrame> frames_[kRows];
-  std::vector<uint8_t> has_[kRows];
-  int next_ = 0;
 };
 
 // Largest grid the writers accept (nodes): 16 Ki x 16 Ki.

@@ -83,10 +83,7 @@ absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
                                 static_cast<int32_t>(j / s)).w,
                        grid.spec.z_top);
         } else {
-          if (!e.has_value()) {
-            e = grid.Corners(ei, ej);
-            if (scheme.uses_trust()) FillTrust(&*e);
-          }
+          if (!e.has_value()) e = grid.Corners(ei, ej);
           z = scheme.Reconstruct(*e, xs[i], ys[j]);
         }
         mesh.vertices[top_index(i, j)] = {xs[i], ys[j], z};

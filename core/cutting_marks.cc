@@ -1096,22 +1096,16 @@ bool ExactSurface(const Workpiece& wp, int32_t id, double x, double y,
   return j->w < kInf;
 }
 
-// The move lowest at (x, y) (kStockTopOwner where none is below the top),
-// over the moves indexed at that point.
-int32_t LowestMove(const Workpiece& wp, double x, double y, double* w) {
-  *w = wp.spec().z_top;
-  int32_t lowest = kStockTopOwner;
-  if (!wp.grid().bounds().Contains(x, y)) return lowest;
-  const MoveIndex& index = wp.index();
-  for (uint32_t id : index.Bin(index.BinOfElement(wp.grid().ElementX(x),
-                                                  wp.grid().ElementY(y)))) {
-    const double h = wp.MoveHeight(id, x, y);
-    if (h < *w) {
-      *w = h;
-      lowest = static_cast<int32_t>(id);
-    }
-  }
-  return lowest;
+// The move lowest at (x, y) where one is below `cap` (else kStockTopOwner,
+// *w = cap), over the moves indexed at that point.
+int32_t LowestMove(const Workpiece& wp, double x, double y, double cap,
+                   double* w) {
+  *w = cap;
+  if (!wp.grid().bounds().Contains(x, y)) return kStockTopOwner;
+  int32_t id = -1;
+  *w = wp.surfaces().LowestAt(wp.grid().ElementX(x), wp.grid().ElementY(y), x,
+                              y, cap, &id);
+  return id >= 0 ? id : kStockTopOwner;
 }
 
 // Newton on (S_a - S_b, S_a - S_c) = 0: where three surfaces meet.
@@ -1167,7 +1161,8 @@ void ProjectOntoExactCrease(const Workpiece& wp,
       // On the crease of a and b; where a third surface lies below it, the
       // vertex is a junction: where the three meet.
       double w;
-      const int32_t c = LowestMove(wp, x, y, &w);
+      const int32_t c =
+          LowestMove(wp, x, y, std::min(a.w, b.w) - t1, &w);
       if (w < std::min(a.w, b.w) - t1 && c != owners[0] && c != owners[1] &&
           !TriplePoint(wp, owners[0], owners[1], c, max_step, t1, &x, &y, &a,
                        &b)) {
@@ -1330,7 +1325,10 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
       }
     }
   }
-  if (wp.scheme().kind() == SchemeKind::kExact) {
+  // Sessions whose reconstruction uses the exact surfaces have their marks
+  // on the exact creases too.
+  if (wp.scheme().kind() == SchemeKind::kExact ||
+      wp.scheme().kind() == SchemeKind::kGuarded) {
     for (MarkPolyline& p : marks) {
       for (size_t k = 0; k < p.vertices.size(); ++k) {
         ProjectOntoExactCrease(wp, p.vertex_owners[k], h, s.t1, &p.vertices[k],

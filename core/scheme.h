@@ -23,6 +23,8 @@ namespace swarf {
 // append only.
 enum class SchemeKind { kZmap, kTaylor, kGuarded, kExact };
 
+struct ElementCorners;
+
 // The exact swept surfaces of a workpiece's moves, by move id: what the
 // exact scheme reconstructs from. Implementations are thread-safe.
 class MoveSurfaces {
@@ -33,6 +35,16 @@ class MoveSurfaces {
   virtual double Height(int32_t id, double x, double y) const = 0;
   // Its height and derivatives there (zeros where the height is +inf).
   virtual SurfaceJet Jet(int32_t id, double x, double y) const = 0;
+  // The least of `cap` and of the heights at (x, y), a point of element
+  // (ei, ej), of every move that can dip below cap there: the true surface
+  // where it is below cap. *id (if not null) is the move that gives it, -1
+  // for cap.
+  virtual double LowestAt(int32_t ei, int32_t ej, double x, double y,
+                          double cap, int32_t* id = nullptr) const = 0;
+  // Fills e->candidates for element (e->ei, e->ej), from its corners and
+  // their owners: every move that can be the lowest somewhere in the
+  // element (see MoveSweeps::FillCandidates).
+  virtual void FillCandidates(ElementCorners* e) const = 0;
 };
 
 // What a corner node's patch stands for: its owner's swept surface, which
@@ -50,44 +62,35 @@ struct CornerReach {
   bool bounded = false;
   int count = 0;  // capsules in use
   Capsule capsule[3];
+  int32_t id[3] = {-1, -1, -1};  // the moves of the capsules
   double z_low = -std::numeric_limits<double>::infinity();
 
   // Whether (x, y) lies in a capsule (always, when unbounded).
   bool Contains(double x, double y) const;
 };
 
-// What TrustPatch derives from a jet alone (the rim distances, the
-// principal direction, the slope), so that it is computed once per corner
-// instead of once per sample. TrustPatch(TrustFrameOf(j), dx, dy) ==
-// TrustPatch(j, dx, dy) for every offset.
-struct PatchTrustFrame {
-  bool unbounded = true;  // RimDistance is infinite: kFull everywhere
-  double wx = 0, wy = 0;  // the jet's slope
-  double s = 0;           // |slope|
-  double ex = 0, ey = 0;  // direction of the larger principal curvature
-  double se = 0;          // slope along it
-  double reach2 = 0;      // (kPatchReach * min of the rim distances)^2
-  double uphill = 0;      // kPatchUphill * RimDistance
-  double uphill_e = 0;    // kPatchUphill * the rim distance along (ex, ey)
-};
-
 // The four corner nodes of element [x0,x1] x [y0,y1]: c[0] at (x0,y0),
 // c[1] at (x1,y0), c[2] at (x1,y1), c[3] at (x0,y1) (the paper's i, j, k, m).
 struct ElementCorners {
+  int32_t ei = 0, ej = 0;  // the element's indices
   double x0 = 0, y0 = 0, x1 = 0, y1 = 0;
   double z_top = 0;  // stock top: no reconstruction lies above it
   SurfaceJet c[4];
+  int32_t owner[4] = {-1, -1, -1, -1};  // the corners' owners (-1: uncut)
   CornerReach reach[4];  // filled where the scheme uses_reach()
   // Filled where the scheme uses_candidates(): every move whose swept
   // surface can be the lowest somewhere in the element (MoveSweeps::
-  // FillCandidates), ascending, and the surfaces of the moves (not owned;
-  // outlives the corners).
+  // FillCandidates), ascending.
   absl::InlinedVector<int32_t, 32> candidates;
+  // The surfaces of the moves (not owned; outlives the corners), where the
+  // scheme uses_reach() or uses_candidates(); null where the moves are not
+  // known.
   const MoveSurfaces* surfaces = nullptr;
-  // With has_trust (FillTrust): TrustFrameOf each c[k], valid while c[] is
-  // unchanged; without, computed where used (Scheme::uses_trust).
-  bool has_trust = false;
-  PatchTrustFrame trust[4];
+  // What Scheme::Prepare found out about the element (kGuarded).
+  struct Guard {
+    bool smooth = false;  // the patches hold over the whole element
+    double lift[4][4] = {};  // [k][q]: patch k's shortfall at corner q
+  } guard;
 };
 
 class Scheme {
@@ -107,9 +110,9 @@ class Scheme {
   virtual bool uses_candidates() const { return false; }
   // Bytes per allocated node, including the owning move id.
   virtual int bytes_per_node() const = 0;
-  // Whether Reconstruct reads ElementCorners::trust (when has_trust; else it
-  // derives the frames at every point: the same bits, more work).
-  virtual bool uses_trust() const { return false; }
+  // Work done once per element, before Reconstruct and Gradient read it:
+  // every holder of nodes calls it on the corners it fills.
+  virtual void Prepare(ElementCorners* /*e*/) const {}
   // Height at (x, y) inside the element. Thread-safe.
   virtual double Reconstruct(const ElementCorners& e, double x,
                              double y) const = 0;
@@ -118,13 +121,14 @@ class Scheme {
   virtual void Gradient(const ElementCorners& e, double x, double y,
                         double* gx, double* gy) const = 0;
   // Reconstruct at n points of the element: out[q] = Reconstruct(e, x[q],
-  // y[q]), bit for bit (schemes with per-element work override it).
+  // y[q]), bit for bit (schemes with work shared between points override
+  // it).
   virtual void ReconstructMany(const ElementCorners& e, const double* x,
                                const double* y, int32_t n, double* out) const {
     for (int32_t q = 0; q < n; ++q) out[q] = Reconstruct(e, x[q], y[q]);
   }
-  // Both: returns Reconstruct(e, x, y) and sets the Gradient, bit for bit
-  // (schemes that find both at once override it).
+  // Both at once: returns Reconstruct(e, x, y) and sets the Gradient, bit
+  // for bit (schemes that find both together override it).
   virtual double HeightAndGradient(const ElementCorners& e, double x,
                                    double y, double* gx, double* gy) const {
     Gradient(e, x, y, gx, gy);
@@ -137,28 +141,44 @@ double BilinearHeight(const ElementCorners& e, double x, double y);
 // Eq. (2): minimum of the four corner patches of eq. (1), and of the top.
 double MinOfPatches(const ElementCorners& e, double x, double y);
 
-// The guarded reconstruction (kGuarded). Eq. (2) assumes every element lies
-// inside smooth pieces; at rims and walls a corner's patch, extrapolated
-// across the element, can plunge far below anything the tool reaches (a rim
-// node carries a slope of up to 1e4, and float storage of its huge, nearly
-// singular Hessian leaves spurious negative curvature). A patch is a
-// statement about its owner's swept surface near its node, so corner k's
-// term of the minimum at (x, y) is:
-// - nothing, outside its owner's footprint (CornerReach: where the owner's
-//   sweep, or a move continuing it, reaches below the top): no surface of
-//   the owner is there. Where no corner has a term, the bilinear.
-// - its patch, held at or above the owner's lowest tip, where TrustPatch
-//   trusts it (kFull); the larger of that and the bilinear where the patch
-//   is only a lower bound (kLowerBound); the bilinear of eq. (16) (the
-//   z-map's answer) beyond (kNone).
-// The minimum starts at the top. So every value is the bilinear, the top or
-// a patch inside its owner's reach held above the owner's lowest tip: never
-// below the lowest tip of the moves owning the corners.
+// The guarded reconstruction (kGuarded, the default). Eq. (2) assumes every
+// element lies inside smooth pieces; at rims, walls and a cutter's own kinks
+// (a V-bit's apex, a flat end's rim) a corner's patch, extrapolated across
+// the element, can plunge far below anything the tool reaches (143 mm below
+// a 1 mm cut), and a cut passing between the nodes is seen by no patch. A
+// patch is a statement about its owner's swept surface near its node: it is
+// used only where that statement is checked to hold, and the exact surfaces
+// (MoveSurfaces, the workpiece's exact-surface entry point) answer where it
+// does not. PrepareGuarded classifies each element once:
+// - smooth: every corner is cut, every corner's patch is trusted over the
+//   whole element (TrustPatch kFull at the other three corners; the trust
+//   region is convex, so then everywhere in it), and no patch passes more
+//   than kGuardConsistency x the element's size below another corner
+//   inside its owner's reach (a patch that disagrees with a neighbouring
+//   node by more than a third-order term does not model the surface there:
+//   a kink, a wall, a crease inside the element). There, eq. (2) over the
+//   corners whose reach holds (x, y) (the owner's footprint, and those of
+//   the moves continuing it), each patch lifted by the bilinear
+//   interpolation of its shortfalls below the corners in its reach (so
+//   that every patch passes at or above every node it should: the
+//   reconstruction interpolates the nodes) and held at or above its owner's
+//   lowest tip.
+// - otherwise: the least of the top and the exact swept surfaces of the
+//   corners' owners and the moves continuing them: exact wherever one of
+//   them is the lowest move, and never below the true surface.
+// In both, where a corner lies lower than the value found and nothing found
+// explains it (its owner's reach misses (x, y), or its surfaces there are
+// higher), a cut passes between the nodes: the true surface there
+// (MoveSurfaces::LowestAt). Without surfaces (a grid whose moves are not
+// known) every element is taken as smooth, and the bilinear answers where
+// no corner's reach holds (x, y). See docs/benchmarks.md, "Guarded scheme".
 double GuardedHeight(const ElementCorners& e, double x, double y);
-// GuardedHeight at n points of one element, bit for bit: the corners'
-// frames and capsules once, the points in vectorized loops.
-void GuardedHeights(const ElementCorners& e, const double* x, const double* y,
-                    int32_t n, double* out);
+// The per-element part of the guarded reconstruction (ElementCorners::
+// guard), from e's corners, reach and surfaces.
+void PrepareGuarded(ElementCorners* e);
+// Patches that disagree with a corner in their reach by more than this
+// fraction of the element's size mark the element as not smooth.
+inline constexpr double kGuardConsistency = 0.05;
 
 // Along the gradient, with slope s and curvature k, a patch is the
 // osculating parabola of a circle of radius (1 + s^2)^(3/2) / |k| (a ball's
@@ -186,12 +206,16 @@ inline constexpr double kPatchUphill = 0.9;
 enum class PatchTrust { kFull, kLowerBound, kNone };
 // The trust of the patch with jet `j` at offset (dx, dy) from its node.
 PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy);
-// The same from the jet's frame (TrustFrameOf), without its libm calls.
-PatchTrustFrame TrustFrameOf(const SurfaceJet& j);
-PatchTrust TrustPatch(const PatchTrustFrame& f, double dx, double dy);
-// Sets e->trust[k] = TrustFrameOf(e->c[k]) and e->has_trust: worth it when
-// the guarded scheme reconstructs the element at several points.
-void FillTrust(ElementCorners* e);
+// The same in two steps, for many offsets of one patch: its trust region
+// (from the jet alone), then the trust at an offset, as TrustPatch.
+struct PatchTrustRegion {
+  bool everywhere = true;  // a plane: trusted everywhere
+  double delta = 0, de = 0, reach = 0;  // rim distances, trusted radius
+  double gx = 0, gy = 0, s = 0;         // gradient and its length
+  double ex = 0, ey = 0, se = 0;        // larger principal direction
+};
+PatchTrustRegion TrustRegion(const SurfaceJet& j);
+PatchTrust Trust(const PatchTrustRegion& region, double dx, double dy);
 
 // The exact reconstruction (kExact): the minimum of the stock top and of
 // the exact swept surfaces of the element's candidates at (x, y). The

@@ -112,7 +112,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
   }
   const double z_top = wp.spec().z_top;
   const Scheme& scheme = wp.scheme();
-  const bool trust = scheme.uses_trust();
   pool.ParallelFor(bins, [&](int64_t b) {
     const int32_t bx = static_cast<int32_t>(b % index.bins_x());
     const int32_t by = static_cast<int32_t>(b / index.bins_x());
@@ -135,19 +134,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     for (uint32_t id : index.Bin(static_cast<int32_t>(b))) {
       const Sweep s = wp.MoveSweep(id);
       bin.push_back({&wp.move(id), s, s.Footprint(z_top).Bounds()});
-    }
-    // The guarded scheme's trust frames, a function of each node's jet:
-    // once per node of the bin instead of once per element corner.
-    const int32_t frame_w = ei1 - ei0 + 1;
-    std::vector<PatchTrustFrame> frames;
-    if (trust) {
-      frames.resize(static_cast<size_t>(frame_w) * (ej1 - ej0 + 1));
-      for (int32_t j = ej0; j <= ej1; ++j) {
-        for (int32_t i = ei0; i <= ei1; ++i) {
-          frames[(j - ej0) * frame_w + (i - ei0)] =
-              TrustFrameOf(wp.Node(i, j).jet);
-        }
-      }
     }
     // The sweeps of recent corner owners: neighbouring elements share most.
     struct Owner {
@@ -197,15 +183,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       for (int32_t ei = ei0; ei < ei1; ++ei) {
         const double ex0 = grid.NodeX(ei), ex1 = grid.NodeX(ei + 1);
         if (ex0 > region.x1 || ex1 < region.x0) continue;
-        ElementCorners e = wp.Corners(ei, ej);
-        if (trust) {
-          const int32_t f = (ej - ej0) * frame_w + (ei - ei0);
-          e.trust[0] = frames[f];
-          e.trust[1] = frames[f + 1];
-          e.trust[2] = frames[f + frame_w + 1];
-          e.trust[3] = frames[f + frame_w];
-          e.has_trust = true;
-        }
+        const ElementCorners e = wp.Corners(ei, ej);
         for (int32_t si = 0; si < n; ++si) {
           col_x[si] = e.x0 + (e.x1 - e.x0) * si / (n - 1);
           if (mapped) {

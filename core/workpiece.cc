@@ -466,7 +466,8 @@ CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
   r.bounded = true;
   // Where each sweep is below the top (beyond, the top is lower anyway): a
   // rapid above the stock continues no surface.
-  auto add = [&](const Move& m) {
+  auto add = [&](int64_t k) {
+    const Move& m = moves[k];
     const Capsule c = Sweep(m.from, m.to, m.cutter).Footprint(z_top);
     if (c.empty) return;
     // The footprint's exact radius (Footprint widens it by a margin for
@@ -474,15 +475,16 @@ CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
     // exact surface).
     const double rho =
         FootprintRadius(m.cutter, std::min(m.from.z, m.to.z), z_top);
+    r.id[r.count] = static_cast<int32_t>(k);
     r.capsule[r.count++] = {c.x0, c.y0, c.x1, c.y1, rho};
   };
   const Move& m = moves[id];
-  add(m);
+  add(id);
   r.z_low = std::min(m.from.z, m.to.z);
-  if (id > 0 && SamePoint(moves[id - 1].to, m.from)) add(moves[id - 1]);
+  if (id > 0 && SamePoint(moves[id - 1].to, m.from)) add(id - 1);
   if (id + 1 < static_cast<int64_t>(moves.size()) &&
       SamePoint(moves[id + 1].from, m.to)) {
-    add(moves[id + 1]);
+    add(id + 1);
   }
   return r;
 }
@@ -523,9 +525,48 @@ const Sweep* MoveSweeps::SweepOf(int32_t id) const {
   return &*e.sweep;
 }
 
-void MoveSweeps::FillCandidates(int32_t ei, int32_t ej,
-                                const int32_t corner_owner[4],
-                                ElementCorners* e) const {
+CornerReach MoveSweeps::Reach(int32_t id, double z_top) const {
+  struct Entry {
+    uint64_t serial = 0;
+    int32_t id = -1;
+    double z_top = 0;
+    CornerReach reach;
+  };
+  constexpr int kEntries = 256;
+  thread_local Entry cache[kEntries];
+  Entry& e = cache[id & (kEntries - 1)];
+  if (e.id != id || e.serial != serial_ || e.z_top != z_top) {
+    e.reach = ReachOf(*moves_, id, z_top);
+    e.id = id;
+    e.serial = serial_;
+    e.z_top = z_top;
+  }
+  return e.reach;
+}
+
+double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
+                            double cap, int32_t* id) const {
+  double w = cap;
+  int32_t lowest = -1;
+  for (const uint32_t k : index_->Bin(index_->BinOfElement(ei, ej))) {
+    const Move& m = (*moves_)[k];
+    if (!(std::min(m.from.z, m.to.z) < w)) continue;
+    // Beyond its footprint below w a move is not below w.
+    const std::optional<Rect> b = FootprintBounds(m.from, m.to, m.cutter, w);
+    if (!b.has_value() || !b->Contains(x, y)) continue;
+    const double h = Height(static_cast<int32_t>(k), x, y);
+    if (h < w) {
+      w = h;
+      lowest = static_cast<int32_t>(k);
+    }
+  }
+  if (id != nullptr) *id = lowest;
+  return w;
+}
+
+void MoveSweeps::FillCandidates(ElementCorners* e) const {
+  const int32_t ei = e->ei, ej = e->ej;
+  const int32_t* corner_owner = e->owner;
   e->surfaces = this;
   e->candidates.clear();
   const double xs[4] = {e->x0, e->x1, e->x1, e->x0};
@@ -573,33 +614,10 @@ SurfaceJet MoveSweeps::Jet(int32_t id, double x, double y) const {
   return s->JetAt(x, y);
 }
 
-const CornerReach& Workpiece::CachedReach(int32_t id) const {
-  // Neighbouring elements share their corners' owners, and ReachOf builds
-  // up to three sweeps: a per-thread direct-mapped cache. A move's reach
-  // depends on it and its neighbours in the list, which only grows (the
-  // serial changes when LoadState replaces the state): an entry holds while
-  // whether the move has a successor is unchanged.
-  struct Entry {
-    uint64_t serial = 0;
-    int32_t id = -1;
-    bool last = false;
-    CornerReach reach;
-  };
-  constexpr int kEntries = 256;
-  thread_local Entry cache[kEntries];
-  Entry& e = cache[id & (kEntries - 1)];
-  const bool last = id + 1 >= move_count();
-  if (e.id != id || e.serial != serial_ || e.last != last) {
-    e.reach = ReachOf(moves_, id, spec().z_top);
-    e.id = id;
-    e.serial = serial_;
-    e.last = last;
-  }
-  return e.reach;
-}
-
 ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
   ElementCorners e;
+  e.ei = ei;
+  e.ej = ej;
   e.x0 = grid_.NodeX(ei);
   e.x1 = grid_.NodeX(ei + 1);
   e.y0 = grid_.NodeY(ej);
@@ -610,15 +628,14 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
   for (int k = 0; k < 4; ++k) {
     const NodeValue n = Node(is[k], js[k]);
     e.c[k] = n.jet;
+    e.owner[k] = n.owner;
     if (n.owner >= 0 && scheme_->uses_reach()) {
-      e.reach[k] = CachedReach(n.owner);
+      e.reach[k] = surfaces_.Reach(n.owner, e.z_top);
     }
   }
-  if (scheme_->uses_candidates()) {
-    int32_t owners[4];
-    for (int k = 0; k < 4; ++k) owners[k] = OwnerAt(is[k], js[k]);
-    surfaces_.FillCandidates(ei, ej, owners, &e);
-  }
+  if (scheme_->uses_candidates()) surfaces_.FillCandidates(&e);
+  if (scheme_->uses_reach()) e.surfaces = &surfaces_;
+  scheme_->Prepare(&e);
   return e;
 }
 

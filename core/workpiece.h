@@ -81,9 +81,14 @@ class MoveSweeps final : public MoveSurfaces {
   // +inf (and a zero jet) for an id outside the list.
   double Height(int32_t id, double x, double y) const override;
   SurfaceJet Jet(int32_t id, double x, double y) const override;
+  double LowestAt(int32_t ei, int32_t ej, double x, double y, double cap,
+                  int32_t* id = nullptr) const override;
+  // ReachOf(moves, id, z_top), kept per thread for the owners met last (a
+  // node is a corner of four elements, an owner of many nodes).
+  CornerReach Reach(int32_t id, double z_top) const;
 
-  // Fills e->candidates (and e->surfaces) for element (ei, ej) of the
-  // index's grid, whose corners e->c[k] are owned by corner_owner[k] (-1:
+  // Fills e->candidates (and e->surfaces) for element (e->ei, e->ej) of the
+  // index's grid, whose corners e->c[k] are owned by e->owner[k] (-1:
   // uncut): the corners' owners, and every other move of the element's bin
   // that can dip below their surfaces somewhere in the element. Each sweep
   // is convex (the lower surface of a convex tool swept along a segment),
@@ -92,8 +97,7 @@ class MoveSweeps final : public MoveSurfaces {
   // the element from above (cap), and a move whose footprint below cap
   // (FootprintBounds) misses the rectangle cannot lower it. So the minimum
   // over the candidates is the exact surface everywhere in the element.
-  void FillCandidates(int32_t ei, int32_t ej, const int32_t corner_owner[4],
-                      ElementCorners* e) const;
+  void FillCandidates(ElementCorners* e) const override;
 
  private:
   const Sweep* SweepOf(int32_t id) const;
@@ -260,9 +264,6 @@ class Workpiece {
   // the owners' sweeps once and cached (thread-safe). The reference stays
   // valid until this thread's next call (the thread keeps the last one).
   const TileJets& Jets(int32_t t) const;
-  // ReachOf(moves_, id, z_top), kept per thread; valid until this thread's
-  // next call.
-  const CornerReach& CachedReach(int32_t id) const;
   void ComputeJets(int32_t t, const Tile& tile, TileJets* out) const;
 
   const GridGeometry grid_;

@@ -27,8 +27,10 @@ std::unique_ptr<Workpiece> Cut(const StockSpec& stock, SchemeKind scheme,
 }
 
 // The lowest reconstructed height over an n x n lattice in every element
-// (corners included), and the lowest tip of the moves owning its corners,
-// minus the reconstruction: > 0 where the scheme digs below them.
+// (corners included), and the lowest tip of the moves owning its corners
+// (or the true surface, where a cut that owns no corner goes deeper: the
+// guarded scheme finds such cuts), minus the reconstruction: > 0 where the
+// scheme digs below what the tools reach.
 struct Dig {
   double lowest = 0;     // lowest sample (mm)
   double worst_dig = 0;  // largest depth below the owning tips (mm)
@@ -53,7 +55,8 @@ Dig Sampled(const Workpiece& wp, int n) {
           const double y = e.y0 + (e.y1 - e.y0) * b / n;
           const double w = wp.scheme().Reconstruct(e, x, y);
           d.lowest = std::min(d.lowest, w);
-          d.worst_dig = std::max(d.worst_dig, floor - w);
+          d.worst_dig = std::max(
+              d.worst_dig, std::min(floor, wp.ExactHeight(x, y)) - w);
         }
       }
     }
@@ -172,6 +175,59 @@ TEST(GuardedSchemeTest, RandomScenesNeverDigBelowTheOwningTips) {
   }
 }
 
+// Random scenes of plunges, slots and ramps of every cutter shape, on grids
+// from fine to coarse against the tools (elements from 3% to 60% of the
+// radius): the guarded scheme never digs below what the tools reach, and
+// its max and RMS errors are never above the z-map's, its mean far below.
+TEST(GuardedSchemeTest, RandomScenesOfEveryShapeBeatTheZmap) {
+  std::mt19937_64 rng(1516);
+  std::uniform_real_distribution<double> u(0, 1);
+  double worst_mean_ratio = 0;
+  for (int scene = 0; scene < 30; ++scene) {
+    const int elements = 16 + static_cast<int>(u(rng) * 100);
+    const StockSpec stock{0, 0, 10, 10, 0, elements, elements};
+    std::vector<Move> moves;
+    const int n = 2 + scene % 6;
+    for (int k = 0; k < n; ++k) {
+      const double r = 0.3 + 1.7 * u(rng);
+      Cutter c = Cutter::Ball(r);
+      switch (scene % 5) {
+        case 1:
+          c = Cutter::Flat(r);
+          break;
+        case 2:
+          c = Cutter::BullNose(r, r * (0.1 + 0.8 * u(rng)));
+          break;
+        case 3:
+          c = Cutter::Cone(r, 15 + 60 * u(rng), r * 0.3 * u(rng));
+          break;
+        case 4:
+          c = Cutter::TaperedBall(r, r * (0.2 + 0.5 * u(rng)), 25 * u(rng));
+          break;
+        default:
+          break;
+      }
+      const Vec3 a{10 * u(rng), 10 * u(rng), 0.5 - 3 * u(rng)};
+      Vec3 b{10 * u(rng), 10 * u(rng), 0.5 - 3 * u(rng)};
+      if (k % 3 == 0) b = {a.x, a.y, a.z - 2 * u(rng)};  // a plunge
+      if (k % 3 == 1) b.z = a.z;                         // a slot
+      moves.push_back({a, b, c});
+    }
+    SCOPED_TRACE(::testing::Message() << "scene " << scene << ", "
+                                      << elements << " elements");
+    auto zmap = Cut(stock, SchemeKind::kZmap, moves);
+    auto guarded = Cut(stock, SchemeKind::kGuarded, moves);
+    EXPECT_EQ(Sampled(*guarded, 4).worst_dig, 0);
+    const ErrorStats z = Errors(*zmap), g = Errors(*guarded);
+    EXPECT_LE(g.max_error, z.max_error);
+    EXPECT_LE(g.rms_error, z.rms_error);
+    EXPECT_LE(g.mean_error, z.mean_error / 10)
+        << "guarded " << g.mean_error << " zmap " << z.mean_error;
+    worst_mean_ratio = std::max(worst_mean_ratio, g.mean_error / z.mean_error);
+  }
+  RecordProperty("worst_mean_ratio", std::to_string(worst_mean_ratio));
+}
+
 TEST(CornerReachTest, FootprintOfAMoveAndTheMovesContinuingIt) {
   const std::vector<Move> path = {{{-2, 0, 0}, {0, 0, -1}, 1},
                                   {{0, 0, -1}, {2, 0, -1}, 1},
@@ -193,66 +249,15 @@ TEST(CornerReachTest, FootprintOfAMoveAndTheMovesContinuingIt) {
   EXPECT_FALSE(plunge.Contains(9.6, 9.81));
 }
 
-// The batched kernel (GuardedHeights: corner frames and capsules once per
-// element, vectorized loops, whole-element capsule decisions) and the
-// trust frames are the per-point reconstruction bit for bit: on every
-// element of random scenes, at the valuation's 5 x 5 lattice, random
-// points, points on the edges and corners, just outside the element, and
-// non-finite points; with and without the frames filled; and on synthetic
-// elements whose capsules cut through them.
-TEST(GuardedSchemeTest, BatchedKernelIsThePointwiseOneBitForBit) {
+// The points of an element at once (ReconstructMany) and the height with
+// its gradient (HeightAndGradient) are Reconstruct and Gradient bit for bit:
+// on every element of random scenes, at the valuation's 5 x 5 lattice,
+// random points, the edges and corners, and just outside the element.
+TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
   std::mt19937_64 rng(27);
   std::uniform_real_distribution<double> u(0, 1);
   const Scheme& guarded = GetScheme(SchemeKind::kGuarded);
-  auto check = [&](ElementCorners e, std::vector<double> xs,
-                   std::vector<double> ys) {
-    std::vector<double> expected(xs.size());
-    for (size_t q = 0; q < xs.size(); ++q) {
-      expected[q] = GuardedHeight(e, xs[q], ys[q]);
-    }
-    for (int filled = 0; filled < 2; ++filled) {
-      if (filled) FillTrust(&e);
-      std::vector<double> got(xs.size());
-      guarded.ReconstructMany(e, xs.data(), ys.data(),
-                              static_cast<int32_t>(xs.size()), got.data());
-      for (size_t q = 0; q < xs.size(); ++q) {
-        const bool same = std::memcmp(&got[q], &expected[q], 8) == 0 ||
-                          (std::isnan(got[q]) && std::isnan(expected[q]));
-        ASSERT_TRUE(same) << "point (" << xs[q] << ", " << ys[q] << "): "
-                          << got[q] << " vs " << expected[q]
-                          << (filled ? " with frames" : "");
-        // One point at a time, and the height with its gradient.
-        ASSERT_EQ(guarded.Reconstruct(e, xs[q], ys[q]), GuardedHeight(e, xs[q], ys[q]));
-        double gx, gy, hx, hy;
-        const double w = guarded.HeightAndGradient(e, xs[q], ys[q], &gx, &gy);
-        guarded.Gradient(e, xs[q], ys[q], &hx, &hy);
-        if (std::isfinite(xs[q]) && std::isfinite(ys[q])) {
-          ASSERT_EQ(w, expected[q]);
-          ASSERT_EQ(gx, hx);
-          ASSERT_EQ(gy, hy);
-        }
-      }
-    }
-  };
-  auto lattice = [&](const ElementCorners& e, std::vector<double>* xs,
-                     std::vector<double>* ys) {
-    for (int b = 0; b <= 4; ++b) {
-      for (int a = 0; a <= 4; ++a) {
-        xs->push_back(e.x0 + (e.x1 - e.x0) * a / 4);
-        ys->push_back(e.y0 + (e.y1 - e.y0) * b / 4);
-      }
-    }
-    for (int k = 0; k < 70; ++k) {  // more than one chunk of points
-      xs->push_back(e.x0 + (e.x1 - e.x0) * u(rng));
-      ys->push_back(e.y0 + (e.y1 - e.y0) * u(rng));
-    }
-    const double dx = e.x1 - e.x0;
-    xs->insert(xs->end(), {e.x0 - 0.3 * dx, e.x1 + 0.2 * dx, e.x1,
-                           std::nextafter(e.x1, 1e9), e.x0});
-    ys->insert(ys->end(), {e.y1, e.y0 - 0.1 * dx, e.y0 + 1e-300, e.y1,
-                           std::nextafter(e.y0, -1e9)});
-  };
-  for (int scene = 0; scene < 6; ++scene) {
+  for (int scene = 0; scene < 4; ++scene) {
     const StockSpec stock{0, 0, 6, 6, 0, 24 + scene, 24 + scene};
     std::vector<Move> moves;
     for (int k = 0; k < 6; ++k) {
@@ -270,82 +275,34 @@ TEST(GuardedSchemeTest, BatchedKernelIsThePointwiseOneBitForBit) {
                                           << ei << ", " << ej);
         const ElementCorners e = wp->Corners(ei, ej);
         std::vector<double> xs, ys;
-        lattice(e, &xs, &ys);
-        ASSERT_NO_FATAL_FAILURE(check(e, xs, ys));
-      }
-    }
-  }
-  // Synthetic corners: random jets (steep, curved, flat, uncut), capsules
-  // of every size through and around the element, z_low above the patch.
-  for (int trial = 0; trial < 3000; ++trial) {
-    SCOPED_TRACE(::testing::Message() << "synthetic " << trial);
-    ElementCorners e;
-    e.x0 = 10 * u(rng) - 5;
-    e.y0 = 10 * u(rng) - 5;
-    e.x1 = e.x0 + 0.05 + 0.2 * u(rng);
-    e.y1 = e.y0 + 0.05 + 0.2 * u(rng);
-    e.z_top = 0;
-    for (int k = 0; k < 4; ++k) {
-      SurfaceJet& j = e.c[k];
-      const int kind = static_cast<int>(4 * u(rng));
-      j.w = -2 * u(rng);
-      if (kind > 0) {
-        j.wx = (kind == 3 ? 50 : 2) * (u(rng) - 0.5);
-        j.wy = (kind == 3 ? 50 : 2) * (u(rng) - 0.5);
-      }
-      if (kind > 1) {
-        j.wxx = 20 * (u(rng) - 0.5);
-        j.wxy = 20 * (u(rng) - 0.5);
-        j.wyy = 20 * (u(rng) - 0.5);
-      }
-      if (u(rng) < 0.8) {
-        CornerReach& r = e.reach[k];
-        r.bounded = true;
-        r.count = 1 + static_cast<int>(3 * u(rng)) % 3;
-        r.z_low = -3 * u(rng);
-        for (int c = 0; c < r.count; ++c) {
-          const double cx = e.x0 + (e.x1 - e.x0) * (3 * u(rng) - 1);
-          const double cy = e.y0 + (e.y1 - e.y0) * (3 * u(rng) - 1);
-          const bool point = u(rng) < 0.2;
-          r.capsule[c] = {cx, cy, point ? cx : cx + u(rng) - 0.5,
-                          point ? cy : cy + u(rng) - 0.5,
-                          (e.x1 - e.x0) * 3 * u(rng)};
+        for (int b = 0; b <= 4; ++b) {
+          for (int a = 0; a <= 4; ++a) {
+            xs.push_back(e.x0 + (e.x1 - e.x0) * a / 4);
+            ys.push_back(e.y0 + (e.y1 - e.y0) * b / 4);
+          }
+        }
+        for (int k = 0; k < 10; ++k) {
+          xs.push_back(e.x0 + (e.x1 - e.x0) * u(rng));
+          ys.push_back(e.y0 + (e.y1 - e.y0) * u(rng));
+        }
+        xs.push_back(std::nextafter(e.x1, 1e9));
+        ys.push_back(e.y0);
+        std::vector<double> many(xs.size());
+        guarded.ReconstructMany(e, xs.data(), ys.data(),
+                                static_cast<int32_t>(xs.size()), many.data());
+        for (size_t q = 0; q < xs.size(); ++q) {
+          const double w = guarded.Reconstruct(e, xs[q], ys[q]);
+          ASSERT_EQ(std::memcmp(&many[q], &w, 8), 0) << xs[q] << ", " << ys[q];
+          double gx, gy, hx, hy;
+          const double z = guarded.HeightAndGradient(e, xs[q], ys[q], &gx, &gy);
+          guarded.Gradient(e, xs[q], ys[q], &hx, &hy);
+          ASSERT_EQ(std::memcmp(&z, &w, 8), 0) << xs[q] << ", " << ys[q];
+          ASSERT_EQ(gx, hx);
+          ASSERT_EQ(gy, hy);
         }
       }
     }
-    std::vector<double> xs, ys;
-    lattice(e, &xs, &ys);
-    if (trial % 50 == 0) {
-      xs.push_back(std::nan(""));
-      ys.push_back(e.y0);
-      xs.push_back(e.x0);
-      ys.push_back(INFINITY);
-    }
-    ASSERT_NO_FATAL_FAILURE(check(e, xs, ys));
   }
-}
-
-TEST(GuardedSchemeTest, TrustFrameGivesTheTrustOfTheJet) {
-  std::mt19937_64 rng(5);
-  std::uniform_real_distribution<double> u(-1, 1);
-  int seen[3] = {0, 0, 0};
-  for (int trial = 0; trial < 20000; ++trial) {
-    SurfaceJet j;
-    j.wx = (trial % 3 == 0) ? 0 : 5 * u(rng);
-    j.wy = (trial % 5 == 0) ? 0 : 5 * u(rng);
-    j.wxx = (trial % 7 == 0) ? 0 : 30 * u(rng);
-    j.wxy = 30 * u(rng);
-    j.wyy = 30 * u(rng);
-    const PatchTrustFrame f = TrustFrameOf(j);
-    for (int k = 0; k < 8; ++k) {
-      const double dx = u(rng) * (k < 4 ? 0.2 : 2);
-      const double dy = u(rng) * (k < 4 ? 0.2 : 2);
-      const PatchTrust t = TrustPatch(j, dx, dy);
-      ASSERT_EQ(TrustPatch(f, dx, dy), t) << trial;
-      ++seen[static_cast<int>(t)];
-    }
-  }
-  for (int c : seen) EXPECT_GT(c, 1000);  // every outcome is exercised
 }
 
 }  // namespace

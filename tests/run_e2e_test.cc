@@ -500,6 +500,61 @@ TEST(RunCorpusProjectTest, FlowerMoldAndVcarve) {
   }
 }
 
+// Issue 15: on every corpus job, as its project gives it (tools, stock), the
+// default scheme's max and RMS errors against the exact surface are each at
+// most the z-map's and its mean far below, at the default 0.1 mm and on a
+// grid twice as coarse (elements 40% of flower_mold's 0.5 mm radius).
+class CorpusPrecisionTest
+    : public ::testing::TestWithParam<std::tuple<const char*, const char*>> {};
+
+google::protobuf::Struct RunJson(const std::vector<std::string>& argv) {
+  std::stringstream out;
+  std::streambuf* old = std::cout.rdbuf(out.rdbuf());
+  std::string err;
+  const int rc = RunCapturing(argv, &err);
+  std::cout.rdbuf(old);
+  EXPECT_EQ(rc, 0) << err;
+  google::protobuf::Struct s;
+  EXPECT_TRUE(google::protobuf::util::JsonStringToMessage(out.str(), &s).ok())
+      << out.str().substr(0, 200);
+  return s;
+}
+
+TEST_P(CorpusPrecisionTest, DefaultSchemeNeverWorseThanTheZmap) {
+  const auto [name, spacing] = GetParam();
+  const std::string project =
+      std::string(SWARF_CORPUS_DIR) + "/" + name + ".camotics";
+  if (!std::filesystem::exists(project)) {
+    GTEST_SKIP() << "no corpus at " << SWARF_CORPUS_DIR;
+  }
+  auto error = [&](const char* scheme) {
+    std::vector<std::string> argv = {"--project", project, "--spacing",
+                                     spacing,     "--json",  "--quiet"};
+    if (scheme != nullptr) argv.insert(argv.end(), {"--scheme", scheme});
+    const google::protobuf::Struct stats = RunJson(argv);
+    const auto& e = stats.fields().at("error").struct_value().fields();
+    return std::tuple{e.at("max").number_value(), e.at("mean").number_value(),
+                      e.at("rms").number_value()};
+  };
+  const auto [zmax, zmean, zrms] = error("zmap");
+  const auto [gmax, gmean, grms] = error(nullptr);  // the default
+  EXPECT_GT(zmean, 0);
+  EXPECT_LE(gmax, zmax);
+  EXPECT_LE(grms, zrms);
+  EXPECT_LE(gmean, zmean / 10) << "default " << gmean << " zmap " << zmean;
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Corpus, CorpusPrecisionTest,
+    ::testing::Combine(::testing::Values("bear", "cameo", "flower_mold",
+                                         "vcarve"),
+                       ::testing::Values("0.1", "0.2")),
+    [](const auto& info) {
+      std::string s = std::get<1>(info.param);
+      s.replace(s.find('.'), 1, "_");
+      return std::string(std::get<0>(info.param)) + "_" + s;
+    });
+
 INSTANTIATE_TEST_SUITE_P(
     Corpus, RunE2eTest,
     ::testing::Values(std::tuple{"bear.nc", "ball:d=3.175"},
