@@ -174,8 +174,12 @@ double MinOfPatches(const ElementCorners& e, double x, double y);
 // no corner's reach holds (x, y). See docs/benchmarks.md, "Guarded scheme".
 double GuardedHeight(const ElementCorners& e, double x, double y);
 // The per-element part of the guarded reconstruction (ElementCorners::
-// guard), from e's corners, reach and surfaces.
-void PrepareGuarded(ElementCorners* e);
+// guard), from e's corners, reach and surfaces. `trust`, if given, holds
+// TrustRegion(e->c[k]) for the cut corners (a node's region serves its four
+// elements).
+struct PatchTrustRegion;
+void PrepareGuarded(ElementCorners* e,
+                    const PatchTrustRegion* const trust[4] = nullptr);
 // Patches that disagree with a corner in their reach by more than this
 // fraction of the element's size mark the element as not smooth.
 inline constexpr double kGuardConsistency = 0.05;

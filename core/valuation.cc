@@ -135,6 +135,23 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       const Sweep s = wp.MoveSweep(id);
       bin.push_back({&wp.move(id), s, s.Footprint(z_top).Bounds()});
     }
+    // The guarded scheme's trust regions (TrustRegion, a function of each
+    // node's jet), once per cut node of the bin instead of once per element
+    // corner.
+    const bool guarded = scheme.kind() == SchemeKind::kGuarded;
+    const int32_t region_w = ei1 - ei0 + 1;
+    std::vector<PatchTrustRegion> regions;
+    if (guarded) {
+      regions.resize(static_cast<size_t>(region_w) * (ej1 - ej0 + 1));
+      for (int32_t j = ej0; j <= ej1; ++j) {
+        for (int32_t i = ei0; i <= ei1; ++i) {
+          const NodeValue v = wp.Node(i, j);
+          if (v.owner >= 0) {
+            regions[(j - ej0) * region_w + (i - ei0)] = TrustRegion(v.jet);
+          }
+        }
+      }
+    }
     // The sweeps of recent corner owners: neighbouring elements share most.
     struct Owner {
       int32_t id = -1;
@@ -183,7 +200,14 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       for (int32_t ei = ei0; ei < ei1; ++ei) {
         const double ex0 = grid.NodeX(ei), ex1 = grid.NodeX(ei + 1);
         if (ex0 > region.x1 || ex1 < region.x0) continue;
-        const ElementCorners e = wp.Corners(ei, ej);
+        ElementCorners e = wp.Corners(ei, ej, /*prepare=*/!guarded);
+        if (guarded) {
+          const PatchTrustRegion* r =
+              &regions[(ej - ej0) * region_w + (ei - ei0)];
+          const PatchTrustRegion* const trust[4] = {r, r + 1, r + region_w + 1,
+                                                    r + region_w};
+          PrepareGuarded(&e, trust);
+        }
         for (int32_t si = 0; si < n; ++si) {
           col_x[si] = e.x0 + (e.x1 - e.x0) * si / (n - 1);
           if (mapped) {

@@ -192,8 +192,9 @@ class Workpiece {
   int32_t OwnerAt(int32_t i, int32_t j) const;
   // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with each cut corner's
   // reach (ReachOf its owner) and the stencil's owners and the moves'
-  // surfaces, where the scheme uses them.
-  ElementCorners Corners(int32_t ei, int32_t ej) const;
+  // surfaces, where the scheme uses them; prepared (Scheme::Prepare) unless
+  // `prepare` is false (the caller prepares it).
+  ElementCorners Corners(int32_t ei, int32_t ej, bool prepare = true) const;
   // The scheme's reconstructed surface at a point of the stock (clamped to
   // the stock rectangle).
   double Reconstruct(double x, double y) const;

@@ -249,14 +249,18 @@ TEST(CornerReachTest, FootprintOfAMoveAndTheMovesContinuingIt) {
   EXPECT_FALSE(plunge.Contains(9.6, 9.81));
 }
 
-// The points of an element at once (ReconstructMany) and the height with
-// its gradient (HeightAndGradient) are Reconstruct and Gradient bit for bit:
-// on every element of random scenes, at the valuation's 5 x 5 lattice,
-// random points, the edges and corners, and just outside the element.
+// The points of an element at once (ReconstructMany: smooth elements in
+// vectorized loops, capsules decided for the whole element where they can
+// be) and the height with its gradient (HeightAndGradient) are Reconstruct
+// and Gradient bit for bit: on every element of random scenes, at the
+// valuation's 5 x 5 lattice, random points, the edges and corners, and just
+// outside the element. Preparing an element from its nodes' trust regions
+// gives the same element.
 TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
   std::mt19937_64 rng(27);
   std::uniform_real_distribution<double> u(0, 1);
   const Scheme& guarded = GetScheme(SchemeKind::kGuarded);
+  int smooth = 0;
   for (int scene = 0; scene < 4; ++scene) {
     const StockSpec stock{0, 0, 6, 6, 0, 24 + scene, 24 + scene};
     std::vector<Move> moves;
@@ -281,10 +285,25 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
             ys.push_back(e.y0 + (e.y1 - e.y0) * b / 4);
           }
         }
-        for (int k = 0; k < 10; ++k) {
+        for (int k = 0; k < 70; ++k) {  // past one chunk of the kernel
           xs.push_back(e.x0 + (e.x1 - e.x0) * u(rng));
           ys.push_back(e.y0 + (e.y1 - e.y0) * u(rng));
         }
+        smooth += e.guard.smooth;
+        // Prepared with the nodes' trust regions (as the valuation does):
+        // the same element.
+        ElementCorners f = wp->Corners(ei, ej, /*prepare=*/false);
+        PatchTrustRegion regions[4];
+        const PatchTrustRegion* trust[4];
+        for (int k = 0; k < 4; ++k) {
+          regions[k] = TrustRegion(f.c[k]);
+          trust[k] = &regions[k];
+        }
+        PrepareGuarded(&f, trust);
+        ASSERT_EQ(f.guard.smooth, e.guard.smooth);
+        ASSERT_EQ(std::memcmp(f.guard.lift, e.guard.lift, sizeof f.guard.lift),
+                  0);
+        ASSERT_TRUE(f.candidates == e.candidates);
         xs.push_back(std::nextafter(e.x1, 1e9));
         ys.push_back(e.y0);
         std::vector<double> many(xs.size());
@@ -303,6 +322,7 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
       }
     }
   }
+  EXPECT_GT(smooth, 200);  // the batched kernel's elements
 }
 
 }  // namespace
