@@ -110,7 +110,8 @@ absl::Status SurfaceGrid::Validate() const {
   return absl::OkStatus();
 }
 
-ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
+ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej,
+                                    bool prepare) const {
   // Same construction as Workpiece::Corners so that reconstructions agree
   // bit for bit.
   const GridGeometry g(spec);
@@ -140,7 +141,7 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
     surfaces->FillCandidates(&e);
   }
   if (GetScheme(scheme).uses_reach()) e.surfaces = surfaces.get();
-  GetScheme(scheme).Prepare(&e);
+  if (prepare) GetScheme(scheme).Prepare(&e);
   return e;
 }
 
@@ -168,6 +169,24 @@ double SurfaceGrid::HeightAndGradient(double x, double y, double* gx,
 SurfaceSampler::SurfaceSampler(const SurfaceGrid& grid)
     : grid_(grid), scheme_(GetScheme(grid.scheme)) {}
 
+const PatchTrustRegion* SurfaceSampler::Region(int32_t i, int32_t j) {
+  int k = 0;
+  while (k < kRows && row_[k] != j) ++k;
+  if (k == kRows) {
+    // A new row replaces the oldest.
+    k = next_;
+    next_ = (next_ + 1) % kRows;
+    row_[k] = j;
+    regions_[k].resize(grid_.nodes_x());
+    has_[k].assign(grid_.nodes_x(), 0);
+  }
+  if (!has_[k][i]) {
+    regions_[k][i] = TrustRegion(grid_.jet(i, j));
+    has_[k][i] = 1;
+  }
+  return &regions_[k][i];
+}
+
 double SurfaceSampler::HeightAndGradient(double x, double y, double* gx,
                                          double* gy) {
   // As SurfaceGrid::HeightAndGradient.
@@ -176,7 +195,21 @@ double SurfaceSampler::HeightAndGradient(double x, double y, double* gx,
   y = std::clamp(y, grid_.spec.y0, grid_.spec.y1);
   const int32_t ei = g.ElementX(x), ej = g.ElementY(y);
   if (ei != ei_ || ej != ej_) {
-    e_ = grid_.Corners(ei, ej);
+    if (scheme_.kind() == SchemeKind::kGuarded) {
+      // Prepared from the nodes' regions (a node serves four elements);
+      // PrepareGuarded reads them for cut corners only.
+      e_ = grid_.Corners(ei, ej, /*prepare=*/false);
+      const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
+      const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
+      static const PatchTrustRegion kNone;
+      const PatchTrustRegion* trust[4];
+      for (int k = 0; k < 4; ++k) {
+        trust[k] = e_.owner[k] >= 0 ? Region(is[k], js[k]) : &kNone;
+      }
+      PrepareGuarded(&e_, trust);
+    } else {
+      e_ = grid_.Corners(ei, ej);
+    }
     ei_ = ei;
     ej_ = ej;
   }
