@@ -36,10 +36,7 @@ bool CornerReach::Capsule::Contains(double x, double y) const {
 
 bool CornerReach::Contains(double x, double y) const {
   if (!bounded) return true;
-  for (int k = 0; k < count; ++k) {
-    if (capsule[k].Contains(x, y)) return true;
-  }
-  return false;
+  return !empty && capsule.Contains(x, y);
 }
 
 namespace {
@@ -182,8 +179,8 @@ constexpr int32_t kGuardedChunk = 64;
 
 // Guarded() at n <= kGuardedChunk points of a smooth element with surfaces,
 // corner by corner in vectorized loops: each point sees the same operations
-// in the same order (its reach tests, each lifted patch and the running
-// minimum, the hidden test). Capsules that hold all the points or none are
+// in the same order (its reach test, each lifted patch and the running
+// minimum, the hidden test). A capsule that holds all the points or none is
 // decided once (CapsuleBoxSide). Points where a corner is hidden take the
 // true surface one by one (TakeLowest), as Guarded does.
 SWARF_TARGET_CLONES
@@ -213,20 +210,20 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x,
   for (int k = 0; k < 4; ++k) {
     const CornerReach& r = e.reach[k];
     double* __restrict inside = in[k];
-    // inside[q]: r.Contains(x[q], y[q]).
-    const double all = r.bounded ? 0.0 : 1.0;
-    for (int32_t q = 0; q < n; ++q) inside[q] = all;
-    for (int cap = 0; r.bounded && cap < r.count; ++cap) {
-      const CornerReach::Capsule& cs = r.capsule[cap];
-      if (finite) {
-        const BoxSide side =
-            CapsuleBoxSide(cs, box_x0, box_y0, box_x1, box_y1);
-        if (side == BoxSide::kOutside) continue;
-        if (side == BoxSide::kInside) {
-          for (int32_t q = 0; q < n; ++q) inside[q] = 1;
-          break;
-        }
+    // inside[q]: e.guard.inside[k] || r.Contains(x[q], y[q]).
+    const bool all = e.guard.inside[k] || !r.bounded;
+    const bool none = !all && r.empty;
+    for (int32_t q = 0; q < n; ++q) inside[q] = all ? 1.0 : 0.0;
+    BoxSide side = all ? BoxSide::kInside : none ? BoxSide::kOutside
+                                                  : BoxSide::kMixed;
+    if (side == BoxSide::kMixed && finite) {
+      side = CapsuleBoxSide(r.capsule, box_x0, box_y0, box_x1, box_y1);
+      if (side == BoxSide::kInside) {
+        for (int32_t q = 0; q < n; ++q) inside[q] = 1;
       }
+    }
+    if (side == BoxSide::kMixed) {
+      const CornerReach::Capsule& cs = r.capsule;
       const double ax = cs.ax, ay = cs.ay;
       const double ux = cs.bx - ax, uy = cs.by - ay;
       const double len2 = ux * ux + uy * uy;
@@ -240,7 +237,7 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x,
           const double v0 = v < 0.0 ? 0.0 : v;
           const double tc = 1.0 < v0 ? 1.0 : v0;
           const double dx = px - tc * ux, dy = py - tc * uy;
-          inside[q] = dx * dx + dy * dy <= r2 ? 1.0 : inside[q];
+          inside[q] = dx * dx + dy * dy <= r2 ? 1.0 : 0.0;
         }
       } else {
 #pragma omp simd
@@ -248,7 +245,7 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x,
           const double px = x[q] - ax, py = y[q] - ay;
           const double tc = 0.0;
           const double dx = px - tc * ux, dy = py - tc * uy;
-          inside[q] = dx * dx + dy * dy <= r2 ? 1.0 : inside[q];
+          inside[q] = dx * dx + dy * dy <= r2 ? 1.0 : 0.0;
         }
       }
     }
@@ -289,8 +286,10 @@ GuardedValue Guarded(const ElementCorners& e, double x, double y) {
     const double s = (x - e.x0) / (e.x1 - e.x0);
     const double t = (y - e.y0) / (e.y1 - e.y0);
     bool any = false;
+    bool in[4];
     for (int k = 0; k < 4; ++k) {
-      if (!e.reach[k].Contains(x, y)) continue;
+      in[k] = e.guard.inside[k] || e.reach[k].Contains(x, y);
+      if (!in[k]) continue;
       any = true;
       const double p = std::max(
           EvaluatePatch(e.c[k], c.x[k], c.y[k], x, y) + LiftAt(e, k, s, t),
@@ -308,42 +307,19 @@ GuardedValue Guarded(const ElementCorners& e, double x, double y) {
       return v;
     }
     bool hidden = !any;
-    for (int k = 0; k < 4; ++k) {
-      hidden |= !e.reach[k].Contains(x, y) && e.c[k].w < v.w;
-    }
+    for (int k = 0; k < 4; ++k) hidden |= !in[k] && e.c[k].w < v.w;
     if (hidden) TakeLowest(e, x, y, &v);
     return v;
   }
-  // The exact surfaces of the corners' owners and of the moves continuing
-  // them.
-  double h[4];
-  for (int k = 0; k < 4; ++k) {
-    h[k] = kInfinity;
-    if (e.owner[k] < 0) continue;
-    for (int q = 0; q < e.reach[k].count; ++q) {
-      const int32_t id = e.reach[k].id[q];
-      const double hk = e.surfaces->Height(id, x, y);
-      h[k] = std::min(h[k], hk);
-      if (hk < v.w) {
-        v.w = hk;
-        v.move = id;
-      }
-    }
-  }
-  // An uncut element may still hold a cut between its nodes: its
-  // candidates (PrepareGuarded).
+  // The exact surface: the element's candidates (PrepareGuarded) hold
+  // every move that can be the lowest in it.
   for (const int32_t id : e.candidates) {
-    const double hk = e.surfaces->Height(id, x, y);
-    if (hk < v.w) {
-      v.w = hk;
+    const double h = e.surfaces->Height(id, x, y);
+    if (h < v.w) {
+      v.w = h;
       v.move = id;
     }
   }
-  bool hidden = false;
-  for (int k = 0; k < 4; ++k) {
-    hidden |= e.owner[k] >= 0 && h[k] > v.w && e.c[k].w < v.w;
-  }
-  if (hidden) TakeLowest(e, x, y, &v);
   return v;
 }
 
@@ -459,11 +435,17 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
     }
   }
   e->guard.smooth = smooth;
-  // An uncut element: the moves that may cut it between its nodes.
-  if (e->surfaces != nullptr && e->owner[0] < 0 && e->owner[1] < 0 &&
-      e->owner[2] < 0 && e->owner[3] < 0) {
-    e->surfaces->FillCandidates(e);
+  // A capsule is convex: holding the element's corners, it holds it all.
+  for (int k = 0; k < 4; ++k) {
+    bool inside = true;
+    for (int j = 0; j < 4 && inside; ++j) {
+      inside = e->reach[k].Contains(c.x[j], c.y[j]);
+    }
+    e->guard.inside[k] = inside;
   }
+  // Elsewhere the exact surface: every move that can be the lowest in the
+  // element (an uncut one too: a cut may pass between its nodes).
+  if (!smooth && e->surfaces != nullptr) e->surfaces->FillCandidates(e);
 }
 
 double MinOfPatches(const ElementCorners& e, double x, double y) {

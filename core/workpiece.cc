@@ -455,37 +455,22 @@ void Workpiece::ReconstructGradient(double x, double y, double* gx,
                     gy);
 }
 
-namespace {
-bool SamePoint(const Vec3& a, const Vec3& b) {
-  return a.x == b.x && a.y == b.y && a.z == b.z;
-}
-}  // namespace
-
 CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
   CornerReach r;
   r.bounded = true;
-  // Where each sweep is below the top (beyond, the top is lower anyway): a
-  // rapid above the stock continues no surface.
-  auto add = [&](int64_t k) {
-    const Move& m = moves[k];
-    const Capsule c = Sweep(m.from, m.to, m.cutter).Footprint(z_top);
-    if (c.empty) return;
-    // The footprint's exact radius (Footprint widens it by a margin for
-    // the cut; here a point just outside must stay outside, as for the
-    // exact surface).
-    const double rho =
-        FootprintRadius(m.cutter, std::min(m.from.z, m.to.z), z_top);
-    r.id[r.count] = static_cast<int32_t>(k);
-    r.capsule[r.count++] = {c.x0, c.y0, c.x1, c.y1, rho};
-  };
   const Move& m = moves[id];
-  add(id);
   r.z_low = std::min(m.from.z, m.to.z);
-  if (id > 0 && SamePoint(moves[id - 1].to, m.from)) add(id - 1);
-  if (id + 1 < static_cast<int64_t>(moves.size()) &&
-      SamePoint(moves[id + 1].from, m.to)) {
-    add(id + 1);
+  // Where the sweep is below the top (beyond, the top is lower anyway).
+  const Capsule c = Sweep(m.from, m.to, m.cutter).Footprint(z_top);
+  if (c.empty) {
+    r.empty = true;
+    return r;
   }
+  // The footprint's exact radius (Footprint widens it by a margin for the
+  // cut; here a point just outside must stay outside, as for the exact
+  // surface).
+  const double rho = FootprintRadius(m.cutter, r.z_low, z_top);
+  r.capsule = {c.x0, c.y0, c.x1, c.y1, rho};
   return r;
 }
 

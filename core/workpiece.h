@@ -58,10 +58,8 @@ struct Move {
 };
 
 // Where the swept surface of moves[id] exists and how low it goes (for the
-// guarded scheme): the XY capsule where it goes below z_top (BallSweep::
-// Footprint), with those of the moves before and after it when they
-// continue the same path (one's end is the other's start), and its own
-// lowest tip.
+// guarded scheme): the XY capsule where it goes below z_top (the sweep's
+// Footprint, at the footprint's exact radius) and its lowest tip.
 CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top);
 
 // The exact swept surfaces of a list of moves, by index, and where each
@@ -190,10 +188,10 @@ class Workpiece {
   NodeValue Node(int32_t i, int32_t j) const;
   // Node (i, j)'s owner (-1: uncut), without its jet: Node(i, j).owner.
   int32_t OwnerAt(int32_t i, int32_t j) const;
-  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with each cut corner's
-  // reach (ReachOf its owner) and the stencil's owners and the moves'
-  // surfaces, where the scheme uses them; prepared (Scheme::Prepare) unless
-  // `prepare` is false (the caller prepares it).
+  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with the corners'
+  // owners, each cut corner's reach (ReachOf its owner), the candidates and
+  // the moves' surfaces where the scheme uses them, prepared by the scheme
+  // (Scheme::Prepare) unless `prepare` is false (the caller prepares it).
   ElementCorners Corners(int32_t ei, int32_t ej, bool prepare = true) const;
   // The scheme's reconstructed surface at a point of the stock (clamped to
   // the stock rectangle).

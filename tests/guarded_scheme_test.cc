@@ -228,25 +228,27 @@ TEST(GuardedSchemeTest, RandomScenesOfEveryShapeBeatTheZmap) {
   RecordProperty("worst_mean_ratio", std::to_string(worst_mean_ratio));
 }
 
-TEST(CornerReachTest, FootprintOfAMoveAndTheMovesContinuingIt) {
+TEST(CornerReachTest, FootprintOfAMove) {
   const std::vector<Move> path = {{{-2, 0, 0}, {0, 0, -1}, 1},
                                   {{0, 0, -1}, {2, 0, -1}, 1},
                                   {{2, 0, -1}, {2, 0, 3}, 1},
-                                  {{9, 9, 9}, {9, 9, -5}, 1}};
+                                  {{9, 9, 9}, {9, 9, -5}, 1},
+                                  {{0, 0, 101}, {5, 0, 101}, 1}};
   EXPECT_TRUE(CornerReach().Contains(1e9, -1e9));  // unbounded
   const CornerReach r = ReachOf(path, 1, 100);
-  EXPECT_EQ(r.count, 3);  // the ramp before, the retract after
   EXPECT_EQ(r.z_low, -1);  // its own tips only
   EXPECT_TRUE(r.Contains(1, 1));       // on the side, exactly at r
   EXPECT_FALSE(r.Contains(1, 1.001));
-  EXPECT_TRUE(r.Contains(-2.5, 0.5));  // the move before
-  EXPECT_TRUE(r.Contains(3, 0));       // end cap
+  EXPECT_FALSE(r.Contains(-2.5, 0.5));  // the move before: not its surface
+  EXPECT_TRUE(r.Contains(3, 0));        // end cap
   EXPECT_FALSE(r.Contains(3.01, 0));
-  const CornerReach plunge = ReachOf(path, 3, 100);  // not continuing move 2
-  EXPECT_EQ(plunge.count, 1);
+  const CornerReach plunge = ReachOf(path, 3, 100);
   EXPECT_EQ(plunge.z_low, -5);
   EXPECT_TRUE(plunge.Contains(9.6, 9.79));
   EXPECT_FALSE(plunge.Contains(9.6, 9.81));
+  const CornerReach above = ReachOf(path, 4, 100);  // never below the top
+  EXPECT_TRUE(above.empty);
+  EXPECT_FALSE(above.Contains(2, 0));
 }
 
 // The points of an element at once (ReconstructMany: smooth elements in

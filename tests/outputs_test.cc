@@ -1117,7 +1117,7 @@ std::vector<Move> GoldenMoves() {
 }
 
 // The writers' figures and bytes on a fixed scene, as they were before
-// issue 14's speed-ups (commit c7b198f: serial strokes, one JSON/SVG
+// issue 14's speed-ups (main at 4627b2d: serial strokes, one JSON/SVG
 // string, measuring every leaf again, ...) and after: the
 // adaptive mesh (triangles, measured deviation, every vertex and index),
 // the relief and marks pictures' pixels, marks.json and marks.svg.
