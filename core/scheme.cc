@@ -413,6 +413,12 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
   const double tau = kGuardConsistency * std::max(e->x1 - e->x0, e->y1 - e->y0);
   bool smooth = true;
   for (int k = 0; k < 4; ++k) smooth &= e->owner[k] >= 0;
+  // Whether corner k's reach holds corner q: for the lifts and for the
+  // whole element, tested once.
+  bool holds[4][4];
+  for (int k = 0; k < 4; ++k) {
+    for (int q = 0; q < 4; ++q) holds[k][q] = e->reach[k].Contains(c.x[q], c.y[q]);
+  }
   for (int k = 0; k < 4; ++k) {
     // The trust region is convex: trusted at the other corners, the patch
     // is trusted over the whole element.
@@ -427,7 +433,7 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
         smooth = false;
       }
       // A node outside the owner's reach says nothing of its surface.
-      if (!e->reach[k].Contains(c.x[q], c.y[q])) continue;
+      if (!holds[k][q]) continue;
       const double r =
           e->c[q].w - EvaluatePatch(e->c[k], c.x[k], c.y[k], c.x[q], c.y[q]);
       if (r > 0) e->guard.lift[k][q] = r;
@@ -437,11 +443,8 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
   e->guard.smooth = smooth;
   // A capsule is convex: holding the element's corners, it holds it all.
   for (int k = 0; k < 4; ++k) {
-    bool inside = true;
-    for (int j = 0; j < 4 && inside; ++j) {
-      inside = e->reach[k].Contains(c.x[j], c.y[j]);
-    }
-    e->guard.inside[k] = inside;
+    e->guard.inside[k] =
+        holds[k][0] && holds[k][1] && holds[k][2] && holds[k][3];
   }
   // Elsewhere the exact surface: every move that can be the lowest in the
   // element (an uncut one too: a cut may pass between its nodes).
