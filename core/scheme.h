@@ -122,6 +122,20 @@ class Scheme {
   // the piece Reconstruct picks).
   virtual void Gradient(const ElementCorners& e, double x, double y,
                         double* gx, double* gy) const = 0;
+  // Reconstruct at n points of the element: out[q] = Reconstruct(e, x[q],
+  // y[q]), bit for bit (schemes with work shared between points override
+  // it).
+  virtual void ReconstructMany(const ElementCorners& e, const double* x,
+                               const double* y, int32_t n, double* out) const {
+    for (int32_t q = 0; q < n; ++q) out[q] = Reconstruct(e, x[q], y[q]);
+  }
+  // Both at once: returns Reconstruct(e, x, y) and sets the Gradient, bit
+  // for bit (schemes that find both together override it).
+  virtual double HeightAndGradient(const ElementCorners& e, double x,
+                                   double y, double* gx, double* gy) const {
+    Gradient(e, x, y, gx, gy);
+    return Reconstruct(e, x, y);
+  }
 };
 
 // Eq. (16): bilinear interpolation of the corner heights.
@@ -165,8 +179,12 @@ double MinOfPatches(const ElementCorners& e, double x, double y);
 // "Guarded scheme".
 double GuardedHeight(const ElementCorners& e, double x, double y);
 // The per-element part of the guarded reconstruction (ElementCorners::
-// guard), from e's corners, reach and surfaces.
-void PrepareGuarded(ElementCorners* e);
+// guard), from e's corners, reach and surfaces. `trust`, if given, holds
+// TrustRegion(e->c[k]) for the cut corners (a node's region serves its four
+// elements).
+struct PatchTrustRegion;
+void PrepareGuarded(ElementCorners* e,
+                    const PatchTrustRegion* const trust[4] = nullptr);
 // Patches that disagree with a corner in their reach by more than this
 // fraction of the element's size mark the element as not smooth.
 inline constexpr double kGuardConsistency = 0.05;

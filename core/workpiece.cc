@@ -599,7 +599,8 @@ SurfaceJet MoveSweeps::Jet(int32_t id, double x, double y) const {
   return s->JetAt(x, y);
 }
 
-ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
+ElementCorners Workpiece::Corners(int32_t ei, int32_t ej,
+                                  bool prepare) const {
   ElementCorners e;
   e.ei = ei;
   e.ej = ej;
@@ -620,7 +621,7 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
   }
   if (scheme_->uses_candidates()) surfaces_.FillCandidates(&e);
   if (scheme_->uses_reach()) e.surfaces = &surfaces_;
-  scheme_->Prepare(&e);
+  if (prepare) scheme_->Prepare(&e);
   return e;
 }
 

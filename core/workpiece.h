@@ -186,11 +186,13 @@ class Workpiece {
 
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
   NodeValue Node(int32_t i, int32_t j) const;
+  // Node (i, j)'s owner (-1: uncut), without its jet: Node(i, j).owner.
+  int32_t OwnerAt(int32_t i, int32_t j) const;
   // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with the corners'
   // owners, each cut corner's reach (ReachOf its owner), the candidates and
   // the moves' surfaces where the scheme uses them, prepared by the scheme
-  // (Scheme::Prepare).
-  ElementCorners Corners(int32_t ei, int32_t ej) const;
+  // (Scheme::Prepare) unless `prepare` is false (the caller prepares it).
+  ElementCorners Corners(int32_t ei, int32_t ej, bool prepare = true) const;
   // The scheme's reconstructed surface at a point of the stock (clamped to
   // the stock rectangle).
   double Reconstruct(double x, double y) const;
@@ -261,8 +263,6 @@ class Workpiece {
   // the owners' sweeps once and cached (thread-safe). The reference stays
   // valid until this thread's next call (the thread keeps the last one).
   const TileJets& Jets(int32_t t) const;
-  // Node (i, j)'s owner (-1: uncut), without its jet.
-  int32_t OwnerAt(int32_t i, int32_t j) const;
   void ComputeJets(int32_t t, const Tile& tile, TileJets* out) const;
 
   const GridGeometry grid_;
