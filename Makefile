@@ -36,7 +36,7 @@ demo: deps build
 # clang build), the three at once whatever JOBS is (each runs for a fixed
 # time); the corpus replays are part of the main ctest.
 test: deps build fuzz-build
-	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
+	cd $(BUILD) && ctest --output-on-failure --timeout 900 -j $(JOBS)
 	cd $(FUZZ_BUILD) && ctest --output-on-failure -j 3 -L '^fuzz$$'
 
 bench: deps build
@@ -70,4 +70,4 @@ test-sanitize: deps $(ASAN_BUILD)/build.ninja
 	cmake --build $(ASAN_BUILD) -j $(JOBS)
 	cd $(ASAN_BUILD) && UBSAN_OPTIONS=print_stacktrace=1 \
 	  LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp \
-	  ctest --output-on-failure -j $(JOBS) -E '^ViewerBrowserTest'
+	  ctest --output-on-failure --timeout 900 -j $(JOBS) -E '^ViewerBrowserTest'

@@ -118,10 +118,21 @@ class Lattice {
         at(static_cast<double>(k - s) / static_cast<double>(df));
       }
     };
-    crossings(p.i, di);
-    crossings(p.j, dj);
-    crossings(p.i - p.j, di - dj);
-    crossings(p.i + p.j, di + dj);
+    // Along an axis or a diagonal several families cross at the same t
+    // (the same doubles: m / d and (2m) / (2d), or the same quotient of
+    // negated integers): measuring them once gives the same maximum.
+    if (dj == 0 || di == 0) {
+      crossings(dj == 0 ? p.i : p.j, dj == 0 ? di : dj);
+    } else if (di == dj) {
+      crossings(p.i + p.j, di + dj);
+    } else if (di == -dj) {
+      crossings(p.i - p.j, di - dj);
+    } else {
+      crossings(p.i, di);
+      crossings(p.j, dj);
+      crossings(p.i - p.j, di - dj);
+      crossings(p.i + p.j, di + dj);
+    }
     return dev;
   }
 
@@ -164,18 +175,26 @@ double LineDeviation(const Lattice& l, P p, P q) {
 
 // Whether the corner triangles of a leaf are within `tolerance`. Its sides
 // are edges of those triangles: checked first, they reject most blocks
-// cheaply.
-bool CornersFit(const Lattice& l, const Leaf& f, double tolerance) {
+// cheaply. When they fit, *dev is their deviation: what measuring the two
+// triangles without a limit gives (a measure stops early only above the
+// limit).
+bool CornersFit(const Lattice& l, const Leaf& f, double tolerance,
+                double* dev) {
   const P a{f.i0, f.j0}, b{f.i0 + f.w, f.j0}, c{f.i0 + f.w, f.j0 + f.h},
       d{f.i0, f.j0 + f.h};
   if (LineDeviation(l, a, b) > tolerance || LineDeviation(l, d, c) > tolerance ||
       LineDeviation(l, a, d) > tolerance || LineDeviation(l, b, c) > tolerance) {
     return false;
   }
-  std::vector<P> t;
+  thread_local std::vector<P> t;
+  t.clear();
   CornerTriangles(l, f, &t);
-  return l.TriangleDeviation(t[0], t[1], t[2], tolerance) <= tolerance &&
-         l.TriangleDeviation(t[3], t[4], t[5], tolerance) <= tolerance;
+  const double d0 = l.TriangleDeviation(t[0], t[1], t[2], tolerance);
+  if (!(d0 <= tolerance)) return false;
+  const double d1 = l.TriangleDeviation(t[3], t[4], t[5], tolerance);
+  if (!(d1 <= tolerance)) return false;
+  *dev = std::max(std::max(0.0, d0), d1);
+  return true;
 }
 
 // The halves of a leaf across x or across y: across the direction in which
@@ -259,6 +278,11 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
   // corner triangles miss the tolerance is split.
   constexpr int64_t kRoot = 64;
   std::vector<Leaf> pending, leaves;
+  // Per leaf, its corner triangles' deviation where CornersFit measured it
+  // (-1: not measured): a leaf whose sides gain no vertex keeps those
+  // triangles, and the conforming pass takes the value instead of
+  // measuring them again.
+  std::vector<double> fit_dev;
   for (int64_t j = 0; j < ny; j += kRoot) {
     for (int64_t i = 0; i < nx; i += kRoot) {
       pending.push_back({i, j, kRoot, kRoot});
@@ -268,6 +292,7 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
   while (!pending.empty()) {
     std::vector<std::array<Leaf, 2>> halves(pending.size());
     std::vector<char> split(pending.size());
+    std::vector<double> dev(pending.size(), -1);
     pool.ParallelFor(static_cast<int64_t>(pending.size()), [&](int64_t k) {
       const Leaf& f = pending[k];
       if (f.i0 + f.w > nx) {
@@ -276,7 +301,7 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
       } else if (f.j0 + f.h > ny) {
         halves[k] = {Leaf{f.i0, f.j0, f.w, f.h / 2},
                      Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
-      } else if (f.w * f.h > 1 && !CornersFit(l, f, tolerance)) {
+      } else if (f.w * f.h > 1 && !CornersFit(l, f, tolerance, &dev[k])) {
         halves[k] = Halves(l, f);
       } else {
         return;
@@ -287,6 +312,7 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
     for (size_t k = 0; k < pending.size(); ++k) {
       if (!split[k]) {
         leaves.push_back(pending[k]);
+        fit_dev.push_back(dev[k]);
         continue;
       }
       for (const Leaf& c : halves[k]) {
@@ -304,7 +330,7 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
   std::vector<double> leaf_dev(leaves.size());
   std::vector<char> dirty(leaves.size(), 1);
   std::vector<uint8_t> used, old_used;
-  for (;;) {
+  for (bool first_pass = true;; first_pass = false) {
     old_used.swap(used);
     used.assign(lattice_vertices, 0);
     for (const Leaf& f : leaves) {
@@ -314,29 +340,45 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
     }
     pool.ParallelFor(static_cast<int64_t>(leaves.size()), [&](int64_t k) {
       const Leaf& f = leaves[k];
-      // The sides' lattice vertices, counter-clockwise from (i0, j0).
-      std::vector<P> side;
-      for (int64_t d = 0; d < f.w; ++d) side.push_back({f.i0 + d, f.j0});
-      for (int64_t d = 0; d < f.h; ++d) side.push_back({f.i0 + f.w, f.j0 + d});
-      for (int64_t d = f.w; d > 0; --d) side.push_back({f.i0 + d, f.j0 + f.h});
-      for (int64_t d = f.h; d > 0; --d) side.push_back({f.i0, f.j0 + d});
+      // Calls fn(p) for the sides' lattice vertices, counter-clockwise
+      // from (i0, j0), until it returns false.
+      auto sides = [&f](auto&& fn) {
+        for (int64_t d = 0; d < f.w; ++d) {
+          if (!fn(P{f.i0 + d, f.j0})) return;
+        }
+        for (int64_t d = 0; d < f.h; ++d) {
+          if (!fn(P{f.i0 + f.w, f.j0 + d})) return;
+        }
+        for (int64_t d = f.w; d > 0; --d) {
+          if (!fn(P{f.i0 + d, f.j0 + f.h})) return;
+        }
+        for (int64_t d = f.h; d > 0; --d) {
+          if (!fn(P{f.i0, f.j0 + d})) return;
+        }
+      };
       if (!dirty[k]) {
-        for (const P& p : side) {
+        sides([&](const P& p) {
           if (used[l.Index(p.i, p.j)] != old_used[l.Index(p.i, p.j)]) {
             dirty[k] = 1;
-            break;
           }
-        }
+          return !dirty[k];
+        });
         if (!dirty[k]) return;
       }
       std::vector<P> ring;
-      for (const P& p : side) {
+      sides([&](const P& p) {
         if (used[l.Index(p.i, p.j)]) ring.push_back(p);
-      }
+        return true;
+      });
       std::vector<P>& t = tris[k];
       t.clear();
+      dirty[k] = 0;
       if (ring.size() == 4) {
         CornerTriangles(l, f, &t);
+        if (first_pass && fit_dev[k] >= 0) {
+          leaf_dev[k] = fit_dev[k];
+          return;
+        }
       } else {
         ClipEars(std::move(ring), &t);
       }
@@ -345,7 +387,6 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
         dev = std::max(dev, l.TriangleDeviation(t[q], t[q + 1], t[q + 2]));
       }
       leaf_dev[k] = dev;
-      dirty[k] = 0;
     });
     std::vector<Leaf> next;
     std::vector<std::vector<P>> next_tris;

@@ -1,12 +1,15 @@
 #include "client/marks_files.h"
 
 #include <algorithm>
+#include <functional>
+#include <string_view>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "client/colormap.h"
 #include "client/file_writer.h"
 #include "client/json_writer.h"
+#include "core/thread_pool.h"
 
 namespace swarf::cli {
 
@@ -67,36 +70,84 @@ std::vector<MarkPolyline> FilterMarks(const std::vector<MarkPolyline>& marks,
   return out;
 }
 
+namespace {
+
+// Polylines per chunk formatted by one task.
+constexpr size_t kChunkPolylines = 1024;
+
+// format(k, &text) appends polyline k's text; the chunks of polylines are
+// formatted at once on ThreadPool::Default(), each chunk's text in order.
+std::vector<std::string> FormatChunks(
+    size_t n, const std::function<void(size_t, std::string*)>& format) {
+  const size_t chunks = (n + kChunkPolylines - 1) / kChunkPolylines;
+  std::vector<std::string> out(chunks);
+  ThreadPool::Default().ParallelFor(
+      static_cast<int64_t>(chunks), [&](int64_t c) {
+        const size_t end = std::min(n, (c + 1) * kChunkPolylines);
+        for (size_t k = c * kChunkPolylines; k < end; ++k) {
+          format(k, &out[c]);
+        }
+      });
+  return out;
+}
+
+// One polyline object as JsonWriter writes it inside the array (its
+// members do not depend on what comes before it), preceded by the array's
+// comma after the first.
+void AppendMarkJson(const MarkPolyline& p, bool vertex_owners, bool first,
+                    std::string* out) {
+  if (!first) *out += ',';
+  JsonWriter j;
+  j.BeginObject().Key("closed").Bool(p.closed);
+  j.Key("owners").BeginArray().Int(p.owners[0]).Int(p.owners[1]).EndArray();
+  j.Key("vertices").BeginArray();
+  for (const Vec3& v : p.vertices) {
+    j.BeginArray().Double(v.x).Double(v.y).Double(v.z).EndArray();
+  }
+  j.EndArray().Key("angle_deg").BeginArray();
+  for (double a : p.angle_deg) j.Double(a);
+  j.EndArray();
+  if (vertex_owners) {
+    j.Key("vertex_owners").BeginArray();
+    for (const auto& o : p.vertex_owners) {
+      j.BeginArray().Int(o[0]).Int(o[1]).EndArray();
+    }
+    j.EndArray();
+  }
+  j.EndObject();
+  *out += j.str();
+}
+
+constexpr std::string_view kMarksJsonHead = "{\"polylines\":[";
+constexpr std::string_view kMarksJsonTail = "]}";
+
+std::vector<std::string> MarksJsonChunks(const std::vector<MarkPolyline>& marks,
+                                         bool vertex_owners) {
+  return FormatChunks(marks.size(), [&](size_t k, std::string* out) {
+    AppendMarkJson(marks[k], vertex_owners, k == 0, out);
+  });
+}
+
+}  // namespace
+
 std::string MarksJson(const std::vector<MarkPolyline>& marks,
                       bool vertex_owners) {
-  JsonWriter j;
-  j.BeginObject().Key("polylines").BeginArray();
-  for (const MarkPolyline& p : marks) {
-    j.BeginObject().Key("closed").Bool(p.closed);
-    j.Key("owners").BeginArray().Int(p.owners[0]).Int(p.owners[1]).EndArray();
-    j.Key("vertices").BeginArray();
-    for (const Vec3& v : p.vertices) {
-      j.BeginArray().Double(v.x).Double(v.y).Double(v.z).EndArray();
-    }
-    j.EndArray().Key("angle_deg").BeginArray();
-    for (double a : p.angle_deg) j.Double(a);
-    j.EndArray();
-    if (vertex_owners) {
-      j.Key("vertex_owners").BeginArray();
-      for (const auto& o : p.vertex_owners) {
-        j.BeginArray().Int(o[0]).Int(o[1]).EndArray();
-      }
-      j.EndArray();
-    }
-    j.EndObject();
-  }
-  j.EndArray().EndObject();
-  return j.str();
+  std::string s(kMarksJsonHead);
+  for (const std::string& c : MarksJsonChunks(marks, vertex_owners)) s += c;
+  s += kMarksJsonTail;
+  return s;
 }
 
 absl::Status WriteMarksJson(const std::vector<MarkPolyline>& marks,
                             const std::string& path) {
-  return WriteStringToFile(path, MarksJson(marks) + "\n");
+  // Chunk by chunk: no copy of the whole document.
+  FileWriter f(path);
+  if (!f.status().ok()) return f.status();
+  f.Write(kMarksJsonHead);
+  for (const std::string& c : MarksJsonChunks(marks, false)) f.Write(c);
+  f.Write(kMarksJsonTail);
+  f.Write("\n");
+  return f.Close();
 }
 
 namespace {
@@ -104,53 +155,79 @@ namespace {
 // 7 significant digits: 1e-5 mm on a 100 mm stock, well below any grid.
 std::string Num(double v) { return absl::StrFormat("%.7g", v); }
 
-}  // namespace
-
-std::string MarksSvg(const StockSpec& stock,
-                     const std::vector<MarkPolyline>& marks) {
+std::string MarksSvgHead(const StockSpec& stock, size_t polylines,
+                         double stroke) {
   const double w = stock.x1 - stock.x0, h = stock.y1 - stock.y0;
-  // Strokes scale with the stock so that the drawing looks the same at any
-  // size: 1/400 of the longer side, the outline a little thinner.
-  const double stroke = std::max(w, h) / 400;
-  std::string s = absl::StrCat(
+  return absl::StrCat(
       "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
       "<svg xmlns=\"http://www.w3.org/2000/svg\" version=\"1.1\" width=\"",
       Num(w), "mm\" height=\"", Num(h), "mm\" viewBox=\"", Num(stock.x0), " ",
       Num(-stock.y1), " ", Num(w), " ", Num(h), "\">\n",
-      "<title>swarf cutting marks: ", marks.size(),
+      "<title>swarf cutting marks: ", polylines,
       " polylines, mm, y up</title>\n",
       "<g transform=\"scale(1,-1)\" fill=\"none\" stroke-linecap=\"round\" "
       "stroke-linejoin=\"round\">\n",
       "<rect x=\"", Num(stock.x0), "\" y=\"", Num(stock.y0), "\" width=\"",
       Num(w), "\" height=\"", Num(h), "\" stroke=\"#000000\" stroke-width=\"",
       Num(stroke * 0.6), "\"/>\n");
-  for (const MarkPolyline& p : marks) {
-    double mean = 0;
-    for (double a : p.angle_deg) mean += a;
-    if (!p.angle_deg.empty()) mean /= p.angle_deg.size();
-    const Rgb c = AngleColor(mean);
-    absl::StrAppend(&s, "<path stroke=\"",
-                    absl::StrFormat("#%02x%02x%02x", c.r, c.g, c.b),
-                    "\" stroke-width=\"", Num(stroke), "\" data-owners=\"",
-                    p.owners[0], " ", p.owners[1], "\" data-angle-deg=\"",
-                    Num(mean), "\" d=\"");
-    for (size_t k = 0; k < p.vertices.size(); ++k) {
-      absl::StrAppend(&s, k == 0 ? "M" : " L", Num(p.vertices[k].x), " ",
-                      Num(p.vertices[k].y));
-    }
-    if (p.closed) s += " Z";
-    absl::StrAppend(&s, "\"><title>owners ", p.owners[0], " ", p.owners[1],
-                    ", mean angle ", absl::StrFormat("%.2f", mean),
-                    " deg</title></path>\n");
+}
+
+constexpr std::string_view kMarksSvgTail = "</g>\n</svg>\n";
+
+void AppendMarkSvg(const MarkPolyline& p, double stroke, std::string* s) {
+  double mean = 0;
+  for (double a : p.angle_deg) mean += a;
+  if (!p.angle_deg.empty()) mean /= p.angle_deg.size();
+  const Rgb c = AngleColor(mean);
+  absl::StrAppend(s, "<path stroke=\"",
+                  absl::StrFormat("#%02x%02x%02x", c.r, c.g, c.b),
+                  "\" stroke-width=\"", Num(stroke), "\" data-owners=\"",
+                  p.owners[0], " ", p.owners[1], "\" data-angle-deg=\"",
+                  Num(mean), "\" d=\"");
+  for (size_t k = 0; k < p.vertices.size(); ++k) {
+    absl::StrAppend(s, k == 0 ? "M" : " L", Num(p.vertices[k].x), " ",
+                    Num(p.vertices[k].y));
   }
-  s += "</g>\n</svg>\n";
+  if (p.closed) *s += " Z";
+  absl::StrAppend(s, "\"><title>owners ", p.owners[0], " ", p.owners[1],
+                  ", mean angle ", absl::StrFormat("%.2f", mean),
+                  " deg</title></path>\n");
+}
+
+// Strokes scale with the stock so that the drawing looks the same at any
+// size: 1/400 of the longer side, the outline a little thinner.
+double SvgStroke(const StockSpec& stock) {
+  return std::max(stock.x1 - stock.x0, stock.y1 - stock.y0) / 400;
+}
+
+std::vector<std::string> MarksSvgChunks(const std::vector<MarkPolyline>& marks,
+                                        double stroke) {
+  return FormatChunks(marks.size(), [&](size_t k, std::string* out) {
+    AppendMarkSvg(marks[k], stroke, out);
+  });
+}
+
+}  // namespace
+
+std::string MarksSvg(const StockSpec& stock,
+                     const std::vector<MarkPolyline>& marks) {
+  const double stroke = SvgStroke(stock);
+  std::string s = MarksSvgHead(stock, marks.size(), stroke);
+  for (const std::string& c : MarksSvgChunks(marks, stroke)) s += c;
+  s += kMarksSvgTail;
   return s;
 }
 
 absl::Status WriteMarksSvg(const StockSpec& stock,
                            const std::vector<MarkPolyline>& marks,
                            const std::string& path) {
-  return WriteStringToFile(path, MarksSvg(stock, marks));
+  const double stroke = SvgStroke(stock);
+  FileWriter f(path);
+  if (!f.status().ok()) return f.status();
+  f.Write(MarksSvgHead(stock, marks.size(), stroke));
+  for (const std::string& c : MarksSvgChunks(marks, stroke)) f.Write(c);
+  f.Write(kMarksSvgTail);
+  return f.Close();
 }
 
 }  // namespace swarf::cli

@@ -192,22 +192,31 @@ absl::StatusOr<Image> RenderRelief(const SurfaceGrid& grid,
   const size_t n = static_cast<size_t>(f.width) * f.height;
   std::vector<float> height(n), shade(n);
   std::vector<double> row_min(f.height, z_top);
-  ThreadPool::Default().ParallelFor(f.height, [&](int64_t py) {
-    const double y = f.Y(py);
-    double lo = z_top;
-    for (int px = 0; px < f.width; ++px) {
-      double gx, gy;
-      const double z = grid.HeightAndGradient(f.X(px), y, &gx, &gy);
-      const double dot = (-gx * kLightX - gy * kLightY + kLightZ) /
-                         std::sqrt(gx * gx + gy * gy + 1);
-      const size_t k = static_cast<size_t>(py) * f.width + px;
-      // Stored relative to the top in float: depth resolution ~1e-7 of it.
-      height[k] = static_cast<float>(z - z_top);
-      shade[k] = static_cast<float>(
-          kAmbient + (1 - kAmbient) * std::max(dot, 0.0) / kLightZ);
-      lo = std::min(lo, z);
+  // Blocks of rows, each with one sampler: neighbouring rows share nodes.
+  constexpr int kBlockRows = 16;
+  const int blocks = (f.height + kBlockRows - 1) / kBlockRows;
+  ThreadPool::Default().ParallelFor(blocks, [&](int64_t block) {
+    SurfaceSampler sampler(grid);
+    const int py0 = static_cast<int>(block) * kBlockRows;
+    const int py1 = std::min(f.height, py0 + kBlockRows);
+    for (int py = py0; py < py1; ++py) {
+      const double y = f.Y(py);
+      double lo = z_top;
+      for (int px = 0; px < f.width; ++px) {
+        double gx, gy;
+        const double z = sampler.HeightAndGradient(f.X(px), y, &gx, &gy);
+        const double dot = (-gx * kLightX - gy * kLightY + kLightZ) /
+                           std::sqrt(gx * gx + gy * gy + 1);
+        const size_t k = static_cast<size_t>(py) * f.width + px;
+        // Stored relative to the top in float: depth resolution ~1e-7 of
+        // it.
+        height[k] = static_cast<float>(z - z_top);
+        shade[k] = static_cast<float>(
+            kAmbient + (1 - kAmbient) * std::max(dot, 0.0) / kLightZ);
+        lo = std::min(lo, z);
+      }
+      row_min[py] = lo;
     }
-    row_min[py] = lo;
   });
   const double depth = z_top - *std::min_element(row_min.begin(),
                                                  row_min.end());
@@ -354,25 +363,43 @@ struct PixelSegment {
 // Anti-aliased stroke: each pixel's coverage is how far its centre lies
 // inside the stroke's edge (a one-pixel ramp), which is cheap and good
 // enough for lines of a few pixels.
+// The rows a stroke of `width` may touch, [*y0, *y1] within [0, max_y).
+void StrokeRows(const PixelSegment& s, double width, int max_y, int* y0,
+                int* y1) {
+  const double half = width / 2;
+  *y0 = std::max(0, static_cast<int>(std::floor(
+                        std::min(s.ay, s.by) - half - 1)));
+  *y1 = std::min(max_y - 1, static_cast<int>(std::ceil(
+                                std::max(s.ay, s.by) + half + 1)));
+}
+
+// Draws the stroke's pixels in rows [row0, row1) only: a pixel's blends
+// happen in segment order whichever band draws it, so bands of rows can be
+// drawn at once with the same result.
 void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
-            double width, bool halo) {
+            double width, bool halo, int row0, int row1) {
   const double half = width / 2;
   const int x0 = std::max(0, static_cast<int>(std::floor(
                                  std::min(s.ax, s.bx) - half - 1)));
   const int x1 = std::min(max_x - 1, static_cast<int>(std::ceil(
                                          std::max(s.ax, s.bx) + half + 1)));
-  const int y0 = std::max(0, static_cast<int>(std::floor(
-                                 std::min(s.ay, s.by) - half - 1)));
-  const int y1 = std::min(max_y - 1, static_cast<int>(std::ceil(
-                                         std::max(s.ay, s.by) + half + 1)));
+  int y0, y1;
+  StrokeRows(s, width, max_y, &y0, &y1);
+  y0 = std::max(y0, row0);
+  y1 = std::min(y1, row1 - 1);
   const double dx = s.bx - s.ax, dy = s.by - s.ay;
   const double len2 = dx * dx + dy * dy;
+  // Pixels at squared distance r2 or more have no coverage: sqrt is
+  // monotonic and sqrt(fl(r * r)) == r, so sqrt(d2) >= r there.
+  const double r = half + 0.5, r2 = r * r;
   for (int py = y0; py <= y1; ++py) {
     for (int px = x0; px <= x1; ++px) {
       double t = len2 > 0 ? ((px - s.ax) * dx + (py - s.ay) * dy) / len2 : 0;
       t = std::clamp(t, 0.0, 1.0);
       const double ex = s.ax + t * dx - px, ey = s.ay + t * dy - py;
-      const double coverage = half + 0.5 - std::sqrt(ex * ex + ey * ey);
+      const double d2 = ex * ex + ey * ey;
+      if (d2 >= r2) continue;
+      const double coverage = r - std::sqrt(d2);
       if (coverage <= 0) continue;
       const Rgb c = halo ? kHalo
                          : AngleColor(s.angle_a + t * (s.angle_b - s.angle_a));
@@ -441,13 +468,31 @@ absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
   for (int y = 0; y < frame.height; ++y) {
     std::copy(relief.row(y), relief.row(y) + 3 * frame.width, image.row(y));
   }
-  // All halos first, so that no halo covers an earlier line's colour.
-  for (const PixelSegment& s : segments) {
-    Stroke(image, frame.width, frame.height, s, width + 2, true);
+  // All halos first, so that no halo covers an earlier line's colour. In
+  // bands of rows at once, each band's segments in their order (a halo's
+  // rows hold its line's).
+  constexpr int kBandRows = 32;
+  const int bands = (frame.height + kBandRows - 1) / kBandRows;
+  std::vector<std::vector<uint32_t>> band_segments(bands);
+  for (size_t k = 0; k < segments.size(); ++k) {
+    int y0, y1;
+    StrokeRows(segments[k], width + 2, frame.height, &y0, &y1);
+    for (int b = y0 / kBandRows; b <= y1 / kBandRows && b < bands; ++b) {
+      band_segments[b].push_back(static_cast<uint32_t>(k));
+    }
   }
-  for (const PixelSegment& s : segments) {
-    Stroke(image, frame.width, frame.height, s, width, false);
-  }
+  ThreadPool::Default().ParallelFor(bands, [&](int64_t b) {
+    const int row0 = static_cast<int>(b) * kBandRows;
+    const int row1 = std::min(frame.height, row0 + kBandRows);
+    for (uint32_t k : band_segments[b]) {
+      Stroke(image, frame.width, frame.height, segments[k], width + 2, true,
+             row0, row1);
+    }
+    for (uint32_t k : band_segments[b]) {
+      Stroke(image, frame.width, frame.height, segments[k], width, false,
+             row0, row1);
+    }
+  });
   DrawLegend(image, legend_x0, image.height(), legend, scale, nullptr,
              nullptr);
   return image;

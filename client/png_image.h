@@ -2,6 +2,7 @@
 #ifndef SWARF_CLIENT_PNG_IMAGE_H_
 #define SWARF_CLIENT_PNG_IMAGE_H_
 
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -46,8 +47,16 @@ class Image {
     p[1] = c.g;
     p[2] = c.b;
   }
-  // Mixes `c` over the pixel with weight a in [0, 1] (clamped).
-  void Blend(int x, int y, Rgb c, double a);
+  // Mixes `c` over the pixel with weight a in [0, 1] (clamped). Inline:
+  // strokes call it per pixel.
+  void Blend(int x, int y, Rgb c, double a) {
+    a = std::clamp(a, 0.0, 1.0);
+    uint8_t* p = &pixels_[Offset(x, y)];
+    const uint8_t src[3] = {c.r, c.g, c.b};
+    for (int k = 0; k < 3; ++k) {
+      p[k] = static_cast<uint8_t>(p[k] + (src[k] - p[k]) * a + 0.5);
+    }
+  }
   // Fills [x0, x1) x [y0, y1), clipped to the image.
   void FillRect(int x0, int y0, int x1, int y1, Rgb c);
 

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "absl/strings/str_format.h"
+#include "core/thread_pool.h"
 
 namespace swarf::cli {
 
@@ -30,11 +31,7 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::Uncut(const StockSpec& spec,
 absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
   absl::StatusOr<SurfaceGrid> g = Uncut(wp.spec(), wp.scheme().kind());
   if (!g.ok()) return g.status();
-  g->moves.reserve(wp.move_count());
-  for (int64_t id = 0; id < wp.move_count(); ++id) {
-    g->moves.push_back(wp.move(id));
-  }
-  g->surfaces = std::make_shared<const MoveSweeps>(g->moves, g->spec);
+  g->SetMoves(std::vector<Move>(wp.moves().begin(), wp.moves().end()));
   std::vector<double> w(kTileNodes);
   std::vector<float> dbuf(5 * kTileNodes);
   std::vector<int32_t> owner(kTileNodes);
@@ -63,6 +60,22 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
     }
   }
   return g;
+}
+
+void SurfaceGrid::SetMoves(std::vector<Move> list) {
+  moves = std::move(list);
+  surfaces = std::make_shared<const MoveSweeps>(moves, spec);
+  // Every element's corners need their owners' reach (up to three sweeps
+  // each): once per move instead.
+  auto r = std::make_shared<std::vector<CornerReach>>(moves.size());
+  constexpr int64_t kChunk = 1024;
+  const int64_t n = static_cast<int64_t>(moves.size());
+  ThreadPool::Default().ParallelFor((n + kChunk - 1) / kChunk, [&](int64_t c) {
+    for (int64_t id = c * kChunk; id < std::min(n, (c + 1) * kChunk); ++id) {
+      (*r)[id] = ReachOf(moves, id, spec.z_top);
+    }
+  });
+  reaches = std::move(r);
 }
 
 absl::Status SurfaceGrid::SetNodes(int32_t i0, int32_t j0, int32_t nx,
@@ -110,7 +123,8 @@ absl::Status SurfaceGrid::Validate() const {
   return absl::OkStatus();
 }
 
-ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
+ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej,
+                                    bool prepare) const {
   // Same construction as Workpiece::Corners so that reconstructions agree
   // bit for bit.
   const GridGeometry g(spec);
@@ -130,15 +144,17 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej) const {
     e.owner[k] = o;
     if (o >= 0 && o < static_cast<int64_t>(moves.size()) &&
         GetScheme(scheme).uses_reach()) {
-      e.reach[k] = surfaces != nullptr ? surfaces->Reach(o, spec.z_top)
-                                       : ReachOf(moves, o, spec.z_top);
+      e.reach[k] = reaches != nullptr && reaches->size() == moves.size()
+                       ? (*reaches)[o]
+                   : surfaces != nullptr ? surfaces->Reach(o, spec.z_top)
+                                         : ReachOf(moves, o, spec.z_top);
     }
   }
   if (GetScheme(scheme).uses_candidates() && surfaces != nullptr) {
     surfaces->FillCandidates(&e);
   }
   if (GetScheme(scheme).uses_reach()) e.surfaces = surfaces.get();
-  GetScheme(scheme).Prepare(&e);
+  if (prepare) GetScheme(scheme).Prepare(&e);
   return e;
 }
 
@@ -159,10 +175,58 @@ double SurfaceGrid::HeightAndGradient(double x, double y, double* gx,
   const GridGeometry g(spec);
   x = std::clamp(x, spec.x0, spec.x1);
   y = std::clamp(y, spec.y0, spec.y1);
-  const ElementCorners e = Corners(g.ElementX(x), g.ElementY(y));
-  const Scheme& s = GetScheme(scheme);
-  s.Gradient(e, x, y, gx, gy);
-  return s.Reconstruct(e, x, y);
+  return GetScheme(scheme).HeightAndGradient(
+      Corners(g.ElementX(x), g.ElementY(y)), x, y, gx, gy);
+}
+
+SurfaceSampler::SurfaceSampler(const SurfaceGrid& grid)
+    : grid_(grid), scheme_(GetScheme(grid.scheme)) {}
+
+const PatchTrustRegion* SurfaceSampler::Region(int32_t i, int32_t j) {
+  int k = 0;
+  while (k < kRows && row_[k] != j) ++k;
+  if (k == kRows) {
+    // A new row replaces the oldest.
+    k = next_;
+    next_ = (next_ + 1) % kRows;
+    row_[k] = j;
+    regions_[k].resize(grid_.nodes_x());
+    has_[k].assign(grid_.nodes_x(), 0);
+  }
+  if (!has_[k][i]) {
+    regions_[k][i] = TrustRegion(grid_.jet(i, j));
+    has_[k][i] = 1;
+  }
+  return &regions_[k][i];
+}
+
+double SurfaceSampler::HeightAndGradient(double x, double y, double* gx,
+                                         double* gy) {
+  // As SurfaceGrid::HeightAndGradient.
+  const GridGeometry g(grid_.spec);
+  x = std::clamp(x, grid_.spec.x0, grid_.spec.x1);
+  y = std::clamp(y, grid_.spec.y0, grid_.spec.y1);
+  const int32_t ei = g.ElementX(x), ej = g.ElementY(y);
+  if (ei != ei_ || ej != ej_) {
+    if (scheme_.kind() == SchemeKind::kGuarded) {
+      // Prepared from the nodes' regions (a node serves four elements);
+      // PrepareGuarded reads them for cut corners only.
+      e_ = grid_.Corners(ei, ej, /*prepare=*/false);
+      const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
+      const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
+      static const PatchTrustRegion kNone;
+      const PatchTrustRegion* trust[4];
+      for (int k = 0; k < 4; ++k) {
+        trust[k] = e_.owner[k] >= 0 ? Region(is[k], js[k]) : &kNone;
+      }
+      PrepareGuarded(&e_, trust);
+    } else {
+      e_ = grid_.Corners(ei, ej);
+    }
+    ei_ = ei;
+    ej_ = ej;
+  }
+  return scheme_.HeightAndGradient(e_, x, y, gx, gy);
 }
 
 double SurfaceGrid::MinNodeHeight() const {

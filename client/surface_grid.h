@@ -35,6 +35,14 @@ struct SurfaceGrid {
   // The same moves' exact surfaces, for the exact scheme (null: that
   // scheme falls back to the patches). Immutable, shared by copies.
   std::shared_ptr<const MoveSweeps> surfaces;
+  // ReachOf each of those moves, for the guarded scheme (null, or not one
+  // per move: computed for every corner, the same values). Immutable,
+  // shared by copies.
+  std::shared_ptr<const std::vector<CornerReach>> reaches;
+
+  // Sets moves, surfaces and reaches (reaches in parallel on
+  // ThreadPool::Default()).
+  void SetMoves(std::vector<Move> moves);
 
   // Untouched stock: every node at z_top, flat, owner -1. InvalidArgument
   // for a spec ValidateStock rejects, or more than kMaxGridNodes nodes.
@@ -64,8 +72,9 @@ struct SurfaceGrid {
   const SurfaceJet& jet(int32_t i, int32_t j) const { return jets[Index(i, j)]; }
   int32_t owner(int32_t i, int32_t j) const { return owners[Index(i, j)]; }
 
-  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny.
-  ElementCorners Corners(int32_t ei, int32_t ej) const;
+  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny; prepared
+  // (Scheme::Prepare) unless `prepare` is false (the caller prepares it).
+  ElementCorners Corners(int32_t ei, int32_t ej, bool prepare = true) const;
   // The scheme's reconstruction at any point of the stock (clamped to the
   // stock rectangle), as Workpiece::Reconstruct.
   double Height(double x, double y) const;
@@ -76,6 +85,33 @@ struct SurfaceGrid {
   double HeightAndGradient(double x, double y, double* gx, double* gy) const;
   // Lowest node height (z_top if uncut).
   double MinNodeHeight() const;
+};
+
+// Reconstructs a grid at many points for one thread, as
+// SurfaceGrid::HeightAndGradient does bit for bit, keeping what neighbouring
+// points share: the last element's corners (prepared, Scheme::Prepare) for
+// the next points in it, and for the guarded scheme the trust regions
+// (TrustRegion) of the cut nodes of the last few node rows, from which
+// elements are prepared (PrepareGuarded). Cheapest when points come row by
+// row. Not thread-safe; `grid` must outlive it and stay unchanged.
+class SurfaceSampler {
+ public:
+  explicit SurfaceSampler(const SurfaceGrid& grid);
+  double HeightAndGradient(double x, double y, double* gx, double* gy);
+
+ private:
+  const PatchTrustRegion* Region(int32_t i, int32_t j);
+
+  const SurfaceGrid& grid_;
+  const Scheme& scheme_;
+  int32_t ei_ = -1, ej_ = -1;  // the element e_ holds
+  ElementCorners e_;
+  // Regions of node rows row_[k] (-1: none), computed where has_[k] says.
+  static constexpr int kRows = 4;
+  int32_t row_[kRows] = {-1, -1, -1, -1};
+  std::vector<PatchTrustRegion> regions_[kRows];
+  std::vector<uint8_t> has_[kRows];
+  int next_ = 0;
 };
 
 // Largest grid the writers accept (nodes): 16 Ki x 16 Ki.

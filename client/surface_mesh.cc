@@ -5,6 +5,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstring>
+#include <optional>
 
 #include "absl/strings/str_format.h"
 #include "client/colormap.h"
@@ -68,19 +69,23 @@ absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
     const int32_t ej = static_cast<int32_t>(std::min(j / s, ny - 1));
     double lo = grid.spec.z_top;
     for (int32_t ei = 0; ei < nx; ++ei) {
-      // Corners once per element for its s (s + 1 in the last) vertices.
-      const ElementCorners e = grid.Corners(ei, ej);
+      // Corners once per element for its s (s + 1 in the last) vertices,
+      // and only where one lies between nodes (never at s = 1).
+      std::optional<ElementCorners> e;
       const int64_t i_end = ei == nx - 1 ? big_nx : (ei + 1) * int64_t{s} - 1;
       for (int64_t i = ei * int64_t{s}; i <= i_end; ++i) {
         // At a node its simulated height is exact; eq. (2) there can sit
         // below it where a neighbour's patch, extrapolated across a steep
         // element, undershoots. The patches fill in between nodes.
-        const double z =
-            (i % s == 0 && j % s == 0)
-                ? std::min(grid.jet(static_cast<int32_t>(i / s),
-                                    static_cast<int32_t>(j / s)).w,
-                           grid.spec.z_top)
-                : scheme.Reconstruct(e, xs[i], ys[j]);
+        double z;
+        if (i % s == 0 && j % s == 0) {
+          z = std::min(grid.jet(static_cast<int32_t>(i / s),
+                                static_cast<int32_t>(j / s)).w,
+                       grid.spec.z_top);
+        } else {
+          if (!e.has_value()) e = grid.Corners(ei, ej);
+          z = scheme.Reconstruct(*e, xs[i], ys[j]);
+        }
         mesh.vertices[top_index(i, j)] = {xs[i], ys[j], z};
         lo = std::min(lo, z);
       }

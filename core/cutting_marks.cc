@@ -897,7 +897,8 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
 }
 
 std::vector<MarkPolyline> Chain(const std::vector<Segment>& segs, double tol,
-                                double fold, double end_fold) {
+                                double fold, double end_fold,
+                                ThreadPool& pool) {
   const int64_t n = static_cast<int64_t>(segs.size());
   // Incidences sorted by vertex key.
   struct Inc {
@@ -911,10 +912,21 @@ std::vector<MarkPolyline> Chain(const std::vector<Segment>& segs, double tol,
     inc.push_back({segs[k].e[0].key, k, 0});
     inc.push_back({segs[k].e[1].key, k, 1});
   }
-  std::sort(inc.begin(), inc.end(), [](const Inc& a, const Inc& b) {
+  // A total order, so the result is the same however it is sorted: two
+  // halves at once, then merged.
+  auto less = [](const Inc& a, const Inc& b) {
     return a.key != b.key ? a.key < b.key
                           : (a.seg != b.seg ? a.seg < b.seg : a.end < b.end);
+  };
+  const auto middle = inc.begin() + static_cast<std::ptrdiff_t>(inc.size() / 2);
+  pool.ParallelFor(2, [&](int64_t h) {
+    if (h == 0) {
+      std::sort(inc.begin(), middle, less);
+    } else {
+      std::sort(middle, inc.end(), less);
+    }
   });
+  std::inplace_merge(inc.begin(), middle, inc.end(), less);
   // For each segment end: its vertex's degree and, at degree 2, the other
   // incidence.
   std::vector<int> degree(2 * n);
@@ -1261,18 +1273,35 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
     }
   });
 
-  std::vector<Segment> segs;
-  for (auto& b : band_segments) {
-    segs.insert(segs.end(), b.begin(), b.end());
-  }
   // Keep what lies in the region (junctions may sit a little outside their
-  // element, hence outside the stock).
-  std::vector<Segment> kept;
-  kept.reserve(segs.size());
-  for (size_t k = 0; k < segs.size(); ++k) {
-    Segment seg = segs[k];
-    if (ClipSegment(region, k, &seg)) kept.push_back(seg);
+  // element, hence outside the stock), each band's segments at once with
+  // their index in the bands' concatenation, then the bands concatenated
+  // once (segments are large: a copy of all of them is ~100 MB on a
+  // detailed relief).
+  std::vector<size_t> first(bands + 1, 0);
+  for (int32_t b = 0; b < bands; ++b) {
+    first[b + 1] = first[b] + band_segments[b].size();
   }
+  std::vector<size_t> band_kept(bands, 0);
+  wp.pool().ParallelFor(bands, [&](int64_t b) {
+    std::vector<Segment>& band = band_segments[b];
+    size_t n = 0;
+    for (size_t i = 0; i < band.size(); ++i) {
+      Segment seg = band[i];
+      if (ClipSegment(region, first[b] + i, &seg)) band[n++] = seg;
+    }
+    band_kept[b] = n;
+  });
+  std::vector<size_t> kept_first(bands + 1, 0);
+  for (int32_t b = 0; b < bands; ++b) {
+    kept_first[b + 1] = kept_first[b] + band_kept[b];
+  }
+  std::vector<Segment> kept(kept_first[bands]);
+  wp.pool().ParallelFor(bands, [&](int64_t b) {
+    std::copy_n(band_segments[b].begin(), band_kept[b],
+                kept.begin() + kept_first[b]);
+    std::vector<Segment>().swap(band_segments[b]);
+  });
   // Vertices closer than this are one (crossings clamped onto a node).
   const double tol = 1e-9 * std::fmax(grid.dx(), grid.dy());
   // Folds shorter than a tenth of an element are the patches' disagreement,
@@ -1280,16 +1309,18 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
   // which a junction may leave its element.
   const double h = std::fmin(grid.dx(), grid.dy());
   std::vector<MarkPolyline> marks =
-      Chain(kept, tol, 0.1 * h, kJunctionMargin * h);
+      Chain(kept, tol, 0.1 * h, kJunctionMargin * h, wp.pool());
   if (wp.scheme().kind() == SchemeKind::kGuarded) {
     // A crease lies on both owners' surfaces: never below either's lowest
-    // point (patches met far from their nodes can cross lower).
+    // point (patches met far from their nodes can cross lower): the owner's
+    // lowest tip, ReachOf(...).z_low, without building its reach.
     for (MarkPolyline& p : marks) {
       for (size_t k = 0; k < p.vertices.size(); ++k) {
         for (int32_t id : p.vertex_owners[k]) {
           if (id < 0 || id >= wp.move_count()) continue;
+          const Move& m = wp.move(id);
           p.vertices[k].z =
-              std::max(p.vertices[k].z, ReachOf(wp.moves(), id, s.z_top).z_low);
+              std::max(p.vertices[k].z, std::min(m.from.z, m.to.z));
         }
       }
     }

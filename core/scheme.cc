@@ -36,10 +36,7 @@ bool CornerReach::Capsule::Contains(double x, double y) const {
 
 bool CornerReach::Contains(double x, double y) const {
   if (!bounded) return true;
-  for (int k = 0; k < count; ++k) {
-    if (capsule[k].Contains(x, y)) return true;
-  }
-  return false;
+  return !empty && capsule.Contains(x, y);
 }
 
 namespace {
@@ -88,6 +85,199 @@ void TakeLowest(const ElementCorners& e, double x, double y, GuardedValue* v) {
   }
 }
 
+// Clones for wider vectors, picked at load time; the same IEEE operations in
+// every clone (no FMA: -ffp-contract=off), so the same bits (as the sweeps'
+// kernels, core/cutter/ball_sweep.cc).
+#ifdef SWARF_NO_TARGET_CLONES
+#define SWARF_TARGET_CLONES
+#else
+#define SWARF_TARGET_CLONES \
+  __attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
+#endif
+
+// The squared distance from (x, y) to a capsule's segment exactly as
+// CornerReach::Capsule::Contains computes it.
+double CapsuleDistance2(const CornerReach::Capsule& c, double x, double y) {
+  const double ux = c.bx - c.ax, uy = c.by - c.ay;
+  const double px = x - c.ax, py = y - c.ay;
+  const double len2 = ux * ux + uy * uy;
+  const double t =
+      len2 > 0 ? std::clamp((px * ux + py * uy) / len2, 0.0, 1.0) : 0.0;
+  const double dx = px - t * ux, dy = py - t * uy;
+  return dx * dx + dy * dy;
+}
+
+// Whether Contains, as computed, holds at every point of the finite box
+// [x0, x1] x [y0, y1] (kInside), at none (kOutside), or either is possible
+// (kMixed). The distance to a segment is 1-Lipschitz, so over the box it is
+// at most its value at the centre plus the half diagonal, and it is at
+// least the gap between the box and the segment's bounding box. The
+// computed distance is within a few ulps of the coordinates of the true
+// one (the point on the segment it measures to is off by as little); tol,
+// a thousand times that, separates the cases.
+enum class BoxSide { kInside, kOutside, kMixed };
+BoxSide CapsuleBoxSide(const CornerReach::Capsule& c, double x0, double y0,
+                       double x1, double y1) {
+  const double scale = 1 + std::fabs(c.ax) + std::fabs(c.ay) +
+                       std::fabs(c.bx) + std::fabs(c.by) + std::fabs(x0) +
+                       std::fabs(x1) + std::fabs(y0) + std::fabs(y1) +
+                       std::fabs(c.radius);
+  const double tol = 1e-12 * scale;
+  const double centre = std::sqrt(
+      CapsuleDistance2(c, 0.5 * (x0 + x1), 0.5 * (y0 + y1)));
+  const double half_diagonal =
+      0.5 * std::sqrt((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0));
+  if (centre + half_diagonal + 4 * tol <= c.radius * (1 - 1e-12)) {
+    return BoxSide::kInside;
+  }
+  const double gap_x = std::max(x0 - std::max(c.ax, c.bx),
+                                std::min(c.ax, c.bx) - x1);
+  const double gap_y = std::max(y0 - std::max(c.ay, c.by),
+                                std::min(c.ay, c.by) - y1);
+  if (std::max(gap_x, gap_y) - 4 * tol >= c.radius * (1 + 1e-12)) {
+    return BoxSide::kOutside;
+  }
+  return BoxSide::kMixed;
+}
+
+// std::lerp(a, b, t) (libstdc++'s, which BilinearHeight uses) as selects,
+// for vectorized loops: the same operations on every path.
+inline double LerpSelect(double a, double b, double t) {
+  const bool opposite = ((a <= 0) & (b >= 0)) | ((a >= 0) & (b <= 0));
+  const double r1 = t * b + (1 - t) * a;
+  const double x = a + t * (b - a);
+  const double r2 =
+      (t > 1) == (b > a) ? (b < x ? x : b) : (b > x ? x : b);
+  return opposite ? r1 : (t == 1 ? b : r2);
+}
+
+// out[q] = std::lerp(a, b, t[q]) for loop-invariant a and b: their tests
+// decided once (the vectorizer takes no select on a scalar condition).
+// Inlined into its callers' clones.
+inline void LerpInvariant(double a, double b, const double* __restrict t, int32_t n,
+                   double* __restrict out) {
+  if ((a <= 0 && b >= 0) || (a >= 0 && b <= 0)) {
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) out[q] = t[q] * b + (1 - t[q]) * a;
+  } else if (b > a) {
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) {
+      const double x = a + t[q] * (b - a);
+      out[q] = t[q] == 1 ? b : t[q] > 1 ? (b < x ? x : b) : (b > x ? x : b);
+    }
+  } else {
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) {
+      const double x = a + t[q] * (b - a);
+      out[q] = t[q] == 1 ? b : t[q] > 1 ? (b > x ? x : b) : (b < x ? x : b);
+    }
+  }
+}
+
+// Points per call of SmoothChunk.
+constexpr int32_t kGuardedChunk = 64;
+
+// Guarded() at n <= kGuardedChunk points of a smooth element with surfaces,
+// corner by corner in vectorized loops: each point sees the same operations
+// in the same order (its reach test, each lifted patch and the running
+// minimum, the hidden test). A capsule that holds all the points or none is
+// decided once (CapsuleBoxSide). Points where a corner is hidden take the
+// true surface one by one (TakeLowest), as Guarded does.
+SWARF_TARGET_CLONES
+void SmoothChunk(const ElementCorners& e, const double* __restrict x,
+                 const double* __restrict y, int32_t n,
+                 double* __restrict out) {
+  // Flags as doubles (0 or 1) beside the doubles, and loop-invariant tests
+  // outside the loops, so that every loop is selects the vectorizer takes.
+  double in[4][kGuardedChunk], s[kGuardedChunk], t[kGuardedChunk];
+  double w[kGuardedChunk], any[kGuardedChunk], l0[kGuardedChunk],
+      l1[kGuardedChunk];
+  const double lx = e.x1 - e.x0, ly = e.y1 - e.y0;
+  double box_x0 = x[0], box_x1 = x[0], box_y0 = y[0], box_y1 = y[0];
+  bool finite = true;
+  for (int32_t q = 0; q < n; ++q) {
+    s[q] = (x[q] - e.x0) / lx;
+    t[q] = (y[q] - e.y0) / ly;
+    w[q] = e.z_top;
+    any[q] = 0;
+    finite &= std::isfinite(x[q]) & std::isfinite(y[q]);
+    box_x0 = std::min(box_x0, x[q]);
+    box_x1 = std::max(box_x1, x[q]);
+    box_y0 = std::min(box_y0, y[q]);
+    box_y1 = std::max(box_y1, y[q]);
+  }
+  const CornerXY c = CornersOf(e);
+  for (int k = 0; k < 4; ++k) {
+    const CornerReach& r = e.reach[k];
+    double* __restrict inside = in[k];
+    // inside[q]: e.guard.inside[k] || r.Contains(x[q], y[q]).
+    const bool all = e.guard.inside[k] || !r.bounded;
+    const bool none = !all && r.empty;
+    for (int32_t q = 0; q < n; ++q) inside[q] = all ? 1.0 : 0.0;
+    BoxSide side = all ? BoxSide::kInside : none ? BoxSide::kOutside
+                                                  : BoxSide::kMixed;
+    if (side == BoxSide::kMixed && finite) {
+      side = CapsuleBoxSide(r.capsule, box_x0, box_y0, box_x1, box_y1);
+      if (side == BoxSide::kInside) {
+        for (int32_t q = 0; q < n; ++q) inside[q] = 1;
+      }
+    }
+    if (side == BoxSide::kMixed) {
+      const CornerReach::Capsule& cs = r.capsule;
+      const double ax = cs.ax, ay = cs.ay;
+      const double ux = cs.bx - ax, uy = cs.by - ay;
+      const double len2 = ux * ux + uy * uy;
+      const double r2 = cs.radius * cs.radius;
+      if (len2 > 0) {
+#pragma omp simd
+        for (int32_t q = 0; q < n; ++q) {
+          const double px = x[q] - ax, py = y[q] - ay;
+          // std::clamp(v, 0, 1) by value: min(max(v, 0), 1).
+          const double v = (px * ux + py * uy) / len2;
+          const double v0 = v < 0.0 ? 0.0 : v;
+          const double tc = 1.0 < v0 ? 1.0 : v0;
+          const double dx = px - tc * ux, dy = py - tc * uy;
+          inside[q] = dx * dx + dy * dy <= r2 ? 1.0 : 0.0;
+        }
+      } else {
+#pragma omp simd
+        for (int32_t q = 0; q < n; ++q) {
+          const double px = x[q] - ax, py = y[q] - ay;
+          const double tc = 0.0;
+          const double dx = px - tc * ux, dy = py - tc * uy;
+          inside[q] = dx * dx + dy * dy <= r2 ? 1.0 : 0.0;
+        }
+      }
+    }
+    // The lift (LiftAt): lerps of the shortfalls, the first two over s.
+    const double* d = e.guard.lift[k];
+    LerpInvariant(d[0], d[1], s, n, l0);
+    LerpInvariant(d[3], d[2], s, n, l1);
+    const SurfaceJet& j = e.c[k];
+    const double xk = c.x[k], yk = c.y[k], z_low = r.z_low;
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) {
+      const double lift = LerpSelect(l0[q], l1[q], t[q]);
+      const double raw = EvaluatePatch(j, xk, yk, x[q], y[q]) + lift;
+      const double p = raw < z_low ? z_low : raw;  // std::max(raw, z_low)
+      const bool holds = inside[q] != 0;
+      any[q] = holds ? 1.0 : any[q];
+      w[q] = holds & (p < w[q]) ? p : w[q];
+    }
+  }
+  for (int32_t q = 0; q < n; ++q) {
+    bool hidden = any[q] == 0;
+    for (int k = 0; k < 4; ++k) hidden |= in[k][q] == 0 && e.c[k].w < w[q];
+    if (hidden) {
+      GuardedValue v;
+      v.w = w[q];
+      TakeLowest(e, x[q], y[q], &v);
+      w[q] = v.w;
+    }
+    out[q] = w[q];
+  }
+}
+
 GuardedValue Guarded(const ElementCorners& e, double x, double y) {
   const CornerXY c = CornersOf(e);
   GuardedValue v;
@@ -96,8 +286,10 @@ GuardedValue Guarded(const ElementCorners& e, double x, double y) {
     const double s = (x - e.x0) / (e.x1 - e.x0);
     const double t = (y - e.y0) / (e.y1 - e.y0);
     bool any = false;
+    bool in[4];
     for (int k = 0; k < 4; ++k) {
-      if (!e.reach[k].Contains(x, y)) continue;
+      in[k] = e.guard.inside[k] || e.reach[k].Contains(x, y);
+      if (!in[k]) continue;
       any = true;
       const double p = std::max(
           EvaluatePatch(e.c[k], c.x[k], c.y[k], x, y) + LiftAt(e, k, s, t),
@@ -115,42 +307,19 @@ GuardedValue Guarded(const ElementCorners& e, double x, double y) {
       return v;
     }
     bool hidden = !any;
-    for (int k = 0; k < 4; ++k) {
-      hidden |= !e.reach[k].Contains(x, y) && e.c[k].w < v.w;
-    }
+    for (int k = 0; k < 4; ++k) hidden |= !in[k] && e.c[k].w < v.w;
     if (hidden) TakeLowest(e, x, y, &v);
     return v;
   }
-  // The exact surfaces of the corners' owners and of the moves continuing
-  // them.
-  double h[4];
-  for (int k = 0; k < 4; ++k) {
-    h[k] = kInfinity;
-    if (e.owner[k] < 0) continue;
-    for (int q = 0; q < e.reach[k].count; ++q) {
-      const int32_t id = e.reach[k].id[q];
-      const double hk = e.surfaces->Height(id, x, y);
-      h[k] = std::min(h[k], hk);
-      if (hk < v.w) {
-        v.w = hk;
-        v.move = id;
-      }
-    }
-  }
-  // An uncut element may still hold a cut between its nodes: its
-  // candidates (PrepareGuarded).
+  // The exact surface: the element's candidates (PrepareGuarded) hold
+  // every move that can be the lowest in it.
   for (const int32_t id : e.candidates) {
-    const double hk = e.surfaces->Height(id, x, y);
-    if (hk < v.w) {
-      v.w = hk;
+    const double h = e.surfaces->Height(id, x, y);
+    if (h < v.w) {
+      v.w = h;
       v.move = id;
     }
   }
-  bool hidden = false;
-  for (int k = 0; k < 4; ++k) {
-    hidden |= e.owner[k] >= 0 && h[k] > v.w && e.c[k].w < v.w;
-  }
-  if (hidden) TakeLowest(e, x, y, &v);
   return v;
 }
 
@@ -238,25 +407,33 @@ double GuardedHeight(const ElementCorners& e, double x, double y) {
   return Guarded(e, x, y).w;
 }
 
-void PrepareGuarded(ElementCorners* e) {
+void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
   const CornerXY c = CornersOf(*e);
   e->guard = {};
   const double tau = kGuardConsistency * std::max(e->x1 - e->x0, e->y1 - e->y0);
   bool smooth = true;
   for (int k = 0; k < 4; ++k) smooth &= e->owner[k] >= 0;
+  // Whether corner k's reach holds corner q: for the lifts and for the
+  // whole element, tested once.
+  bool holds[4][4];
+  for (int k = 0; k < 4; ++k) {
+    for (int q = 0; q < 4; ++q) holds[k][q] = e->reach[k].Contains(c.x[q], c.y[q]);
+  }
   for (int k = 0; k < 4; ++k) {
     // The trust region is convex: trusted at the other corners, the patch
     // is trusted over the whole element.
-    const PatchTrustRegion trust =
-        smooth ? TrustRegion(e->c[k]) : PatchTrustRegion{};
+    const PatchTrustRegion region =
+        !smooth ? PatchTrustRegion{}
+        : trust != nullptr ? *trust[k]
+                           : TrustRegion(e->c[k]);
     for (int q = 0; q < 4; ++q) {
       if (q == k) continue;
       const double dx = c.x[q] - c.x[k], dy = c.y[q] - c.y[k];
-      if (smooth && Trust(trust, dx, dy) != PatchTrust::kFull) {
+      if (smooth && Trust(region, dx, dy) != PatchTrust::kFull) {
         smooth = false;
       }
       // A node outside the owner's reach says nothing of its surface.
-      if (!e->reach[k].Contains(c.x[q], c.y[q])) continue;
+      if (!holds[k][q]) continue;
       const double r =
           e->c[q].w - EvaluatePatch(e->c[k], c.x[k], c.y[k], c.x[q], c.y[q]);
       if (r > 0) e->guard.lift[k][q] = r;
@@ -264,11 +441,14 @@ void PrepareGuarded(ElementCorners* e) {
     }
   }
   e->guard.smooth = smooth;
-  // An uncut element: the moves that may cut it between its nodes.
-  if (e->surfaces != nullptr && e->owner[0] < 0 && e->owner[1] < 0 &&
-      e->owner[2] < 0 && e->owner[3] < 0) {
-    e->surfaces->FillCandidates(e);
+  // A capsule is convex: holding the element's corners, it holds it all.
+  for (int k = 0; k < 4; ++k) {
+    e->guard.inside[k] =
+        holds[k][0] && holds[k][1] && holds[k][2] && holds[k][3];
   }
+  // Elsewhere the exact surface: every move that can be the lowest in the
+  // element (an uncut one too: a cut may pass between its nodes).
+  if (!smooth && e->surfaces != nullptr) e->surfaces->FillCandidates(e);
 }
 
 double MinOfPatches(const ElementCorners& e, double x, double y) {
@@ -339,8 +519,24 @@ class GuardedScheme final : public Scheme {
                      double y) const override {
     return GuardedHeight(e, x, y);
   }
+  void ReconstructMany(const ElementCorners& e, const double* x,
+                       const double* y, int32_t n,
+                       double* out) const override {
+    if (!e.guard.smooth || e.surfaces == nullptr) {
+      Scheme::ReconstructMany(e, x, y, n, out);
+      return;
+    }
+    for (int32_t q0 = 0; q0 < n; q0 += kGuardedChunk) {
+      SmoothChunk(e, x + q0, y + q0, std::min(kGuardedChunk, n - q0),
+                  out + q0);
+    }
+  }
   void Gradient(const ElementCorners& e, double x, double y, double* gx,
                 double* gy) const override {
+    HeightAndGradient(e, x, y, gx, gy);
+  }
+  double HeightAndGradient(const ElementCorners& e, double x, double y,
+                           double* gx, double* gy) const override {
     const GuardedValue v = Guarded(e, x, y);
     *gx = *gy = 0;  // the top, or a patch held at its owner's lowest point
     if (v.corner == kBilinear) {
@@ -360,6 +556,7 @@ class GuardedScheme final : public Scheme {
       *gx += ((1 - t) * (d[1] - d[0]) + t * (d[2] - d[3])) / lx;
       *gy += ((1 - s) * (d[3] - d[0]) + s * (d[2] - d[1])) / ly;
     }
+    return v.w;
   }
 };
 

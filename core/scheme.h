@@ -48,11 +48,13 @@ class MoveSurfaces {
 };
 
 // What a corner node's patch stands for: its owner's swept surface, which
-// exists only over the owner's footprint (XY capsules: segments widened by
-// their radius; the owner's, and those of the moves continuing it on the
-// same path, whose surface carries on smoothly) and never goes below `z_low`
-// (the lowest point the owner's tool reaches). Unbounded for uncut nodes (their
-// patch is the stock top, everywhere) and where the owner is unknown.
+// exists only over the owner's footprint below the top (an XY capsule: the
+// segment widened by a radius) and never goes below `z_low` (the lowest
+// point the owner's tool reaches). Not the moves continuing the owner's
+// path: where the path turns or changes slope, the patch does not model
+// their surface (measured: every corpus job errs less without them).
+// Unbounded for uncut nodes (their patch is the stock top, everywhere) and
+// where the owner is unknown.
 struct CornerReach {
   struct Capsule {
     double ax = 0, ay = 0, bx = 0, by = 0;
@@ -60,12 +62,11 @@ struct CornerReach {
     bool Contains(double x, double y) const;  // closed
   };
   bool bounded = false;
-  int count = 0;  // capsules in use
-  Capsule capsule[3];
-  int32_t id[3] = {-1, -1, -1};  // the moves of the capsules
+  bool empty = false;  // bounded, and the owner never goes below the top
+  Capsule capsule;
   double z_low = -std::numeric_limits<double>::infinity();
 
-  // Whether (x, y) lies in a capsule (always, when unbounded).
+  // Whether (x, y) lies in the capsule (always, when unbounded).
   bool Contains(double x, double y) const;
 };
 
@@ -89,6 +90,7 @@ struct ElementCorners {
   // What Scheme::Prepare found out about the element (kGuarded).
   struct Guard {
     bool smooth = false;  // the patches hold over the whole element
+    bool inside[4] = {};  // reach[k] holds the whole element
     double lift[4][4] = {};  // [k][q]: patch k's shortfall at corner q
   } guard;
 };
@@ -120,6 +122,20 @@ class Scheme {
   // the piece Reconstruct picks).
   virtual void Gradient(const ElementCorners& e, double x, double y,
                         double* gx, double* gy) const = 0;
+  // Reconstruct at n points of the element: out[q] = Reconstruct(e, x[q],
+  // y[q]), bit for bit (schemes with work shared between points override
+  // it).
+  virtual void ReconstructMany(const ElementCorners& e, const double* x,
+                               const double* y, int32_t n, double* out) const {
+    for (int32_t q = 0; q < n; ++q) out[q] = Reconstruct(e, x[q], y[q]);
+  }
+  // Both at once: returns Reconstruct(e, x, y) and sets the Gradient, bit
+  // for bit (schemes that find both together override it).
+  virtual double HeightAndGradient(const ElementCorners& e, double x,
+                                   double y, double* gx, double* gy) const {
+    Gradient(e, x, y, gx, gy);
+    return Reconstruct(e, x, y);
+  }
 };
 
 // Eq. (16): bilinear interpolation of the corner heights.
@@ -149,19 +165,26 @@ double MinOfPatches(const ElementCorners& e, double x, double y);
 //   that every patch passes at or above every node it should: the
 //   reconstruction interpolates the nodes) and held at or above its owner's
 //   lowest tip.
-// - otherwise: the least of the top and the exact swept surfaces of the
-//   corners' owners and the moves continuing them: exact wherever one of
-//   them is the lowest move, and never below the true surface.
-// In both, where a corner lies lower than the value found and nothing found
-// explains it (its owner's reach misses (x, y), or its surfaces there are
-// higher), a cut passes between the nodes: the true surface there
-// (MoveSurfaces::LowestAt). Without surfaces (a grid whose moves are not
-// known) every element is taken as smooth, and the bilinear answers where
-// no corner's reach holds (x, y). See docs/benchmarks.md, "Guarded scheme".
+//   Where a corner lies lower than the value found and its owner's reach
+//   misses (x, y), a cut passes between the nodes: the true surface there
+//   (MoveSurfaces::LowestAt).
+// - otherwise (a rim, a wall, a cutter's own kink, a patch that disagrees
+//   with its neighbours, an uncut element a cut may cross between its
+//   nodes): the exact surface, as the exact scheme gives it (the minimum
+//   over the element's candidates, MoveSurfaces::FillCandidates).
+// Without surfaces (a grid whose moves are not known) every element is
+// taken as smooth, and the bilinear answers where no corner's reach holds
+// (x, y). So patches serve the smooth interiors, where they are accurate to
+// third order, and the exact sweeps the rest. See docs/benchmarks.md,
+// "Guarded scheme".
 double GuardedHeight(const ElementCorners& e, double x, double y);
 // The per-element part of the guarded reconstruction (ElementCorners::
-// guard), from e's corners, reach and surfaces.
-void PrepareGuarded(ElementCorners* e);
+// guard), from e's corners, reach and surfaces. `trust`, if given, holds
+// TrustRegion(e->c[k]) for the cut corners (a node's region serves its four
+// elements).
+struct PatchTrustRegion;
+void PrepareGuarded(ElementCorners* e,
+                    const PatchTrustRegion* const trust[4] = nullptr);
 // Patches that disagree with a corner in their reach by more than this
 // fraction of the element's size mark the element as not smooth.
 inline constexpr double kGuardConsistency = 0.05;

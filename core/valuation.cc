@@ -16,6 +16,38 @@ struct Partial {
   int64_t n = 0;
 };
 
+// The largest of v[0..n), n >= 1. Heights are never NaN (minima that start
+// at the stock top), so the order of comparison does not matter: a
+// vectorized reduction, in registers.
+double Highest(const double* v, int32_t n) {
+  double m = v[0];
+#pragma omp simd reduction(max : m)
+  for (int32_t q = 1; q < n; ++q) m = std::max(m, v[q]);
+  return m;
+}
+
+// Adds err[0..n) to the sums in sample order (the same additions as one
+// loop over the samples) and returns the index of the first error above
+// *max (-1: none), updating *max. Its own function keeps the sums in
+// registers.
+int32_t Accumulate(const double* err, int32_t n, double* sum, double* sum_sq,
+                   double* max) {
+  double s = *sum, s2 = *sum_sq, m = *max;
+  int32_t at = -1;
+  for (int32_t q = 0; q < n; ++q) {
+    s += err[q];
+    s2 += err[q] * err[q];
+    if (err[q] > m) {
+      m = err[q];
+      at = q;
+    }
+  }
+  *sum = s;
+  *sum_sq = s2;
+  *max = m;
+  return at;
+}
+
 }  // namespace
 
 absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
@@ -56,11 +88,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
   auto cell_index = [](double f, int32_t n) {
     return f >= n - 1 ? n - 1 : f > 0 ? static_cast<int32_t>(f) : 0;
   };
-  auto map_cell = [&](double x, double y) {
-    const int32_t cx = cell_index((x - region.x0) / cell_x, options.map_cols);
-    const int32_t cy = cell_index((y - region.y0) / cell_y, options.map_rows);
-    return int64_t{cy} * options.map_cols + cx;
-  };
   // Samples of different bins can share a cell: a lock-free max.
   auto map_max = [&](int64_t c, float e) {
     std::atomic_ref<float> cell(map[c]);
@@ -73,17 +100,18 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
   std::vector<Partial> partials(bins);
 
   ThreadPool& pool = options.pool != nullptr ? *options.pool : wp.pool();
-  // The lattice's offsets inside an element (fractions of its sides), the
-  // corners left out.
-  std::vector<double> fx, fy;
+  // The lattice's points inside an element, row by row, the corners left
+  // out: column si and row sj of n.
+  std::vector<int> lattice_i, lattice_j;
   for (int sj = 0; sj < n; ++sj) {
     for (int si = 0; si < n; ++si) {
       if ((si == 0 || si == n - 1) && (sj == 0 || sj == n - 1)) continue;
-      fx.push_back(si);
-      fy.push_back(sj);
+      lattice_i.push_back(si);
+      lattice_j.push_back(sj);
     }
   }
   const double z_top = wp.spec().z_top;
+  const Scheme& scheme = wp.scheme();
   pool.ParallelFor(bins, [&](int64_t b) {
     const int32_t bx = static_cast<int32_t>(b % index.bins_x());
     const int32_t by = static_cast<int32_t>(b / index.bins_x());
@@ -98,13 +126,31 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     }
     // The bin's moves, with the XY box where each can cut below the top.
     struct Candidate {
+      const Move* move;
       Sweep sweep;
       Rect box;
     };
     std::vector<Candidate> bin;
     for (uint32_t id : index.Bin(static_cast<int32_t>(b))) {
       const Sweep s = wp.MoveSweep(id);
-      bin.push_back({s, s.Footprint(z_top).Bounds()});
+      bin.push_back({&wp.move(id), s, s.Footprint(z_top).Bounds()});
+    }
+    // The guarded scheme's trust regions (TrustRegion, a function of each
+    // node's jet), once per cut node of the bin instead of once per element
+    // corner.
+    const bool guarded = scheme.kind() == SchemeKind::kGuarded;
+    const int32_t region_w = ei1 - ei0 + 1;
+    std::vector<PatchTrustRegion> regions;
+    if (guarded) {
+      regions.resize(static_cast<size_t>(region_w) * (ej1 - ej0 + 1));
+      for (int32_t j = ej0; j <= ej1; ++j) {
+        for (int32_t i = ei0; i <= ei1; ++i) {
+          const NodeValue v = wp.Node(i, j);
+          if (v.owner >= 0) {
+            regions[(j - ej0) * region_w + (i - ei0)] = TrustRegion(v.jet);
+          }
+        }
+      }
     }
     // The sweeps of recent corner owners: neighbouring elements share most.
     struct Owner {
@@ -124,23 +170,59 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       o.sweep.emplace(wp.MoveSweep(id));
       return *o.sweep;
     };
-    const size_t lattice = fx.size();
-    std::vector<double> xs(lattice), ys(lattice), est(lattice), h(lattice);
-    Partial& p = partials[b];
+    const size_t lattice = lattice_i.size();
+    std::vector<double> xs(lattice), ys(lattice), est(lattice), h(lattice),
+        rec(lattice), err(lattice);
+    std::vector<int64_t> cells(lattice);
+    // Per lattice column and row of an element: the coordinate and the map
+    // cell (the same values per point, computed n times instead of n^2).
+    std::vector<double> col_x(n), row_y(n);
+    std::vector<int64_t> col_cell(n), row_cell(n);
+    std::vector<const Candidate*> row_bin;
+    // The bin's sums in locals (registers), stored once at the end.
+    Partial p = partials[b];
     for (int32_t ej = ej0; ej < ej1; ++ej) {
+      const double ey0 = grid.NodeY(ej), ey1 = grid.NodeY(ej + 1);
+      if (ey0 > region.y1 || ey1 < region.y0) continue;
+      // The moves whose box meets this row of elements (in bin order).
+      row_bin.clear();
+      for (const Candidate& c : bin) {
+        if (c.box.y0 <= ey1 && ey0 <= c.box.y1) row_bin.push_back(&c);
+      }
+      for (int32_t sj = 0; sj < n; ++sj) {
+        row_y[sj] = ey0 + (ey1 - ey0) * sj / (n - 1);
+        if (mapped) {
+          row_cell[sj] = int64_t{cell_index((row_y[sj] - region.y0) / cell_y,
+                                            options.map_rows)} *
+                         options.map_cols;
+        }
+      }
       for (int32_t ei = ei0; ei < ei1; ++ei) {
-        const ElementCorners e = wp.Corners(ei, ej);
-        if (e.x0 > region.x1 || e.x1 < region.x0 || e.y0 > region.y1 ||
-            e.y1 < region.y0) {
-          continue;
+        const double ex0 = grid.NodeX(ei), ex1 = grid.NodeX(ei + 1);
+        if (ex0 > region.x1 || ex1 < region.x0) continue;
+        ElementCorners e = wp.Corners(ei, ej, /*prepare=*/!guarded);
+        if (guarded) {
+          const PatchTrustRegion* r =
+              &regions[(ej - ej0) * region_w + (ei - ei0)];
+          const PatchTrustRegion* const trust[4] = {r, r + 1, r + region_w + 1,
+                                                    r + region_w};
+          PrepareGuarded(&e, trust);
+        }
+        for (int32_t si = 0; si < n; ++si) {
+          col_x[si] = e.x0 + (e.x1 - e.x0) * si / (n - 1);
+          if (mapped) {
+            col_cell[si] =
+                cell_index((col_x[si] - region.x0) / cell_x, options.map_cols);
+          }
         }
         int32_t count = 0;
         for (size_t q = 0; q < lattice; ++q) {
-          const double x = e.x0 + (e.x1 - e.x0) * fx[q] / (n - 1);
-          const double y = e.y0 + (e.y1 - e.y0) * fy[q] / (n - 1);
+          const double x = col_x[lattice_i[q]];
+          const double y = row_y[lattice_j[q]];
           if (!region.Contains(x, y)) continue;
           xs[count] = x;
           ys[count] = y;
+          if (mapped) cells[count] = row_cell[lattice_j[q]] + col_cell[lattice_i[q]];
           ++count;
         }
         if (count == 0) continue;
@@ -159,46 +241,49 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
                                          h.data());
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
-        const double cap = *std::max_element(est.begin(), est.begin() + count);
+        const double cap = Highest(est.data(), count);
         const Rect box{e.x0, e.y0, e.x1, e.y1};
-        for (const Candidate& c : bin) {
-          if (!c.box.Intersects(box) || !(c.sweep.lowest() < cap)) continue;
-          const Capsule f = c.sweep.Footprint(cap);
-          if (f.empty || !f.Bounds().Intersects(box)) continue;
-          c.sweep.Heights(xs.data(), ys.data(), count, h.data());
+        for (const Candidate* c : row_bin) {
+          if (!c->box.Intersects(box) || !(c->sweep.lowest() < cap)) continue;
+          // Footprint(cap).Bounds(), without the capsule's direction.
+          const std::optional<Rect> f =
+              FootprintBounds(c->move->from, c->move->to, c->move->cutter, cap);
+          if (!f.has_value() || !f->Intersects(box)) continue;
+          c->sweep.Heights(xs.data(), ys.data(), count, h.data());
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
-        // An element's samples mostly share a map cell: their max goes in
-        // once per run of one cell (the same max: cells start at 0 and
-        // take only larger values).
-        int64_t run_cell = -1;
-        float run_max = 0;
+        scheme.ReconstructMany(e, xs.data(), ys.data(), count, rec.data());
         for (int32_t q = 0; q < count; ++q) {
-          const double x = xs[q], y = ys[q];
-          const double err =
-              SampleError(wp.scheme().Reconstruct(e, x, y), est[q]);
-          if (mapped) {
-            const int64_t c = map_cell(x, y);
+          err[q] = SampleError(rec[q], est[q]);
+        }
+        if (mapped) {
+          // An element's samples mostly share a map cell: their max goes
+          // in once per run of one cell (the same max: cells start at 0
+          // and take only larger values).
+          int64_t run_cell = -1;
+          float run_max = 0;
+          for (int32_t q = 0; q < count; ++q) {
+            const int64_t c = cells[q];
             if (c != run_cell) {
               if (run_cell >= 0) map_max(run_cell, run_max);
               run_cell = c;
               run_max = 0;
             }
-            const float ef = static_cast<float>(err);
+            const float ef = static_cast<float>(err[q]);
             if (ef > run_max) run_max = ef;
           }
-          p.sum += err;
-          p.sum_sq += err * err;
-          ++p.n;
-          if (err > p.max) {
-            p.max = err;
-            p.max_x = x;
-            p.max_y = y;
-          }
+          if (run_cell >= 0) map_max(run_cell, run_max);
         }
-        if (run_cell >= 0) map_max(run_cell, run_max);
+        const int32_t max_q =
+            Accumulate(err.data(), count, &p.sum, &p.sum_sq, &p.max);
+        p.n += count;
+        if (max_q >= 0) {
+          p.max_x = xs[max_q];
+          p.max_y = ys[max_q];
+        }
       }
     }
+    partials[b] = p;
   });
 
   ErrorStats stats;

@@ -679,37 +679,22 @@ void Workpiece::ReconstructGradient(double x, double y, double* gx,
                     gy);
 }
 
-namespace {
-bool SamePoint(const Vec3& a, const Vec3& b) {
-  return a.x == b.x && a.y == b.y && a.z == b.z;
-}
-}  // namespace
-
 CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
   CornerReach r;
   r.bounded = true;
-  // Where each sweep is below the top (beyond, the top is lower anyway): a
-  // rapid above the stock continues no surface.
-  auto add = [&](int64_t k) {
-    const Move& m = moves[k];
-    const Capsule c = Sweep(m.from, m.to, m.cutter).Footprint(z_top);
-    if (c.empty) return;
-    // The footprint's exact radius (Footprint widens it by a margin for
-    // the cut; here a point just outside must stay outside, as for the
-    // exact surface).
-    const double rho =
-        FootprintRadius(m.cutter, std::min(m.from.z, m.to.z), z_top);
-    r.id[r.count] = static_cast<int32_t>(k);
-    r.capsule[r.count++] = {c.x0, c.y0, c.x1, c.y1, rho};
-  };
   const Move& m = moves[id];
-  add(id);
   r.z_low = std::min(m.from.z, m.to.z);
-  if (id > 0 && SamePoint(moves[id - 1].to, m.from)) add(id - 1);
-  if (id + 1 < static_cast<int64_t>(moves.size()) &&
-      SamePoint(moves[id + 1].from, m.to)) {
-    add(id + 1);
+  // Where the sweep is below the top (beyond, the top is lower anyway).
+  const Capsule c = FootprintCapsule(m.from, m.to, m.cutter, z_top);
+  if (c.empty) {
+    r.empty = true;
+    return r;
   }
+  // The footprint's exact radius (Footprint widens it by a margin for the
+  // cut; here a point just outside must stay outside, as for the exact
+  // surface).
+  const double rho = FootprintRadius(m.cutter, r.z_low, z_top);
+  r.capsule = {c.x0, c.y0, c.x1, c.y1, rho};
   return r;
 }
 
@@ -738,7 +723,7 @@ const Sweep* MoveSweeps::SweepOf(int32_t id) const {
     int32_t id = -1;
     std::optional<Sweep> sweep;
   };
-  constexpr int kEntries = 64;
+  constexpr int kEntries = 256;
   thread_local Entry cache[kEntries];
   Entry& e = cache[id & (kEntries - 1)];
   if (e.id == id && e.serial == serial_) return &*e.sweep;
@@ -838,7 +823,8 @@ SurfaceJet MoveSweeps::Jet(int32_t id, double x, double y) const {
   return s->JetAt(x, y);
 }
 
-ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
+ElementCorners Workpiece::Corners(int32_t ei, int32_t ej,
+                                  bool prepare) const {
   ElementCorners e;
   e.ei = ei;
   e.ej = ej;
@@ -859,7 +845,7 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej) const {
   }
   if (scheme_->uses_candidates()) surfaces_.FillCandidates(&e);
   if (scheme_->uses_reach()) e.surfaces = &surfaces_;
-  scheme_->Prepare(&e);
+  if (prepare) scheme_->Prepare(&e);
   return e;
 }
 

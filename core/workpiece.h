@@ -58,10 +58,8 @@ struct Move {
 };
 
 // Where the swept surface of moves[id] exists and how low it goes (for the
-// guarded scheme): the XY capsule where it goes below z_top (BallSweep::
-// Footprint), with those of the moves before and after it when they
-// continue the same path (one's end is the other's start), and its own
-// lowest tip.
+// guarded scheme): the XY capsule where it goes below z_top (the sweep's
+// Footprint, at the footprint's exact radius) and its lowest tip.
 CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top);
 
 // The exact swept surfaces of a list of moves, by index, and where each
@@ -188,10 +186,13 @@ class Workpiece {
 
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
   NodeValue Node(int32_t i, int32_t j) const;
-  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with each cut corner's
-  // reach (ReachOf its owner) and the stencil's owners and the moves'
-  // surfaces, where the scheme uses them.
-  ElementCorners Corners(int32_t ei, int32_t ej) const;
+  // Node (i, j)'s owner (-1: uncut), without its jet: Node(i, j).owner.
+  int32_t OwnerAt(int32_t i, int32_t j) const;
+  // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with the corners'
+  // owners, each cut corner's reach (ReachOf its owner), the candidates and
+  // the moves' surfaces where the scheme uses them, prepared by the scheme
+  // (Scheme::Prepare) unless `prepare` is false (the caller prepares it).
+  ElementCorners Corners(int32_t ei, int32_t ej, bool prepare = true) const;
   // The scheme's reconstructed surface at a point of the stock (clamped to
   // the stock rectangle).
   double Reconstruct(double x, double y) const;
@@ -275,8 +276,6 @@ class Workpiece {
   // valid until this thread's next call (the thread keeps the last one).
   const TileJets& Jets(int32_t t) const;
   const TileJets& JetsMiss(int32_t t) const;  // Jets() past its hit test
-  // Node (i, j)'s owner (-1: uncut), without its jet.
-  int32_t OwnerAt(int32_t i, int32_t j) const;
   // Tile t's cached jets if they are of `version` (and this state), else
   // null.
   std::shared_ptr<const TileJets> CachedJets(int32_t t,

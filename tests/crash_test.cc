@@ -5,9 +5,6 @@
 // bit-identical to an uninterrupted run of the same moves. Snapshots are
 // written every 5 batches, so restarts load one and replay the tail (and a
 // kill may land in the middle of writing one).
-#include <fcntl.h>
-#include <signal.h>
-#include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
@@ -24,12 +21,14 @@
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
 #include "swarf/v1/swarf.grpc.pb.h"
+#include "tests/swarfd_process.h"
 
 namespace swarf {
 namespace {
 
 namespace pb = ::swarf::v1;
 namespace fs = std::filesystem;
+using ::swarf::testing::SwarfdProcess;
 
 constexpr double kRadius = 0.5;
 const StockSpec kStock{0, 0, 20, 20, 0, 200, 200};
@@ -64,46 +63,9 @@ pb::SimulateRequest Batch(const std::vector<Vec3>& pts, int seq) {
   return r;
 }
 
-// A swarfd child process with its output in a log file.
-class Swarfd {
- public:
-  Swarfd(const std::string& data_dir, const std::string& log) {
-    pid_ = fork();
-    if (pid_ == 0) {
-      const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0644);
-      dup2(fd, 1);
-      dup2(fd, 2);
-      execl(SWARFD_PATH, SWARFD_PATH, "--listen", "127.0.0.1:0",
-            ("--data_dir=" + data_dir).c_str(), "--journal_sync=full",
-            "--worker_threads=2", "--snapshot_every_moves=2000",
-            static_cast<char*>(nullptr));
-      _exit(127);
-    }
-    // The port from the log: "listening on ... (port N)".
-    const std::regex port_re(R"(\(port (\d+)\))");
-    for (int tries = 0; tries < 200 && port_ == 0; ++tries) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(25));
-      std::ifstream in(log);
-      std::string text((std::istreambuf_iterator<char>(in)),
-                       std::istreambuf_iterator<char>());
-      std::smatch m;
-      if (std::regex_search(text, m, port_re)) port_ = std::stoi(m[1]);
-    }
-  }
-  ~Swarfd() { Kill(); }
-  int port() const { return port_; }
-  void Kill() {
-    if (pid_ > 0) {
-      ::kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-      pid_ = -1;
-    }
-  }
-
- private:
-  pid_t pid_ = -1;
-  int port_ = 0;
-};
+// How the test runs swarfd: snapshots every 5 batches.
+const std::vector<std::string> kFlags = {
+    "--journal_sync=full", "--worker_threads=2", "--snapshot_every_moves=2000"};
 
 std::unique_ptr<pb::Swarf::Stub> Stub(int port) {
   return pb::Swarf::NewStub(grpc::CreateChannel(
@@ -128,7 +90,7 @@ TEST(CrashTest, KilledServerLosesNothingAcknowledgedAndEndsBitIdentical) {
   const std::vector<Vec3> pts = Path();
   const std::string id = "crash-job";
 
-  auto server = std::make_unique<Swarfd>(data, log());
+  auto server = std::make_unique<SwarfdProcess>(data, log(), kFlags);
   ASSERT_GT(server->port(), 0) << "swarfd did not start";
   {
     pb::CreateSessionRequest req;
@@ -183,7 +145,7 @@ TEST(CrashTest, KilledServerLosesNothingAcknowledgedAndEndsBitIdentical) {
       ASSERT_EQ(last_acked, kBatches);
       break;
     }
-    server = std::make_unique<Swarfd>(data, log());
+    server = std::make_unique<SwarfdProcess>(data, log(), kFlags);
     ASSERT_GT(server->port(), 0) << "swarfd did not restart";
     pb::Session s;
     pb::GetSessionRequest get;

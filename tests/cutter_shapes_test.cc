@@ -64,6 +64,8 @@ const Shape kShapes[] = {
     {"vbit", Cutter::Cone(3, 45, 0)},          // 90-degree V-bit, sharp
     {"chamfer", Cutter::Cone(3, 30, 0.4)},     // 60 degrees, 0.8 mm flat tip
     {"taper", Cutter::TaperedBall(3, 0.5, 10)},  // 1 mm ball, 20-degree taper
+    {"bull_flat", Cutter::BullNose(3, 0)},   // swept as the flat end
+    {"bull_ball", Cutter::BullNose(3, 3)},   // swept as the ball
 };
 
 // Straight moves of every kind (tool tips; coordinates off any symmetry).
@@ -601,6 +603,39 @@ TEST_P(ReferenceTest, SweepContract) {
           << At(xs[k], ys[k]) << " height " << h << " outside the footprint "
           << "below " << cap;
     }
+  }
+}
+
+// FootprintCapsule and FootprintBounds, which do not build the sweep, give
+// the sweep's own footprint bit for bit, at every cap (above the move, at
+// its tips, through it, below it).
+TEST_P(ReferenceTest, FootprintWithoutTheSweep) {
+  const Sweep sweep = MakeSweep();
+  const MoveCase& m = move();
+  const double lo = std::min(m.from.z, m.to.z);
+  const double hi = std::max(m.from.z, m.to.z);
+  for (double cap : {lo - 1, lo, 0.5 * (lo + hi), hi, hi + 0.1, hi + 50}) {
+    const Capsule a = sweep.Footprint(cap);
+    const Capsule b = FootprintCapsule(m.from, m.to, cutter(), cap);
+    ASSERT_EQ(a.empty, b.empty) << "cap " << cap;
+    const std::optional<Rect> r = FootprintBounds(m.from, m.to, cutter(), cap);
+    ASSERT_EQ(r.has_value(), !a.empty) << "cap " << cap;
+    if (a.empty) continue;
+    EXPECT_EQ(a.x0, b.x0);
+    EXPECT_EQ(a.y0, b.y0);
+    EXPECT_EQ(a.x1, b.x1);
+    EXPECT_EQ(a.y1, b.y1);
+    EXPECT_EQ(a.radius, b.radius);
+    EXPECT_EQ(a.ux, b.ux);
+    EXPECT_EQ(a.uy, b.uy);
+    EXPECT_EQ(a.length, b.length);
+    EXPECT_EQ(a.inv_ux, b.inv_ux);
+    EXPECT_EQ(a.inv_uy, b.inv_uy);
+    const Rect ab = a.Bounds();
+    EXPECT_EQ(r->x0, ab.x0);
+    EXPECT_EQ(r->y0, ab.y0);
+    EXPECT_EQ(r->x1, ab.x1);
+    EXPECT_EQ(r->y1, ab.y1);
   }
 }
 

@@ -5,6 +5,7 @@
 // four-line program that made the paper's scheme dig 143 mm; random scenes.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <random>
 #include <vector>
@@ -227,25 +228,103 @@ TEST(GuardedSchemeTest, RandomScenesOfEveryShapeBeatTheZmap) {
   RecordProperty("worst_mean_ratio", std::to_string(worst_mean_ratio));
 }
 
-TEST(CornerReachTest, FootprintOfAMoveAndTheMovesContinuingIt) {
+TEST(CornerReachTest, FootprintOfAMove) {
   const std::vector<Move> path = {{{-2, 0, 0}, {0, 0, -1}, 1},
                                   {{0, 0, -1}, {2, 0, -1}, 1},
                                   {{2, 0, -1}, {2, 0, 3}, 1},
-                                  {{9, 9, 9}, {9, 9, -5}, 1}};
+                                  {{9, 9, 9}, {9, 9, -5}, 1},
+                                  {{0, 0, 101}, {5, 0, 101}, 1}};
   EXPECT_TRUE(CornerReach().Contains(1e9, -1e9));  // unbounded
   const CornerReach r = ReachOf(path, 1, 100);
-  EXPECT_EQ(r.count, 3);  // the ramp before, the retract after
   EXPECT_EQ(r.z_low, -1);  // its own tips only
   EXPECT_TRUE(r.Contains(1, 1));       // on the side, exactly at r
   EXPECT_FALSE(r.Contains(1, 1.001));
-  EXPECT_TRUE(r.Contains(-2.5, 0.5));  // the move before
-  EXPECT_TRUE(r.Contains(3, 0));       // end cap
+  EXPECT_FALSE(r.Contains(-2.5, 0.5));  // the move before: not its surface
+  EXPECT_TRUE(r.Contains(3, 0));        // end cap
   EXPECT_FALSE(r.Contains(3.01, 0));
-  const CornerReach plunge = ReachOf(path, 3, 100);  // not continuing move 2
-  EXPECT_EQ(plunge.count, 1);
+  const CornerReach plunge = ReachOf(path, 3, 100);
   EXPECT_EQ(plunge.z_low, -5);
   EXPECT_TRUE(plunge.Contains(9.6, 9.79));
   EXPECT_FALSE(plunge.Contains(9.6, 9.81));
+  const CornerReach above = ReachOf(path, 4, 100);  // never below the top
+  EXPECT_TRUE(above.empty);
+  EXPECT_FALSE(above.Contains(2, 0));
+}
+
+// The points of an element at once (ReconstructMany: smooth elements in
+// vectorized loops, capsules decided for the whole element where they can
+// be) and the height with its gradient (HeightAndGradient) are Reconstruct
+// and Gradient bit for bit: on every element of random scenes, at the
+// valuation's 5 x 5 lattice, random points, the edges and corners, and just
+// outside the element. Preparing an element from its nodes' trust regions
+// gives the same element.
+TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
+  std::mt19937_64 rng(27);
+  std::uniform_real_distribution<double> u(0, 1);
+  const Scheme& guarded = GetScheme(SchemeKind::kGuarded);
+  int smooth = 0;
+  for (int scene = 0; scene < 4; ++scene) {
+    const StockSpec stock{0, 0, 6, 6, 0, 24 + scene, 24 + scene};
+    std::vector<Move> moves;
+    for (int k = 0; k < 6; ++k) {
+      const double r = 0.2 + 1.3 * u(rng);
+      const Vec3 a{6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)};
+      Vec3 b{6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)};
+      if (k % 3 == 0) b = {a.x, a.y, a.z - 2 * u(rng)};
+      if (k % 3 == 1) b.z = a.z;
+      moves.push_back({a, b, r});
+    }
+    auto wp = Cut(stock, SchemeKind::kGuarded, moves);
+    for (int32_t ej = 0; ej < stock.ny; ++ej) {
+      for (int32_t ei = 0; ei < stock.nx; ++ei) {
+        SCOPED_TRACE(::testing::Message() << "scene " << scene << " element "
+                                          << ei << ", " << ej);
+        const ElementCorners e = wp->Corners(ei, ej);
+        std::vector<double> xs, ys;
+        for (int b = 0; b <= 4; ++b) {
+          for (int a = 0; a <= 4; ++a) {
+            xs.push_back(e.x0 + (e.x1 - e.x0) * a / 4);
+            ys.push_back(e.y0 + (e.y1 - e.y0) * b / 4);
+          }
+        }
+        for (int k = 0; k < 70; ++k) {  // past one chunk of the kernel
+          xs.push_back(e.x0 + (e.x1 - e.x0) * u(rng));
+          ys.push_back(e.y0 + (e.y1 - e.y0) * u(rng));
+        }
+        smooth += e.guard.smooth;
+        // Prepared with the nodes' trust regions (as the valuation does):
+        // the same element.
+        ElementCorners f = wp->Corners(ei, ej, /*prepare=*/false);
+        PatchTrustRegion regions[4];
+        const PatchTrustRegion* trust[4];
+        for (int k = 0; k < 4; ++k) {
+          regions[k] = TrustRegion(f.c[k]);
+          trust[k] = &regions[k];
+        }
+        PrepareGuarded(&f, trust);
+        ASSERT_EQ(f.guard.smooth, e.guard.smooth);
+        ASSERT_EQ(std::memcmp(f.guard.lift, e.guard.lift, sizeof f.guard.lift),
+                  0);
+        ASSERT_TRUE(f.candidates == e.candidates);
+        xs.push_back(std::nextafter(e.x1, 1e9));
+        ys.push_back(e.y0);
+        std::vector<double> many(xs.size());
+        guarded.ReconstructMany(e, xs.data(), ys.data(),
+                                static_cast<int32_t>(xs.size()), many.data());
+        for (size_t q = 0; q < xs.size(); ++q) {
+          const double w = guarded.Reconstruct(e, xs[q], ys[q]);
+          ASSERT_EQ(std::memcmp(&many[q], &w, 8), 0) << xs[q] << ", " << ys[q];
+          double gx, gy, hx, hy;
+          const double z = guarded.HeightAndGradient(e, xs[q], ys[q], &gx, &gy);
+          guarded.Gradient(e, xs[q], ys[q], &hx, &hy);
+          ASSERT_EQ(std::memcmp(&z, &w, 8), 0) << xs[q] << ", " << ys[q];
+          ASSERT_EQ(gx, hx);
+          ASSERT_EQ(gy, hy);
+        }
+      }
+    }
+  }
+  EXPECT_GT(smooth, 200);  // the batched kernel's elements
 }
 
 }  // namespace

@@ -23,6 +23,7 @@
 
 #include "client/text.h"
 #include "client/colormap.h"
+#include "client/json_writer.h"
 #include "client/marks_files.h"
 #include "client/pictures.h"
 #include "client/png_image.h"
@@ -34,6 +35,8 @@
 #include "core/workpiece.h"
 #include "google/protobuf/struct.pb.h"
 #include "google/protobuf/util/json_util.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "gtest/gtest.h"
 
 namespace swarf::cli {
@@ -1087,6 +1090,189 @@ TEST(RunOutputsTest, LargeGridTiming) {
               marks.size(), total);
   RecordProperty("seconds", std::to_string(total));
   EXPECT_LT(total, 30);  // a sanity bound; the figure is in the output
+}
+
+// ------------------------------------------------ the same figures, faster
+
+uint64_t Fnv(const void* p, size_t n, uint64_t h = 1469598103934665603ull) {
+  const unsigned char* b = static_cast<const unsigned char*>(p);
+  for (size_t k = 0; k < n; ++k) {
+    h ^= b[k];
+    h *= 1099511628211ull;
+  }
+  return h;
+}
+
+// Ball passes at several depths over a 12 x 9 mm stock (guarded, 0.1 mm),
+// a diagonal ramp and a plunge: creases, rims and detail everywhere.
+std::vector<Move> GoldenMoves() {
+  std::vector<Move> m;
+  for (int k = 0; k < 14; ++k) {
+    const double y = 1.5 + 0.55 * k, z = -0.4 - 0.15 * (k % 4);
+    m.push_back({{-1, y, z}, {13, y + 0.3 * (k % 2), z - 0.2}, 0.8});
+  }
+  m.push_back({{2, 2, 1}, {11, 8, -1.1}, 1.2});
+  m.push_back({{6.3, 4.1, 0.5}, {6.3, 4.1, -1.7}, 0.6});
+  return m;
+}
+
+// The writers' figures and bytes on a fixed scene, as they were before
+// issue 14's speed-ups (main at 4627b2d: serial strokes, one JSON/SVG
+// string, measuring every leaf again, ...) and after: the
+// adaptive mesh (triangles, measured deviation, every vertex and index),
+// the relief and marks pictures' pixels, marks.json and marks.svg.
+TEST(OutputsGoldenTest, GuardedSceneFiguresAreUnchanged) {
+  const StockSpec spec{0, 0, 12, 9, 0, 120, 90};
+  auto wp = Cut(SchemeKind::kGuarded, spec, GoldenMoves());
+  const SurfaceGrid g = GridOf(*wp);
+  SurfaceMeshOptions o;
+  o.tolerance = 0.005;
+  auto mesh = BuildSurfaceMesh(g, o);
+  ASSERT_TRUE(mesh.ok()) << mesh.status();
+  EXPECT_EQ(mesh->triangles.size(), 2868u);
+  EXPECT_EQ(mesh->max_deviation, 0.0048927818058065453);
+  uint64_t h = Fnv(mesh->vertices.data(), mesh->vertices.size() * sizeof(Vec3));
+  h = Fnv(mesh->triangles.data(),
+          mesh->triangles.size() * sizeof(mesh->triangles[0]), h);
+  EXPECT_EQ(h, 0x493636f244403715u);
+
+  auto relief = RenderRelief(g, {});
+  ASSERT_TRUE(relief.ok());
+  EXPECT_EQ(Fnv(relief->pixels().data(), relief->pixels().size()),
+            0xa783bb551d1dba40u);
+
+  auto found = FindCuttingMarks(*wp, {});
+  ASSERT_TRUE(found.ok());
+  const std::vector<MarkPolyline> marks =
+      FilterMarks(*found, kDefaultMarkDisplay);
+  EXPECT_EQ(marks.size(), 22u);
+  const MarksPictureOptions mo;
+  auto fine = RenderRelief(g, mo.relief);
+  ASSERT_TRUE(fine.ok());
+  auto picture = DrawMarks(*fine, ReliefFrame(g.spec, mo.relief), marks, mo);
+  ASSERT_TRUE(picture.ok());
+  EXPECT_EQ(picture->width(), 1141);
+  EXPECT_EQ(picture->height(), 750);  // 24 bands of rows drawn at once
+  EXPECT_EQ(Fnv(picture->pixels().data(), picture->pixels().size()),
+            0xeee569a18ab7dfeau);
+
+  const std::string json = MarksJson(marks), svg = MarksSvg(spec, marks);
+  EXPECT_EQ(Fnv(json.data(), json.size()), 0xf8e7a3c03ce96293u);
+  EXPECT_EQ(Fnv(svg.data(), svg.size()), 0xe7f7c6ba389e333cu);
+}
+
+// The relief's sampler (corners and trust frames kept between points) is
+// SurfaceGrid::HeightAndGradient bit for bit, in rows and at random.
+TEST(SurfaceSamplerTest, MatchesHeightAndGradientBitForBit) {
+  for (SchemeKind scheme : {SchemeKind::kGuarded, SchemeKind::kTaylor,
+                            SchemeKind::kZmap, SchemeKind::kExact}) {
+    SCOPED_TRACE(GetScheme(scheme).name());
+    const StockSpec spec{0, 0, 12, 9, 0, 60, 45};
+    auto wp = Cut(scheme, spec, GoldenMoves());
+    const SurfaceGrid g = GridOf(*wp);
+    SurfaceSampler sampler(g);
+    std::mt19937_64 rng(8);
+    std::uniform_real_distribution<double> ux(-0.5, 12.5), uy(-0.5, 9.5);
+    std::vector<std::pair<double, double>> points;
+    for (int j = 0; j <= 100; ++j) {
+      for (int i = 0; i <= 130; ++i) points.push_back({i * 0.093, j * 0.09});
+    }
+    for (int k = 0; k < 5000; ++k) points.push_back({ux(rng), uy(rng)});
+    for (const auto& [x, y] : points) {
+      double gx, gy, hx, hy;
+      const double z = sampler.HeightAndGradient(x, y, &gx, &gy);
+      const double w = g.HeightAndGradient(x, y, &hx, &hy);
+      ASSERT_EQ(std::memcmp(&z, &w, 8), 0) << x << ", " << y;
+      ASSERT_EQ(gx, hx) << x << ", " << y;
+      ASSERT_EQ(gy, hy) << x << ", " << y;
+      ASSERT_EQ(w, g.Height(x, y));
+    }
+  }
+}
+
+// marks.json and marks.svg are formatted in chunks of polylines at once:
+// the same bytes as one writer over all of them (here as the files were
+// written before), across several chunks, in memory and in the files.
+TEST(MarksTest, JsonAndSvgInChunksAreOneDocument) {
+  std::mt19937_64 rng(9);
+  std::uniform_real_distribution<double> u(-50, 50);
+  std::vector<MarkPolyline> marks(2600);
+  for (size_t k = 0; k < marks.size(); ++k) {
+    MarkPolyline& p = marks[k];
+    p.closed = k % 7 == 0;
+    p.owners = {static_cast<int32_t>(k % 5) - 1, static_cast<int32_t>(k)};
+    for (size_t v = 0; v < 1 + k % 4; ++v) {
+      p.vertices.push_back({u(rng), u(rng), u(rng) / 1e3});
+      p.angle_deg.push_back(std::fabs(u(rng)));
+      p.vertex_owners.push_back({static_cast<int32_t>(v), -1});
+    }
+  }
+  for (bool vertex_owners : {false, true}) {
+    JsonWriter j;
+    j.BeginObject().Key("polylines").BeginArray();
+    for (const MarkPolyline& p : marks) {
+      j.BeginObject().Key("closed").Bool(p.closed);
+      j.Key("owners").BeginArray().Int(p.owners[0]).Int(p.owners[1]).EndArray();
+      j.Key("vertices").BeginArray();
+      for (const Vec3& v : p.vertices) {
+        j.BeginArray().Double(v.x).Double(v.y).Double(v.z).EndArray();
+      }
+      j.EndArray().Key("angle_deg").BeginArray();
+      for (double a : p.angle_deg) j.Double(a);
+      j.EndArray();
+      if (vertex_owners) {
+        j.Key("vertex_owners").BeginArray();
+        for (const auto& o : p.vertex_owners) {
+          j.BeginArray().Int(o[0]).Int(o[1]).EndArray();
+        }
+        j.EndArray();
+      }
+      j.EndObject();
+    }
+    j.EndArray().EndObject();
+    EXPECT_EQ(MarksJson(marks, vertex_owners), j.str());
+  }
+  const StockSpec stock{-50, -50, 50, 50, 0, 100, 100};
+  auto num = [](double v) { return absl::StrFormat("%.7g", v); };
+  const double stroke = 100.0 / 400;
+  std::string svg = absl::StrCat(
+      "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+      "<svg xmlns=\"http://www.w3.org/2000/svg\" version=\"1.1\" width=\"",
+      num(100), "mm\" height=\"", num(100), "mm\" viewBox=\"", num(-50), " ",
+      num(-50), " ", num(100), " ", num(100), "\">\n",
+      "<title>swarf cutting marks: ", marks.size(),
+      " polylines, mm, y up</title>\n",
+      "<g transform=\"scale(1,-1)\" fill=\"none\" stroke-linecap=\"round\" "
+      "stroke-linejoin=\"round\">\n",
+      "<rect x=\"", num(-50), "\" y=\"", num(-50), "\" width=\"", num(100),
+      "\" height=\"", num(100), "\" stroke=\"#000000\" stroke-width=\"",
+      num(stroke * 0.6), "\"/>\n");
+  for (const MarkPolyline& p : marks) {
+    double mean = 0;
+    for (double a : p.angle_deg) mean += a;
+    if (!p.angle_deg.empty()) mean /= p.angle_deg.size();
+    const Rgb c = AngleColor(mean);
+    absl::StrAppend(&svg, "<path stroke=\"",
+                    absl::StrFormat("#%02x%02x%02x", c.r, c.g, c.b),
+                    "\" stroke-width=\"", num(stroke), "\" data-owners=\"",
+                    p.owners[0], " ", p.owners[1], "\" data-angle-deg=\"",
+                    num(mean), "\" d=\"");
+    for (size_t k = 0; k < p.vertices.size(); ++k) {
+      absl::StrAppend(&svg, k == 0 ? "M" : " L", num(p.vertices[k].x), " ",
+                      num(p.vertices[k].y));
+    }
+    if (p.closed) svg += " Z";
+    absl::StrAppend(&svg, "\"><title>owners ", p.owners[0], " ", p.owners[1],
+                    ", mean angle ", absl::StrFormat("%.2f", mean),
+                    " deg</title></path>\n");
+  }
+  svg += "</g>\n</svg>\n";
+  EXPECT_EQ(MarksSvg(stock, marks), svg);
+  TempDir dir;
+  ASSERT_TRUE(WriteMarksJson(marks, dir.File("m.json")).ok());
+  ASSERT_TRUE(WriteMarksSvg(stock, marks, dir.File("m.svg")).ok());
+  EXPECT_EQ(ReadAll(dir.File("m.json")), MarksJson(marks) + "\n");
+  EXPECT_EQ(ReadAll(dir.File("m.svg")), svg);
 }
 
 }  // namespace

@@ -21,6 +21,7 @@
 #include "google/protobuf/struct.pb.h"
 #include "google/protobuf/util/json_util.h"
 #include "gtest/gtest.h"
+#include "server/server.h"
 
 namespace swarf::cli {
 namespace {
@@ -160,6 +161,53 @@ TEST_P(RunE2eTest, CorpusJobRunsAndItsOutputsAreValid) {
   EXPECT_EQ(below, 0) << "machined below the lowest tool tip";
   EXPECT_LT(min_z, lowest_tip);  // the bottom plane
   std::filesystem::remove_all(out);
+}
+
+std::string ReadFile(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+// swarf run asks for the marks as one message, and one per polyline when
+// they pass the server's message limit: the same marks either way. A server
+// with 1 MiB messages (bear.nc's marks at 0.25 mm are several MiB) against
+// the embedded one (64 MiB: one message).
+TEST(RunE2eMarksTest, OneMessageOrOnePerPolylineGiveTheSameMarks) {
+  server::ServerOptions o;
+  o.listen = "127.0.0.1:0";
+  o.limits.max_message_bytes = 1 << 20;
+  o.limits.max_batch_points = 20000;
+  auto srv = server::SwarfServer::Start(o);
+  ASSERT_TRUE(srv.ok()) << srv.status();
+  const std::string file = std::string(SWARF_CORPUS_DIR) + "/bear.nc";
+  const std::filesystem::path base =
+      std::filesystem::temp_directory_path() /
+      ("swarf-e2e-marks-" + std::to_string(::getpid()));
+  const std::string remote = (base / "remote").string();
+  const std::string embedded = (base / "embedded").string();
+  std::filesystem::remove_all(base);
+  const std::vector<std::string> args = {file, "--tool", "ball:d=3.175",
+                                         "--spacing", "0.25", "--quiet"};
+  std::vector<std::string> a = args;
+  a.insert(a.end(), {"--out", remote, "--server",
+                     "127.0.0.1:" + std::to_string((*srv)->port())});
+  ASSERT_EQ(RunCommand(a), 0);
+  a = args;
+  a.insert(a.end(), {"--out", embedded});
+  ASSERT_EQ(RunCommand(a), 0);
+  const google::protobuf::Struct remote_stats = ReadJson(remote + "/stats.json");
+  const google::protobuf::Struct embedded_stats =
+      ReadJson(embedded + "/stats.json");
+  const auto& m = remote_stats.fields().at("marks").struct_value().fields();
+  const auto& e = embedded_stats.fields().at("marks").struct_value().fields();
+  EXPECT_GT(m.at("vertices").number_value() * 32, 1 << 20);  // x, y, z, angle
+  for (const char* k : {"polylines", "vertices", "total_length"}) {
+    EXPECT_EQ(m.at(k).number_value(), e.at(k).number_value()) << k;
+  }
+  for (const char* f : {"marks.json", "marks.svg"}) {
+    EXPECT_EQ(ReadFile(remote + "/" + f), ReadFile(embedded + "/" + f)) << f;
+  }
+  std::filesystem::remove_all(base);
 }
 
 // Never silent: moves the interpreter drops and a cut leaving the stock are

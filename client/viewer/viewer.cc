@@ -130,6 +130,16 @@ class ViewerImpl {
     // Fill the cache before the page can ask, so that it starts whole.
     Poll();
     http_thread_ = std::thread([this] { http_.listen_after_bind(); });
+    // cpp-httplib's stop() does nothing until the listening thread has
+    // marked itself running: a viewer destroyed before that would wait on
+    // accept() for ever. Return only once it listens.
+    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (!http_.is_running()) {
+      if (std::chrono::steady_clock::now() > give_up) {
+        return absl::UnavailableError("the viewer's HTTP server did not start");
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
     relay_thread_ = std::thread([this] { Relay(); });
     return absl::OkStatus();
   }

@@ -404,6 +404,17 @@ std::optional<Rect> BallSweep::FootprintBounds(const Vec3& tip_from,
   return c.Bounds();
 }
 
+BallSweep::Capsule BallSweep::FootprintOf(const Vec3& tip_from,
+                                           const Vec3& tip_to, double radius,
+                                           double cap) {
+  const Vec3 a{tip_from.x, tip_from.y, tip_from.z + radius};
+  const Vec3 b{tip_to.x, tip_to.y, tip_to.z + radius};
+  Capsule c = FootprintEnds(a, b, radius, radius * radius, cap);
+  if (c.empty) return c;
+  FillDirection(&c);
+  return c;
+}
+
 BallSweep::Capsule BallSweep::Footprint(double cap) const {
   Capsule c = FootprintEnds(a_, b_, r_, r2_, cap);
   if (c.empty) return c;

@@ -214,6 +214,10 @@ class BallSweep {
   static std::optional<Rect> FootprintBounds(const Vec3& tip_from,
                                              const Vec3& tip_to,
                                              double radius, double cap);
+  // The footprint itself, bit-identical to BallSweep(tip_from, tip_to,
+  // radius).Footprint(cap), without building the sweep.
+  static Capsule FootprintOf(const Vec3& tip_from, const Vec3& tip_to,
+                             double radius, double cap);
 
  private:
   friend struct BallSweepKernels;  // the kernels over many frames

@@ -28,12 +28,25 @@ Sweep::Variant MakeVariant(const Vec3& a, const Vec3& b, const Cutter& c) {
 Sweep::Sweep(const Vec3& tip_from, const Vec3& tip_to, const Cutter& cutter)
     : v_(MakeVariant(tip_from, tip_to, cutter)) {}
 
+Capsule FootprintCapsule(const Vec3& tip_from, const Vec3& tip_to,
+                         const Cutter& cutter, double cap) {
+  if (SweptAsBall(cutter)) {
+    return BallSweep::FootprintOf(tip_from, tip_to, cutter.radius, cap);
+  }
+  // The profile sweeps' own (ProfileSweep::Footprint), with the cutter they
+  // are built for: a bull-nose without a corner is the flat end.
+  const bool flat = cutter.kind == CutterKind::kBullNose &&
+                    cutter.corner_radius == 0;
+  return TipFootprint(tip_from, tip_to,
+                      flat ? Cutter::Flat(cutter.radius) : cutter, cap);
+}
+
 std::optional<Rect> FootprintBounds(const Vec3& tip_from, const Vec3& tip_to,
                                     const Cutter& cutter, double cap) {
   if (SweptAsBall(cutter)) {
     return BallSweep::FootprintBounds(tip_from, tip_to, cutter.radius, cap);
   }
-  const Capsule c = Sweep(tip_from, tip_to, cutter).Footprint(cap);
+  const Capsule c = FootprintCapsule(tip_from, tip_to, cutter, cap);
   if (c.empty) return std::nullopt;
   return c.Bounds();
 }

@@ -92,6 +92,10 @@ class Sweep {
 // footprint is empty. Bit-identical to Sweep(...).Footprint(cap).Bounds().
 std::optional<Rect> FootprintBounds(const Vec3& tip_from, const Vec3& tip_to,
                                     const Cutter& cutter, double cap);
+// The footprint below `cap` itself, bit-identical to Sweep(tip_from, tip_to,
+// cutter).Footprint(cap), without building the sweep.
+Capsule FootprintCapsule(const Vec3& tip_from, const Vec3& tip_to,
+                         const Cutter& cutter, double cap);
 
 }  // namespace swarf
 
