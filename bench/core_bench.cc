@@ -242,7 +242,8 @@ void BM_RecordMoves(benchmark::State& state) {
 BENCHMARK(BM_RecordMoves)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 // What reads cost once a job is cut: the finishing raster of
-// BM_FinishingMoves cut on a taylor workpiece (1000x1000), then every
+// BM_FinishingMoves cut on a taylor workpiece (unless a
+// scheme is named: the same cut on its workpiece; 1000x1000), then every
 // allocated tile read with derivatives (as the service answers GetTiles),
 // the valuation (eq. 15, 21 samples per element, MeasureError), and the
 // cutting marks (FindCuttingMarks, default options). Each read starts from a
@@ -264,7 +265,8 @@ std::unique_ptr<Workpiece> FinishedWorkpiece(SchemeKind scheme) {
 // computes its tile's derivatives on the calling thread).
 enum class Read { kTiles, kTilesSerial, kValuation, kMarks };
 
-void BM_Read(benchmark::State& state, Read what) {
+void BM_Read(benchmark::State& state, Read what,
+             SchemeKind scheme = SchemeKind::kTaylor) {
   std::vector<double> w(kTileNodes);
   std::vector<float> d(5 * kTileNodes);
   std::vector<int32_t> owner(kTileNodes);
@@ -272,7 +274,7 @@ void BM_Read(benchmark::State& state, Read what) {
   for (int c = 0; c < 5; ++c) dp[c] = d.data() + c * kTileNodes;
   for (auto _ : state) {
     state.PauseTiming();
-    auto wp = FinishedWorkpiece(SchemeKind::kTaylor);
+    auto wp = FinishedWorkpiece(scheme);
     state.ResumeTiming();
     switch (what) {
       case Read::kTiles: {
@@ -318,6 +320,21 @@ BENCHMARK_CAPTURE(BM_Read, tiles_with_derivatives_serial, Read::kTilesSerial)
 BENCHMARK_CAPTURE(BM_Read, valuation, Read::kValuation)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Read, marks, Read::kMarks)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+// The same reads on the other schemes that reconstruct from the nodes' jets
+// or the moves (the cut is the same; the surface inside elements differs).
+BENCHMARK_CAPTURE(BM_Read, valuation_guarded, Read::kValuation,
+                  SchemeKind::kGuarded)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Read, valuation_exact, Read::kValuation,
+                  SchemeKind::kExact)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Read, valuation_zmap, Read::kValuation,
+                  SchemeKind::kZmap)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Read, marks_guarded, Read::kMarks, SchemeKind::kGuarded)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Read, marks_exact, Read::kMarks, SchemeKind::kExact)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace

@@ -17,7 +17,7 @@ namespace swarf {
 
 // kZmap: eq. (16). kTaylor: the paper's eq. (1)-(2), unchanged. kGuarded (the
 // default of sessions and `swarf run`): eq. (1)-(2) where the patches are
-// trustworthy, the bilinear elsewhere (see GuardedHeight). kExact: the
+// checked to hold, the exact swept surfaces elsewhere (see GuardedHeight). kExact: the
 // minimum of the exact swept surfaces of the moves that can reach the
 // element (see ExactCandidatesHeight). The values are stored in snapshots:
 // append only.
@@ -159,8 +159,9 @@ double MinOfPatches(const ElementCorners& e, double x, double y);
 //   inside its owner's reach (a patch that disagrees with a neighbouring
 //   node by more than a third-order term does not model the surface there:
 //   a kink, a wall, a crease inside the element). There, eq. (2) over the
-//   corners whose reach holds (x, y) (the owner's footprint, and those of
-//   the moves continuing it), each patch lifted by the bilinear
+//   corners whose reach holds (x, y) (the owner's own footprint: where the
+//   path turns or changes slope the patch does not model the next move),
+//   each patch lifted by the bilinear
 //   interpolation of its shortfalls below the corners in its reach (so
 //   that every patch passes at or above every node it should: the
 //   reconstruction interpolates the nodes) and held at or above its owner's
