@@ -5,6 +5,7 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
+#include "core/target_clones.h"
 
 namespace swarf {
 
@@ -84,16 +85,6 @@ void TakeLowest(const ElementCorners& e, double x, double y, GuardedValue* v) {
     v->move = id;
   }
 }
-
-// Clones for wider vectors, picked at load time; the same IEEE operations in
-// every clone (no FMA: -ffp-contract=off), so the same bits (as the sweeps'
-// kernels, core/cutter/ball_sweep.cc).
-#ifdef SWARF_NO_TARGET_CLONES
-#define SWARF_TARGET_CLONES
-#else
-#define SWARF_TARGET_CLONES \
-  __attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
-#endif
 
 // The squared distance from (x, y) to a capsule's segment exactly as
 // CornerReach::Capsule::Contains computes it.

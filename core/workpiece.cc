@@ -100,6 +100,9 @@ absl::StatusOr<std::unique_ptr<Workpiece>> Workpiece::Create(
 }
 
 absl::Status Workpiece::ValidateMoves(std::span<const Move> moves) {
+  // Consecutive moves mostly share a cutter: validated once per run (the
+  // field name is a string built per call; it was 3% of a finishing batch).
+  const Cutter* valid = nullptr;
   for (size_t k = 0; k < moves.size(); ++k) {
     const Move& m = moves[k];
     const struct {
@@ -119,8 +122,10 @@ absl::Status Workpiece::ValidateMoves(std::span<const Move> moves) {
                          kMaxCoordinate, " mm, got ", f.v));
       }
     }
+    if (valid != nullptr && m.cutter == *valid) continue;
     SWARF_RETURN_IF_ERROR(
         ValidateCutter(m.cutter, absl::StrCat("moves[", k, "].cutter")));
+    valid = &m.cutter;
   }
   return absl::OkStatus();
 }

@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "core/cutter/hypot.h"
+#include "core/target_clones.h"
 
 namespace swarf {
 namespace {
@@ -57,16 +58,6 @@ BallSweep::BallSweep(const Vec3& tip_from, const Vec3& tip_to, double radius)
   h2_ = dy / dxy;
 }
 
-// Clones for wider vectors, picked at load time; the same IEEE operations in
-// every clone (no FMA: -ffp-contract=off), so the same bits.
-// SWARF_NO_TARGET_CLONES keeps only the default: clang 14 names the ifunc
-// "<name>.ifunc", so callers in other files don't link (fuzz builds).
-#ifdef SWARF_NO_TARGET_CLONES
-#define SWARF_TARGET_CLONES
-#else
-#define SWARF_TARGET_CLONES \
-  __attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
-#endif
 SWARF_TARGET_CLONES
 void BallSweep::Heights(const double* x, const double* y, int32_t n,
                         double* out) const {
@@ -241,6 +232,7 @@ struct BallSweepKernels {
       const int32_t m = std::min(kChunk, n - q0);
       const int32_t* f = frame_of + q0;
       int32_t q = 0;
+#if defined(__GNUC__) && !defined(__clang__)  // __builtin_shuffle: GCC only
       if constexpr (kPermute) {
         using V8 = double __attribute__((vector_size(64)));
         using I8 = int64_t __attribute__((vector_size(64)));
@@ -269,6 +261,7 @@ struct BallSweepKernels {
           }
         }
       }
+#endif
       for (; q < m; ++q) {
         for (int32_t v = 0; v < kValues; ++v) {
           lane[v][q] = data[v * stride + f[q]];
