@@ -166,7 +166,8 @@ TEST(GuardedSchemeTest, RandomScenesNeverDigBelowTheOwningTips) {
       if (k % 3 == 1) b.z = a.z;                         // a slot
       moves.push_back({a, b, r});
     }
-    for (SchemeKind kind : {SchemeKind::kZmap, SchemeKind::kGuarded}) {
+    for (SchemeKind kind :
+         {SchemeKind::kZmap, SchemeKind::kGuarded, SchemeKind::kExact}) {
       SCOPED_TRACE(::testing::Message() << "scene " << scene << " scheme "
                                         << GetScheme(kind).name());
       auto wp = Cut(stock, kind, moves);
