@@ -153,6 +153,107 @@ void BM_EndToEnd(benchmark::State& state) {
       benchmark::Counter::kIsIterationInvariantRate);
 }
 
+// Tile reads as a client sees them: a session of `moves` finishing moves
+// (taylor, 1000x1000) streamed in first, then every tile of the stock read
+// with one GetTiles (floats; with derivatives and owners when range(1) is
+// 1). Each iteration reads a freshly cut session, so no tile's derivatives
+// were computed before (the first read of each tile version).
+void BM_GetTiles(benchmark::State& state) {
+  const int64_t moves = state.range(0);
+  const bool derivatives = state.range(1) != 0;
+  const std::vector<Vec3> pts = Raster(moves);
+  server::ServerOptions opt;
+  opt.listen = "127.0.0.1:0";
+  auto srv = *server::SwarfServer::Start(opt);
+  grpc::ChannelArguments args;
+  args.SetMaxReceiveMessageSize(64 << 20);
+  auto stub = pb::Swarf::NewStub(grpc::CreateCustomChannel(
+      "127.0.0.1:" + std::to_string(srv->port()),
+      grpc::InsecureChannelCredentials(), args));
+  int run = 0;
+  int64_t tiles = 0, bytes = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    const std::string id = "tiles-" + std::to_string(run++);
+    pb::CreateSessionRequest create;
+    create.set_session_id(id);
+    create.mutable_stock()->set_x1(kStock.x1);
+    create.mutable_stock()->set_y1(kStock.y1);
+    create.set_nx(kStock.nx);
+    create.set_ny(kStock.ny);
+    create.set_scheme(pb::SCHEME_TAYLOR);
+    pb::Tool* tool = create.add_tools();
+    tool->set_id(1);
+    tool->mutable_ball()->set_radius(kBallRadius);
+    {
+      grpc::ClientContext ctx;
+      pb::Session session;
+      if (!stub->CreateSession(&ctx, create, &session).ok()) {
+        state.SkipWithError("CreateSession failed");
+      }
+    }
+    {
+      grpc::ClientContext ctx;
+      ctx.AddMetadata("x-swarf-session", id);
+      auto stream = stub->Simulate(&ctx);
+      constexpr size_t kBatch = 10000;
+      uint64_t seq = 0;
+      for (size_t k = 0; k < pts.size(); k += kBatch) {
+        pb::SimulateRequest r;
+        pb::MoveBatch* b = r.mutable_moves();
+        b->set_seq(++seq);
+        b->set_tool_id(1);
+        for (size_t p = k; p < std::min(pts.size(), k + kBatch); ++p) {
+          b->add_xyz(pts[p].x);
+          b->add_xyz(pts[p].y);
+          b->add_xyz(pts[p].z);
+        }
+        stream->Write(r);
+      }
+      stream->WritesDone();
+      pb::SimulateResponse resp;
+      while (stream->Read(&resp)) {
+      }
+      if (!stream->Finish().ok()) state.SkipWithError("stream failed");
+    }
+    pb::GetTilesRequest req;
+    req.set_session_id(id);
+    pb::Rect* region = req.mutable_selection()->mutable_region();
+    region->set_x1(kStock.x1);
+    region->set_y1(kStock.y1);
+    req.set_precision(pb::PRECISION_FLOAT);
+    req.set_include_derivatives(derivatives);
+    req.set_include_owners(derivatives);
+    state.ResumeTiming();
+    grpc::ClientContext ctx;
+    auto reader = stub->GetTiles(&ctx, req);
+    pb::Tile tile;
+    tiles = 0;
+    bytes = 0;
+    while (reader->Read(&tile)) {
+      ++tiles;
+      bytes += static_cast<int64_t>(tile.ByteSizeLong());
+    }
+    if (!reader->Finish().ok()) state.SkipWithError("GetTiles failed");
+    state.PauseTiming();
+    {
+      grpc::ClientContext dctx;
+      pb::DeleteSessionRequest del;
+      del.set_session_id(id);
+      pb::DeleteSessionResponse dresp;
+      stub->DeleteSession(&dctx, del, &dresp);
+    }
+    state.ResumeTiming();
+  }
+  state.counters["tiles"] = static_cast<double>(tiles);
+  state.counters["MB"] = static_cast<double>(bytes) / 1e6;
+}
+BENCHMARK(BM_GetTiles)
+    ->Args({100000, 1})
+    ->Args({100000, 0})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
 // Restart: a journaled session of `moves` moves is restored (what swarfd
 // does at start) from its journal and, with snapshots every `every` moves
 // (0: none), from its last snapshot plus the batches after it. Reports the
