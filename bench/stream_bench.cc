@@ -70,56 +70,88 @@ void BM_InProcess(benchmark::State& state) {
       benchmark::Counter::kIsIterationInvariantRate);
 }
 
+// A swarfd in this process on 127.0.0.1 and a client of it.
+struct Loopback {
+  std::unique_ptr<server::SwarfServer> server;
+  std::unique_ptr<pb::Swarf::Stub> stub;
+};
+
+Loopback StartLoopback() {
+  server::ServerOptions opt;
+  opt.listen = "127.0.0.1:0";
+  Loopback loop;
+  loop.server = *server::SwarfServer::Start(opt);
+  grpc::ChannelArguments args;
+  args.SetMaxReceiveMessageSize(64 << 20);
+  loop.stub = pb::Swarf::NewStub(grpc::CreateCustomChannel(
+      "127.0.0.1:" + std::to_string(loop.server->port()),
+      grpc::InsecureChannelCredentials(), args));
+  return loop;
+}
+
+// A taylor session `id` of kStock with tool 1 (the ball); false if refused.
+bool CreateBenchSession(pb::Swarf::Stub* stub, const std::string& id) {
+  pb::CreateSessionRequest create;
+  create.set_session_id(id);
+  create.mutable_stock()->set_x1(kStock.x1);
+  create.mutable_stock()->set_y1(kStock.y1);
+  create.set_nx(kStock.nx);
+  create.set_ny(kStock.ny);
+  create.set_scheme(pb::SCHEME_TAYLOR);
+  pb::Tool* tool = create.add_tools();
+  tool->set_id(1);
+  tool->mutable_ball()->set_radius(kBallRadius);
+  grpc::ClientContext ctx;
+  pb::Session session;
+  return stub->CreateSession(&ctx, create, &session).ok();
+}
+
+void DeleteBenchSession(pb::Swarf::Stub* stub, const std::string& id) {
+  grpc::ClientContext ctx;
+  pb::DeleteSessionRequest del;
+  del.set_session_id(id);
+  pb::DeleteSessionResponse resp;
+  stub->DeleteSession(&ctx, del, &resp);
+}
+
+// The polyline as Simulate requests of `batch` points, seq 1, 2, ...; each
+// batch continues from the last point (the first point of the first batch
+// is only the start).
+std::vector<pb::SimulateRequest> MoveBatches(const std::vector<Vec3>& pts,
+                                             size_t batch) {
+  std::vector<pb::SimulateRequest> reqs;
+  uint64_t seq = 0;
+  for (size_t k = 0; k < pts.size(); k += batch) {
+    pb::MoveBatch* b = reqs.emplace_back().mutable_moves();
+    b->set_seq(++seq);
+    b->set_tool_id(1);
+    for (size_t p = k; p < std::min(pts.size(), k + batch); ++p) {
+      b->add_xyz(pts[p].x);
+      b->add_xyz(pts[p].y);
+      b->add_xyz(pts[p].z);
+    }
+  }
+  return reqs;
+}
+
 // End to end: a client streams the batches to swarfd over 127.0.0.1 (one
 // thread writing, one reading acks) until the last batch is acknowledged.
 void BM_EndToEnd(benchmark::State& state) {
   const int64_t moves = state.range(0), batch = state.range(1);
   const std::vector<Vec3> pts = Raster(moves);
-  server::ServerOptions opt;
-  opt.listen = "127.0.0.1:0";
-  auto srv = *server::SwarfServer::Start(opt);
-  grpc::ChannelArguments args;
-  args.SetMaxReceiveMessageSize(64 << 20);
-  auto channel = grpc::CreateCustomChannel(
-      "127.0.0.1:" + std::to_string(srv->port()),
-      grpc::InsecureChannelCredentials(), args);
-  auto stub = pb::Swarf::NewStub(channel);
+  const Loopback loop = StartLoopback();
+  pb::Swarf::Stub* const stub = loop.stub.get();
   int run = 0;
   for (auto _ : state) {
     state.PauseTiming();
     const std::string id = "bench-" + std::to_string(run++);
-    pb::CreateSessionRequest create;
-    create.set_session_id(id);
-    create.mutable_stock()->set_x1(kStock.x1);
-    create.mutable_stock()->set_y1(kStock.y1);
-    create.set_nx(kStock.nx);
-    create.set_ny(kStock.ny);
-    create.set_scheme(pb::SCHEME_TAYLOR);
-    pb::Tool* tool = create.add_tools();
-    tool->set_id(1);
-    tool->mutable_ball()->set_radius(kBallRadius);
-    {
-      grpc::ClientContext ctx;
-      pb::Session session;
-      grpc::Status st = stub->CreateSession(&ctx, create, &session);
-      if (!st.ok()) state.SkipWithError(st.error_message().c_str());
+    if (!CreateBenchSession(stub, id)) {
+      state.SkipWithError("CreateSession failed");
     }
     // Requests are built before timing: the client's own work is not the
     // server's throughput.
-    std::vector<pb::SimulateRequest> reqs;
-    uint64_t seq = 0;
-    for (size_t k = 0; k < pts.size(); k += batch) {
-      pb::MoveBatch* b = reqs.emplace_back().mutable_moves();
-      b->set_seq(++seq);
-      b->set_tool_id(1);
-      // Batches continue from the last point; the first point of the first
-      // batch is only the start.
-      for (size_t p = k; p < std::min(pts.size(), k + batch); ++p) {
-        b->add_xyz(pts[p].x);
-        b->add_xyz(pts[p].y);
-        b->add_xyz(pts[p].z);
-      }
-    }
+    const std::vector<pb::SimulateRequest> reqs = MoveBatches(pts, batch);
+    const uint64_t seq = reqs.size();
     state.ResumeTiming();
     grpc::ClientContext ctx;
     ctx.AddMetadata("x-swarf-session", id);
@@ -139,13 +171,7 @@ void BM_EndToEnd(benchmark::State& state) {
       state.SkipWithError(("stream failed: " + st.error_message()).c_str());
     }
     state.PauseTiming();
-    {
-      grpc::ClientContext dctx;
-      pb::DeleteSessionRequest del;
-      del.set_session_id(id);
-      pb::DeleteSessionResponse dresp;
-      stub->DeleteSession(&dctx, del, &dresp);
-    }
+    DeleteBenchSession(stub, id);
     state.ResumeTiming();
   }
   state.counters["moves_per_s"] = benchmark::Counter(
@@ -162,54 +188,21 @@ void BM_GetTiles(benchmark::State& state) {
   const int64_t moves = state.range(0);
   const bool derivatives = state.range(1) != 0;
   const std::vector<Vec3> pts = Raster(moves);
-  server::ServerOptions opt;
-  opt.listen = "127.0.0.1:0";
-  auto srv = *server::SwarfServer::Start(opt);
-  grpc::ChannelArguments args;
-  args.SetMaxReceiveMessageSize(64 << 20);
-  auto stub = pb::Swarf::NewStub(grpc::CreateCustomChannel(
-      "127.0.0.1:" + std::to_string(srv->port()),
-      grpc::InsecureChannelCredentials(), args));
+  const Loopback loop = StartLoopback();
+  pb::Swarf::Stub* const stub = loop.stub.get();
   int run = 0;
   int64_t tiles = 0, bytes = 0;
   for (auto _ : state) {
     state.PauseTiming();
     const std::string id = "tiles-" + std::to_string(run++);
-    pb::CreateSessionRequest create;
-    create.set_session_id(id);
-    create.mutable_stock()->set_x1(kStock.x1);
-    create.mutable_stock()->set_y1(kStock.y1);
-    create.set_nx(kStock.nx);
-    create.set_ny(kStock.ny);
-    create.set_scheme(pb::SCHEME_TAYLOR);
-    pb::Tool* tool = create.add_tools();
-    tool->set_id(1);
-    tool->mutable_ball()->set_radius(kBallRadius);
-    {
-      grpc::ClientContext ctx;
-      pb::Session session;
-      if (!stub->CreateSession(&ctx, create, &session).ok()) {
-        state.SkipWithError("CreateSession failed");
-      }
+    if (!CreateBenchSession(stub, id)) {
+      state.SkipWithError("CreateSession failed");
     }
     {
       grpc::ClientContext ctx;
       ctx.AddMetadata("x-swarf-session", id);
       auto stream = stub->Simulate(&ctx);
-      constexpr size_t kBatch = 10000;
-      uint64_t seq = 0;
-      for (size_t k = 0; k < pts.size(); k += kBatch) {
-        pb::SimulateRequest r;
-        pb::MoveBatch* b = r.mutable_moves();
-        b->set_seq(++seq);
-        b->set_tool_id(1);
-        for (size_t p = k; p < std::min(pts.size(), k + kBatch); ++p) {
-          b->add_xyz(pts[p].x);
-          b->add_xyz(pts[p].y);
-          b->add_xyz(pts[p].z);
-        }
-        stream->Write(r);
-      }
+      for (const auto& r : MoveBatches(pts, 10000)) stream->Write(r);
       stream->WritesDone();
       pb::SimulateResponse resp;
       while (stream->Read(&resp)) {
@@ -236,13 +229,7 @@ void BM_GetTiles(benchmark::State& state) {
     }
     if (!reader->Finish().ok()) state.SkipWithError("GetTiles failed");
     state.PauseTiming();
-    {
-      grpc::ClientContext dctx;
-      pb::DeleteSessionRequest del;
-      del.set_session_id(id);
-      pb::DeleteSessionResponse dresp;
-      stub->DeleteSession(&dctx, del, &dresp);
-    }
+    DeleteBenchSession(stub, id);
     state.ResumeTiming();
   }
   state.counters["tiles"] = static_cast<double>(tiles);
