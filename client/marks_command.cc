@@ -142,8 +142,10 @@ int MarksCommand(const std::vector<std::string>& argv) {
   SchemeKind scheme = SchemeKind::kTaylor;
   if (auto v = args->Get("scheme")) {
     auto k = ParseScheme(*v);
-    if (!k.ok()) return fail(absl::InvalidArgumentError(
-        absl::StrCat("--scheme: ", k.status().message())));
+    if (!k.ok()) {
+      return fail(absl::InvalidArgumentError(
+          absl::StrCat("--scheme: ", k.status().message())));
+    }
     scheme = *k;
   }
   auto wp = Workpiece::Create(inst->stock, scheme);

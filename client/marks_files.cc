@@ -128,13 +128,20 @@ std::vector<std::string> MarksJsonChunks(const std::vector<MarkPolyline>& marks,
   });
 }
 
+// The marks.json document piece by piece, in order, to put(piece).
+void EmitMarksJson(const std::vector<MarkPolyline>& marks, bool vertex_owners,
+                   const std::function<void(std::string_view)>& put) {
+  put(kMarksJsonHead);
+  for (const std::string& c : MarksJsonChunks(marks, vertex_owners)) put(c);
+  put(kMarksJsonTail);
+}
+
 }  // namespace
 
 std::string MarksJson(const std::vector<MarkPolyline>& marks,
                       bool vertex_owners) {
-  std::string s(kMarksJsonHead);
-  for (const std::string& c : MarksJsonChunks(marks, vertex_owners)) s += c;
-  s += kMarksJsonTail;
+  std::string s;
+  EmitMarksJson(marks, vertex_owners, [&](std::string_view p) { s += p; });
   return s;
 }
 
@@ -143,9 +150,7 @@ absl::Status WriteMarksJson(const std::vector<MarkPolyline>& marks,
   // Chunk by chunk: no copy of the whole document.
   FileWriter f(path);
   if (!f.status().ok()) return f.status();
-  f.Write(kMarksJsonHead);
-  for (const std::string& c : MarksJsonChunks(marks, false)) f.Write(c);
-  f.Write(kMarksJsonTail);
+  EmitMarksJson(marks, false, [&](std::string_view p) { f.Write(p); });
   f.Write("\n");
   return f.Close();
 }
@@ -207,26 +212,32 @@ std::vector<std::string> MarksSvgChunks(const std::vector<MarkPolyline>& marks,
   });
 }
 
+// The marks.svg document piece by piece, in order, to put(piece).
+void EmitMarksSvg(const StockSpec& stock,
+                  const std::vector<MarkPolyline>& marks,
+                  const std::function<void(std::string_view)>& put) {
+  const double stroke = SvgStroke(stock);
+  put(MarksSvgHead(stock, marks.size(), stroke));
+  for (const std::string& c : MarksSvgChunks(marks, stroke)) put(c);
+  put(kMarksSvgTail);
+}
+
 }  // namespace
 
 std::string MarksSvg(const StockSpec& stock,
                      const std::vector<MarkPolyline>& marks) {
-  const double stroke = SvgStroke(stock);
-  std::string s = MarksSvgHead(stock, marks.size(), stroke);
-  for (const std::string& c : MarksSvgChunks(marks, stroke)) s += c;
-  s += kMarksSvgTail;
+  std::string s;
+  EmitMarksSvg(stock, marks, [&](std::string_view p) { s += p; });
   return s;
 }
 
 absl::Status WriteMarksSvg(const StockSpec& stock,
                            const std::vector<MarkPolyline>& marks,
                            const std::string& path) {
-  const double stroke = SvgStroke(stock);
+  // Chunk by chunk: no copy of the whole document.
   FileWriter f(path);
   if (!f.status().ok()) return f.status();
-  f.Write(MarksSvgHead(stock, marks.size(), stroke));
-  for (const std::string& c : MarksSvgChunks(marks, stroke)) f.Write(c);
-  f.Write(kMarksSvgTail);
+  EmitMarksSvg(stock, marks, [&](std::string_view p) { f.Write(p); });
   return f.Close();
 }
 

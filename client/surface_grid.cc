@@ -65,8 +65,8 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
 void SurfaceGrid::SetMoves(std::vector<Move> list) {
   moves = std::move(list);
   surfaces = std::make_shared<const MoveSweeps>(moves, spec);
-  // Every element's corners need their owners' reach (up to three sweeps
-  // each): once per move instead.
+  // Every element's corners need their owners' reach: once per move, in
+  // parallel, instead of once per corner (or per thread's cache miss).
   auto r = std::make_shared<std::vector<CornerReach>>(moves.size());
   constexpr int64_t kChunk = 1024;
   const int64_t n = static_cast<int64_t>(moves.size());

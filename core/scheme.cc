@@ -42,13 +42,36 @@ bool CornerReach::Contains(double x, double y) const {
 
 namespace {
 
-void BilinearGradient(const ElementCorners& e, double x, double y, double* gx,
-                      double* gy) {
+// The gradient at (x, y) of the bilinear interpolation over the element of
+// the values v[k] at its corners (in the order of ElementCorners::c).
+void BilinearGradientOf(const ElementCorners& e, const double v[4], double x,
+                        double y, double* gx, double* gy) {
   const double lx = e.x1 - e.x0, ly = e.y1 - e.y0;
   const double s = (x - e.x0) / lx, t = (y - e.y0) / ly;
-  const double w0 = e.c[0].w, w1 = e.c[1].w, w2 = e.c[2].w, w3 = e.c[3].w;
-  *gx = ((1 - t) * (w1 - w0) + t * (w2 - w3)) / lx;
-  *gy = ((1 - s) * (w3 - w0) + s * (w2 - w1)) / ly;
+  *gx = ((1 - t) * (v[1] - v[0]) + t * (v[2] - v[3])) / lx;
+  *gy = ((1 - s) * (v[3] - v[0]) + s * (v[2] - v[1])) / ly;
+}
+
+// Eq. (16)'s gradient: of the corner heights.
+void BilinearGradient(const ElementCorners& e, double x, double y, double* gx,
+                      double* gy) {
+  const double w[4] = {e.c[0].w, e.c[1].w, e.c[2].w, e.c[3].w};
+  BilinearGradientOf(e, w, x, y, gx, gy);
+}
+
+// The lowest of the stock top and the element's candidates' exact surfaces
+// at (x, y), and the candidate that gives it (-1: the top).
+struct Lowest {
+  double w;
+  int32_t id;
+};
+Lowest LowestCandidate(const ElementCorners& e, double x, double y) {
+  Lowest l{e.z_top, -1};
+  for (const int32_t id : e.candidates) {
+    const double h = e.surfaces->Height(id, x, y);
+    if (h < l.w) l = {h, id};
+  }
+  return l;
 }
 
 // Corner coordinates, in the order of ElementCorners::c.
@@ -145,8 +168,8 @@ inline double LerpSelect(double a, double b, double t) {
 // out[q] = std::lerp(a, b, t[q]) for loop-invariant a and b: their tests
 // decided once (the vectorizer takes no select on a scalar condition).
 // Inlined into its callers' clones.
-inline void LerpInvariant(double a, double b, const double* __restrict t, int32_t n,
-                   double* __restrict out) {
+inline void LerpInvariant(double a, double b, const double* __restrict t,
+                          int32_t n, double* __restrict out) {
   if ((a <= 0 && b >= 0) || (a >= 0 && b <= 0)) {
 #pragma omp simd
     for (int32_t q = 0; q < n; ++q) out[q] = t[q] * b + (1 - t[q]) * a;
@@ -304,13 +327,9 @@ GuardedValue Guarded(const ElementCorners& e, double x, double y) {
   }
   // The exact surface: the element's candidates (PrepareGuarded) hold
   // every move that can be the lowest in it.
-  for (const int32_t id : e.candidates) {
-    const double h = e.surfaces->Height(id, x, y);
-    if (h < v.w) {
-      v.w = h;
-      v.move = id;
-    }
-  }
+  const Lowest l = LowestCandidate(e, x, y);
+  v.w = l.w;
+  v.move = l.id;
   return v;
 }
 
@@ -408,7 +427,9 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
   // whole element, tested once.
   bool holds[4][4];
   for (int k = 0; k < 4; ++k) {
-    for (int q = 0; q < 4; ++q) holds[k][q] = e->reach[k].Contains(c.x[q], c.y[q]);
+    for (int q = 0; q < 4; ++q) {
+      holds[k][q] = e->reach[k].Contains(c.x[q], c.y[q]);
+    }
   }
   for (int k = 0; k < 4; ++k) {
     // The trust region is convex: trusted at the other corners, the patch
@@ -541,11 +562,10 @@ class GuardedScheme final : public Scheme {
       const int k = v.corner;
       PatchGradient(e.c[k], c.x[k], c.y[k], x, y, gx, gy);
       // The lift's: bilinear in (s, t).
-      const double lx = e.x1 - e.x0, ly = e.y1 - e.y0;
-      const double s = (x - e.x0) / lx, t = (y - e.y0) / ly;
-      const double* d = e.guard.lift[k];
-      *gx += ((1 - t) * (d[1] - d[0]) + t * (d[2] - d[3])) / lx;
-      *gy += ((1 - s) * (d[3] - d[0]) + s * (d[2] - d[1])) / ly;
+      double lx, ly;
+      BilinearGradientOf(e, e.guard.lift[k], x, y, &lx, &ly);
+      *gx += lx;
+      *gy += ly;
     }
     return v.w;
   }
@@ -571,15 +591,7 @@ class ExactScheme final : public Scheme {
       GetScheme(SchemeKind::kTaylor).Gradient(e, x, y, gx, gy);
       return;
     }
-    double w = e.z_top;
-    int32_t lowest = -1;
-    for (const int32_t id : e.candidates) {
-      const double h = e.surfaces->Height(id, x, y);
-      if (h < w) {
-        w = h;
-        lowest = id;
-      }
-    }
+    const int32_t lowest = LowestCandidate(e, x, y).id;
     if (lowest < 0) return;
     const SurfaceJet j = e.surfaces->Jet(lowest, x, y);
     *gx = j.wx;
@@ -591,11 +603,7 @@ class ExactScheme final : public Scheme {
 
 double ExactCandidatesHeight(const ElementCorners& e, double x, double y) {
   if (e.surfaces == nullptr) return MinOfPatches(e, x, y);
-  double w = e.z_top;
-  for (const int32_t id : e.candidates) {
-    w = std::min(w, e.surfaces->Height(id, x, y));
-  }
-  return w;
+  return LowestCandidate(e, x, y).w;
 }
 
 const Scheme& GetScheme(SchemeKind kind) {

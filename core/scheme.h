@@ -17,10 +17,10 @@ namespace swarf {
 
 // kZmap: eq. (16). kTaylor: the paper's eq. (1)-(2), unchanged. kGuarded (the
 // default of sessions and `swarf run`): eq. (1)-(2) where the patches are
-// checked to hold, the exact swept surfaces elsewhere (see GuardedHeight). kExact: the
-// minimum of the exact swept surfaces of the moves that can reach the
-// element (see ExactCandidatesHeight). The values are stored in snapshots:
-// append only.
+// checked to hold, the exact swept surfaces elsewhere (see GuardedHeight).
+// kExact: the minimum of the exact swept surfaces of the moves that can
+// reach the element (see ExactCandidatesHeight). The values are stored in
+// snapshots: append only.
 enum class SchemeKind { kZmap, kTaylor, kGuarded, kExact };
 
 struct ElementCorners;
@@ -161,11 +161,10 @@ double MinOfPatches(const ElementCorners& e, double x, double y);
 //   a kink, a wall, a crease inside the element). There, eq. (2) over the
 //   corners whose reach holds (x, y) (the owner's own footprint: where the
 //   path turns or changes slope the patch does not model the next move),
-//   each patch lifted by the bilinear
-//   interpolation of its shortfalls below the corners in its reach (so
-//   that every patch passes at or above every node it should: the
-//   reconstruction interpolates the nodes) and held at or above its owner's
-//   lowest tip.
+//   each patch lifted by the bilinear interpolation of its shortfalls below
+//   the corners in its reach (so that every patch passes at or above every
+//   node it should: the reconstruction interpolates the nodes) and held at
+//   or above its owner's lowest tip.
 //   Where a corner lies lower than the value found and its owner's reach
 //   misses (x, y), a cut passes between the nodes: the true surface there
 //   (MoveSurfaces::LowestAt).

@@ -222,7 +222,9 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           if (!region.Contains(x, y)) continue;
           xs[count] = x;
           ys[count] = y;
-          if (mapped) cells[count] = row_cell[lattice_j[q]] + col_cell[lattice_i[q]];
+          if (mapped) {
+            cells[count] = row_cell[lattice_j[q]] + col_cell[lattice_i[q]];
+          }
           ++count;
         }
         if (count == 0) continue;

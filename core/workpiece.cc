@@ -658,10 +658,10 @@ void Workpiece::ReadTile(int32_t t, double* w, float* const d[5],
     }
     if (d == nullptr) continue;
     // Jets of the cut columns [lo, hi], zeros around them.
-    const int32_t lo = jets != nullptr ? std::min<int32_t>(jets->lo[j], e.nx)
-                                       : e.nx;
-    const int32_t hi = jets != nullptr ? std::min<int32_t>(jets->hi[j], e.nx - 1)
-                                       : -1;
+    const int32_t lo =
+        jets != nullptr ? std::min<int32_t>(jets->lo[j], e.nx) : e.nx;
+    const int32_t hi =
+        jets != nullptr ? std::min<int32_t>(jets->hi[j], e.nx - 1) : -1;
     for (int c = 0; c < 5; ++c) {
       float* row = d[c] + out;
       if (lo > hi) {

@@ -222,9 +222,9 @@ class Workpiece {
   // derivatives (zeros for schemes without them, and for uncut nodes), and
   // owners (-1 for uncut nodes).
   // With derivatives, the first read of a tile version computes them from
-  // the owners' sweeps on the calling thread (about 10 ns a cut node of a
-  // finishing raster on AVX-512: docs/benchmarks.md; see PrepareJets) and
-  // keeps them for later reads.
+  // the owners' sweeps on the calling thread (1.4 ms for every tile of a
+  // 1000x1000 finishing raster, one by one: BM_Read in docs/benchmarks.md;
+  // see PrepareJets) and keeps them for later reads.
   void ReadTile(int32_t t, double* w, float* const d[5], int32_t* owner) const;
   // Computes the derivatives of the listed tiles (any order; unallocated
   // tiles and those already cached are skipped) in parallel on the pool, for

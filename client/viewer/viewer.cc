@@ -133,7 +133,8 @@ class ViewerImpl {
     // cpp-httplib's stop() does nothing until the listening thread has
     // marked itself running: a viewer destroyed before that would wait on
     // accept() for ever. Return only once it listens.
-    const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    const auto give_up =
+        std::chrono::steady_clock::now() + std::chrono::seconds(10);
     while (!http_.is_running()) {
       if (std::chrono::steady_clock::now() > give_up) {
         return absl::UnavailableError("the viewer's HTTP server did not start");
