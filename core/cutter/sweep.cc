@@ -5,22 +5,21 @@ namespace {
 
 Sweep::Variant MakeVariant(const Vec3& a, const Vec3& b, const Cutter& c) {
   // The degenerate bull-noses are those shapes, to the bit.
-  if (SweptAsBall(c)) return BallSweep(a, b, c.radius);
-  switch (c.kind) {
+  const Cutter s = SweptCutter(c);
+  switch (s.kind) {
     case CutterKind::kBall:
-      return BallSweep(a, b, c.radius);
+      return BallSweep(a, b, s.radius);
     case CutterKind::kFlat:
-      return FlatSweep(a, b, c.radius);
+      return FlatSweep(a, b, s.radius);
     case CutterKind::kBullNose:
-      if (c.corner_radius == 0) return FlatSweep(a, b, c.radius);
-      return BullNoseSweep(a, b, c.radius, c.corner_radius);
+      return BullNoseSweep(a, b, s.radius, s.corner_radius);
     case CutterKind::kCone:
-      return ConeSweep(a, b, c.radius, c.half_angle_deg, c.tip_radius);
+      return ConeSweep(a, b, s.radius, s.half_angle_deg, s.tip_radius);
     case CutterKind::kTaperedBall:
-      return TaperedBallSweep(a, b, c.radius, c.tip_radius,
-                              c.half_angle_deg);
+      return TaperedBallSweep(a, b, s.radius, s.tip_radius,
+                              s.half_angle_deg);
   }
-  return BallSweep(a, b, c.radius);  // unreachable: ValidateCutter
+  return BallSweep(a, b, s.radius);  // unreachable: ValidateCutter
 }
 
 }  // namespace
@@ -30,15 +29,13 @@ Sweep::Sweep(const Vec3& tip_from, const Vec3& tip_to, const Cutter& cutter)
 
 Capsule FootprintCapsule(const Vec3& tip_from, const Vec3& tip_to,
                          const Cutter& cutter, double cap) {
-  if (SweptAsBall(cutter)) {
-    return BallSweep::FootprintOf(tip_from, tip_to, cutter.radius, cap);
+  const Cutter s = SweptCutter(cutter);
+  if (s.kind == CutterKind::kBall) {
+    return BallSweep::FootprintOf(tip_from, tip_to, s.radius, cap);
   }
   // The profile sweeps' own (ProfileSweep::Footprint), with the cutter they
-  // are built for: a bull-nose without a corner is the flat end.
-  const bool flat = cutter.kind == CutterKind::kBullNose &&
-                    cutter.corner_radius == 0;
-  return TipFootprint(tip_from, tip_to,
-                      flat ? Cutter::Flat(cutter.radius) : cutter, cap);
+  // are built for.
+  return TipFootprint(tip_from, tip_to, s, cap);
 }
 
 std::optional<Rect> FootprintBounds(const Vec3& tip_from, const Vec3& tip_to,

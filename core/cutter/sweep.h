@@ -40,12 +40,23 @@
 
 namespace swarf {
 
+// The cutter whose sweep Sweep builds for `cutter`: itself, but for the
+// degenerate bull-noses, swept as the ball (corner = radius) and as the flat
+// end (corner 0).
+inline Cutter SweptCutter(const Cutter& cutter) {
+  if (cutter.kind == CutterKind::kBullNose) {
+    if (cutter.corner_radius == cutter.radius) {
+      return Cutter::Ball(cutter.radius);
+    }
+    if (cutter.corner_radius == 0) return Cutter::Flat(cutter.radius);
+  }
+  return cutter;
+}
+
 // Whether Sweep holds a BallSweep(tip_from, tip_to, cutter.radius) for
 // `cutter`: the ball, and the bull-nose whose corner is its radius.
 inline bool SweptAsBall(const Cutter& cutter) {
-  return cutter.kind == CutterKind::kBall ||
-         (cutter.kind == CutterKind::kBullNose &&
-          cutter.corner_radius == cutter.radius);
+  return SweptCutter(cutter).kind == CutterKind::kBall;
 }
 
 // The sweep of one straight move of any cutter. Immutable, thread-safe.
