@@ -310,28 +310,30 @@ void FillTile(const Workpiece& wp, int32_t t, const TileOptions& opt,
   out->set_j0(e.j0);
   out->set_nx(e.nx);
   out->set_ny(e.ny);
-  std::vector<double> w(n);
-  std::vector<int32_t> owner(opt.owners ? n : 0);
-  std::vector<float> d(opt.derivatives ? 5 * n : 0);
+  // Read straight into the message's fields: a tile is 28 bytes a node
+  // with derivatives, and a copy through buffers cost as much as the read.
+  auto fill = [n](auto* field) {
+    field->Reserve(n);
+    return field->AddNAlreadyReserved(n);
+  };
   float* dp[5] = {};
-  for (int c = 0; c < 5 && opt.derivatives; ++c) dp[c] = d.data() + c * n;
-  wp.ReadTile(t, w.data(), opt.derivatives ? dp : nullptr,
-              opt.owners ? owner.data() : nullptr);
-  if (opt.doubles) {
-    out->mutable_heights_d()->Assign(w.begin(), w.end());
-  } else {
-    auto* h = out->mutable_heights_f();
-    h->Reserve(n);
-    for (double v : w) h->AddAlreadyReserved(static_cast<float>(v));
-  }
   if (opt.derivatives) {
-    out->mutable_wx()->Assign(dp[0], dp[0] + n);
-    out->mutable_wy()->Assign(dp[1], dp[1] + n);
-    out->mutable_wxx()->Assign(dp[2], dp[2] + n);
-    out->mutable_wxy()->Assign(dp[3], dp[3] + n);
-    out->mutable_wyy()->Assign(dp[4], dp[4] + n);
+    dp[0] = fill(out->mutable_wx());
+    dp[1] = fill(out->mutable_wy());
+    dp[2] = fill(out->mutable_wxx());
+    dp[3] = fill(out->mutable_wxy());
+    dp[4] = fill(out->mutable_wyy());
   }
-  if (opt.owners) out->mutable_owners()->Assign(owner.begin(), owner.end());
+  int32_t* owner = opt.owners ? fill(out->mutable_owners()) : nullptr;
+  if (opt.doubles) {
+    wp.ReadTile(t, fill(out->mutable_heights_d()),
+                opt.derivatives ? dp : nullptr, owner);
+    return;
+  }
+  std::vector<double> w(n);
+  wp.ReadTile(t, w.data(), opt.derivatives ? dp : nullptr, owner);
+  float* h = fill(out->mutable_heights_f());
+  for (int32_t k = 0; k < n; ++k) h[k] = static_cast<float>(w[k]);
 }
 
 absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,

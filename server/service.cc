@@ -208,7 +208,7 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
   void OnDone() override { delete this; }
 
  private:
-  static constexpr size_t kLowWater = 4;
+  static constexpr size_t kLowWater = 16;
 
   struct Act {
     const T* write = nullptr;
