@@ -49,49 +49,6 @@ int32_t Accumulate(const double* err, int32_t n, double* sum, double* sum_sq,
   return at;
 }
 
-// A quick test that a ball move's footprint below a cap misses a box, done
-// before the exact one (FootprintBounds, a call, a division and a root):
-// most moves an element's cap lets through reach only just below it, far
-// from the element. Conservative: it says Misses only where FootprintBounds
-// (cap) does not meet the box, so the moves evaluated, and the figures, are
-// the same.
-struct BallReach {
-  bool ball = false;
-  double x0 = 0, y0 = 0, x1 = 0, y1 = 0;  // the tips' XY box
-  double z_centre = 0;                    // the lowest ball centre
-  double r2 = 0;
-
-  static BallReach Of(const Move& m) {
-    BallReach b;
-    if (!SweptAsBall(m.cutter)) return b;
-    b.ball = true;
-    b.x0 = std::min(m.from.x, m.to.x);
-    b.x1 = std::max(m.from.x, m.to.x);
-    b.y0 = std::min(m.from.y, m.to.y);
-    b.y1 = std::max(m.from.y, m.to.y);
-    b.z_centre = std::min(m.from.z, m.to.z) + m.cutter.radius;
-    b.r2 = m.cutter.radius * m.cutter.radius;
-    return b;
-  }
-
-  // The footprint below `cap` lies within the centres' box (its axis is a
-  // part of the move) widened by its radius sqrt(r^2 - h^2), h the lowest
-  // centre's height above cap (r where the centre is below it). The box
-  // must clear that by more than the footprint's margins (1e-9 mm and a
-  // relative 1e-12) and the rounding of the clipped ends: 1e-6 mm.
-  bool Misses(const Rect& box, double cap) const {
-    if (!ball) return false;
-    constexpr double kSlack = 1e-6;
-    const double gap = std::max(std::max(box.x0 - x1, x0 - box.x1),
-                                std::max(box.y0 - y1, y0 - box.y1)) -
-                       kSlack;
-    if (!(gap > 0)) return false;
-    const double h = z_centre - cap;
-    const double rho2 = h > 0 ? r2 - h * h : r2;
-    return gap * gap > rho2;
-  }
-};
-
 }  // namespace
 
 absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
@@ -173,13 +130,11 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       const Move* move;
       Sweep sweep;
       Rect box;
-      BallReach ball;
     };
     std::vector<Candidate> bin;
     for (uint32_t id : index.Bin(static_cast<int32_t>(b))) {
       const Sweep s = wp.MoveSweep(id);
-      const Move& m = wp.move(id);
-      bin.push_back({&m, s, s.Footprint(z_top).Bounds(), BallReach::Of(m)});
+      bin.push_back({&wp.move(id), s, s.Footprint(z_top).Bounds()});
     }
     // The guarded scheme's trust regions (TrustRegion, a function of each
     // node's jet), once per cut node of the bin instead of once per element
@@ -293,7 +248,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const Rect box{e.x0, e.y0, e.x1, e.y1};
         for (const Candidate* c : row_bin) {
           if (!c->box.Intersects(box) || !(c->sweep.lowest() < cap)) continue;
-          if (c->ball.Misses(box, cap)) continue;
+          const Move& m = *c->move;
+          if (FootprintSurelyMisses(m.from, m.to, m.cutter, box, cap)) {
+            continue;
+          }
           // Footprint(cap).Bounds(), without the capsule's direction.
           const std::optional<Rect> f =
               FootprintBounds(c->move->from, c->move->to, c->move->cutter, cap);

@@ -766,6 +766,9 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
     const Move& m = (*moves_)[k];
     if (!(std::min(m.from.z, m.to.z) < w)) continue;
     // Beyond its footprint below w a move is not below w.
+    if (FootprintSurelyMisses(m.from, m.to, m.cutter, {x, y, x, y}, w)) {
+      continue;
+    }
     const std::optional<Rect> b = FootprintBounds(m.from, m.to, m.cutter, w);
     if (!b.has_value() || !b->Contains(x, y)) continue;
     const double h = Height(static_cast<int32_t>(k), x, y);
@@ -809,6 +812,7 @@ void MoveSweeps::FillCandidates(ElementCorners* e) const {
       owner = e->candidates[q] == static_cast<int32_t>(id);
     }
     if (owner) continue;
+    if (FootprintSurelyMisses(m.from, m.to, m.cutter, box, cap)) continue;
     const std::optional<Rect> b = FootprintBounds(m.from, m.to, m.cutter, cap);
     if (b.has_value() && b->Intersects(box)) {
       e->candidates.push_back(static_cast<int32_t>(id));

@@ -23,6 +23,7 @@
 #ifndef SWARF_CORE_CUTTER_SWEEP_H_
 #define SWARF_CORE_CUTTER_SWEEP_H_
 
+#include <algorithm>
 #include <cstdint>
 #include <optional>
 #include <utility>
@@ -97,6 +98,34 @@ class Sweep {
  private:
   Variant v_;
 };
+
+// A quick, conservative test done before FootprintBounds where many moves
+// are tried against a box: true only where the footprint below `cap` of the
+// move between the two tips surely misses `box` (FootprintBounds(...) does
+// not meet it); false where unsure. For the ball: the footprint's axis is a
+// part of the move, so it lies in the tips' XY box widened by its radius
+// sqrt(r^2 - h^2) (h: the lowest ball centre above cap; r where below), and
+// the box must clear that by more than the footprint's margins (1e-9 mm and
+// a relative 1e-12) and the rounding of its clipped ends: 1e-6 mm. No root
+// and no division, where FootprintBounds takes both and a call. Other
+// shapes: false.
+inline bool FootprintSurelyMisses(const Vec3& tip_from, const Vec3& tip_to,
+                                  const Cutter& cutter, const Rect& box,
+                                  double cap) {
+  if (!SweptAsBall(cutter)) return false;
+  constexpr double kSlack = 1e-6;
+  const double gap =
+      std::max(std::max(box.x0 - std::max(tip_from.x, tip_to.x),
+                        std::min(tip_from.x, tip_to.x) - box.x1),
+               std::max(box.y0 - std::max(tip_from.y, tip_to.y),
+                        std::min(tip_from.y, tip_to.y) - box.y1)) -
+      kSlack;
+  if (!(gap > 0)) return false;
+  const double r = cutter.radius;
+  const double h = std::min(tip_from.z, tip_to.z) + r - cap;
+  const double rho2 = h > 0 ? r * r - h * h : r * r;
+  return gap * gap > rho2;
+}
 
 // The footprint's bounds below `cap` for the move between two tool tips,
 // without building the sweep where the shape allows; nullopt where the
