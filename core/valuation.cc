@@ -29,9 +29,10 @@ double Highest(const double* v, int32_t n) {
 
 // Adds err[0..n) to the sums in sample order (the same additions as one
 // loop over the samples) and returns the index of the first error above
-// *max (-1: none), updating *max. Its own function keeps the sums in
-// registers.
-int32_t Accumulate(const double* err, int32_t n, double* sum, double* sum_sq,
+// *max (-1: none), updating *max. Not inlined: inlined into the element
+// loop, the sums were spilled to the stack, one store and load a sample on
+// the chain of additions.
+[[gnu::noinline]] int32_t Accumulate(const double* err, int32_t n, double* sum, double* sum_sq,
                    double* max) {
   double s = *sum, s2 = *sum_sq, m = *max;
   int32_t at = -1;
