@@ -797,7 +797,9 @@ TEST(ProfileSweep, WorkpieceNodesAreTheSweeps) {
           EXPECT_EQ(static_cast<float>(nv.jet.wyy), static_cast<float>(e.wyy));
         }
       }
-      if (scheme == SchemeKind::kTaylor) EXPECT_GT(cut, 1000);
+      if (scheme == SchemeKind::kTaylor) {
+        EXPECT_GT(cut, 1000);
+      }
     }
   }
 }
