@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "core/cutter/sweep.h"
 #include "gtest/gtest.h"
 #include "tests/sweep_reference.h"
 
@@ -639,6 +640,55 @@ TEST(BallSweepFootprintTest, BoundsWithoutTheSweepAreBitIdentical) {
   }
   EXPECT_GT(empty, 1000);  // both cases were exercised
   EXPECT_LT(empty, 19000);
+}
+
+// The quick test skips only what FootprintBounds would: boxes and points
+// placed around the footprint's bounds, down to a micrometre from them.
+TEST(BallSweepFootprintTest, SurelyMissesOnlyWhatTheBoundsMiss) {
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> u(-20, 20), rad(1e-3, 5), unit(0, 1);
+  int skipped = 0, close = 0;
+  for (int k = 0; k < 50000; ++k) {
+    const Vec3 a{u(rng), u(rng), u(rng) / 4};
+    Vec3 b{u(rng), u(rng), u(rng) / 4};
+    if (k % 5 == 1) b = {a.x, a.y, b.z};
+    if (k % 5 == 2) b.z = a.z;
+    if (k % 5 == 3) b = a;
+    const double r = rad(rng), cap = u(rng) / 8;
+    const Cutter ball = Cutter::Ball(r);
+    const std::optional<Rect> f = FootprintBounds(a, b, ball, cap);
+    // A box beside the bounds (or the tips' box when empty), at a gap of
+    // 10^-e mm, e in [0, 6], or overlapping them; every other one a point.
+    const Rect near = f.value_or(Rect{std::min(a.x, b.x), std::min(a.y, b.y),
+                                      std::max(a.x, b.x), std::max(a.y, b.y)});
+    const double gap = unit(rng) < 0.2 ? -0.5 : std::pow(10.0, -6 * unit(rng));
+    const double size = k % 2 == 0 ? 0 : unit(rng);
+    Rect box;
+    switch (k % 4) {
+      case 0:
+        box = {near.x1 + gap, near.y0, near.x1 + gap + size, near.y0 + size};
+        break;
+      case 1:
+        box = {near.x0 - gap - size, near.y1 - size, near.x0 - gap, near.y1};
+        break;
+      case 2:
+        box = {near.x0, near.y1 + gap, near.x0 + size, near.y1 + gap + size};
+        break;
+      default:
+        box = {near.x1 - size, near.y0 - gap - size, near.x1, near.y0 - gap};
+        break;
+    }
+    if (!FootprintSurelyMisses(a, b, ball, box, cap)) continue;
+    ++skipped;
+    if (gap < 1e-4) ++close;
+    ASSERT_FALSE(f.has_value() && f->Intersects(box))
+        << k << ": skipped a box the footprint's bounds meet";
+  }
+  EXPECT_GT(skipped, 5000);  // it does skip, some within 0.1 um
+  EXPECT_GT(close, 100);
+  // Other shapes: never sure.
+  EXPECT_FALSE(FootprintSurelyMisses({0, 0, 0}, {1, 0, 0}, Cutter::Flat(1),
+                                     {50, 50, 60, 60}, 0));
 }
 
 }  // namespace
