@@ -32,8 +32,8 @@ double Highest(const double* v, int32_t n) {
 // *max (-1: none), updating *max. Not inlined: inlined into the element
 // loop, the sums were spilled to the stack, one store and load a sample on
 // the chain of additions.
-[[gnu::noinline]] int32_t Accumulate(const double* err, int32_t n, double* sum, double* sum_sq,
-                   double* max) {
+[[gnu::noinline]] int32_t Accumulate(const double* err, int32_t n, double* sum,
+                                     double* sum_sq, double* max) {
   double s = *sum, s2 = *sum_sq, m = *max;
   int32_t at = -1;
   for (int32_t q = 0; q < n; ++q) {
@@ -133,14 +133,13 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     struct Candidate {
       Rect box;
       double lowest;
-      int32_t k;  // into sweeps and moves
+      int32_t k;  // into ids and sweeps
     };
+    const std::vector<uint32_t>& ids = index.Bin(static_cast<int32_t>(b));
     std::vector<Candidate> bin;
     std::vector<Sweep> sweeps;
-    std::vector<const Move*> moves;
-    for (uint32_t id : index.Bin(static_cast<int32_t>(b))) {
+    for (uint32_t id : ids) {
       const Sweep& s = sweeps.emplace_back(wp.MoveSweep(id));
-      moves.push_back(&wp.move(id));
       bin.push_back({s.Footprint(z_top).Bounds(), s.lowest(),
                      static_cast<int32_t>(bin.size())});
     }
@@ -256,7 +255,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const Rect box{e.x0, e.y0, e.x1, e.y1};
         for (const Candidate& c : row_bin) {
           if (!c.box.Intersects(box) || !(c.lowest < cap)) continue;
-          const Move& m = *moves[c.k];
+          const Move& m = wp.move(ids[c.k]);
           if (FootprintSurelyMisses(m.from, m.to, m.cutter, box, cap)) {
             continue;
           }

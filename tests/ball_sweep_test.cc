@@ -616,18 +616,31 @@ TEST(BallSweepFootprintTest, RadiusIsTheCrossSectionAtTheCap) {
 
 // The bounds computed without building the sweep (what indexing moves
 // uses) are the footprint's, bit for bit, and empty exactly when it is.
+// Case k of the random footprint tests: a move between tips a and b of a
+// ball of radius r, and a cap; plunges, level moves and points as well as
+// general ones.
+struct FootprintCase {
+  Vec3 a, b;
+  double r, cap;
+};
+FootprintCase RandomFootprintCase(std::mt19937_64& rng, int k) {
+  std::uniform_real_distribution<double> u(-20, 20), rad(1e-3, 5);
+  FootprintCase c;
+  c.a = {u(rng), u(rng), u(rng) / 4};
+  c.b = {u(rng), u(rng), u(rng) / 4};
+  if (k % 5 == 1) c.b = {c.a.x, c.a.y, c.b.z};
+  if (k % 5 == 2) c.b.z = c.a.z;
+  if (k % 5 == 3) c.b = c.a;
+  c.r = rad(rng);
+  c.cap = u(rng) / 8;
+  return c;
+}
+
 TEST(BallSweepFootprintTest, BoundsWithoutTheSweepAreBitIdentical) {
   std::mt19937_64 rng(17);
-  std::uniform_real_distribution<double> u(-20, 20), rad(1e-3, 5);
   int empty = 0;
   for (int k = 0; k < 20000; ++k) {
-    const Vec3 a{u(rng), u(rng), u(rng) / 4};
-    // Plunges, level moves and points as well as general ones.
-    Vec3 b{u(rng), u(rng), u(rng) / 4};
-    if (k % 5 == 1) b = {a.x, a.y, b.z};
-    if (k % 5 == 2) b.z = a.z;
-    if (k % 5 == 3) b = a;
-    const double r = rad(rng), cap = u(rng) / 8;
+    const auto [a, b, r, cap] = RandomFootprintCase(rng, k);
     const BallSweep::Capsule c = BallSweep(a, b, r).Footprint(cap);
     const std::optional<Rect> bounds = BallSweep::FootprintBounds(a, b, r, cap);
     ASSERT_EQ(bounds.has_value(), !c.empty) << k;
@@ -646,15 +659,10 @@ TEST(BallSweepFootprintTest, BoundsWithoutTheSweepAreBitIdentical) {
 // placed around the footprint's bounds, down to a micrometre from them.
 TEST(BallSweepFootprintTest, SurelyMissesOnlyWhatTheBoundsMiss) {
   std::mt19937_64 rng(23);
-  std::uniform_real_distribution<double> u(-20, 20), rad(1e-3, 5), unit(0, 1);
+  std::uniform_real_distribution<double> unit(0, 1);
   int skipped = 0, close = 0;
   for (int k = 0; k < 50000; ++k) {
-    const Vec3 a{u(rng), u(rng), u(rng) / 4};
-    Vec3 b{u(rng), u(rng), u(rng) / 4};
-    if (k % 5 == 1) b = {a.x, a.y, b.z};
-    if (k % 5 == 2) b.z = a.z;
-    if (k % 5 == 3) b = a;
-    const double r = rad(rng), cap = u(rng) / 8;
+    const auto [a, b, r, cap] = RandomFootprintCase(rng, k);
     const Cutter ball = Cutter::Ball(r);
     const std::optional<Rect> f = FootprintBounds(a, b, ball, cap);
     // A box beside the bounds (or the tips' box when empty), at a gap of

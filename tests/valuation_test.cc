@@ -226,11 +226,6 @@ TEST(MeasureErrorTest, MatchesIndependentComputation) {
   }
 }
 
-// Any pool gives the same bits: statistics, place of the max and map. And
-// they equal a plain serial loop that takes the exact surface over every
-// move (no corner-owner bound, no skipped moves, scalar Height) and sums
-// the samples in the order the contract states: by bin, then element, then
-// sample.
 // A finishing raster over a wavy floor: most moves an element's cap lets
 // through dip only just below it, a pass or two away (what the quick
 // footprint test skips).
@@ -263,6 +258,11 @@ std::vector<Move> Dabs() {
   return moves;
 }
 
+// Any pool gives the same bits: statistics, place of the max and map. And
+// they equal a plain serial loop that takes the exact surface over every
+// move (no corner-owner bound, no skipped moves, scalar Height) and sums
+// the samples in the order the contract states: by bin, then element, then
+// sample.
 TEST(MeasureErrorTest, ParallelEqualsSerialBitForBit) {
   // 56 x 40 elements: 4 x 3 bins, the last ones partial.
   const StockSpec spec{0, 0, 40, 30, 0, 56, 40};
