@@ -8,12 +8,16 @@ namespace swarf {
 struct ThreadPool::Job {
   const std::function<void(int64_t)>* fn;
   int64_t n;
+  int64_t grain;  // indices claimed at a time
   std::atomic<int64_t> next{0};
   int active = 0;  // workers inside Run(); guarded by the pool's mu_
 
-  // Claims and runs indices until none are left.
+  // Claims indices, `grain` at a time, and runs them until none are left.
   void Run() {
-    for (int64_t i; (i = next.fetch_add(1)) < n;) (*fn)(i);
+    for (int64_t i; (i = next.fetch_add(grain)) < n;) {
+      const int64_t end = std::min(n, i + grain);
+      for (; i < end; ++i) (*fn)(i);
+    }
   }
 };
 
@@ -63,6 +67,11 @@ void ThreadPool::ParallelFor(int64_t n, const std::function<void(int64_t)>& fn) 
   Job job;
   job.fn = &fn;
   job.n = n;
+  // Loops of many small items (a mesh's leaves, a picture's rows) spent
+  // more on claiming indices one by one than on the items, and threads
+  // writing neighbouring items shared cache lines. Runs of indices fix
+  // both; 64 runs per thread still balance uneven items.
+  job.grain = std::max<int64_t>(1, n / (64 * size()));
   {
     std::lock_guard<std::mutex> l(mu_);
     jobs_.push_back(&job);

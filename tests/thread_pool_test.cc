@@ -3,6 +3,7 @@
 #include "core/thread_pool.h"
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <memory>
 #include <thread>
@@ -86,6 +87,26 @@ TEST(ThreadPoolTest, ConcurrentCallersEachGetTheirLoop) {
     }
     for (auto& t : callers) t.join();
     EXPECT_EQ(failures.load(), 0) << threads << " threads";
+  }
+}
+
+// Indices are claimed in runs (about n / (64 * size())), yet a loop of a
+// few items is still shared: the first item waits for another thread to
+// start one, which fails if one thread had claimed the whole loop.
+TEST(ThreadPoolTest, FewItemsStillShared) {
+  ThreadPool pool(2);
+  for (int64_t n : {2, 128, 1000}) {
+    std::atomic<int> started{0};
+    std::atomic<bool> shared{false};
+    pool.ParallelFor(n, [&](int64_t i) {
+      ++started;
+      if (i != 0) return;
+      for (int k = 0; k < 10000 && started.load() < 2; ++k) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+      shared = started.load() >= 2;
+    });
+    EXPECT_TRUE(shared.load()) << "n = " << n;
   }
 }
 
