@@ -324,55 +324,59 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
 
   // Conforming triangulation, measured; leaves over the tolerance are
   // split and the leaves they touch (their sides gain vertices) are
-  // triangulated and measured again, until none is over.
+  // triangulated and measured again, until none is over. A split leaf
+  // stays in `leaves` with its halves appended (kids[k], kids[k] + 1): the
+  // mesh lists the final leaves depth first, which is the order of
+  // replacing each split leaf by its halves in place. Late passes split a
+  // handful of leaves: only those and their neighbours are visited.
   const int64_t lattice_vertices = (nx + 1) * (ny + 1);
+  const int64_t roots = static_cast<int64_t>(leaves.size());
+  std::vector<int64_t> kids(leaves.size(), -1);
   std::vector<std::vector<P>> tris(leaves.size());
   std::vector<double> leaf_dev(leaves.size());
-  std::vector<char> dirty(leaves.size(), 1);
-  std::vector<uint8_t> used, old_used;
-  for (bool first_pass = true;; first_pass = false) {
-    old_used.swap(used);
-    used.assign(lattice_vertices, 0);
-    for (const Leaf& f : leaves) {
-      used[l.Index(f.i0, f.j0)] = used[l.Index(f.i0 + f.w, f.j0)] = 1;
-      used[l.Index(f.i0, f.j0 + f.h)] = 1;
-      used[l.Index(f.i0 + f.w, f.j0 + f.h)] = 1;
+  // Which leaf holds each cell, and which lattice vertices are leaf
+  // corners (splits only add corners: a leaf's corners are its halves').
+  std::vector<int32_t> cell_leaf(static_cast<size_t>(nx * ny));
+  std::vector<uint8_t> used(lattice_vertices, 0);
+  auto place = [&](int64_t k) {
+    const Leaf& f = leaves[k];
+    for (int64_t j = f.j0; j < f.j0 + f.h; ++j) {
+      std::fill_n(cell_leaf.begin() + j * nx + f.i0, f.w,
+                  static_cast<int32_t>(k));
     }
-    pool.ParallelFor(static_cast<int64_t>(leaves.size()), [&](int64_t k) {
+  };
+  std::vector<int64_t> corners_added;
+  auto add_corners = [&](const Leaf& f) {
+    for (const P& p : {P{f.i0, f.j0}, P{f.i0 + f.w, f.j0}, P{f.i0, f.j0 + f.h},
+                       P{f.i0 + f.w, f.j0 + f.h}}) {
+      uint8_t& u = used[l.Index(p.i, p.j)];
+      if (!u) corners_added.push_back(l.Index(p.i, p.j));
+      u = 1;
+    }
+  };
+  std::vector<int64_t> work(leaves.size());
+  for (int64_t k = 0; k < roots; ++k) {
+    place(k);
+    add_corners(leaves[k]);
+    work[k] = k;
+  }
+  std::vector<uint8_t> queued;
+  for (bool first_pass = true;; first_pass = false) {
+    pool.ParallelFor(static_cast<int64_t>(work.size()), [&](int64_t w) {
+      const int64_t k = work[w];
       const Leaf& f = leaves[k];
-      // Calls fn(p) for the sides' lattice vertices, counter-clockwise
-      // from (i0, j0), until it returns false.
-      auto sides = [&f](auto&& fn) {
-        for (int64_t d = 0; d < f.w; ++d) {
-          if (!fn(P{f.i0 + d, f.j0})) return;
-        }
-        for (int64_t d = 0; d < f.h; ++d) {
-          if (!fn(P{f.i0 + f.w, f.j0 + d})) return;
-        }
-        for (int64_t d = f.w; d > 0; --d) {
-          if (!fn(P{f.i0 + d, f.j0 + f.h})) return;
-        }
-        for (int64_t d = f.h; d > 0; --d) {
-          if (!fn(P{f.i0, f.j0 + d})) return;
-        }
-      };
-      if (!dirty[k]) {
-        sides([&](const P& p) {
-          if (used[l.Index(p.i, p.j)] != old_used[l.Index(p.i, p.j)]) {
-            dirty[k] = 1;
-          }
-          return !dirty[k];
-        });
-        if (!dirty[k]) return;
-      }
+      // The sides' lattice vertices that are corners, counter-clockwise
+      // from (i0, j0).
       std::vector<P> ring;
-      sides([&](const P& p) {
-        if (used[l.Index(p.i, p.j)]) ring.push_back(p);
-        return true;
-      });
+      auto side_vertex = [&](int64_t i, int64_t j) {
+        if (used[l.Index(i, j)]) ring.push_back({i, j});
+      };
+      for (int64_t d = 0; d < f.w; ++d) side_vertex(f.i0 + d, f.j0);
+      for (int64_t d = 0; d < f.h; ++d) side_vertex(f.i0 + f.w, f.j0 + d);
+      for (int64_t d = f.w; d > 0; --d) side_vertex(f.i0 + d, f.j0 + f.h);
+      for (int64_t d = f.h; d > 0; --d) side_vertex(f.i0, f.j0 + d);
       std::vector<P>& t = tris[k];
       t.clear();
-      dirty[k] = 0;
       if (ring.size() == 4) {
         CornerTriangles(l, f, &t);
         if (first_pass && fit_dev[k] >= 0) {
@@ -388,31 +392,60 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
       }
       leaf_dev[k] = dev;
     });
-    std::vector<Leaf> next;
-    std::vector<std::vector<P>> next_tris;
-    std::vector<double> next_dev;
-    bool refined = false;
-    for (size_t k = 0; k < leaves.size(); ++k) {
-      const Leaf& f = leaves[k];
-      if (leaf_dev[k] <= tolerance || f.w * f.h == 1) {
-        next.push_back(f);
-        next_tris.push_back(std::move(tris[k]));
-        next_dev.push_back(leaf_dev[k]);
-        continue;
-      }
-      refined = true;
+    corners_added.clear();
+    std::vector<int64_t> halves;
+    for (const int64_t k : work) {
+      const Leaf f = leaves[k];
+      if (leaf_dev[k] <= tolerance || f.w * f.h == 1) continue;
+      kids[k] = static_cast<int64_t>(leaves.size());
+      std::vector<P>().swap(tris[k]);
       for (const Leaf& half : Halves(l, f)) {
-        next.push_back(half);
-        next_tris.emplace_back();
-        next_dev.push_back(INFINITY);
+        halves.push_back(static_cast<int64_t>(leaves.size()));
+        leaves.push_back(half);
+        kids.push_back(-1);
+        tris.emplace_back();
+        leaf_dev.push_back(INFINITY);
+        place(halves.back());
+        add_corners(half);
       }
     }
-    leaves = std::move(next);
-    tris = std::move(next_tris);
-    leaf_dev = std::move(next_dev);
-    dirty.resize(leaves.size());
-    for (size_t k = 0; k < leaves.size(); ++k) dirty[k] = tris[k].empty();
-    if (!refined) break;
+    if (halves.empty()) break;
+    // Next: the halves, and every leaf with a new corner on its sides (it
+    // holds one of the four cells around that corner).
+    queued.resize(leaves.size());
+    work = halves;
+    for (const int64_t k : halves) queued[k] = 1;
+    for (const int64_t v : corners_added) {
+      const int64_t i = v % (nx + 1), j = v / (nx + 1);
+      for (int64_t cj = std::max<int64_t>(j - 1, 0); cj <= std::min(j, ny - 1);
+           ++cj) {
+        for (int64_t ci = std::max<int64_t>(i - 1, 0);
+             ci <= std::min(i, nx - 1); ++ci) {
+          const int32_t k = cell_leaf[cj * nx + ci];
+          if (!queued[k]) {
+            queued[k] = 1;
+            work.push_back(k);
+          }
+        }
+      }
+    }
+    for (const int64_t k : work) queued[k] = 0;
+  }
+
+  // The final leaves, depth first from the roots.
+  std::vector<int64_t> final_leaves, stack;
+  for (int64_t r = 0; r < roots; ++r) {
+    stack.push_back(r);
+    while (!stack.empty()) {
+      const int64_t k = stack.back();
+      stack.pop_back();
+      if (kids[k] < 0) {
+        final_leaves.push_back(k);
+      } else {
+        stack.push_back(kids[k] + 1);
+        stack.push_back(kids[k]);
+      }
+    }
   }
 
   // The used lattice vertices, row-major, are the new top vertices.
@@ -427,7 +460,7 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
     mesh.vertices.push_back(full.vertices[v]);
   }
   mesh.top_vertices = static_cast<int64_t>(mesh.vertices.size());
-  for (size_t k = 0; k < tris.size(); ++k) {
+  for (const int64_t k : final_leaves) {
     const std::vector<P>& t = tris[k];
     for (size_t q = 0; q + 2 < t.size(); q += 3) {
       mesh.triangles.push_back({remap[l.Index(t[q].i, t[q].j)],
