@@ -263,7 +263,7 @@ std::unique_ptr<Workpiece> FinishedWorkpiece(SchemeKind scheme) {
 // chunk's derivatives computed on the pool first (PrepareJets), then read
 // one by one; kTilesSerial reads them one by one only (each first read
 // computes its tile's derivatives on the calling thread).
-enum class Read { kTiles, kTilesSerial, kValuation, kMarks };
+enum class Read { kTiles, kTilesSerial, kJetsOnly, kValuation, kMarks };
 
 void BM_Read(benchmark::State& state, Read what,
              SchemeKind scheme = SchemeKind::kTaylor) {
@@ -294,6 +294,17 @@ void BM_Read(benchmark::State& state, Read what,
         }
         break;
       }
+      case Read::kJetsOnly: {
+        std::vector<int32_t> tiles;
+        for (int32_t t = 0; t < wp->tile_count(); ++t) {
+          if (wp->TileAllocated(t)) tiles.push_back(t);
+        }
+        for (size_t k = 0; k < tiles.size(); k += 16) {
+          wp->PrepareJets(std::span<const int32_t>(
+              tiles.data() + k, std::min<size_t>(16, tiles.size() - k)));
+        }
+        break;
+      }
       case Read::kTilesSerial:
         for (int32_t t = 0; t < wp->tile_count(); ++t) {
           if (!wp->TileAllocated(t)) continue;
@@ -316,6 +327,8 @@ void BM_Read(benchmark::State& state, Read what,
 BENCHMARK_CAPTURE(BM_Read, tiles_with_derivatives, Read::kTiles)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Read, tiles_with_derivatives_serial, Read::kTilesSerial)
+    ->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_Read, jets_only, Read::kJetsOnly)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Read, valuation, Read::kValuation)
     ->Unit(benchmark::kMillisecond)->UseRealTime();

@@ -11,8 +11,9 @@
 // leaf's triangles are measured against the full-resolution surface (both
 // piecewise linear, so the largest vertical gap lies at a lattice vertex or
 // where a coarse edge crosses a fine one: all are checked); a leaf over the
-// tolerance is split and everything retriangulated, until none is. Single
-// cells are the full-resolution triangles, so this ends.
+// tolerance is split, and its halves and neighbours are triangulated
+// again, until none is. Single cells are the full-resolution triangles, so
+// this ends.
 #include <algorithm>
 #include <array>
 #include <cstddef>
