@@ -392,8 +392,29 @@ void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
   // Pixels at squared distance r2 or more have no coverage: sqrt is
   // monotonic and sqrt(fl(r * r)) == r, so sqrt(d2) >= r there.
   const double r = half + 0.5, r2 = r * r;
+  const double seg_x0 = std::min(s.ax, s.bx), seg_x1 = std::max(s.ax, s.bx);
+  const double seg_y0 = std::min(s.ay, s.by), seg_y1 = std::max(s.ay, s.by);
+  const double len = std::sqrt(len2);
   for (int py = y0; py <= y1; ++py) {
-    for (int px = x0; px <= x1; ++px) {
+    // The row's pixels that can be within r of the segment: within r of
+    // its box, and of its line. A pixel more off than that fails the test
+    // below anyway; the bounds are widened by a pixel against rounding, so
+    // the same pixels are drawn, in the same order, with fewer tests.
+    const double off_y = std::max({0.0, seg_y0 - py, py - seg_y1});
+    if (off_y > r + 1) continue;
+    const double reach = std::sqrt(std::max(0.0, r2 - off_y * off_y));
+    double lo = seg_x0 - reach, hi = seg_x1 + reach;
+    if (std::fabs(dy) * 8 > len) {
+      // |cross((px, py) - a, d)| < r len: px within r len / |dy| of where
+      // the line crosses the row.
+      const double at = s.ax + (py - s.ay) * dx / dy;
+      const double w = r * len / std::fabs(dy);
+      lo = std::max(lo, at - w);
+      hi = std::min(hi, at + w);
+    }
+    const int row_x0 = std::max(x0, static_cast<int>(std::floor(lo)) - 1);
+    const int row_x1 = std::min(x1, static_cast<int>(std::ceil(hi)) + 1);
+    for (int px = row_x0; px <= row_x1; ++px) {
       double t = len2 > 0 ? ((px - s.ax) * dx + (py - s.ay) * dy) / len2 : 0;
       t = std::clamp(t, 0.0, 1.0);
       const double ex = s.ax + t * dx - px, ey = s.ay + t * dy - py;
