@@ -262,7 +262,9 @@ std::unique_ptr<Workpiece> FinishedWorkpiece(SchemeKind scheme) {
 // kTiles reads as the service answers GetTiles: chunks of 16 tiles, each
 // chunk's derivatives computed on the pool first (PrepareJets), then read
 // one by one; kTilesSerial reads them one by one only (each first read
-// computes its tile's derivatives on the calling thread).
+// computes its tile's derivatives on the calling thread); kJetsOnly
+// computes the derivatives as kTiles does and reads nothing (kTiles minus
+// kJetsOnly: the copy out).
 enum class Read { kTiles, kTilesSerial, kJetsOnly, kValuation, kMarks };
 
 void BM_Read(benchmark::State& state, Read what,
