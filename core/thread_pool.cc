@@ -67,11 +67,14 @@ void ThreadPool::ParallelFor(int64_t n, const std::function<void(int64_t)>& fn) 
   Job job;
   job.fn = &fn;
   job.n = n;
-  // Loops of many small items (a mesh's leaves, a picture's rows) spent
-  // more on claiming indices one by one than on the items, and threads
-  // writing neighbouring items shared cache lines. Runs of indices fix
-  // both; 64 runs per thread still balance uneven items.
-  job.grain = std::max<int64_t>(1, n / (64 * size()));
+  // Loops of many small items (a mesh's leaves) spent more on claiming
+  // indices one by one than on the items, and threads writing
+  // neighbouring items shared cache lines. Runs of indices fix both. Work
+  // is often bunched in a few items (the valuation's bins under a
+  // toolpath): 1024 runs per thread keep it balanced (64 made the
+  // valuation of BM_Read 10% slower), and loops of under 2048 items per
+  // thread still go one index at a time.
+  job.grain = std::max<int64_t>(1, n / (1024 * size()));
   {
     std::lock_guard<std::mutex> l(mu_);
     jobs_.push_back(&job);

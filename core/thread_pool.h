@@ -24,7 +24,7 @@ class ThreadPool {
   int size() const { return static_cast<int>(workers_.size()) + 1; }
 
   // Runs fn(i) for every i in [0, n), in any order and on any thread
-  // (indices are claimed in runs of about n / (64 * size())).
+  // (indices are claimed in runs of about n / (1024 * size())).
   void ParallelFor(int64_t n, const std::function<void(int64_t)>& fn);
 
   // A process-wide pool with one thread per hardware thread.

@@ -90,12 +90,12 @@ TEST(ThreadPoolTest, ConcurrentCallersEachGetTheirLoop) {
   }
 }
 
-// Indices are claimed in runs (about n / (64 * size())), yet a loop of a
+// Indices are claimed in runs (about n / (1024 * size())), yet a loop of a
 // few items is still shared: the first item waits for another thread to
 // start one, which fails if one thread had claimed the whole loop.
 TEST(ThreadPoolTest, FewItemsStillShared) {
   ThreadPool pool(2);
-  for (int64_t n : {2, 128, 1000}) {
+  for (int64_t n : {2, 128, 1000, 100000}) {
     std::atomic<int> started{0};
     std::atomic<bool> shared{false};
     pool.ParallelFor(n, [&](int64_t i) {
