@@ -260,11 +260,10 @@ std::unique_ptr<Workpiece> FinishedWorkpiece(SchemeKind scheme) {
 }
 
 // kTiles reads as the service answers GetTiles: chunks of 16 tiles, each
-// chunk's derivatives computed on the pool first (PrepareJets), then read
-// one by one; kTilesSerial reads them one by one only (each first read
-// computes its tile's derivatives on the calling thread); kJetsOnly
-// computes the derivatives as kTiles does and reads nothing (kTiles minus
-// kJetsOnly: the copy out).
+// chunk's tiles read on the pool at once, each computing its derivatives
+// straight into its buffers; kTilesSerial reads them one by one on the
+// calling thread; kJetsOnly computes the derivatives into the cache
+// (PrepareJets, chunks of 16 on the pool) and reads nothing.
 enum class Read { kTiles, kTilesSerial, kJetsOnly, kValuation, kMarks };
 
 void BM_Read(benchmark::State& state, Read what,
@@ -274,6 +273,12 @@ void BM_Read(benchmark::State& state, Read what,
   std::vector<int32_t> owner(kTileNodes);
   float* dp[5];
   for (int c = 0; c < 5; ++c) dp[c] = d.data() + c * kTileNodes;
+  struct TileBuffers {
+    std::vector<double> w;
+    std::vector<float> d;
+    std::vector<int32_t> owner;
+  };
+  TileBuffers chunk_buffers[16];
   for (auto _ : state) {
     state.PauseTiming();
     auto wp = FinishedWorkpiece(scheme);
@@ -286,13 +291,19 @@ void BM_Read(benchmark::State& state, Read what,
         }
         constexpr size_t kChunk = 16;  // as SwarfService::GetTiles
         for (size_t k = 0; k < tiles.size(); k += kChunk) {
-          const std::span<const int32_t> chunk(
-              tiles.data() + k, std::min(kChunk, tiles.size() - k));
-          wp->PrepareJets(chunk);
-          for (const int32_t t : chunk) {
-            wp->ReadTile(t, w.data(), dp, owner.data());
-            benchmark::DoNotOptimize(d.data());
-          }
+          const size_t n = std::min(kChunk, tiles.size() - k);
+          wp->pool().ParallelFor(static_cast<int64_t>(n), [&](int64_t q) {
+            TileBuffers& b = chunk_buffers[q];
+            b.w.resize(kTileNodes);
+            b.d.resize(5 * kTileNodes);
+            b.owner.resize(kTileNodes);
+            float* const bd[5] = {b.d.data(), b.d.data() + kTileNodes,
+                                  b.d.data() + 2 * kTileNodes,
+                                  b.d.data() + 3 * kTileNodes,
+                                  b.d.data() + 4 * kTileNodes};
+            wp->ReadTile(tiles[k + q], b.w.data(), bd, b.owner.data());
+            benchmark::DoNotOptimize(b.d.data());
+          });
         }
         break;
       }

@@ -366,8 +366,9 @@ struct JetScratch {
 
 }  // namespace
 
-void Workpiece::ComputeJets(int32_t t, const Tile& tile,
-                            TileJets* out) const {
+void Workpiece::ComputeJets(int32_t t, const Tile& tile, int32_t stride,
+                            int8_t* row_lo, int8_t* row_hi,
+                            float* const jets[5]) const {
   thread_local std::unique_ptr<JetScratch> scratch;
   if (scratch == nullptr) scratch = std::make_unique<JetScratch>();
   JetScratch& s = *scratch;
@@ -381,16 +382,16 @@ void Workpiece::ComputeJets(int32_t t, const Tile& tile,
   // are irregular).
   for (int32_t j = 0; j < e.ny; ++j) {
     const int32_t* row = owner + j * kTileSize;
-    int32_t lo = 0, hi = kTileSize - 1;
-    while (lo < kTileSize && row[lo] < 0) ++lo;
+    int32_t lo = 0, hi = e.nx - 1;  // nodes past the grid are never cut
+    while (lo < e.nx && row[lo] < 0) ++lo;
     while (hi >= lo && row[hi] < 0) --hi;
-    out->lo[j] = static_cast<int8_t>(lo);
-    out->hi[j] = static_cast<int8_t>(hi);
+    row_lo[j] = static_cast<int8_t>(lo);
+    row_hi[j] = static_cast<int8_t>(hi);
   }
   int32_t run = -1, prev = -2;  // -2: no owner
   for (int32_t j = 0; j < e.ny; ++j) {
     const int32_t k0 = j * kTileSize;
-    for (int32_t k = k0 + out->lo[j]; k <= k0 + out->hi[j]; ++k) {
+    for (int32_t k = k0 + row_lo[j]; k <= k0 + row_hi[j]; ++k) {
       const int32_t o = owner[k];
       run += o != prev;
       s.run_owner[run] = o;
@@ -425,7 +426,7 @@ void Workpiece::ComputeJets(int32_t t, const Tile& tile,
   for (int32_t j = 0; j < e.ny; ++j) {
     const int32_t k0 = j * kTileSize;
 #pragma omp simd
-    for (int32_t k = k0 + out->lo[j]; k <= k0 + out->hi[j]; ++k) {
+    for (int32_t k = k0 + row_lo[j]; k <= k0 + row_hi[j]; ++k) {
       s.frame_of[k] = s.run_frame[s.run_of[k]];
     }
   }
@@ -468,11 +469,11 @@ void Workpiece::ComputeJets(int32_t t, const Tile& tile,
   // them get NoFrame()'s zeros).
   for (int32_t i = 0; i < kTileSize; ++i) s.xs[i] = grid_.NodeX(e.i0 + i);
   for (int32_t j = 0; j < e.ny; ++j) {
-    const int32_t lo = out->lo[j], hi = out->hi[j];
+    const int32_t lo = row_lo[j], hi = row_hi[j];
     if (lo > hi) continue;
-    const int32_t k = j * kTileSize + lo;
-    float* const d[5] = {out->d[0] + k, out->d[1] + k, out->d[2] + k,
-                         out->d[3] + k, out->d[4] + k};
+    const int32_t k = j * kTileSize + lo, o = j * stride + lo;
+    float* const d[5] = {jets[0] + o, jets[1] + o, jets[2] + o, jets[3] + o,
+                         jets[4] + o};
     BallSweep::JetsOfFrames(s.frames, s.frame_of + k, s.xs + lo,
                             grid_.NodeY(e.j0 + j), hi - lo + 1, d);
   }
@@ -482,14 +483,14 @@ void Workpiece::ComputeJets(int32_t t, const Tile& tile,
   for (int32_t j = 0; j < e.ny; ++j) {
     const double y = grid_.NodeY(e.j0 + j);
     const int32_t k0 = j * kTileSize;
-    for (int32_t i = out->lo[j]; i <= out->hi[j];) {
+    for (int32_t i = row_lo[j]; i <= row_hi[j];) {
       const int32_t f = s.frame_of[k0 + i];
       int32_t end = i + 1;
-      while (end <= out->hi[j] && s.frame_of[k0 + end] == f) ++end;
+      while (end <= row_hi[j] && s.frame_of[k0 + end] == f) ++end;
       if (s.other[f] >= 0) {
-        const int32_t n = end - i, k = k0 + i;
-        float* const d[5] = {out->d[0] + k, out->d[1] + k, out->d[2] + k,
-                             out->d[3] + k, out->d[4] + k};
+        const int32_t n = end - i, o = j * stride + i;
+        float* const d[5] = {jets[0] + o, jets[1] + o, jets[2] + o, jets[3] + o,
+                             jets[4] + o};
         s.others[s.other[f]].Visit([&](const auto& shape) {
           if constexpr (std::is_same_v<std::decay_t<decltype(shape)>,
                                        BallSweep>) {
@@ -533,7 +534,9 @@ std::shared_ptr<const Workpiece::TileJets> Workpiece::NewJets(
   std::shared_ptr<TileJets> fresh(new TileJets);
   fresh->serial = serial_;
   fresh->version = version;
-  ComputeJets(t, *tiles_[t], fresh.get());
+  float* const d[5] = {fresh->d[0], fresh->d[1], fresh->d[2], fresh->d[3],
+                       fresh->d[4]};
+  ComputeJets(t, *tiles_[t], kTileSize, fresh->lo, fresh->hi, d);
   std::lock_guard<std::mutex> lock(jets_mu_);
   if (jets_[t] == nullptr) {
     jets_order_.push_back(t);
@@ -649,27 +652,43 @@ void Workpiece::ReadTile(int32_t t, double* w, float* const d[5],
     return;
   }
   // Uncut nodes hold the top and owner -1: rows are copied whole.
-  const TileJets* jets = d != nullptr && derivatives_ ? &Jets(t) : nullptr;
   for (int32_t j = 0; j < e.ny; ++j) {
     const int32_t out = j * e.nx, k = j * kTileSize;
     if (w != nullptr) std::memcpy(w + out, tile->w + k, e.nx * sizeof(double));
     if (owner != nullptr) {
       std::memcpy(owner + out, tile->owner + k, e.nx * sizeof(int32_t));
     }
-    if (d == nullptr) continue;
-    // Jets of the cut columns [lo, hi], zeros around them.
-    const int32_t lo =
-        jets != nullptr ? std::min<int32_t>(jets->lo[j], e.nx) : e.nx;
-    const int32_t hi =
-        jets != nullptr ? std::min<int32_t>(jets->hi[j], e.nx - 1) : -1;
-    for (int c = 0; c < 5; ++c) {
-      float* row = d[c] + out;
-      if (lo > hi) {
-        std::fill_n(row, e.nx, 0.0f);
-        continue;
+  }
+  if (d == nullptr) return;
+  // Jets of each row's cut columns [lo, hi], zeros around them: copied
+  // when cached, else computed straight into d (not cached: a cache entry
+  // costs its allocation and a copy, as much as the computation saves on
+  // a read again).
+  int8_t computed_lo[kTileSize], computed_hi[kTileSize];
+  const int8_t *lo_of = computed_lo, *hi_of = computed_hi;
+  std::shared_ptr<const TileJets> cached;
+  if (!derivatives_) {
+    std::fill_n(computed_lo, e.ny, kTileSize);  // no cut column: zeros
+    std::fill_n(computed_hi, e.ny, kTileSize - 1);
+  } else if (cached = CachedJets(t, tile_version_[t]); cached != nullptr) {
+    lo_of = cached->lo;
+    hi_of = cached->hi;
+    for (int32_t j = 0; j < e.ny; ++j) {
+      const int32_t lo = lo_of[j], hi = hi_of[j];
+      for (int c = 0; c < 5 && lo <= hi; ++c) {
+        std::memcpy(d[c] + j * e.nx + lo, cached->d[c] + j * kTileSize + lo,
+                    (hi - lo + 1) * sizeof(float));
       }
+    }
+  } else {
+    ComputeJets(t, *tile, e.nx, computed_lo, computed_hi, d);
+  }
+  for (int32_t j = 0; j < e.ny; ++j) {
+    const int32_t lo = std::min<int32_t>(lo_of[j], e.nx);
+    const int32_t hi = lo_of[j] > hi_of[j] ? lo - 1 : hi_of[j];
+    for (int c = 0; c < 5; ++c) {
+      float* row = d[c] + j * e.nx;
       std::fill_n(row, lo, 0.0f);
-      std::memcpy(row + lo, jets->d[c] + k + lo, (hi - lo + 1) * sizeof(float));
       std::fill_n(row + hi + 1, e.nx - 1 - hi, 0.0f);
     }
   }

@@ -221,16 +221,17 @@ class Workpiece {
   // non-null outputs of nx * ny entries each: heights, the five
   // derivatives (zeros for schemes without them, and for uncut nodes), and
   // owners (-1 for uncut nodes).
-  // With derivatives, the first read of a tile version computes them from
-  // the owners' sweeps on the calling thread (1.4 ms for every tile of a
-  // 1000x1000 finishing raster, one by one: BM_Read in docs/benchmarks.md;
-  // see PrepareJets) and keeps them for later reads.
+  // Derivatives are copied from the cache when PrepareJets (or another
+  // reader: Node, the valuation) computed them for this tile version, else
+  // computed from the owners' sweeps straight into d on the calling thread
+  // (not cached). Thread-safe: a reader of many tiles (GetTiles) reads
+  // them on the pool's threads at once.
   void ReadTile(int32_t t, double* w, float* const d[5], int32_t* owner) const;
   // Computes the derivatives of the listed tiles (any order; unallocated
-  // tiles and those already cached are skipped) in parallel on the pool, for
-  // the reads that follow: a reader of many tiles (GetTiles) calls it on
-  // each chunk it reads. Keeps at most kJetCacheTiles of them (the first
-  // ones listed), and the cache keeps the last kJetCacheTiles tiles
+  // tiles and those already cached are skipped) in parallel on the pool,
+  // and caches them for the reads that follow (ReadTile copies them, Node
+  // and the valuation read them). Keeps at most kJetCacheTiles of them (the
+  // first ones listed), and the cache keeps the last kJetCacheTiles tiles
   // computed: list fewer than that. A no-op for schemes without
   // derivatives. Thread-safe.
   void PrepareJets(std::span<const int32_t> tiles) const;
@@ -282,7 +283,10 @@ class Workpiece {
                                              uint64_t version) const;
   // Computes tile t's jets (at `version`, its current one) and caches them.
   std::shared_ptr<const TileJets> NewJets(int32_t t, uint64_t version) const;
-  void ComputeJets(int32_t t, const Tile& tile, TileJets* out) const;
+  // Tile t's jets into d[c] (row j at d[c] + j * stride, only its cut
+  // columns [lo[j], hi[j]] written; lo[j] > hi[j]: none).
+  void ComputeJets(int32_t t, const Tile& tile, int32_t stride, int8_t* lo,
+                   int8_t* hi, float* const d[5]) const;
 
   const GridGeometry grid_;
   const Scheme* scheme_;

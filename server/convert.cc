@@ -336,6 +336,16 @@ void FillTile(const Workpiece& wp, int32_t t, const TileOptions& opt,
   for (int32_t k = 0; k < n; ++k) h[k] = static_cast<float>(w[k]);
 }
 
+void FillTiles(const Workpiece& wp, std::span<const int32_t> tiles,
+               const TileOptions& opt, std::span<pb::Tile* const> out) {
+  auto fill = [&](int64_t k) { FillTile(wp, tiles[k], opt, out[k]); };
+  if (!opt.derivatives) {
+    for (size_t k = 0; k < tiles.size(); ++k) fill(static_cast<int64_t>(k));
+    return;
+  }
+  wp.pool().ParallelFor(static_cast<int64_t>(tiles.size()), fill);
+}
+
 absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,
                                             const pb::Rect* region,
                                             int32_t samples_per_edge,

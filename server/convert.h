@@ -5,6 +5,7 @@
 
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -64,6 +65,11 @@ absl::StatusOr<TileOptions> TileOptionsFrom(const Workpiece& wp,
                                             bool derivatives, bool owners);
 void FillTile(const Workpiece& wp, int32_t t, const TileOptions& opt,
               pb::Tile* out);
+// FillTile(wp, tiles[k], opt, out[k]) for every k (out.size() ==
+// tiles.size()). With derivatives, which the read computes, the tiles are
+// filled at once on the workpiece's pool.
+void FillTiles(const Workpiece& wp, std::span<const int32_t> tiles,
+               const TileOptions& opt, std::span<pb::Tile* const> out);
 
 absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,
                                             const pb::Rect* region,

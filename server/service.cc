@@ -521,15 +521,19 @@ class SimulateReactor
     }
     if (!job_tiles.empty() || !push_tiles.empty()) {
       session_->Read([&](const Workpiece& wp) {
-        if (job_options.derivatives) wp.PrepareJets(job_tiles);
-        if (push_options.derivatives) wp.PrepareJets(push_tiles);
-        for (int32_t t : job_tiles) {
-          FillTile(wp, t, job_options, responses.emplace_back().mutable_tile());
+        // The messages first, then pointers into them (the vector moves).
+        const size_t first = responses.size();
+        responses.resize(first + job_tiles.size() + push_tiles.size());
+        std::vector<pb::Tile*> job_out, push_out;
+        for (size_t k = 0; k < job_tiles.size(); ++k) {
+          job_out.push_back(responses[first + k].mutable_tile());
         }
-        for (int32_t t : push_tiles) {
-          FillTile(wp, t, push_options,
-                   responses.emplace_back().mutable_tile());
+        for (size_t k = 0; k < push_tiles.size(); ++k) {
+          push_out.push_back(
+              responses[first + job_tiles.size() + k].mutable_tile());
         }
+        FillTiles(wp, job_tiles, job_options, job_out);
+        FillTiles(wp, push_tiles, push_options, push_out);
         return 0;
       });
     }
@@ -889,16 +893,15 @@ grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(
         constexpr size_t kChunk = 16;
         const size_t end = std::min(state->tiles.size(), state->next + kChunk);
         state->session->Read([&](const Workpiece& wp) {
-          // The chunk's derivatives on the workpiece's pool, then the
-          // tiles one by one.
-          if (state->options.derivatives) {
-            wp.PrepareJets(std::span<const int32_t>(
-                state->tiles.data() + state->next, end - state->next));
+          std::vector<pb::Tile*> chunk;  // a deque's elements stay put
+          for (size_t k = state->next; k < end; ++k) {
+            chunk.push_back(&out->emplace_back());
           }
-          for (; state->next < end; ++state->next) {
-            FillTile(wp, state->tiles[state->next], state->options,
-                     &out->emplace_back());
-          }
+          FillTiles(wp,
+                    std::span<const int32_t>(state->tiles.data() + state->next,
+                                             chunk.size()),
+                    state->options, chunk);
+          state->next = end;
           return 0;
         });
         return state->next < state->tiles.size();

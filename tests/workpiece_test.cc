@@ -888,6 +888,8 @@ void ExpectJetsOfOwners(const Workpiece& wp) {
   for (int c = 0; c < 5; ++c) dp[c] = d.data() + c * kTileNodes;
   int64_t cut = 0;
   for (int32_t t = 0; t < wp.tile_count(); ++t) {
+    // Every output value written: what the last tile left is no zero.
+    std::fill(d.begin(), d.end(), std::nanf(""));
     wp.ReadTile(t, w.data(), dp, owner.data());
     const Workpiece::TileExtent e = wp.Extent(t);
     for (int32_t j = 0; j < e.ny; ++j) {
@@ -930,6 +932,8 @@ TEST(WorkpieceJetsTest, EveryNodeHasItsOwnersJet) {
   ASSERT_EQ(wp->allocated_tiles(), wp->tile_count());
   ASSERT_GT(wp->tile_count(), static_cast<int>(Workpiece::kJetCacheTiles));
   {
+    // Nothing cached: each read computes its jets straight into the
+    // buffers (Node, called after it, caches them).
     SCOPED_TRACE("read one by one");
     ExpectJetsOfOwners(*wp);
   }
