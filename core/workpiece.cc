@@ -661,9 +661,9 @@ void Workpiece::ReadTile(int32_t t, double* w, float* const d[5],
   }
   if (d == nullptr) return;
   // Jets of each row's cut columns [lo, hi], zeros around them: copied
-  // when cached, else computed straight into d (not cached: a cache entry
-  // costs its allocation and a copy, as much as the computation saves on
-  // a read again).
+  // when cached, else computed straight into d and not cached (GetTiles
+  // is faster without the cache entries' allocation and copy:
+  // docs/benchmarks.md, issue 12).
   int8_t computed_lo[kTileSize], computed_hi[kTileSize];
   const int8_t *lo_of = computed_lo, *hi_of = computed_hi;
   std::shared_ptr<const TileJets> cached;
