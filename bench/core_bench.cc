@@ -278,18 +278,18 @@ void BM_Read(benchmark::State& state, Read what,
     std::vector<float> d;
     std::vector<int32_t> owner;
   };
-  TileBuffers chunk_buffers[16];
+  constexpr size_t kChunk = 16;  // tiles read at once, as GetTiles does
+  TileBuffers chunk_buffers[kChunk];
   for (auto _ : state) {
     state.PauseTiming();
     auto wp = FinishedWorkpiece(scheme);
+    std::vector<int32_t> tiles;  // the allocated ones
+    for (int32_t t = 0; t < wp->tile_count(); ++t) {
+      if (wp->TileAllocated(t)) tiles.push_back(t);
+    }
     state.ResumeTiming();
     switch (what) {
       case Read::kTiles: {
-        std::vector<int32_t> tiles;
-        for (int32_t t = 0; t < wp->tile_count(); ++t) {
-          if (wp->TileAllocated(t)) tiles.push_back(t);
-        }
-        constexpr size_t kChunk = 16;  // as SwarfService::GetTiles
         for (size_t k = 0; k < tiles.size(); k += kChunk) {
           const size_t n = std::min(kChunk, tiles.size() - k);
           wp->pool().ParallelFor(static_cast<int64_t>(n), [&](int64_t q) {
@@ -307,20 +307,14 @@ void BM_Read(benchmark::State& state, Read what,
         }
         break;
       }
-      case Read::kJetsOnly: {
-        std::vector<int32_t> tiles;
-        for (int32_t t = 0; t < wp->tile_count(); ++t) {
-          if (wp->TileAllocated(t)) tiles.push_back(t);
-        }
-        for (size_t k = 0; k < tiles.size(); k += 16) {
+      case Read::kJetsOnly:
+        for (size_t k = 0; k < tiles.size(); k += kChunk) {
           wp->PrepareJets(std::span<const int32_t>(
-              tiles.data() + k, std::min<size_t>(16, tiles.size() - k)));
+              tiles.data() + k, std::min(kChunk, tiles.size() - k)));
         }
         break;
-      }
       case Read::kTilesSerial:
-        for (int32_t t = 0; t < wp->tile_count(); ++t) {
-          if (!wp->TileAllocated(t)) continue;
+        for (const int32_t t : tiles) {
           wp->ReadTile(t, w.data(), dp, owner.data());
           benchmark::DoNotOptimize(d.data());
         }

@@ -396,7 +396,7 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
     corners_added.clear();
     std::vector<int64_t> halves;
     for (const int64_t k : work) {
-      const Leaf f = leaves[k];
+      const Leaf f = leaves[k];  // a copy: `leaves` grows below
       if (leaf_dev[k] <= tolerance || f.w * f.h == 1) continue;
       kids[k] = static_cast<int64_t>(leaves.size());
       std::vector<P>().swap(tris[k]);

@@ -660,17 +660,19 @@ void Workpiece::ReadTile(int32_t t, double* w, float* const d[5],
     }
   }
   if (d == nullptr) return;
+  if (!derivatives_) {
+    for (int c = 0; c < 5; ++c) std::fill_n(d[c], n, 0.0f);
+    return;
+  }
   // Jets of each row's cut columns [lo, hi], zeros around them: copied
   // when cached, else computed straight into d and not cached (GetTiles
   // is faster without the cache entries' allocation and copy:
   // docs/benchmarks.md, issue 12).
   int8_t computed_lo[kTileSize], computed_hi[kTileSize];
   const int8_t *lo_of = computed_lo, *hi_of = computed_hi;
-  std::shared_ptr<const TileJets> cached;
-  if (!derivatives_) {
-    std::fill_n(computed_lo, e.ny, kTileSize);  // no cut column: zeros
-    std::fill_n(computed_hi, e.ny, kTileSize - 1);
-  } else if (cached = CachedJets(t, tile_version_[t]); cached != nullptr) {
+  const std::shared_ptr<const TileJets> cached =
+      CachedJets(t, tile_version_[t]);
+  if (cached != nullptr) {
     lo_of = cached->lo;
     hi_of = cached->hi;
     for (int32_t j = 0; j < e.ny; ++j) {
