@@ -88,9 +88,11 @@ absl::StatusOr<std::shared_ptr<Session>> Registry::Create(SessionSpec spec) {
 }
 
 absl::Status Registry::AdmitLocked(const std::string& id, int64_t bytes) {
-  if (sessions_.count(id)) {
+  if (auto it = sessions_.find(id); it != sessions_.end()) {
     return absl::AlreadyExistsError(
-        absl::StrCat("session ", id, " already exists"));
+        it->second != nullptr
+            ? absl::StrCat("session ", id, " already exists")
+            : absl::StrCat("session ", id, " is being created or deleted"));
   }
   if (static_cast<int64_t>(sessions_.size()) >= limits_.max_sessions) {
     return absl::ResourceExhaustedError(absl::StrCat(
@@ -201,17 +203,27 @@ absl::StatusOr<std::shared_ptr<Session>> Registry::Get(
 
 absl::Status Registry::Delete(const std::string& id,
                               const std::string& principal) {
-  absl::MutexLock l(&mu_);
-  auto it = sessions_.find(id);
-  if (it == sessions_.end() || it->second == nullptr ||
-      it->second->spec().owner != principal) {
-    return absl::NotFoundError(absl::StrCat("no session ", id));
+  std::shared_ptr<Session> session;
+  {
+    absl::MutexLock l(&mu_);
+    auto it = sessions_.find(id);
+    if (it == sessions_.end() || it->second == nullptr ||
+        it->second->spec().owner != principal) {
+      return absl::NotFoundError(absl::StrCat("no session ", id));
+    }
+    // Gone for every call from here on, but the id stays taken (null, as
+    // while a session is created) until its files are deleted: a new
+    // session under the same id would lose its journal to DeleteFiles.
+    session = std::move(it->second);
   }
-  reserved_bytes_ -= Session::EstimateMemoryBytes(it->second->spec().stock,
-                                                  it->second->spec().scheme);
-  it->second->MarkDeleted();  // closes its journal
-  sessions_.erase(it);
+  // Not under mu_: MarkDeleted waits for the session's readers (a long
+  // error measurement, say), and every other session's calls need mu_.
+  session->MarkDeleted();  // closes its journal
   DeleteFiles(id);
+  absl::MutexLock l(&mu_);
+  reserved_bytes_ -= Session::EstimateMemoryBytes(session->spec().stock,
+                                                  session->spec().scheme);
+  sessions_.erase(id);
   return absl::OkStatus();
 }
 

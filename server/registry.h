@@ -56,6 +56,9 @@ class Registry {
   // that its existence is not revealed).
   absl::StatusOr<std::shared_ptr<Session>> Get(
       const std::string& id, const std::string& principal = "") const;
+  // Deletes the session and its files, once its readers are done (a long
+  // measurement); other sessions are served meanwhile. NOT_FOUND as Get.
+  // The id is gone for Get at once, and free for Create when this returns.
   absl::Status Delete(const std::string& id,
                       const std::string& principal = "");
   // Evicts journaled sessions unused for `idle_seconds` that no stream

@@ -15,6 +15,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/synchronization/mutex.h"
+#include "absl/time/clock.h"
+#include "absl/time/time.h"
 #include "core/valuation.h"
 #include "server/convert.h"
 #include "server/status_util.h"
@@ -143,23 +145,6 @@ std::pair<uint64_t, pb::RequestKind> RequestOf(const pb::SimulateResponse& r) {
       break;
   }
   return {0, pb::REQUEST_KIND_UNSPECIFIED};
-}
-
-// Runs `work` on the executor and finishes the unary call with its status.
-grpc::ServerUnaryReactor* RunUnary(grpc::CallbackServerContext* ctx,
-                                   Executor* executor,
-                                   const std::string& replica,
-                                   std::function<absl::Status()> work) {
-  ctx->AddInitialMetadata(kReplicaMetadata, replica);
-  grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
-  executor->Schedule([reactor, ctx, work = std::move(work)] {
-    if (ctx->IsCancelled()) {
-      reactor->Finish(grpc::Status::CANCELLED);
-      return;
-    }
-    reactor->Finish(ToGrpcStatus(work()));
-  });
-  return reactor;
 }
 
 // A server stream whose messages are produced on the executor in chunks:
@@ -779,10 +764,41 @@ void SwarfService::StreamCounter::Release(const std::string& key) {
   if (--open_[key] <= 0) open_.erase(key);
 }
 
+// A unary call that waited or ran this long is logged (seconds).
+constexpr double kSlowCallSeconds = 2.0;
+
+grpc::ServerUnaryReactor* SwarfService::Unary(
+    grpc::CallbackServerContext* ctx, const char* method,
+    std::function<absl::Status()> work) {
+  ctx->AddInitialMetadata(kReplicaMetadata, replica_);
+  grpc::ServerUnaryReactor* reactor = ctx->DefaultReactor();
+  const absl::Time queued = absl::Now();
+  executor_->Schedule([reactor, ctx, method, queued, work = std::move(work)] {
+    if (ctx->IsCancelled()) {
+      spdlog::warn("{}: cancelled after {:.3f} s in the queue", method,
+                   absl::ToDoubleSeconds(absl::Now() - queued));
+      reactor->Finish(grpc::Status::CANCELLED);
+      return;
+    }
+    const absl::Time started = absl::Now();
+    const absl::Status status = work();
+    const double wait = absl::ToDoubleSeconds(started - queued);
+    const double run = absl::ToDoubleSeconds(absl::Now() - started);
+    // What a client that hit its deadline needs from the log: whether the
+    // call waited for a worker or ran long (a lock, a large request).
+    if (wait + run >= kSlowCallSeconds) {
+      spdlog::warn("{}: slow call, {:.3f} s queued and {:.3f} s running: {}",
+                   method, wait, run, status.ToString());
+    }
+    reactor->Finish(ToGrpcStatus(status));
+  });
+  return reactor;
+}
+
 grpc::ServerUnaryReactor* SwarfService::CreateSession(
     grpc::CallbackServerContext* ctx, const pb::CreateSessionRequest* req,
     pb::Session* resp) {
-  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+  return Unary(ctx, "CreateSession", [=, this]() -> absl::Status {
     auto principal = PrincipalOf(tokens_, ctx);
     if (!principal.ok()) return principal.status();
     pb::CreateSessionRequest r = *req;
@@ -809,7 +825,7 @@ grpc::ServerUnaryReactor* SwarfService::CreateSession(
 grpc::ServerUnaryReactor* SwarfService::GetSession(
     grpc::CallbackServerContext* ctx, const pb::GetSessionRequest* req,
     pb::Session* resp) {
-  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+  return Unary(ctx, "GetSession", [=, this]() -> absl::Status {
     auto session = SessionOf(registry_, tokens_, ctx, req->session_id());
     if (!session.ok()) return session.status();
     FillSession(**session, replica_, resp);
@@ -820,7 +836,7 @@ grpc::ServerUnaryReactor* SwarfService::GetSession(
 grpc::ServerUnaryReactor* SwarfService::ListSessions(
     grpc::CallbackServerContext* ctx, const pb::ListSessionsRequest*,
     pb::ListSessionsResponse* resp) {
-  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+  return Unary(ctx, "ListSessions", [=, this]() -> absl::Status {
     auto principal = PrincipalOf(tokens_, ctx);
     if (!principal.ok()) return principal.status();
     for (const auto& s : registry_->List(*principal)) {
@@ -834,7 +850,7 @@ grpc::ServerUnaryReactor* SwarfService::ListSessions(
 grpc::ServerUnaryReactor* SwarfService::DeleteSession(
     grpc::CallbackServerContext* ctx, const pb::DeleteSessionRequest* req,
     pb::DeleteSessionResponse*) {
-  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+  return Unary(ctx, "DeleteSession", [=, this]() -> absl::Status {
     auto principal = PrincipalOf(tokens_, ctx);
     if (!principal.ok()) return principal.status();
     auto id = SessionIdOf(ctx, req->session_id());
@@ -911,7 +927,7 @@ grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(
 grpc::ServerUnaryReactor* SwarfService::GetErrorStats(
     grpc::CallbackServerContext* ctx, const pb::GetErrorStatsRequest* req,
     pb::ErrorStats* resp) {
-  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+  return Unary(ctx, "GetErrorStats", [=, this]() -> absl::Status {
     auto session = SessionOf(registry_, tokens_, ctx, req->session_id());
     if (!session.ok()) return session.status();
     const int64_t limit = registry_->limits().max_message_bytes;
@@ -966,7 +982,7 @@ grpc::ServerWriteReactor<pb::Polyline>* SwarfService::GetCuttingMarks(
 grpc::ServerUnaryReactor* SwarfService::Probe(
     grpc::CallbackServerContext* ctx, const pb::ProbeRequest* req,
     pb::ProbeResponse* resp) {
-  return RunUnary(ctx, executor_, replica_, [=, this]() -> absl::Status {
+  return Unary(ctx, "Probe", [=, this]() -> absl::Status {
     auto session = SessionOf(registry_, tokens_, ctx, req->session_id());
     if (!session.ok()) return session.status();
     auto probe = (*session)->Read(

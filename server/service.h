@@ -5,9 +5,11 @@
 #ifndef SWARF_SERVER_SERVICE_H_
 #define SWARF_SERVER_SERVICE_H_
 
+#include <functional>
 #include <map>
 #include <string>
 
+#include "absl/status/status.h"
 #include "absl/synchronization/mutex.h"
 #include "server/auth.h"
 #include "server/client_id.h"
@@ -96,6 +98,12 @@ class SwarfService final : public SwarfCallbackBase {
   };
 
  private:
+  // Runs `work` on the executor and finishes the call with its status;
+  // `method` names the call in the log when it was slow.
+  grpc::ServerUnaryReactor* Unary(grpc::CallbackServerContext* ctx,
+                                  const char* method,
+                                  std::function<absl::Status()> work);
+
   Registry* const registry_;
   Executor* const executor_;
   TokenStore* const tokens_;

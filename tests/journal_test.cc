@@ -3,14 +3,17 @@
 // deleted session leaves no files.
 #include "server/journal.h"
 
+#include <atomic>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
+#include "absl/synchronization/notification.h"
 #include "gtest/gtest.h"
 #include "server/convert.h"
 #include "server/registry.h"
@@ -327,6 +330,53 @@ TEST_F(JournalTest, DeletingASessionDeletesItsFiles) {
             absl::StatusCode::kNotFound);
   Registry r2(Limits{}, Durable());
   EXPECT_EQ(*r2.RestoreAll(), 0);
+}
+
+// A session being read (a long measurement) holds up its own deletion,
+// never the other sessions: the registry is not locked while Delete waits.
+TEST_F(JournalTest, DeletionWaitingForAReaderHoldsUpNoOtherSession) {
+  Registry r(Limits{}, Durable());
+  ASSERT_TRUE(r.RestoreAll().ok());
+  auto gone = *r.Create(Spec("gone"));
+  ASSERT_TRUE(r.Create(Spec("kept")).ok());
+  absl::Notification reading, release, checked;
+  std::thread reader([&] {
+    gone->Read([&](const Workpiece&) {
+      reading.Notify();
+      release.WaitForNotification();
+      return 0;
+    });
+  });
+  reading.WaitForNotification();
+  std::atomic<bool> deleted{false};
+  std::thread deleter([&] {
+    EXPECT_TRUE(r.Delete("gone").ok());
+    deleted = true;
+  });
+  std::thread others([&] {
+    // The id leaves the registry before Delete waits for the reader.
+    while (r.Get("gone").ok()) std::this_thread::yield();
+    EXPECT_TRUE(r.Get("kept").ok());
+    EXPECT_EQ(r.List().size(), 1u);
+    EXPECT_TRUE(r.Create(Spec("other")).ok());
+    const auto again = r.Create(Spec("gone"));
+    EXPECT_EQ(again.status().code(), absl::StatusCode::kAlreadyExists);
+    EXPECT_NE(again.status().message().find("being created or deleted"),
+              std::string::npos)
+        << again.status();
+    EXPECT_FALSE(deleted);
+    checked.Notify();
+  });
+  // A deadlock fails here, not at ctest's timeout.
+  EXPECT_TRUE(checked.WaitForNotificationWithTimeout(absl::Seconds(60)))
+      << "calls on other sessions waited for the deletion";
+  release.Notify();
+  reader.join();
+  deleter.join();
+  others.join();
+  EXPECT_TRUE(deleted);
+  EXPECT_FALSE(fs::exists(File("gone")));
+  EXPECT_TRUE(r.Create(Spec("gone")).ok());
 }
 
 TEST_F(JournalTest, IdleSessionIsEvictedAndReloadedBitIdentical) {

@@ -77,6 +77,20 @@ class Swarfd:
             self.proc = None
 
 
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo
+                              ) -> Iterator[None]:
+    """A failed test that ran against a swarfd reports the server's log
+    tail too (what the server did while the client waited)."""
+    outcome = yield
+    report = outcome.get_result()  # type: ignore[attr-defined]
+    server = getattr(item, "funcargs", {}).get("swarfd")
+    if report.failed and isinstance(server, Swarfd) and server.log.exists():
+        lines = server.log.read_text(errors="replace").splitlines()
+        report.sections.append(("swarfd log (last 80 lines)",
+                                "\n".join(lines[-80:])))
+
+
 @pytest.fixture(scope="module")
 def swarfd(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Swarfd]:
     server = Swarfd(tmp_path_factory.mktemp("swarfd"))
