@@ -787,7 +787,7 @@ grpc::ServerUnaryReactor* SwarfService::Unary(
     // What a client that hit its deadline needs from the log: whether the
     // call waited for a worker or ran long (a lock, a large request).
     if (wait + run >= kSlowCallSeconds) {
-      spdlog::warn("{}: slow call, {:.3f} s queued and {:.3f} s running: {}",
+      spdlog::info("{}: slow call, {:.3f} s queued and {:.3f} s running: {}",
                    method, wait, run, status.ToString());
     }
     reactor->Finish(ToGrpcStatus(status));
