@@ -686,8 +686,7 @@ void Workpiece::ReadTile(int32_t t, double* w, float* const d[5],
     ComputeJets(t, *tile, e.nx, computed_lo, computed_hi, d);
   }
   for (int32_t j = 0; j < e.ny; ++j) {
-    const int32_t lo = std::min<int32_t>(lo_of[j], e.nx);
-    const int32_t hi = lo_of[j] > hi_of[j] ? lo - 1 : hi_of[j];
+    const int32_t lo = lo_of[j], hi = hi_of[j];  // a row uncut: hi = lo - 1
     for (int c = 0; c < 5; ++c) {
       float* row = d[c] + j * e.nx;
       std::fill_n(row, lo, 0.0f);

@@ -284,7 +284,8 @@ class Workpiece {
   // Computes tile t's jets (at `version`, its current one) and caches them.
   std::shared_ptr<const TileJets> NewJets(int32_t t, uint64_t version) const;
   // Tile t's jets into d[c] (row j at d[c] + j * stride, only its cut
-  // columns [lo[j], hi[j]] written; lo[j] > hi[j]: none).
+  // columns [lo[j], hi[j]] written). With nx = Extent(t).nx: 0 <= lo[j] <=
+  // nx and hi[j] < nx; a row with no cut node has lo[j] = nx, hi[j] = nx - 1.
   void ComputeJets(int32_t t, const Tile& tile, int32_t stride, int8_t* lo,
                    int8_t* hi, float* const d[5]) const;
 
