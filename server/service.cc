@@ -150,7 +150,8 @@ std::pair<uint64_t, pb::RequestKind> RequestOf(const pb::SimulateResponse& r) {
 // A server stream whose messages are produced on the executor in chunks:
 // `produce` appends the next messages and returns false once there are no
 // more (or an error). One write in flight; the next chunk is produced when
-// the queue runs low.
+// the queue runs low. Deleted once gRPC is done with it and no Produce task
+// is left on the executor.
 template <typename T>
 class ChunkedWriter : public grpc::ServerWriteReactor<T> {
  public:
@@ -164,6 +165,7 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
     {
       absl::MutexLock l(&mu_);
       producing_ = true;
+      ++tasks_;
     }
     executor_->Schedule([this] { Produce(); });
   }
@@ -190,7 +192,15 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
     Do(act);
   }
 
-  void OnDone() override { delete this; }
+  void OnDone() override {
+    bool last;
+    {
+      absl::MutexLock l(&mu_);
+      done_ = true;
+      last = tasks_ == 0;
+    }
+    if (last) delete this;
+  }
 
  private:
   static constexpr size_t kLowWater = 16;
@@ -218,6 +228,7 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
     }
     if (!producing_ && more_ && queue_.size() <= kLowWater) {
       producing_ = true;
+      ++tasks_;
       act.produce = true;
     }
     if (!writing_ && !producing_ && queue_.empty() && !more_) {
@@ -249,7 +260,20 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
       }
       act = NextLocked();
     }
+    // Once producing_ is false, another thread may finish the stream and
+    // gRPC call OnDone before this Do: tasks_ keeps the reactor alive.
     Do(act);
+    EndTask();
+  }
+
+  // A Produce task's last step: the reactor goes if gRPC is done with it.
+  void EndTask() {
+    bool last;
+    {
+      absl::MutexLock l(&mu_);
+      last = --tasks_ == 0 && done_;
+    }
+    if (last) delete this;
   }
 
   Executor* const executor_;
@@ -262,6 +286,8 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
   bool cancelled_ ABSL_GUARDED_BY(mu_) = false;
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
   grpc::Status status_ ABSL_GUARDED_BY(mu_);
+  int tasks_ ABSL_GUARDED_BY(mu_) = 0;  // Produce tasks scheduled or running
+  bool done_ ABSL_GUARDED_BY(mu_) = false;  // OnDone was called
 };
 
 // The Simulate stream of one session.
@@ -370,7 +396,13 @@ class SimulateReactor
       spdlog::info("session {}: stream closed", session_->id());
     }
     if (streams_ != nullptr) streams_->Release(client_);
-    delete this;
+    bool last;
+    {
+      absl::MutexLock l(&mu_);
+      done_ = true;
+      last = tasks_ == 0;
+    }
+    if (last) delete this;
   }
 
  private:
@@ -413,7 +445,7 @@ class SimulateReactor
     Act act;
     if (finished_) return act;
     if (cancelled_) {
-      if (!writing_ && !processing_) {
+      if (!writing_ && !processing_ && !read_starting_) {
         finished_ = true;
         act.finish = grpc::Status::CANCELLED;
       }
@@ -426,14 +458,17 @@ class SimulateReactor
     const bool failing = fatal_.has_value();
     if (!processing_ && !failing && CanProcessLocked()) {
       processing_ = true;
+      ++tasks_;
       act.process = true;
     }
     if (!read_pending_ && !reads_done_ && !failing && in_.size() < kMaxIn &&
         out_.size() < kMaxOut) {
       read_pending_ = true;
+      read_starting_ = true;
       act.read = true;
     }
-    const bool drained = !writing_ && !processing_ && out_.empty();
+    const bool drained =
+        !writing_ && !processing_ && !read_starting_ && out_.empty();
     if (drained && failing) {
       finished_ = true;
       act.finish = *fatal_;
@@ -444,25 +479,30 @@ class SimulateReactor
     return act;
   }
 
-  // The order matters: a pending read keeps gRPC from calling OnDone, and
-  // the writing_/processing_ flags set by NextLocked keep every other
-  // thread from finishing until this thread has started the write and
-  // scheduled the Process. So the read starts first and Process is
-  // scheduled last; the other way round a Process on another thread could
-  // finish the stream (a seq gap) and get the reactor deleted before
-  // StartRead here.
-  void Do(const Act& act) {
-    if (act.read) StartRead(&req_);
-    if (act.write != nullptr) {
-      // One write in flight: the previous one is done with the buffer.
-      write_buf_.Clear();
-      bool own = false;
-      grpc::SerializationTraits<pb::SimulateResponse>::Serialize(
-          *act.write, &write_buf_, &own);
-      StartWrite(&write_buf_);
+  // Carries out what NextLocked decided. A read, a write or a Process it
+  // decided keeps every other thread from finishing the stream (read_starting_,
+  // writing_, processing_) until this thread has started it: gRPC's call
+  // must not end under a read or write not yet started. Once the read has
+  // started, what NextLocked decides next is done here too (the stream may
+  // be able to finish now).
+  void Do(Act act) {
+    for (;;) {
+      if (act.read) StartRead(&req_);
+      if (act.write != nullptr) {
+        // One write in flight: the previous one is done with the buffer.
+        write_buf_.Clear();
+        bool own = false;
+        grpc::SerializationTraits<pb::SimulateResponse>::Serialize(
+            *act.write, &write_buf_, &own);
+        StartWrite(&write_buf_);
+      }
+      if (act.finish.has_value()) Finish(*act.finish);
+      if (act.process) executor_->Schedule([this] { Process(); });
+      if (!act.read) return;
+      absl::MutexLock l(&mu_);
+      read_starting_ = false;
+      act = NextLocked();
     }
-    if (act.finish.has_value()) Finish(*act.finish);
-    if (act.process) executor_->Schedule([this] { Process(); });
   }
 
   // One processing turn on the executor: a slice of the tile job, one
@@ -552,7 +592,20 @@ class SimulateReactor
       processing_ = false;
       act = NextLocked();
     }
+    // Once processing_ is false, another thread may finish the stream and
+    // gRPC call OnDone before this Do: tasks_ keeps the reactor alive.
     Do(act);
+    EndTask();
+  }
+
+  // A Process task's last step: the reactor goes if gRPC is done with it.
+  void EndTask() {
+    bool last;
+    {
+      absl::MutexLock l(&mu_);
+      last = --tasks_ == 0 && done_;
+    }
+    if (last) delete this;
   }
 
   static void Error(uint64_t id, const absl::Status& s,
@@ -741,11 +794,15 @@ class SimulateReactor
   uint64_t reads_ ABSL_GUARDED_BY(mu_) = 0;
   std::optional<grpc::Status> read_error_ ABSL_GUARDED_BY(mu_);
   bool read_pending_ ABSL_GUARDED_BY(mu_) = false;
+  // A read NextLocked decided on, not started yet (Do).
+  bool read_starting_ ABSL_GUARDED_BY(mu_) = false;
   bool reads_done_ ABSL_GUARDED_BY(mu_) = false;
   bool writing_ ABSL_GUARDED_BY(mu_) = false;
   bool processing_ ABSL_GUARDED_BY(mu_) = false;
   bool cancelled_ ABSL_GUARDED_BY(mu_) = false;
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
+  int tasks_ ABSL_GUARDED_BY(mu_) = 0;  // Process tasks scheduled or running
+  bool done_ ABSL_GUARDED_BY(mu_) = false;  // OnDone was called
 };
 
 }  // namespace

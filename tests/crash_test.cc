@@ -75,7 +75,11 @@ std::unique_ptr<pb::Swarf::Stub> Stub(int port) {
 std::unique_ptr<grpc::ClientContext> Ctx(const std::string& id) {
   auto ctx = std::make_unique<grpc::ClientContext>();
   ctx->AddMetadata("x-swarf-session", id);
-  ctx->set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+  // A round streams up to 240 batches, each fsynced (--journal_sync=full),
+  // with a snapshot every 5: generous for a slow disk under a loaded
+  // sanitizer run.
+  ctx->set_deadline(std::chrono::system_clock::now() +
+                    std::chrono::seconds(300));
   return ctx;
 }
 
@@ -87,6 +91,20 @@ TEST(CrashTest, KilledServerLosesNothingAcknowledgedAndEndsBitIdentical) {
   const std::string data = (dir / "data").string();
   int starts = 0;
   auto log = [&] { return (dir / ("log" + std::to_string(++starts))).string(); };
+  // A failure shows what every swarfd it started logged.
+  struct PrintLogsOnFailure {
+    const fs::path& dir;
+    const int& starts;
+    ~PrintLogsOnFailure() {
+      if (!::testing::Test::HasFailure()) return;
+      for (int k = 1; k <= starts; ++k) {
+        const std::string name = "log" + std::to_string(k);
+        std::printf(
+            "---- swarfd %s ----\n%s\n", name.c_str(),
+            swarf::testing::ReadFileText((dir / name).string()).c_str());
+      }
+    }
+  } print_logs{dir, starts};
   const std::vector<Vec3> pts = Path();
   const std::string id = "crash-job";
 
@@ -140,17 +158,25 @@ TEST(CrashTest, KilledServerLosesNothingAcknowledgedAndEndsBitIdentical) {
     }
     ctx->TryCancel();
     writer.join();
-    stream->Finish();
+    const grpc::Status finished = stream->Finish();
     if (last) {
-      ASSERT_EQ(last_acked, kBatches);
+      ASSERT_EQ(last_acked, kBatches)
+          << "the stream ended: " << finished.error_code() << ": "
+          << finished.error_message();
       break;
     }
+    // Not killed: the stream failed before the ack it waited for.
+    ASSERT_EQ(last_acked, kill_after)
+        << "round " << round << ": the stream ended: " << finished.error_code()
+        << ": " << finished.error_message();
     server = std::make_unique<SwarfdProcess>(data, log(), kFlags);
     ASSERT_GT(server->port(), 0) << "swarfd did not restart";
     pb::Session s;
     pb::GetSessionRequest get;
     get.set_session_id(id);
-    ASSERT_TRUE(Stub(server->port())->GetSession(Ctx(id).get(), get, &s).ok());
+    const grpc::Status got =
+        Stub(server->port())->GetSession(Ctx(id).get(), get, &s);
+    ASSERT_TRUE(got.ok()) << got.error_code() << ": " << got.error_message();
     // Everything acknowledged survived; a batch in flight may have too.
     EXPECT_GE(s.last_seq(), static_cast<uint64_t>(last_acked)) << "round "
                                                                 << round;
@@ -213,7 +239,8 @@ TEST(CrashTest, KilledServerLosesNothingAcknowledgedAndEndsBitIdentical) {
     }
     ++tiles;
   }
-  ASSERT_TRUE(reader->Finish().ok());
+  const grpc::Status read = reader->Finish();
+  ASSERT_TRUE(read.ok()) << read.error_code() << ": " << read.error_message();
   EXPECT_EQ(tiles, ref->tile_count());
   server->Kill();
   if (!::testing::Test::HasFailure()) fs::remove_all(dir);  // keep logs

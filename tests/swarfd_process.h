@@ -30,7 +30,8 @@ inline std::string ReadFileText(const std::string& path) {
 class SwarfdProcess {
  public:
   // Starts SWARFD_PATH --listen 127.0.0.1:0 --data_dir=data_dir, then
-  // `flags`. port() is 0 if it did not report a port within 5 s.
+  // `flags`. port() is 0 if it exited or did not report a port within 60 s
+  // (a sanitizer build restoring a session on a loaded machine is slow).
   SwarfdProcess(const std::string& data_dir, const std::string& log,
                 const std::vector<std::string>& flags)
       : log_(log) {
@@ -50,11 +51,16 @@ class SwarfdProcess {
     }
     // The port from the log: "listening on ... (port N)".
     const std::regex port_re(R"(\(port (\d+)\))");
-    for (int tries = 0; tries < 200 && port_ == 0; ++tries) {
+    for (int tries = 0; tries < 2400 && port_ == 0; ++tries) {
       std::this_thread::sleep_for(std::chrono::milliseconds(25));
       const std::string text = ReadFileText(log);
       std::smatch m;
-      if (std::regex_search(text, m, port_re)) port_ = std::stoi(m[1]);
+      if (std::regex_search(text, m, port_re)) {
+        port_ = std::stoi(m[1]);
+      } else if (waitpid(pid_, nullptr, WNOHANG) == pid_) {
+        pid_ = -1;  // exited: its log says why
+        break;
+      }
     }
   }
   ~SwarfdProcess() { Kill(); }
