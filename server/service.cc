@@ -1,6 +1,7 @@
 #include "server/service.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cstdlib>
 #include <deque>
 #include <fstream>
@@ -147,11 +148,24 @@ std::pair<uint64_t, pb::RequestKind> RequestOf(const pb::SimulateResponse& r) {
   return {0, pb::REQUEST_KIND_UNSPECIFIED};
 }
 
+// Who still needs a reactor: gRPC until OnDone, and each executor task
+// scheduled for it until the task's last step (after its lock is released,
+// another thread may finish the stream and gRPC call OnDone). Whoever
+// releases the last reference deletes the reactor.
+class ReactorRefs {
+ public:
+  void Add() { refs_.fetch_add(1, std::memory_order_relaxed); }
+  // Whether that was the last reference.
+  bool Release() { return refs_.fetch_sub(1, std::memory_order_acq_rel) == 1; }
+
+ private:
+  std::atomic<int> refs_{1};  // gRPC's
+};
+
 // A server stream whose messages are produced on the executor in chunks:
 // `produce` appends the next messages and returns false once there are no
 // more (or an error). One write in flight; the next chunk is produced when
-// the queue runs low. Deleted once gRPC is done with it and no Produce task
-// is left on the executor.
+// the queue runs low.
 template <typename T>
 class ChunkedWriter : public grpc::ServerWriteReactor<T> {
  public:
@@ -165,8 +179,8 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
     {
       absl::MutexLock l(&mu_);
       producing_ = true;
-      ++tasks_;
     }
+    refs_.Add();
     executor_->Schedule([this] { Produce(); });
   }
 
@@ -193,13 +207,7 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
   }
 
   void OnDone() override {
-    bool last;
-    {
-      absl::MutexLock l(&mu_);
-      done_ = true;
-      last = tasks_ == 0;
-    }
-    if (last) delete this;
+    if (refs_.Release()) delete this;
   }
 
  private:
@@ -228,7 +236,7 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
     }
     if (!producing_ && more_ && queue_.size() <= kLowWater) {
       producing_ = true;
-      ++tasks_;
+      refs_.Add();
       act.produce = true;
     }
     if (!writing_ && !producing_ && queue_.empty() && !more_) {
@@ -260,20 +268,8 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
       }
       act = NextLocked();
     }
-    // Once producing_ is false, another thread may finish the stream and
-    // gRPC call OnDone before this Do: tasks_ keeps the reactor alive.
     Do(act);
-    EndTask();
-  }
-
-  // A Produce task's last step: the reactor goes if gRPC is done with it.
-  void EndTask() {
-    bool last;
-    {
-      absl::MutexLock l(&mu_);
-      last = --tasks_ == 0 && done_;
-    }
-    if (last) delete this;
+    if (refs_.Release()) delete this;
   }
 
   Executor* const executor_;
@@ -286,8 +282,7 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
   bool cancelled_ ABSL_GUARDED_BY(mu_) = false;
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
   grpc::Status status_ ABSL_GUARDED_BY(mu_);
-  int tasks_ ABSL_GUARDED_BY(mu_) = 0;  // Produce tasks scheduled or running
-  bool done_ ABSL_GUARDED_BY(mu_) = false;  // OnDone was called
+  ReactorRefs refs_;  // gRPC's, and each Produce task's
 };
 
 // The Simulate stream of one session.
@@ -396,13 +391,7 @@ class SimulateReactor
       spdlog::info("session {}: stream closed", session_->id());
     }
     if (streams_ != nullptr) streams_->Release(client_);
-    bool last;
-    {
-      absl::MutexLock l(&mu_);
-      done_ = true;
-      last = tasks_ == 0;
-    }
-    if (last) delete this;
+    if (refs_.Release()) delete this;
   }
 
  private:
@@ -458,7 +447,7 @@ class SimulateReactor
     const bool failing = fatal_.has_value();
     if (!processing_ && !failing && CanProcessLocked()) {
       processing_ = true;
-      ++tasks_;
+      refs_.Add();
       act.process = true;
     }
     if (!read_pending_ && !reads_done_ && !failing && in_.size() < kMaxIn &&
@@ -592,20 +581,8 @@ class SimulateReactor
       processing_ = false;
       act = NextLocked();
     }
-    // Once processing_ is false, another thread may finish the stream and
-    // gRPC call OnDone before this Do: tasks_ keeps the reactor alive.
     Do(act);
-    EndTask();
-  }
-
-  // A Process task's last step: the reactor goes if gRPC is done with it.
-  void EndTask() {
-    bool last;
-    {
-      absl::MutexLock l(&mu_);
-      last = --tasks_ == 0 && done_;
-    }
-    if (last) delete this;
+    if (refs_.Release()) delete this;
   }
 
   static void Error(uint64_t id, const absl::Status& s,
@@ -801,8 +778,7 @@ class SimulateReactor
   bool processing_ ABSL_GUARDED_BY(mu_) = false;
   bool cancelled_ ABSL_GUARDED_BY(mu_) = false;
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
-  int tasks_ ABSL_GUARDED_BY(mu_) = 0;  // Process tasks scheduled or running
-  bool done_ ABSL_GUARDED_BY(mu_) = false;  // OnDone was called
+  ReactorRefs refs_;  // gRPC's, and each Process task's
 };
 
 }  // namespace
