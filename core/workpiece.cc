@@ -854,6 +854,15 @@ SurfaceJet MoveSweeps::Jet(int32_t id, double x, double y) const {
 
 ElementCorners Workpiece::Corners(int32_t ei, int32_t ej,
                                   bool prepare) const {
+  const NodeValue n[4] = {Node(ei, ej), Node(ei + 1, ej), Node(ei + 1, ej + 1),
+                          Node(ei, ej + 1)};
+  const NodeValue* const nodes[4] = {&n[0], &n[1], &n[2], &n[3]};
+  return CornersOf(ei, ej, nodes, prepare);
+}
+
+ElementCorners Workpiece::CornersOf(int32_t ei, int32_t ej,
+                                    const NodeValue* const nodes[4],
+                                    bool prepare) const {
   ElementCorners e;
   e.ei = ei;
   e.ej = ej;
@@ -862,10 +871,8 @@ ElementCorners Workpiece::Corners(int32_t ei, int32_t ej,
   e.y0 = grid_.NodeY(ej);
   e.y1 = grid_.NodeY(ej + 1);
   e.z_top = spec().z_top;
-  const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
-  const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
   for (int k = 0; k < 4; ++k) {
-    const NodeValue n = Node(is[k], js[k]);
+    const NodeValue& n = *nodes[k];
     e.c[k] = n.jet;
     e.owner[k] = n.owner;
     if (n.owner >= 0 && scheme_->uses_reach()) {

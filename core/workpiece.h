@@ -193,6 +193,12 @@ class Workpiece {
   // the moves' surfaces where the scheme uses them, prepared by the scheme
   // (Scheme::Prepare) unless `prepare` is false (the caller prepares it).
   ElementCorners Corners(int32_t ei, int32_t ej, bool prepare = true) const;
+  // The same from the element's four nodes already read (Node(), in the
+  // order of ElementCorners::c): for callers that visit each node of a
+  // region once instead of once per element it belongs to.
+  ElementCorners CornersOf(int32_t ei, int32_t ej,
+                           const NodeValue* const nodes[4],
+                           bool prepare = true) const;
   // The scheme's reconstructed surface at a point of the stock (clamped to
   // the stock rectangle).
   double Reconstruct(double x, double y) const;

@@ -47,8 +47,8 @@ TEST(MeasureErrorTest, TwentyOneSamplesPerElement) {
     EXPECT_GT(stats->max_error, 0);
   }
   // A mesh that is not a multiple of the index bins.
-  auto wp = Cut(StockSpec{-3, 1, 40, 9, 2, 37, 19}, SchemeKind::kZmap,
-                SomeMoves());
+  auto wp =
+      Cut(StockSpec{-3, 1, 40, 9, 2, 37, 19}, SchemeKind::kZmap, SomeMoves());
   ValuationOptions opt;
   opt.samples_per_edge = 5;
   EXPECT_EQ(MeasureError(*wp, opt)->samples, 37 * 19 * 21);
@@ -110,10 +110,10 @@ void ExpectUntouchedHasNoError(SchemeKind scheme) {
     EXPECT_EQ(stats->mean_error, 0);
     EXPECT_EQ(stats->rms_error, 0);
     // Moves that cut nothing change nothing.
-    ASSERT_TRUE(wp->Apply(std::vector<Move>{
-                              {{0, 5, top}, {10, 5, top + 1}, 2},
-                              {{-20, 5, top - 3}, {-20, 5, top - 3}, 5}})
-                    .ok());
+    ASSERT_TRUE(
+        wp->Apply(std::vector<Move>{{{0, 5, top}, {10, 5, top + 1}, 2},
+                                    {{-20, 5, top - 3}, {-20, 5, top - 3}, 5}})
+            .ok());
     EXPECT_EQ(MeasureError(*wp)->max_error, 0);
   }
 }
@@ -136,9 +136,9 @@ TEST(MeasureErrorTest, BadOptions) {
         << n;
   }
   const double nan = std::nan(""), inf = kInf;
-  for (const Rect& r : {Rect{nan, 0, 1, 1}, Rect{0, nan, 1, 1},
-                        Rect{0, 0, inf, 1}, Rect{0, 0, 1, -inf},
-                        Rect{2, 0, 1, 1}, Rect{0, 2, 1, 1}}) {
+  for (const Rect& r :
+       {Rect{nan, 0, 1, 1}, Rect{0, nan, 1, 1}, Rect{0, 0, inf, 1},
+        Rect{0, 0, 1, -inf}, Rect{2, 0, 1, 1}, Rect{0, 2, 1, 1}}) {
     ValuationOptions opt;
     opt.region = r;
     EXPECT_EQ(MeasureError(*wp, opt).status().code(),
@@ -160,8 +160,8 @@ std::vector<Move> RandomMoves(uint64_t seed, int count, double x0, double x1,
       rad(r0, r1);
   std::vector<Move> moves;
   for (int k = 0; k < count; ++k) {
-    moves.push_back({{ux(rng), uy(rng), uz(rng)}, {ux(rng), uy(rng), uz(rng)},
-                     rad(rng)});
+    moves.push_back(
+        {{ux(rng), uy(rng), uz(rng)}, {ux(rng), uy(rng), uz(rng)}, rad(rng)});
   }
   return moves;
 }
@@ -179,7 +179,8 @@ void ForEachSample(const Workpiece& wp, const std::vector<Move>& moves,
       const double y = e.y0 + (e.y1 - e.y0) * sj / 4;
       double exact = wp.spec().z_top;
       for (const Move& m : moves) {
-        exact = std::min(exact, BallSweep(m.from, m.to, m.cutter.radius).Height(x, y));
+        exact = std::min(exact,
+                         BallSweep(m.from, m.to, m.cutter.radius).Height(x, y));
       }
       f(x, y, std::fabs(wp.scheme().Reconstruct(e, x, y) - exact));
     }
@@ -189,8 +190,8 @@ void ForEachSample(const Workpiece& wp, const std::vector<Move>& moves,
 // The statistics against an independent loop over the same samples, with
 // the exact surface taken over every move.
 TEST(MeasureErrorTest, MatchesIndependentComputation) {
-  const std::vector<Move> moves = RandomMoves(12, 25, -2, 18, -2, 10, 0, 3,
-                                              0.5, 3);
+  const std::vector<Move> moves =
+      RandomMoves(12, 25, -2, 18, -2, 10, 0, 3, 0.5, 3);
   const StockSpec spec{0, 0, 16, 8, 2, 40, 20};
   for (SchemeKind scheme : kSchemes) {
     SCOPED_TRACE(GetScheme(scheme).name());
@@ -266,79 +267,84 @@ std::vector<Move> Dabs() {
 TEST(MeasureErrorTest, ParallelEqualsSerialBitForBit) {
   // 56 x 40 elements: 4 x 3 bins, the last ones partial.
   const StockSpec spec{0, 0, 40, 30, 0, 56, 40};
-  ValuationOptions opt;
-  opt.map_cols = 37;
-  opt.map_rows = 23;
-  struct Scene {
-    std::vector<Move> moves;
-    double least_max;  // the largest error is at least this
-  };
-  for (const Scene& scene :
-       {Scene{RandomMoves(7, 100, -2, 42, -2, 32, -1.5, 0.3, 0.3, 2), 0.1},
-        Scene{WavyRaster(), 1e-4}, Scene{Dabs(), 0.1}}) {
-    const std::vector<Move>& moves = scene.moves;
-    for (SchemeKind scheme : kSchemes) {
-      SCOPED_TRACE(absl::StrCat(std::string(GetScheme(scheme).name()), ", ",
-                                moves.size(), " moves"));
-      auto wp = Cut(spec, scheme, moves);
-      ThreadPool one(1), four(4);
-      opt.pool = &one;
-      const ErrorStats serial = *MeasureError(*wp, opt);
-      for (ThreadPool* pool : {&four, static_cast<ThreadPool*>(nullptr)}) {
-        opt.pool = pool;
-        const ErrorStats parallel = *MeasureError(*wp, opt);
-        EXPECT_EQ(parallel.samples, serial.samples);
-        EXPECT_EQ(parallel.max_error, serial.max_error);
-        EXPECT_EQ(parallel.mean_error, serial.mean_error);
-        EXPECT_EQ(parallel.rms_error, serial.rms_error);
-        EXPECT_EQ(parallel.max_x, serial.max_x);
-        EXPECT_EQ(parallel.max_y, serial.max_y);
-        EXPECT_EQ(parallel.map, serial.map);
-      }
-
-      const GridGeometry grid(spec);
-      const int32_t bx = (spec.nx + 15) / 16, by = (spec.ny + 15) / 16;
-      const double cell_x = 40.0 / opt.map_cols, cell_y = 30.0 / opt.map_rows;
-      std::vector<float> map(opt.map_cols * opt.map_rows, 0.0f);
-      double sum = 0, sum_sq = 0, max = -1, max_x = 0, max_y = 0;
-      int64_t n = 0;
-      for (int32_t b = 0; b < bx * by; ++b) {
-        double bsum = 0, bsum_sq = 0;
-        for (int32_t ej = b / bx * 16; ej < std::min(b / bx * 16 + 16, spec.ny);
-             ++ej) {
-          for (int32_t ei = b % bx * 16;
-               ei < std::min(b % bx * 16 + 16, spec.nx); ++ei) {
-            ForEachSample(
-                *wp, moves, ei, ej, [&](double x, double y, double err) {
-                  bsum += err;
-                  bsum_sq += err * err;
-                  ++n;
-                  if (err > max) {
-                    max = err;
-                    max_x = x;
-                    max_y = y;
-                  }
-                  const int cx = std::clamp(static_cast<int>(x / cell_x), 0,
-                                            opt.map_cols - 1);
-                  const int cy = std::clamp(static_cast<int>(y / cell_y), 0,
-                                            opt.map_rows - 1);
-                  float& cell = map[cy * opt.map_cols + cx];
-                  cell = std::max(cell, static_cast<float>(err));
-                });
-          }
+  // Map cells larger than the elements (an element's samples in at most
+  // two cells across and two down, as swarf run asks) and smaller ones.
+  for (const auto [cols, rows] : {std::pair{37, 23}, std::pair{113, 97}}) {
+    ValuationOptions opt;
+    opt.map_cols = cols;
+    opt.map_rows = rows;
+    struct Scene {
+      std::vector<Move> moves;
+      double least_max;  // the largest error is at least this
+    };
+    for (const Scene& scene :
+         {Scene{RandomMoves(7, 100, -2, 42, -2, 32, -1.5, 0.3, 0.3, 2), 0.1},
+          Scene{WavyRaster(), 1e-4}, Scene{Dabs(), 0.1}}) {
+      const std::vector<Move>& moves = scene.moves;
+      for (SchemeKind scheme : kSchemes) {
+        SCOPED_TRACE(absl::StrCat(std::string(GetScheme(scheme).name()), ", ",
+                                  moves.size(), " moves, map ", cols, " x ",
+                                  rows));
+        auto wp = Cut(spec, scheme, moves);
+        ThreadPool one(1), four(4);
+        opt.pool = &one;
+        const ErrorStats serial = *MeasureError(*wp, opt);
+        for (ThreadPool* pool : {&four, static_cast<ThreadPool*>(nullptr)}) {
+          opt.pool = pool;
+          const ErrorStats parallel = *MeasureError(*wp, opt);
+          EXPECT_EQ(parallel.samples, serial.samples);
+          EXPECT_EQ(parallel.max_error, serial.max_error);
+          EXPECT_EQ(parallel.mean_error, serial.mean_error);
+          EXPECT_EQ(parallel.rms_error, serial.rms_error);
+          EXPECT_EQ(parallel.max_x, serial.max_x);
+          EXPECT_EQ(parallel.max_y, serial.max_y);
+          EXPECT_EQ(parallel.map, serial.map);
         }
-        sum += bsum;
-        sum_sq += bsum_sq;
+
+        const GridGeometry grid(spec);
+        const int32_t bx = (spec.nx + 15) / 16, by = (spec.ny + 15) / 16;
+        const double cell_x = 40.0 / opt.map_cols, cell_y = 30.0 / opt.map_rows;
+        std::vector<float> map(opt.map_cols * opt.map_rows, 0.0f);
+        double sum = 0, sum_sq = 0, max = -1, max_x = 0, max_y = 0;
+        int64_t n = 0;
+        for (int32_t b = 0; b < bx * by; ++b) {
+          double bsum = 0, bsum_sq = 0;
+          for (int32_t ej = b / bx * 16;
+               ej < std::min(b / bx * 16 + 16, spec.ny); ++ej) {
+            for (int32_t ei = b % bx * 16;
+                 ei < std::min(b % bx * 16 + 16, spec.nx); ++ei) {
+              ForEachSample(
+                  *wp, moves, ei, ej, [&](double x, double y, double err) {
+                    bsum += err;
+                    bsum_sq += err * err;
+                    ++n;
+                    if (err > max) {
+                      max = err;
+                      max_x = x;
+                      max_y = y;
+                    }
+                    const int cx = std::clamp(static_cast<int>(x / cell_x), 0,
+                                              opt.map_cols - 1);
+                    const int cy = std::clamp(static_cast<int>(y / cell_y), 0,
+                                              opt.map_rows - 1);
+                    float& cell = map[cy * opt.map_cols + cx];
+                    cell = std::max(cell, static_cast<float>(err));
+                  });
+            }
+          }
+          sum += bsum;
+          sum_sq += bsum_sq;
+        }
+        ASSERT_EQ(grid.nx(), spec.nx);
+        EXPECT_EQ(serial.samples, n);
+        EXPECT_EQ(serial.max_error, max);
+        EXPECT_EQ(serial.max_x, max_x);
+        EXPECT_EQ(serial.max_y, max_y);
+        EXPECT_EQ(serial.mean_error, sum / n);
+        EXPECT_EQ(serial.rms_error, std::sqrt(sum_sq / n));
+        EXPECT_EQ(serial.map, map);
+        EXPECT_GT(max, scene.least_max);
       }
-      ASSERT_EQ(grid.nx(), spec.nx);
-      EXPECT_EQ(serial.samples, n);
-      EXPECT_EQ(serial.max_error, max);
-      EXPECT_EQ(serial.max_x, max_x);
-      EXPECT_EQ(serial.max_y, max_y);
-      EXPECT_EQ(serial.mean_error, sum / n);
-      EXPECT_EQ(serial.rms_error, std::sqrt(sum_sq / n));
-      EXPECT_EQ(serial.map, map);
-      EXPECT_GT(max, scene.least_max);
     }
   }
 }
@@ -384,8 +390,8 @@ TEST(PaperInstanceTest, FiveBallsAtMesh100) {
   const InstanceRun run = RunInstance("five-balls", 100);
   RecordProperty("zmap_max_error", std::to_string(run.max_error[0]));
   RecordProperty("taylor_max_error", std::to_string(run.max_error[1]));
-  EXPECT_LT(run.max_error[0], 0.48);    // measured 0.4157
-  EXPECT_LT(run.max_error[1], 0.032);   // measured 0.02767
+  EXPECT_LT(run.max_error[0], 0.48);   // measured 0.4157
+  EXPECT_LT(run.max_error[1], 0.032);  // measured 0.02767
   EXPECT_GT(run.max_error[1], 0);
   // The point of the paper: derivatives buy far more precision.
   EXPECT_LE(4 * run.max_error[1], run.max_error[0]);
@@ -395,8 +401,8 @@ TEST(PaperInstanceTest, FiveCylindersAtMesh100) {
   const InstanceRun run = RunInstance("five-cylinders", 100);
   RecordProperty("zmap_max_error", std::to_string(run.max_error[0]));
   RecordProperty("taylor_max_error", std::to_string(run.max_error[1]));
-  EXPECT_LT(run.max_error[0], 0.52);    // measured 0.4492
-  EXPECT_LT(run.max_error[1], 0.11);    // measured 0.09551
+  EXPECT_LT(run.max_error[0], 0.52);  // measured 0.4492
+  EXPECT_LT(run.max_error[1], 0.11);  // measured 0.09551
   EXPECT_GT(run.max_error[1], 0);
   EXPECT_LE(4 * run.max_error[1], run.max_error[0]);
 }
@@ -433,7 +439,8 @@ TEST(MeasureErrorTest, ErrorMapHoldsEachCellsMaxAndTheOverallMax) {
   // The map's max is the overall max (as float), in the cell of its place.
   const float top = *std::max_element(stats->map.begin(), stats->map.end());
   EXPECT_EQ(top, static_cast<float>(stats->max_error));
-  const int cx = static_cast<int>(stats->max_x / 5), cy = static_cast<int>(stats->max_y / 5);
+  const int cx = static_cast<int>(stats->max_x / 5),
+            cy = static_cast<int>(stats->max_y / 5);
   EXPECT_EQ(stats->map[cy * 8 + std::min(cx, 7)], top);
   // Cells far from the cut (|d| > r + a cell) have no error at all.
   EXPECT_EQ(stats->map[5 * 8 + 7], 0.0f);
