@@ -417,6 +417,18 @@ double GuardedHeight(const ElementCorners& e, double x, double y) {
   return Guarded(e, x, y).w;
 }
 
+namespace {
+
+// Whether a.Contains and b.Contains are one function.
+bool SameReach(const CornerReach& a, const CornerReach& b) {
+  return a.bounded == b.bounded && a.empty == b.empty &&
+         a.capsule.ax == b.capsule.ax && a.capsule.ay == b.capsule.ay &&
+         a.capsule.bx == b.capsule.bx && a.capsule.by == b.capsule.by &&
+         a.capsule.radius == b.capsule.radius;
+}
+
+}  // namespace
+
 void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
   const CornerXY c = CornersOf(*e);
   e->guard = {};
@@ -425,10 +437,17 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
   for (int k = 0; k < 4; ++k) smooth &= e->owner[k] >= 0;
   // Whether corner k's reach holds corner q: for the lifts and for the
   // whole element, tested once.
+  // Corners with one reach (neighbouring nodes mostly share an owner, and
+  // with it the reach) are tested once.
   bool holds[4][4];
   for (int k = 0; k < 4; ++k) {
+    int same = k;
+    for (int p = 0; p < k && same == k; ++p) {
+      if (SameReach(e->reach[p], e->reach[k])) same = p;
+    }
     for (int q = 0; q < 4; ++q) {
-      holds[k][q] = e->reach[k].Contains(c.x[q], c.y[q]);
+      holds[k][q] =
+          same != k ? holds[same][q] : e->reach[k].Contains(c.x[q], c.y[q]);
     }
   }
   for (int k = 0; k < 4; ++k) {
