@@ -12,9 +12,6 @@
 namespace swarf {
 namespace {
 
-// Points per vector of the widest clone (AVX-512: 8 doubles).
-constexpr int32_t kPad = 8;
-
 struct Partial {
   double sum = 0, sum_sq = 0, max = -1, max_x = 0, max_y = 0;
   int64_t n = 0;
@@ -135,16 +132,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       }
     }
   }
-  // The lattice's points inside an element, row by row, the corners left
-  // out: column si and row sj of n.
-  std::vector<int32_t> lattice_i, lattice_j;
-  for (int32_t sj = 0; sj < n; ++sj) {
-    for (int32_t si = 0; si < n; ++si) {
-      if ((si == 0 || si == n - 1) && (sj == 0 || sj == n - 1)) continue;
-      lattice_i.push_back(si);
-      lattice_j.push_back(sj);
-    }
-  }
   const double z_top = wp.spec().z_top;
   const Scheme& scheme = wp.scheme();
   pool.ParallelFor(bins, [&](int64_t b) {
@@ -212,11 +199,9 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       return *o.sweep;
     };
     // The points of an element's lattice: n x n but the corners.
-    const size_t lattice = lattice_i.size();
-    // Room for a whole number of vectors (see `padded` below).
-    const size_t room = (lattice + kPad - 1) / kPad * kPad;
-    std::vector<double> xs(room), ys(room), est(room), h(room), rec(room),
-        err(room);
+    const size_t lattice = static_cast<size_t>(n) * n - 4;
+    std::vector<double> xs(lattice), ys(lattice), est(lattice), h(lattice),
+        rec(lattice), err(lattice);
     std::vector<int64_t> cells(lattice);
     std::vector<Candidate> row_bin;
     // The bin's sums in locals (registers), stored once at the end.
@@ -278,30 +263,20 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           }
         }
         if (count == 0) continue;
-        // The sweeps and the scheme run on a whole number of 8-double
-        // vectors, the extra points copies of the last: their loops then
-        // have no scalar tails (21 samples: 6% of the valuation's time).
-        // Each point's result depends on that point alone, so the real
-        // samples' values are the same; the copies' are never counted.
-        const int32_t padded = (count + kPad - 1) / kPad * kPad;
-        for (int32_t q = count; q < padded; ++q) {
-          xs[q] = xs[count - 1];
-          ys[q] = ys[count - 1];
-        }
         // An upper bound of the exact surface at each sample: the sweeps
         // that own the corners (exact heights of real moves). Only moves
         // that dip below the element's highest bound inside the element
         // can lower a sample further; the rest of the bin is skipped.
         // Heights() is bit-identical to Height(), several samples at once.
-        std::fill_n(est.begin(), padded, z_top);
+        std::fill_n(est.begin(), count, z_top);
         const int32_t* owners = e.owner;
         for (int k = 0; k < 4; ++k) {
           bool seen = owners[k] < 0;
           for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
           if (seen) continue;
-          owner_sweep(owners[k]).Heights(xs.data(), ys.data(), padded,
-                                         h.data());
-          for (int32_t q = 0; q < padded; ++q) est[q] = std::min(est[q], h[q]);
+          owner_sweep(owners[k]).Heights(xs.data(), ys.data(), count, h.data());
+#pragma omp simd
+          for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
         const double cap = Highest(est.data(), count);
         const Rect box{e.x0, e.y0, e.x1, e.y1};
@@ -322,10 +297,11 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           const std::optional<Rect> f =
               FootprintBounds(m.from, m.to, m.cutter, cap);
           if (!f.has_value() || !f->Intersects(box)) continue;
-          sweeps[c.k].Heights(xs.data(), ys.data(), padded, h.data());
-          for (int32_t q = 0; q < padded; ++q) est[q] = std::min(est[q], h[q]);
+          sweeps[c.k].Heights(xs.data(), ys.data(), count, h.data());
+#pragma omp simd
+          for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
-        scheme.ReconstructMany(e, xs.data(), ys.data(), padded, rec.data());
+        scheme.ReconstructMany(e, xs.data(), ys.data(), count, rec.data());
         for (int32_t q = 0; q < count; ++q) {
           err[q] = SampleError(rec[q], est[q]);
         }
@@ -334,17 +310,27 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           int32_t sx = 1, sy = 1;
           while (sx < n && col_cell[sx] == col_cell[0]) ++sx;
           while (sy < n && row_cell[sy] == row_cell[0]) ++sy;
-          // Branch-free and vectorized: a loop of maxima through one
-          // accumulator would wait on each sample's store.
+          // Each row's points left and right of sx are runs: their maxima
+          // in registers, a row at a time.
           double m0 = 0, m1 = 0, m2 = 0, m3 = 0;
-#pragma omp simd reduction(max : m0, m1, m2, m3)
-          for (int32_t q = 0; q < count; ++q) {
-            const double e = err[q];
-            const bool right = lattice_i[q] >= sx, up = lattice_j[q] >= sy;
-            m0 = std::max(m0, !right && !up ? e : 0.0);
-            m1 = std::max(m1, right && !up ? e : 0.0);
-            m2 = std::max(m2, !right && up ? e : 0.0);
-            m3 = std::max(m3, right && up ? e : 0.0);
+          int32_t q = 0;
+          for (int32_t sj = 0; sj < n; ++sj) {
+            const bool end_row = sj == 0 || sj == n - 1;
+            const int32_t si0 = end_row ? 1 : 0, si1 = end_row ? n - 1 : n;
+            const int32_t split = std::clamp(sx, si0, si1);
+            double left = 0, right = 0;
+            for (int32_t k = si0; k < split; ++k)
+              left = std::max(left, err[q++]);
+            for (int32_t k = split; k < si1; ++k) {
+              right = std::max(right, err[q++]);
+            }
+            if (sj < sy) {
+              m0 = std::max(m0, left);
+              m1 = std::max(m1, right);
+            } else {
+              m2 = std::max(m2, left);
+              m3 = std::max(m3, right);
+            }
           }
           // The float of the largest error is the largest of the floats
           // (the conversion keeps the order).
