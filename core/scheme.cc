@@ -436,9 +436,8 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
   bool smooth = true;
   for (int k = 0; k < 4; ++k) smooth &= e->owner[k] >= 0;
   // Whether corner k's reach holds corner q: for the lifts and for the
-  // whole element, tested once.
-  // Corners with one reach (neighbouring nodes mostly share an owner, and
-  // with it the reach) are tested once.
+  // whole element, tested once, and once for corners with one reach
+  // (neighbouring nodes mostly share an owner, and with it the reach).
   bool holds[4][4];
   for (int k = 0; k < 4; ++k) {
     int same = k;

@@ -102,36 +102,36 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
   std::vector<Partial> partials(bins);
 
   ThreadPool& pool = options.pool != nullptr ? *options.pool : wp.pool();
-  // The lattice's coordinates and map cells, per element column (ei * n +
-  // si) and row (ej * n + sj): a division each, once per grid line instead
-  // of once per element.
-  std::vector<double> lattice_x(static_cast<size_t>(grid.nx()) * n),
-      lattice_y(static_cast<size_t>(grid.ny()) * n);
-  std::vector<int64_t> cell_of_x(mapped ? lattice_x.size() : 0),
-      cell_of_y(mapped ? lattice_y.size() : 0);
-  for (int32_t ei = 0; ei < grid.nx(); ++ei) {
-    const double x0 = grid.NodeX(ei), x1 = grid.NodeX(ei + 1);
-    for (int32_t si = 0; si < n; ++si) {
-      const size_t at = static_cast<size_t>(ei) * n + si;
-      lattice_x[at] = x0 + (x1 - x0) * si / (n - 1);
-      if (mapped) {
-        cell_of_x[at] =
-            cell_index((lattice_x[at] - region.x0) / cell_x, options.map_cols);
+  // The lattice's coordinates along one axis, per element (e * n + s, a
+  // division each, once per grid line instead of once per element), and
+  // their map cells (a row's premultiplied by map_cols).
+  auto lattice_lines = [&](bool along_x, std::vector<double>* coord,
+                           std::vector<int64_t>* cell) {
+    const int32_t elements = along_x ? grid.nx() : grid.ny();
+    const double origin = along_x ? region.x0 : region.y0;
+    const double size = along_x ? cell_x : cell_y;
+    const int32_t cells = along_x ? options.map_cols : options.map_rows;
+    const int64_t stride = along_x ? 1 : options.map_cols;
+    coord->resize(static_cast<size_t>(elements) * n);
+    if (mapped) cell->resize(coord->size());
+    for (int32_t e = 0; e < elements; ++e) {
+      const double a = along_x ? grid.NodeX(e) : grid.NodeY(e);
+      const double b = along_x ? grid.NodeX(e + 1) : grid.NodeY(e + 1);
+      for (int32_t s = 0; s < n; ++s) {
+        const size_t at = static_cast<size_t>(e) * n + s;
+        (*coord)[at] = a + (b - a) * s / (n - 1);
+        if (mapped) {
+          (*cell)[at] =
+              int64_t{cell_index(((*coord)[at] - origin) / size, cells)} *
+              stride;
+        }
       }
     }
-  }
-  for (int32_t ej = 0; ej < grid.ny(); ++ej) {
-    const double y0 = grid.NodeY(ej), y1 = grid.NodeY(ej + 1);
-    for (int32_t sj = 0; sj < n; ++sj) {
-      const size_t at = static_cast<size_t>(ej) * n + sj;
-      lattice_y[at] = y0 + (y1 - y0) * sj / (n - 1);
-      if (mapped) {
-        cell_of_y[at] = int64_t{cell_index((lattice_y[at] - region.y0) / cell_y,
-                                           options.map_rows)} *
-                        options.map_cols;
-      }
-    }
-  }
+  };
+  std::vector<double> lattice_x, lattice_y;
+  std::vector<int64_t> cell_of_x, cell_of_y;
+  lattice_lines(/*along_x=*/true, &lattice_x, &cell_of_x);
+  lattice_lines(/*along_x=*/false, &lattice_y, &cell_of_y);
   const double z_top = wp.spec().z_top;
   const Scheme& scheme = wp.scheme();
   pool.ParallelFor(bins, [&](int64_t b) {
@@ -319,8 +319,9 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             const int32_t si0 = end_row ? 1 : 0, si1 = end_row ? n - 1 : n;
             const int32_t split = std::clamp(sx, si0, si1);
             double left = 0, right = 0;
-            for (int32_t k = si0; k < split; ++k)
+            for (int32_t k = si0; k < split; ++k) {
               left = std::max(left, err[q++]);
+            }
             for (int32_t k = split; k < si1; ++k) {
               right = std::max(right, err[q++]);
             }

@@ -269,7 +269,7 @@ TEST(MeasureErrorTest, ParallelEqualsSerialBitForBit) {
   const StockSpec spec{0, 0, 40, 30, 0, 56, 40};
   // Map cells larger than the elements (an element's samples in at most
   // two cells across and two down, as swarf run asks) and smaller ones.
-  for (const auto [cols, rows] : {std::pair{37, 23}, std::pair{113, 97}}) {
+  for (const auto& [cols, rows] : {std::pair{37, 23}, std::pair{113, 97}}) {
     ValuationOptions opt;
     opt.map_cols = cols;
     opt.map_rows = rows;
