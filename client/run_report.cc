@@ -24,15 +24,6 @@
 namespace swarf::cli {
 namespace {
 
-// The error map's cells: one per element up to 1600 along the longer side.
-void MapSize(const StockSpec& s, int32_t* cols, int32_t* rows) {
-  constexpr int32_t kMaxSide = 1600;
-  const double scale =
-      std::min(1.0, static_cast<double>(kMaxSide) / std::max(s.nx, s.ny));
-  *cols = std::max(1, static_cast<int32_t>(s.nx * scale));
-  *rows = std::max(1, static_cast<int32_t>(s.ny * scale));
-}
-
 MarkPolyline MarkFromProto(const pb::Polyline& p) {
   MarkPolyline m;
   m.closed = p.closed();
@@ -160,6 +151,14 @@ std::string Rate(double per_s) {
 
 }  // namespace
 
+void ErrorMapSize(const StockSpec& s, int32_t* cols, int32_t* rows) {
+  constexpr int32_t kMaxSide = 1600;
+  const double scale =
+      std::min(1.0, static_cast<double>(kMaxSide) / std::max(s.nx, s.ny));
+  *cols = std::max(1, static_cast<int32_t>(s.nx * scale));
+  *rows = std::max(1, static_cast<int32_t>(s.ny * scale));
+}
+
 absl::Status ParseOutputFlags(const Args& args, OutputOptions* out) {
   auto number = [&](const char* flag, double* v) -> absl::Status {
     const auto text = args.Get(flag);
@@ -221,7 +220,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
         req.set_session_id(id);
         if (files) {
           int32_t cols, rows;
-          MapSize(stock, &cols, &rows);
+          ErrorMapSize(stock, &cols, &rows);
           req.set_map_cols(cols);
           req.set_map_rows(rows);
         }

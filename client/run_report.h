@@ -65,6 +65,10 @@ struct OutputOptions {
 inline constexpr const char* kOutputFlags[] = {
     "mesh-tolerance", "marks-min-angle", "marks-min-length"};
 
+// The error map swarf run asks for: one cell per element, at most 1600
+// along the longer side (cells then at least as large as elements).
+void ErrorMapSize(const StockSpec& stock, int32_t* cols, int32_t* rows);
+
 // Reads kOutputFlags into `out`; InvalidArgument naming the flag.
 absl::Status ParseOutputFlags(const Args& args, OutputOptions* out);
 
