@@ -207,19 +207,31 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x,
   double w[kGuardedChunk], any[kGuardedChunk], l0[kGuardedChunk],
       l1[kGuardedChunk];
   const double lx = e.x1 - e.x0, ly = e.y1 - e.y0;
-  double box_x0 = x[0], box_x1 = x[0], box_y0 = y[0], box_y1 = y[0];
-  bool finite = true;
+#pragma omp simd
   for (int32_t q = 0; q < n; ++q) {
     s[q] = (x[q] - e.x0) / lx;
     t[q] = (y[q] - e.y0) / ly;
     w[q] = e.z_top;
     any[q] = 0;
-    finite &= std::isfinite(x[q]) & std::isfinite(y[q]);
-    box_x0 = std::min(box_x0, x[q]);
-    box_x1 = std::max(box_x1, x[q]);
-    box_y0 = std::min(box_y0, y[q]);
-    box_y1 = std::max(box_y1, y[q]);
   }
+  // The points' box, for a capsule that may hold some of them, taken on
+  // first use (most corners hold all or none), and only when every point is
+  // finite: then the order of the comparisons does not matter.
+  double box_x0, box_x1, box_y0, box_y1;
+  int box = -1;  // -1: not yet; 0: not finite; 1: taken
+  auto take_box = [&] {
+    box_x0 = box_x1 = x[0];
+    box_y0 = box_y1 = y[0];
+    bool finite = true;
+    for (int32_t q = 0; q < n; ++q) {
+      finite &= std::isfinite(x[q]) & std::isfinite(y[q]);
+      box_x0 = std::min(box_x0, x[q]);
+      box_x1 = std::max(box_x1, x[q]);
+      box_y0 = std::min(box_y0, y[q]);
+      box_y1 = std::max(box_y1, y[q]);
+    }
+    box = finite ? 1 : 0;
+  };
   const CornerXY c = CornersOf(e);
   for (int k = 0; k < 4; ++k) {
     const CornerReach& r = e.reach[k];
@@ -227,14 +239,13 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x,
     // inside[q]: e.guard.inside[k] || r.Contains(x[q], y[q]).
     const bool all = e.guard.inside[k] || !r.bounded;
     const bool none = !all && r.empty;
-    for (int32_t q = 0; q < n; ++q) inside[q] = all ? 1.0 : 0.0;
+    std::fill_n(inside, n, all ? 1.0 : 0.0);
     BoxSide side = all ? BoxSide::kInside : none ? BoxSide::kOutside
                                                   : BoxSide::kMixed;
-    if (side == BoxSide::kMixed && finite) {
+    if (side == BoxSide::kMixed && box < 0) take_box();
+    if (side == BoxSide::kMixed && box == 1) {
       side = CapsuleBoxSide(r.capsule, box_x0, box_y0, box_x1, box_y1);
-      if (side == BoxSide::kInside) {
-        for (int32_t q = 0; q < n; ++q) inside[q] = 1;
-      }
+      if (side == BoxSide::kInside) std::fill_n(inside, n, 1.0);
     }
     if (side == BoxSide::kMixed) {
       const CornerReach::Capsule& cs = r.capsule;
@@ -279,16 +290,26 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x,
       w[q] = holds & (p < w[q]) ? p : w[q];
     }
   }
+  // Hidden points (no corner holds them, or a corner out of its reach is
+  // below them) as flags in one vectorized loop; then those take the true
+  // surface.
+  double hidden[kGuardedChunk];
+  const double c0 = e.c[0].w, c1 = e.c[1].w, c2 = e.c[2].w, c3 = e.c[3].w;
+#pragma omp simd
   for (int32_t q = 0; q < n; ++q) {
-    bool hidden = any[q] == 0;
-    for (int k = 0; k < 4; ++k) hidden |= in[k][q] == 0 && e.c[k].w < w[q];
-    if (hidden) {
-      GuardedValue v;
-      v.w = w[q];
-      TakeLowest(e, x[q], y[q], &v);
-      w[q] = v.w;
-    }
+    const bool h = (any[q] == 0) | ((in[0][q] == 0) & (c0 < w[q])) |
+                   ((in[1][q] == 0) & (c1 < w[q])) |
+                   ((in[2][q] == 0) & (c2 < w[q])) |
+                   ((in[3][q] == 0) & (c3 < w[q]));
+    hidden[q] = h ? 1.0 : 0.0;
     out[q] = w[q];
+  }
+  for (int32_t q = 0; q < n; ++q) {
+    if (hidden[q] == 0) continue;
+    GuardedValue v;
+    v.w = w[q];
+    TakeLowest(e, x[q], y[q], &v);
+    out[q] = v.w;
   }
 }
 
