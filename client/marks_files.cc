@@ -1,6 +1,7 @@
 #include "client/marks_files.h"
 
 #include <algorithm>
+#include <charconv>
 #include <functional>
 #include <string_view>
 
@@ -158,7 +159,20 @@ absl::Status WriteMarksJson(const std::vector<MarkPolyline>& marks,
 namespace {
 
 // 7 significant digits: 1e-5 mm on a 100 mm stock, well below any grid.
-std::string Num(double v) { return absl::StrFormat("%.7g", v); }
+// printf's "%.7g" (std::to_chars with a precision converts as printf
+// does), appended without a string per number.
+void AppendNum(double v, std::string* s) {
+  char buf[32];
+  const std::to_chars_result r =
+      std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, 7);
+  s->append(buf, r.ptr);
+}
+
+std::string Num(double v) {
+  std::string s;
+  AppendNum(v, &s);
+  return s;
+}
 
 std::string MarksSvgHead(const StockSpec& stock, size_t polylines,
                          double stroke) {
@@ -190,8 +204,10 @@ void AppendMarkSvg(const MarkPolyline& p, double stroke, std::string* s) {
                   p.owners[0], " ", p.owners[1], "\" data-angle-deg=\"",
                   Num(mean), "\" d=\"");
   for (size_t k = 0; k < p.vertices.size(); ++k) {
-    absl::StrAppend(s, k == 0 ? "M" : " L", Num(p.vertices[k].x), " ",
-                    Num(p.vertices[k].y));
+    s->append(k == 0 ? "M" : " L");
+    AppendNum(p.vertices[k].x, s);
+    s->push_back(' ');
+    AppendNum(p.vertices[k].y, s);
   }
   if (p.closed) *s += " Z";
   absl::StrAppend(s, "\"><title>owners ", p.owners[0], " ", p.owners[1],
