@@ -8,6 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "core/cutter/sweep.h"
+#include "core/target_clones.h"
 
 namespace swarf {
 namespace {
@@ -48,6 +49,66 @@ double Highest(const double* v, int32_t n) {
   *sum_sq = s2;
   *max = m;
   return at;
+}
+
+// The moves of a bin whose box meets a row of elements, in bin order, as
+// arrays: their footprint boxes across (x0, x1), lowest points, and
+// FootprintGap parts; `k` their index in the bin.
+struct RowMoves {
+  std::vector<double> x0, x1, lowest, ball, gx0, gx1, gy0, gy1, z_r, r2;
+  std::vector<int32_t> k;
+  void Clear() {
+    for (auto* v :
+         {&x0, &x1, &lowest, &ball, &gx0, &gx1, &gy0, &gy1, &z_r, &r2}) {
+      v->clear();
+    }
+    k.clear();
+  }
+  void Add(const Rect& box, double low, const FootprintGap& g, int32_t at) {
+    x0.push_back(box.x0);
+    x1.push_back(box.x1);
+    lowest.push_back(low);
+    ball.push_back(g.ball);
+    gx0.push_back(g.x0);
+    gx1.push_back(g.x1);
+    gy0.push_back(g.y0);
+    gy1.push_back(g.y1);
+    z_r.push_back(g.z_r);
+    r2.push_back(g.r2);
+    k.push_back(at);
+  }
+  int32_t size() const { return static_cast<int32_t>(k.size()); }
+};
+
+// pass[q] = 1 where row move q may cut into `box` below `cap`: its box meets
+// it across (the row's rows it meets already), its lowest point is below
+// cap, and FootprintGap does not rule it out; else 0. Selects only: one
+// vectorized loop.
+SWARF_TARGET_CLONES
+void MovesThatMayCut(const RowMoves& row, const Rect& element, double cap,
+                     double* __restrict pass) {
+  const int32_t n = row.size();
+  // A copy: read through the reference, the loop did not vectorize.
+  const Rect box = element;
+  const double* __restrict x0 = row.x0.data();
+  const double* __restrict x1 = row.x1.data();
+  const double* __restrict lowest = row.lowest.data();
+  const double* __restrict ball = row.ball.data();
+  const double* __restrict gx0 = row.gx0.data();
+  const double* __restrict gx1 = row.gx1.data();
+  const double* __restrict gy0 = row.gy0.data();
+  const double* __restrict gy1 = row.gy1.data();
+  const double* __restrict z_r = row.z_r.data();
+  const double* __restrict r2 = row.r2.data();
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) {
+    const double misses = FootprintGap::Misses(ball[q], gx0[q], gx1[q], gy0[q],
+                                               gy1[q], z_r[q], r2[q], box, cap);
+    double p = x0[q] <= box.x1 ? 1.0 : 0.0;
+    p = box.x0 <= x1[q] ? p : 0.0;
+    p = lowest[q] < cap ? p : 0.0;
+    pass[q] = misses != 0 ? 0.0 : p;
+  }
 }
 
 }  // namespace
@@ -153,14 +214,17 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     struct Candidate {
       Rect box;
       double lowest;
-      int32_t k;  // into ids and sweeps
+      FootprintGap gap;  // FootprintSurelyMisses, the move's parts taken
+      int32_t k;         // into ids and sweeps
     };
     const std::vector<uint32_t>& ids = index.Bin(static_cast<int32_t>(b));
     std::vector<Candidate> bin;
     std::vector<Sweep> sweeps;
     for (uint32_t id : ids) {
       const Sweep& s = sweeps.emplace_back(wp.MoveSweep(id));
+      const Move& m = wp.move(static_cast<int32_t>(id));
       bin.push_back({s.Footprint(z_top).Bounds(), s.lowest(),
+                     FootprintGap::Of(m.from, m.to, m.cutter),
                      static_cast<int32_t>(bin.size())});
     }
     // The bin's nodes, each read once instead of once per element it is a
@@ -203,17 +267,21 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     std::vector<double> xs(lattice), ys(lattice), est(lattice), h(lattice),
         rec(lattice), err(lattice);
     std::vector<int64_t> cells(lattice);
-    std::vector<Candidate> row_bin;
+    RowMoves row;
+    std::vector<double> pass;
     // The bin's sums in locals (registers), stored once at the end.
     Partial p = partials[b];
     for (int32_t ej = ej0; ej < ej1; ++ej) {
       const double ey0 = grid.NodeY(ej), ey1 = grid.NodeY(ej + 1);
       if (ey0 > region.y1 || ey1 < region.y0) continue;
-      // The moves whose box meets this row of elements (in bin order).
-      row_bin.clear();
+      row.Clear();
       for (const Candidate& c : bin) {
-        if (c.box.y0 <= ey1 && ey0 <= c.box.y1) row_bin.push_back(c);
+        if (c.box.y0 <= ey1 && ey0 <= c.box.y1) {
+          row.Add(c.box, c.lowest, c.gap, c.k);
+        }
       }
+      const int32_t row_moves = row.size();
+      pass.resize(row_moves);
       const double* const row_y = &lattice_y[static_cast<size_t>(ej) * n];
       const int64_t* const row_cell =
           mapped ? &cell_of_y[static_cast<size_t>(ej) * n] : nullptr;
@@ -280,24 +348,24 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         }
         const double cap = Highest(est.data(), count);
         const Rect box{e.x0, e.y0, e.x1, e.y1};
-        for (const Candidate& c : row_bin) {
-          if (!c.box.Intersects(box) || !(c.lowest < cap)) continue;
-          // A corner's owner is in est already (on cameo.nc, 40% of the
-          // candidates that pass every test below).
-          const int32_t id = static_cast<int32_t>(ids[c.k]);
+        // The row's moves meet the element's rows already (its y0, y1):
+        // their boxes need testing across only.
+        MovesThatMayCut(row, box, cap, pass.data());
+        for (int32_t q = 0; q < row_moves; ++q) {
+          if (pass[q] == 0) continue;
+          const int32_t ck = row.k[q];
+          // A corner's owner is in est already.
+          const int32_t id = static_cast<int32_t>(ids[ck]);
           if (id == owners[0] || id == owners[1] || id == owners[2] ||
               id == owners[3]) {
             continue;
           }
           const Move& m = wp.move(id);
-          if (FootprintSurelyMisses(m.from, m.to, m.cutter, box, cap)) {
-            continue;
-          }
           // Footprint(cap).Bounds(), without the capsule's direction.
           const std::optional<Rect> f =
               FootprintBounds(m.from, m.to, m.cutter, cap);
           if (!f.has_value() || !f->Intersects(box)) continue;
-          sweeps[c.k].Heights(xs.data(), ys.data(), count, h.data());
+          sweeps[ck].Heights(xs.data(), ys.data(), count, h.data());
 #pragma omp simd
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }

@@ -100,31 +100,57 @@ class Sweep {
 };
 
 // A quick, conservative test done before FootprintBounds where many moves
-// are tried against a box: true only where the footprint below `cap` of the
-// move between the two tips surely misses `box` (FootprintBounds(...) does
-// not meet it); false where unsure. For the ball: the footprint's axis is a
-// part of the move, so it lies in the tips' XY box widened by its radius
-// sqrt(r^2 - h^2) (h: the lowest ball centre above cap; r where below), and
-// the box must clear that by more than the footprint's margins (1e-9 mm and
-// a relative 1e-12) and the rounding of its clipped ends: 1e-6 mm. No root
-// and no division, where FootprintBounds takes both and a call. Other
-// shapes: false.
+// are tried against a box: SurelyMisses is true only where the footprint
+// below `cap` of the move between the two tips surely misses `box`
+// (FootprintBounds(...) does not meet it); false where unsure. For the ball:
+// the footprint's axis is a part of the move, so it lies in the tips' XY box
+// widened by its radius sqrt(r^2 - h^2) (h: the lowest ball centre above
+// cap; r where below), and the box must clear that by more than the
+// footprint's margins (1e-9 mm and a relative 1e-12) and the rounding of
+// its clipped ends: 1e-6 mm. No root and no division, where FootprintBounds
+// takes both and a call. Other shapes: false. The move's parts are taken
+// once (Of), for testing one move against many boxes; branch-free, so that
+// loops over many moves' parts vectorize.
+struct FootprintGap {
+  double ball = 0;                        // 1: swept as a ball; 0: never misses
+  double x0 = 0, x1 = 0, y0 = 0, y1 = 0;  // the tips' XY box
+  double z_r = 0;                         // lowest tip + radius
+  double r2 = 0;                          // radius^2
+
+  static FootprintGap Of(const Vec3& tip_from, const Vec3& tip_to,
+                         const Cutter& cutter) {
+    return {SweptAsBall(cutter) ? 1.0 : 0.0,
+            std::min(tip_from.x, tip_to.x),
+            std::max(tip_from.x, tip_to.x),
+            std::min(tip_from.y, tip_to.y),
+            std::max(tip_from.y, tip_to.y),
+            std::min(tip_from.z, tip_to.z) + cutter.radius,
+            cutter.radius * cutter.radius};
+  }
+  // 1 where it surely misses, else 0, from the parts (selects only).
+  static double Misses(double ball, double x0, double x1, double y0, double y1,
+                       double z_r, double r2, const Rect& box, double cap) {
+    constexpr double kSlack = 1e-6;
+    // std::max by value: selects (by reference they were branches).
+    auto max = [](double a, double b) { return a < b ? b : a; };
+    const double gap =
+        max(max(box.x0 - x1, x0 - box.x1), max(box.y0 - y1, y0 - box.y1)) -
+        kSlack;
+    const double h = z_r - cap;
+    const double rho2 = h > 0 ? r2 - h * h : r2;
+    const double m = gap > 0 ? ball : 0.0;
+    return gap * gap > rho2 ? m : 0.0;
+  }
+  bool SurelyMisses(const Rect& box, double cap) const {
+    return Misses(ball, x0, x1, y0, y1, z_r, r2, box, cap) != 0;
+  }
+};
+
+// FootprintGap::Of(...).SurelyMisses(box, cap), for one test.
 inline bool FootprintSurelyMisses(const Vec3& tip_from, const Vec3& tip_to,
                                   const Cutter& cutter, const Rect& box,
                                   double cap) {
-  if (!SweptAsBall(cutter)) return false;
-  constexpr double kSlack = 1e-6;
-  const double gap =
-      std::max(std::max(box.x0 - std::max(tip_from.x, tip_to.x),
-                        std::min(tip_from.x, tip_to.x) - box.x1),
-               std::max(box.y0 - std::max(tip_from.y, tip_to.y),
-                        std::min(tip_from.y, tip_to.y) - box.y1)) -
-      kSlack;
-  if (!(gap > 0)) return false;
-  const double r = cutter.radius;
-  const double h = std::min(tip_from.z, tip_to.z) + r - cap;
-  const double rho2 = h > 0 ? r * r - h * h : r * r;
-  return gap * gap > rho2;
+  return FootprintGap::Of(tip_from, tip_to, cutter).SurelyMisses(box, cap);
 }
 
 // The footprint's bounds below `cap` for the move between two tool tips,
