@@ -100,6 +100,12 @@ absl::StatusOr<std::unique_ptr<Workpiece>> Simulate(const Job& job) {
   return wp;
 }
 
+SurfaceMeshOptions SwarfRunMesh() {
+  SurfaceMeshOptions m;
+  m.tolerance = OutputOptions{}.mesh_tolerance;
+  return m;
+}
+
 ValuationOptions SwarfRunValuation(const StockSpec& stock) {
   ValuationOptions v;
   ErrorMapSize(stock, &v.map_cols, &v.map_rows);
@@ -141,9 +147,7 @@ absl::Status Prepare(Job& job) {
     job.relief = std::make_unique<Image>(*std::move(relief));
   }
   if (job.mesh == nullptr) {
-    SurfaceMeshOptions m;
-    m.tolerance = OutputOptions{}.mesh_tolerance;
-    auto mesh = BuildSurfaceMesh(*job.grid, m);
+    auto mesh = BuildSurfaceMesh(*job.grid, SwarfRunMesh());
     if (!mesh.ok()) return mesh.status();
     job.mesh = std::make_unique<TriangleMesh>(*std::move(mesh));
   }
@@ -196,15 +200,8 @@ absl::Status RunStep(Step step, Job& job, benchmark::State& state) {
       return WritePng(*map, base + "error.png");
     }
     case Step::kMarksPng: {
-      // The relief drawn for relief.png serves when the frames agree.
-      const PixelFrame frame = ReliefFrame(job.stock, out.marks.relief);
-      absl::StatusOr<Image> finer;
-      if (!(frame == ReliefFrame(job.stock, out.relief))) {
-        finer = RenderRelief(*job.grid, out.marks.relief);
-        if (!finer.ok()) return finer.status();
-      }
-      auto picture = DrawMarks(finer.ok() ? *finer : *job.relief, frame,
-                               *job.shown, out.marks);
+      auto picture = RenderMarks(*job.grid, *job.shown, out.marks,
+                                 job.relief.get(), out.relief);
       if (!picture.ok()) return picture.status();
       return WritePng(*picture, base + "marks.png");
     }
@@ -213,9 +210,7 @@ absl::Status RunStep(Step step, Job& job, benchmark::State& state) {
     case Step::kMarksJson:
       return WriteMarksJson(*job.shown, base + "marks.json");
     case Step::kSurfaceStl: {
-      SurfaceMeshOptions m;
-      m.tolerance = OutputOptions{}.mesh_tolerance;
-      auto mesh = BuildSurfaceMesh(*job.grid, m);
+      auto mesh = BuildSurfaceMesh(*job.grid, SwarfRunMesh());
       if (!mesh.ok()) return mesh.status();
       state.counters["triangles"] = static_cast<double>(mesh->triangles.size());
       state.counters["deviation_mm"] = mesh->max_deviation;

@@ -521,11 +521,16 @@ absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
 
 absl::StatusOr<Image> RenderMarks(const SurfaceGrid& grid,
                                   const std::vector<MarkPolyline>& marks,
-                                  const MarksPictureOptions& options) {
+                                  const MarksPictureOptions& options,
+                                  const Image* drawn,
+                                  const ReliefOptions& drawn_with) {
+  const PixelFrame frame = ReliefFrame(grid.spec, options.relief);
+  if (drawn != nullptr && frame == ReliefFrame(grid.spec, drawn_with)) {
+    return DrawMarks(*drawn, frame, marks, options);
+  }
   absl::StatusOr<Image> relief = RenderRelief(grid, options.relief);
   if (!relief.ok()) return relief.status();
-  return DrawMarks(*relief, ReliefFrame(grid.spec, options.relief), marks,
-                   options);
+  return DrawMarks(*relief, frame, marks, options);
 }
 
 }  // namespace swarf::cli

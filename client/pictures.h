@@ -119,10 +119,15 @@ absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
                                 const std::vector<MarkPolyline>& marks,
                                 const MarksPictureOptions& options = {});
 
-// RenderRelief(grid, options.relief) then DrawMarks.
+// RenderRelief(grid, options.relief) then DrawMarks. A relief already
+// rendered (`drawn`, by RenderRelief(grid, drawn_with)) serves instead when
+// its frame is the same (with the defaults, grids of about 1000 nodes and
+// more per side); not owned, may be null.
 absl::StatusOr<Image> RenderMarks(const SurfaceGrid& grid,
                                   const std::vector<MarkPolyline>& marks,
-                                  const MarksPictureOptions& options = {});
+                                  const MarksPictureOptions& options = {},
+                                  const Image* drawn = nullptr,
+                                  const ReliefOptions& drawn_with = {});
 
 }  // namespace swarf::cli
 

@@ -99,16 +99,9 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
   }
   if (marks != nullptr) {
     pictures.Then("marks.png", [&](const std::string& path) {
-      // The relief already drawn serves when the frames agree (grids of
-      // about 1000 nodes and more per side).
-      const PixelFrame frame = ReliefFrame(grid.spec, options.marks.relief);
-      absl::StatusOr<Image> finer;
-      if (!(frame == ReliefFrame(grid.spec, options.relief))) {
-        finer = RenderRelief(grid, options.marks.relief);
-        if (!finer.ok()) return finer.status();
-      }
-      absl::StatusOr<Image> picture = DrawMarks(
-          finer.ok() ? *finer : *relief, frame, *marks, options.marks);
+      // The relief already drawn serves when the frames agree.
+      absl::StatusOr<Image> picture =
+          RenderMarks(grid, *marks, options.marks, &*relief, options.relief);
       if (!picture.ok()) return picture.status();
       return WritePng(*picture, path);
     });
