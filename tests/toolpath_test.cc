@@ -1,6 +1,8 @@
 // The toolpath parsers: G-code constructs with exact expected points, arcs
 // (direction, chord error, exact ends), errors with line numbers, the
-// corpus programs, and XYZ input.
+// corpus programs (../shared/corpus, read in place: skipped where absent,
+// see tests/shared_files.h), the repository's generated examples, and XYZ
+// input.
 #include "gcode/toolpath.h"
 
 #include <algorithm>
@@ -14,9 +16,13 @@
 #include "absl/status/status.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "tests/shared_files.h"
 
 #ifndef SWARF_CORPUS_DIR
 #error "SWARF_CORPUS_DIR must point at ../shared/corpus"
+#endif
+#ifndef SWARF_SOURCE_DIR
+#error "SWARF_SOURCE_DIR must point at the repository"
 #endif
 
 namespace swarf::gcode {
@@ -673,6 +679,8 @@ struct CorpusCase {
 };
 
 TEST(CorpusTest, ProgramsParseUnmodifiedInsideTheirStock) {
+  SWARF_SKIP_UNLESS_SHARED_FILE(std::string(SWARF_CORPUS_DIR) + "/bear.nc");
+  SWARF_SKIP_UNLESS_SHARED_FILE(std::string(SWARF_CORPUS_DIR) + "/cameo.nc");
   const CorpusCase cases[] = {
       // bear: 15163 lines, 4 without motion (T1M6 G21 G17 M30), G0Z20
       // before XY is known, two repeats of (0, 0, 20) at the end.
@@ -722,6 +730,7 @@ TEST(CorpusTest, ProgramsParseUnmodifiedInsideTheirStock) {
 }
 
 TEST(CorpusTest, CameoIgnoresWhatItShould) {
+  SWARF_SKIP_UNLESS_SHARED_FILE(std::string(SWARF_CORPUS_DIR) + "/cameo.nc");
   const absl::StatusOr<Toolpath> tp = ParseGcode(ReadCorpus("cameo.nc"));
   ASSERT_TRUE(tp.ok()) << tp.status();
   EXPECT_EQ(tp->IgnoredSummary(),
@@ -729,20 +738,75 @@ TEST(CorpusTest, CameoIgnoresWhatItShould) {
             "G43 x1, G49 x1, G80 x1, M3 x1, M5 x1, M8 x1, F x1, H x1");
 }
 
-TEST(CorpusTest, ReadToolpathFileByExtension) {
+// Files of the repository itself (a fresh clone has them).
+TEST(ReadToolpathFileTest, ByExtensionAndContent) {
+  const std::string src = SWARF_SOURCE_DIR;
   const absl::StatusOr<Toolpath> tp =
-      ReadToolpathFile(std::string(SWARF_CORPUS_DIR) + "/bear.nc");
+      ReadToolpathFile(src + "/examples/relief.nc");
   ASSERT_TRUE(tp.ok()) << tp.status();
   EXPECT_GT(tp->point_count(), 10000);
   const absl::StatusOr<Toolpath> missing =
-      ReadToolpathFile(std::string(SWARF_CORPUS_DIR) + "/missing.nc");
+      ReadToolpathFile(src + "/examples/missing.nc");
   EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
-  const absl::StatusOr<Toolpath> unknown =
-      ReadToolpathFile(std::string(SWARF_CORPUS_DIR) + "/README.md");
+  const absl::StatusOr<Toolpath> unknown = ReadToolpathFile(src + "/README.md");
   EXPECT_EQ(unknown.status().code(), absl::StatusCode::kInvalidArgument);
   // By content: README.md's prose is no G-code.
   EXPECT_THAT(std::string(unknown.status().message()),
-              StartsWith(std::string(SWARF_CORPUS_DIR) + "/README.md: line "));
+              StartsWith(src + "/README.md: line "));
+}
+
+// ---------------------------------------------- the generated examples
+
+// examples/*.nc (scripts/make-example; the ctest make_example_check keeps
+// them what it writes): realistic sizes, every move inside its stock, each
+// tool no deeper than its feature's floor, no rapid into the stock.
+struct ExampleCase {
+  const char* file;
+  double x1, y1;                // stock [0, x1] x [0, y1], top 0
+  std::vector<int> tools;
+  std::vector<double> floors;   // per tool: its programmed lowest tip
+};
+
+TEST(ExamplesTest, GeneratedJobsParseInsideTheirStock) {
+  const double vcarve_floor = -2 / std::tan(kPi / 6);  // the leaves' middle
+  const ExampleCase cases[] = {
+      {"relief.nc", 60, 60, {1}, {-8.0}},
+      {"pocket.nc", 100, 80, {1, 2, 3}, {-6, -4, -0.5}},
+      {"vcarve.nc", 80, 80, {1}, {vcarve_floor}},
+  };
+  for (const ExampleCase& c : cases) {
+    SCOPED_TRACE(c.file);
+    const absl::StatusOr<Toolpath> tp =
+        ReadToolpathFile(std::string(SWARF_SOURCE_DIR) + "/examples/" + c.file);
+    ASSERT_TRUE(tp.ok()) << tp.status();
+    EXPECT_GE(tp->move_count(), 10000);
+    EXPECT_LE(tp->move_count(), 100000);
+    EXPECT_EQ(tp->Tools(), c.tools);
+    EXPECT_EQ(tp->dropped_moves(), 0);
+    EXPECT_GE(tp->x_bounds().lo, 0);
+    EXPECT_LE(tp->x_bounds().hi, c.x1);
+    EXPECT_GE(tp->y_bounds().lo, 0);
+    EXPECT_LE(tp->y_bounds().hi, c.y1);
+    std::vector<double> lowest(c.tools.size(), 1e30);
+    for (const ToolpathPoint& p : tp->points()) {
+      if (p.rapid) {
+        // Rapids stay above the stock top but where a level's cut is
+        // entered, half a millimetre above what is already cut.
+        EXPECT_GE(p.position.z, -5.5) << "line " << p.line;
+      }
+      const auto at = std::find(c.tools.begin(), c.tools.end(), p.tool);
+      ASSERT_NE(at, c.tools.end()) << "line " << p.line;
+      double& low = lowest[at - c.tools.begin()];
+      low = std::min(low, p.position.z);
+    }
+    for (size_t t = 0; t < c.tools.size(); ++t) {
+      if (std::string(c.file) == "relief.nc") {
+        EXPECT_GT(lowest[t], c.floors[t]);  // a drop-cutter surface
+      } else {
+        EXPECT_NEAR(lowest[t], c.floors[t], 1e-4) << "T" << c.tools[t];
+      }
+    }
+  }
 }
 
 // -------------------------------------------------------------- XYZ input
