@@ -1,6 +1,9 @@
-// swarf run end to end, in process, on the real corpus programs: they run
-// unmodified, the machined heights stay within the stock, and the pictures
-// and the mesh read back valid (the STL watertight).
+// swarf run end to end, in process, on the repository's generated jobs
+// (examples/, scripts/make-example: every checkout has them) and on the
+// real corpus programs (../shared/corpus, read in place; skipped where
+// absent, failed instead with SWARF_REQUIRE_SHARED: tests/shared_files.h):
+// they run unmodified, the machined heights stay within the stock, and the
+// pictures and the mesh read back valid (the STL watertight).
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -22,6 +25,7 @@
 #include "google/protobuf/util/json_util.h"
 #include "gtest/gtest.h"
 #include "server/server.h"
+#include "tests/shared_files.h"
 
 namespace swarf::cli {
 namespace {
@@ -59,20 +63,54 @@ google::protobuf::Struct ReadJson(const std::string& path) {
   return s;
 }
 
-class RunE2eTest : public ::testing::TestWithParam<std::tuple<const char*, const char*>> {};
+// A job: its program, where it lies, and its tools and stock as options.
+struct Job {
+  const char* name;
+  bool corpus;                    // in ../shared/corpus, else in examples/
+  std::vector<std::string> args;  // --tool ..., --stock ...
+  bool marks = true;              // has cutting marks (a flat-end pocket
+                                  // has none: floors and vertical walls)
+  const char* spacing = "0.25";   // quick; the code path is 0.1 mm's (the
+                                  // pictures are a pixel per node, >= 300)
+  std::string File() const {
+    return std::string(corpus ? SWARF_CORPUS_DIR : SWARF_EXAMPLES_DIR) + "/" +
+           name;
+  }
+};
 
-TEST_P(RunE2eTest, CorpusJobRunsAndItsOutputsAreValid) {
-  const auto [name, tool] = GetParam();
-  const std::string file = std::string(SWARF_CORPUS_DIR) + "/" + name;
+void PrintTo(const Job& job, std::ostream* os) { *os << job.File(); }
+
+const Job kPocket{"pocket.nc", false,
+                  {"--tool", "T1=flat:d=6", "--tool", "T2=flat:d=3", "--tool",
+                   "T3=flat:d=1", "--stock", "0,0,100,80,0"},
+                  false};
+const Job kVcarve{"vcarve.nc", false,
+                  {"--tool", "vbit:d=6,angle=60", "--stock", "0,0,80,80,0"}};
+const Job kRelief{"relief.nc", false,
+                  {"--tool", "ball:d=2", "--stock", "0,0,60,60,0"}, true,
+                  "0.2"};
+
+std::string JobTestName(const ::testing::TestParamInfo<Job>& info) {
+  std::string n = info.param.name;
+  return n.substr(0, n.find('.'));
+}
+
+class RunE2eTest : public ::testing::TestWithParam<Job> {};
+
+TEST_P(RunE2eTest, JobRunsAndItsOutputsAreValid) {
+  const Job& job = GetParam();
+  const std::string name = job.name;
+  const std::string file = job.File();
+  if (job.corpus) SWARF_SKIP_UNLESS_SHARED_FILE(file);
   const std::string out =
       (std::filesystem::temp_directory_path() /
        ("swarf-e2e-" + std::string(name) + "-" + std::to_string(::getpid())))
           .string();
   std::filesystem::remove_all(out);
-  // 0.25 mm keeps the test quick; the code path is the one of 0.1 mm.
-  ASSERT_EQ(RunCommand({file, "--tool", tool, "--spacing", "0.25", "--out",
-                        out, "--quiet"}),
-            0);
+  std::vector<std::string> argv = {file, "--spacing", job.spacing, "--out",
+                                   out,  "--quiet"};
+  argv.insert(argv.end(), job.args.begin(), job.args.end());
+  ASSERT_EQ(RunCommand(argv), 0);
 
   // The stats document: every move simulated, finite errors, marks found.
   const auto path = ReadToolpathFile(file);
@@ -83,15 +121,18 @@ TEST_P(RunE2eTest, CorpusJobRunsAndItsOutputsAreValid) {
   const auto& err = f.at("error").struct_value().fields();
   EXPECT_TRUE(std::isfinite(err.at("max").number_value()));
   EXPECT_GT(err.at("samples").number_value(), 0);
-  EXPECT_GT(f.at("marks").struct_value().fields().at("polylines").number_value(),
-            0);
+  EXPECT_EQ(f.at("dropped_moves").number_value(), 0);
+  EXPECT_EQ(f.count("outside_stock"), 0u);
   // The marks shown are a part of those found; the adaptive mesh is within
   // its tolerance with fewer triangles than the lattice; every step timed.
   const auto& marks = f.at("marks").struct_value().fields();
   const auto& shown = marks.at("shown").struct_value().fields();
   EXPECT_LE(shown.at("vertices").number_value(),
             marks.at("vertices").number_value());
-  EXPECT_GT(shown.at("polylines").number_value(), 0);
+  if (job.marks) {
+    EXPECT_GT(marks.at("polylines").number_value(), 0);
+    EXPECT_GT(shown.at("polylines").number_value(), 0);
+  }
   const auto& mesh = f.at("mesh").struct_value().fields();
   EXPECT_EQ(mesh.at("tolerance").number_value(), 0.005);
   EXPECT_LE(mesh.at("max_deviation").number_value(), 0.005);
@@ -170,24 +211,28 @@ std::string ReadFile(const std::string& path) {
 
 // swarf run asks for the marks as one message, and one per polyline when
 // they pass the server's message limit: the same marks either way. A server
-// with 1 MiB messages (bear.nc's marks at 0.25 mm are several MiB) against
-// the embedded one (64 MiB: one message).
-TEST(RunE2eMarksTest, OneMessageOrOnePerPolylineGiveTheSameMarks) {
+// with 1 MiB messages (the marks of bear.nc and vcarve.nc at 0.25 mm are
+// over 1 MiB) against the embedded one (64 MiB: one message).
+class RunE2eMarksTest : public ::testing::TestWithParam<Job> {};
+
+TEST_P(RunE2eMarksTest, OneMessageOrOnePerPolylineGiveTheSameMarks) {
+  const Job& job = GetParam();
+  const std::string file = job.File();
+  if (job.corpus) SWARF_SKIP_UNLESS_SHARED_FILE(file);
   server::ServerOptions o;
   o.listen = "127.0.0.1:0";
   o.limits.max_message_bytes = 1 << 20;
   o.limits.max_batch_points = 20000;
   auto srv = server::SwarfServer::Start(o);
   ASSERT_TRUE(srv.ok()) << srv.status();
-  const std::string file = std::string(SWARF_CORPUS_DIR) + "/bear.nc";
   const std::filesystem::path base =
       std::filesystem::temp_directory_path() /
       ("swarf-e2e-marks-" + std::to_string(::getpid()));
   const std::string remote = (base / "remote").string();
   const std::string embedded = (base / "embedded").string();
   std::filesystem::remove_all(base);
-  const std::vector<std::string> args = {file, "--tool", "ball:d=3.175",
-                                         "--spacing", "0.25", "--quiet"};
+  std::vector<std::string> args = {file, "--spacing", "0.25", "--quiet"};
+  args.insert(args.end(), job.args.begin(), job.args.end());
   std::vector<std::string> a = args;
   a.insert(a.end(), {"--out", remote, "--server",
                      "127.0.0.1:" + std::to_string((*srv)->port())});
@@ -208,6 +253,124 @@ TEST(RunE2eMarksTest, OneMessageOrOnePerPolylineGiveTheSameMarks) {
     EXPECT_EQ(ReadFile(remote + "/" + f), ReadFile(embedded + "/" + f)) << f;
   }
   std::filesystem::remove_all(base);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Jobs, RunE2eMarksTest,
+    ::testing::Values(Job{"bear.nc", true, {"--tool", "ball:d=3.175"}},
+                      kVcarve),
+    JobTestName);
+
+// The machined surface of the generated jobs where their programs say what
+// it must be, read off the STL (within its 0.005 mm tolerance): the pocket
+// floors at their programmed depths, the engraving's grooves, the stock
+// left alone elsewhere; the V-carve's grooves as deep and as wide as the
+// 60-degree V-bit cuts at the programmed depth.
+class Surface {
+ public:
+  explicit Surface(const Stl& stl) : stl_(stl) {}
+  // The highest triangle over (x, y): the machined top (the STL also has
+  // the bottom plane and the vertical sides).
+  double At(double x, double y) const {
+    double best = -1e30;
+    for (const auto& t : stl_.triangles) {
+      const double ax = t[0], ay = t[1], bx = t[3], by = t[4], cx = t[6],
+                   cy = t[7];
+      const double d = (by - cy) * (ax - cx) + (cx - bx) * (ay - cy);
+      if (std::abs(d) < 1e-12) continue;  // vertical
+      const double l1 = ((by - cy) * (x - cx) + (cx - bx) * (y - cy)) / d;
+      const double l2 = ((cy - ay) * (x - cx) + (ax - cx) * (y - cy)) / d;
+      const double l3 = 1 - l1 - l2;
+      const double e = -1e-9;
+      if (l1 < e || l2 < e || l3 < e) continue;
+      best = std::max(best, l1 * t[2] + l2 * t[5] + l3 * t[8]);
+    }
+    return best;
+  }
+
+ private:
+  const Stl& stl_;
+};
+
+Stl RunToStl(const Job& job, const std::string& tag) {
+  const std::string out = (std::filesystem::temp_directory_path() /
+                           ("swarf-e2e-" + tag + "-" + std::to_string(::getpid())))
+                              .string();
+  std::filesystem::remove_all(out);
+  std::vector<std::string> argv = {job.File(), "--spacing", "0.25", "--out",
+                                   out,        "--quiet"};
+  argv.insert(argv.end(), job.args.begin(), job.args.end());
+  EXPECT_EQ(RunCommand(argv), 0);
+  Stl stl = ReadStl(out + "/surface.stl");
+  std::filesystem::remove_all(out);
+  return stl;
+}
+
+TEST(GeneratedJobsTest, PocketFloorsAtTheirProgrammedDepths) {
+  const Stl stl = RunToStl(kPocket, "pocket-floors");
+  ASSERT_GT(stl.triangles.size(), 1000u);
+  const Surface s(stl);
+  const double tol = 0.006;  // the mesh's 0.005 mm, and float coordinates
+  // T1's round pocket (r 22 at (30, 40)): z = -6 to its wall.
+  for (auto [x, y] : {std::pair{30.0, 40.0}, {45.0, 40.0}, {30.0, 22.0},
+                      {51.0, 40.0}, {20.0, 55.0}}) {
+    EXPECT_NEAR(s.At(x, y), -6, tol) << x << ", " << y;
+  }
+  // T2's rounded rectangle (x 60..92, y 10..70, corners r 4): z = -4, in a
+  // corner too; just outside the corner's arc the top.
+  for (auto [x, y] : {std::pair{76.0, 40.0}, {61.0, 40.0}, {90.5, 68.5},
+                      {61.5, 11.5}, {90.0, 12.0}}) {
+    EXPECT_NEAR(s.At(x, y), -4, tol) << x << ", " << y;
+  }
+  EXPECT_NEAR(s.At(60.5, 10.5), 0, tol);
+  // T3's 1 mm grooves at z = -0.5: the ring (r 25 round the pocket) and
+  // the wave (y = 75 at x = 50).
+  EXPECT_NEAR(s.At(55, 40), -0.5, tol);
+  EXPECT_NEAR(s.At(30, 15), -0.5, tol);
+  EXPECT_NEAR(s.At(50, 75), -0.5, tol);
+  // Untouched stock.
+  for (auto [x, y] : {std::pair{2.0, 2.0}, {95.0, 5.0}, {57.5, 40.0},
+                      {30.0, 10.0}}) {
+    EXPECT_NEAR(s.At(x, y), 0, tol) << x << ", " << y;
+  }
+}
+
+TEST(GeneratedJobsTest, VcarveGroovesAsDeepAndWideAsTheAngleCuts) {
+  const Stl stl = RunToStl(kVcarve, "vcarve-grooves");
+  ASSERT_GT(stl.triangles.size(), 1000u);
+  const Surface s(stl);
+  const double tan_half = std::tan(30 * M_PI / 180);  // 60-degree V-bit
+  const double tol = 0.006;
+  // The frame at x = 5 (a node line), 1 mm deep: across it at y = 40 the
+  // surface is the V, z = min(0, -1 + |dx| / tan 30), at every node: 1 mm
+  // deep, 2 tan(30) = 1.155 mm wide at the top.
+  for (int k = -6; k <= 6; ++k) {
+    const double dx = 0.25 * k;
+    EXPECT_NEAR(s.At(5 + dx, 40), std::min(0.0, -1 + std::abs(dx) / tan_half),
+                tol)
+        << "dx " << dx;
+  }
+  // A leaf, carved along its middle line at depth = half-width / tan 30: at
+  // its widest (half-width 2, on the diagonal through (40, 40), 41 mm out)
+  // the cross-section is a V 2 / tan 30 = 3.464 mm deep and 4 mm wide. On
+  // the flanks the mesh is exact (linear between nodes); at the bottom the
+  // nodes straddle the crease.
+  const double c = 40 + 41 / std::sqrt(2.0);
+  const double deep = -2 / tan_half;
+  auto across = [&](double u) {
+    return s.At(c + u / std::sqrt(2.0), c - u / std::sqrt(2.0));
+  };
+  for (double u : {-1.5, -1.0, -0.6, 0.6, 1.0, 1.5}) {
+    EXPECT_NEAR(across(u), (std::abs(u) - 2) / tan_half, 0.01) << "u " << u;
+  }
+  for (double u : {-2.5, -2.3, 2.3, 2.5}) {
+    EXPECT_NEAR(across(u), 0, tol) << "u " << u;
+  }
+  EXPECT_GE(across(0), deep - tol);
+  EXPECT_LE(across(0), deep + 0.25);
+  // The node on the middle line nearest the widest point, (69, 69), is cut
+  // to the tips' depth there (s = 5.012: -3.4640).
+  EXPECT_NEAR(s.At(69, 69), -3.4640, tol);
 }
 
 // Never silent: moves the interpreter drops and a cut leaving the stock are
@@ -470,9 +633,10 @@ TEST_F(RunProjectTest, LinuxCncToolTableAndNumberedTools) {
 
 // The corpus' new projects run unmodified with the tools they name.
 TEST(RunCorpusProjectTest, FlowerMoldAndVcarve) {
-  if (!std::filesystem::exists(std::string(SWARF_CORPUS_DIR) + "/vcarve.camotics")) {
-    GTEST_SKIP() << "no corpus at " << SWARF_CORPUS_DIR;
-  }
+  SWARF_SKIP_UNLESS_SHARED_FILE(std::string(SWARF_CORPUS_DIR) +
+                                "/vcarve.camotics");
+  SWARF_SKIP_UNLESS_SHARED_FILE(std::string(SWARF_CORPUS_DIR) +
+                                "/flower_mold.camotics");
   for (const auto& [name, program, tool] :
        {std::tuple{"vcarve", "vcarve.ngc", "vbit d=2 angle=53.1301"},
         std::tuple{"flower_mold", "flower_mold.nc", "flat d=1"}}) {
@@ -503,7 +667,8 @@ TEST(RunCorpusProjectTest, FlowerMoldAndVcarve) {
 // Issue 15: on every corpus job, as its project gives it (tools, stock), the
 // default scheme's max and RMS errors against the exact surface are each at
 // most the z-map's and its mean far below, at the default 0.1 mm and on a
-// grid twice as coarse (elements 40% of flower_mold's 0.5 mm radius).
+// grid twice as coarse (elements 40% of flower_mold's 0.5 mm radius). The
+// generated jobs likewise (GeneratedPrecisionTest).
 class CorpusPrecisionTest
     : public ::testing::TestWithParam<std::tuple<const char*, const char*>> {};
 
@@ -524,9 +689,7 @@ TEST_P(CorpusPrecisionTest, DefaultSchemeNeverWorseThanTheZmap) {
   const auto [name, spacing] = GetParam();
   const std::string project =
       std::string(SWARF_CORPUS_DIR) + "/" + name + ".camotics";
-  if (!std::filesystem::exists(project)) {
-    GTEST_SKIP() << "no corpus at " << SWARF_CORPUS_DIR;
-  }
+  SWARF_SKIP_UNLESS_SHARED_FILE(project);
   auto error = [&](const char* scheme) {
     std::vector<std::string> argv = {"--project", project, "--spacing",
                                      spacing,     "--json",  "--quiet"};
@@ -555,14 +718,49 @@ INSTANTIATE_TEST_SUITE_P(
       return std::string(std::get<0>(info.param)) + "_" + s;
     });
 
+// The generated jobs with their tools and stock: the default scheme's max,
+// mean and RMS errors at most the z-map's (the pocket's flat floors and
+// vertical walls: the default scheme's error is 0 there).
+class GeneratedPrecisionTest
+    : public ::testing::TestWithParam<std::tuple<Job, const char*>> {};
+
+TEST_P(GeneratedPrecisionTest, DefaultSchemeNeverWorseThanTheZmap) {
+  const auto& [job, spacing] = GetParam();
+  auto error = [&](const char* scheme) {
+    std::vector<std::string> argv = {job.File(), "--spacing", spacing,
+                                     "--json", "--quiet"};
+    argv.insert(argv.end(), job.args.begin(), job.args.end());
+    if (scheme != nullptr) argv.insert(argv.end(), {"--scheme", scheme});
+    const google::protobuf::Struct stats = RunJson(argv);
+    const auto& e = stats.fields().at("error").struct_value().fields();
+    return std::tuple{e.at("max").number_value(), e.at("mean").number_value(),
+                      e.at("rms").number_value()};
+  };
+  const auto [zmax, zmean, zrms] = error("zmap");
+  const auto [gmax, gmean, grms] = error(nullptr);  // the default
+  EXPECT_GT(zmean, 0);
+  EXPECT_LE(gmax, zmax);
+  EXPECT_LE(grms, zrms);
+  EXPECT_LE(gmean, zmean / 10) << "default " << gmean << " zmap " << zmean;
+}
+
 INSTANTIATE_TEST_SUITE_P(
-    Corpus, RunE2eTest,
-    ::testing::Values(std::tuple{"bear.nc", "ball:d=3.175"},
-                      std::tuple{"cameo.nc", "ball:d=2"}),
+    Generated, GeneratedPrecisionTest,
+    ::testing::Combine(::testing::Values(kRelief, kPocket, kVcarve),
+                       ::testing::Values("0.1", "0.2")),
     [](const auto& info) {
-      std::string n = std::get<0>(info.param);
-      return n.substr(0, n.find('.'));
+      std::string n = std::get<0>(info.param).name;
+      std::string s = std::get<1>(info.param);
+      s.replace(s.find('.'), 1, "_");
+      return n.substr(0, n.find('.')) + "_" + s;
     });
+
+INSTANTIATE_TEST_SUITE_P(
+    Jobs, RunE2eTest,
+    ::testing::Values(kRelief, kPocket, kVcarve,
+                      Job{"bear.nc", true, {"--tool", "ball:d=3.175"}},
+                      Job{"cameo.nc", true, {"--tool", "ball:d=2"}}),
+    JobTestName);
 
 }  // namespace
 }  // namespace swarf::cli
