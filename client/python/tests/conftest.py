@@ -25,6 +25,18 @@ def _binary(var: str) -> str:
     return path
 
 
+def require_shared(path: pathlib.Path) -> None:
+    """Files outside the repository (../shared/corpus, read in place):
+    a missing one skips the test, naming it, so that a fresh clone passes;
+    with SWARF_REQUIRE_SHARED set (not "" or "0"; .ci/run sets it) it
+    fails instead, so CI cannot silently lose the corpus coverage."""
+    if path.exists():
+        return
+    if os.environ.get("SWARF_REQUIRE_SHARED", "") not in ("", "0"):
+        pytest.fail(f"missing {path} (SWARF_REQUIRE_SHARED is set)")
+    pytest.skip(f"missing {path}")
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -15,7 +15,7 @@ import pytest
 import swarf_client
 from swarf_client import SwarfError
 
-from conftest import Swarfd
+from conftest import Swarfd, require_shared
 
 FIVE_BALLS = [(50, 50), (30, 30), (70, 30), (30, 70), (70, 70)]
 
@@ -266,21 +266,75 @@ def test_messages_past_the_4_mib_default(client):
         assert p.heights.shape == (200_000,) and p.normals.shape == (200_000, 3)
 
 
-def test_the_frontend_example_simulates_bear(swarfd, tmp_path):
-    """examples/python/frontend.py on bear.nc: heights saved, as deep as
-    the program's deepest tip."""
-    root = pathlib.Path(__file__).resolve().parents[3]
-    nc = root.parent / "shared" / "corpus" / "bear.nc"
-    assert nc.is_file(), f"the corpus is read in place: {nc}"
+ROOT = pathlib.Path(__file__).resolve().parents[3]
+
+
+def run_frontend(program: pathlib.Path, swarfd, cwd: pathlib.Path) -> str:
+    """examples/python/frontend.py on `program`: its stdout."""
     done = subprocess.run(
-        [sys.executable, str(root / "examples" / "python" / "frontend.py"),
-         str(nc), swarfd.target], cwd=tmp_path, capture_output=True,
+        [sys.executable, str(ROOT / "examples" / "python" / "frontend.py"),
+         str(program), swarfd.target], cwd=cwd, capture_output=True,
         text=True, timeout=120)
     assert done.returncode == 0, done.stderr
-    assert "moves_applied=15158" in done.stdout
+    return done.stdout
+
+
+def test_the_frontend_example_simulates_bear(swarfd, tmp_path):
+    """examples/python/frontend.py on bear.nc (the corpus, read in place;
+    skipped without it): heights saved, as deep as the program's deepest
+    tip."""
+    nc = ROOT.parent / "shared" / "corpus" / "bear.nc"
+    require_shared(nc)
+    out = run_frontend(nc, swarfd, tmp_path)
+    assert "moves_applied=15158" in out
     h = np.load(tmp_path / "bear-heights.npy")
     assert h.shape == (801, 801)
     assert h.min() == -17.368 and h.max() <= 0
+
+
+def test_the_frontend_example_simulates_the_pocket(swarfd, tmp_path):
+    """frontend.py on examples/pocket.nc (three flat end mills, tool
+    changes): every tool's moves sent with its number; the floors at the
+    programmed depths, exactly (flat bottoms), the stock top elsewhere."""
+    out = run_frontend(ROOT / "examples" / "pocket.nc", swarfd, tmp_path)
+    for tool in ("T1 ", "T2 ", "T3 "):
+        assert tool in out, out
+    h = np.load(tmp_path / "pocket-heights.npy")
+    assert h.shape == (801, 1001)  # [j, i]: y 0..80, x 0..100 at 0.1 mm
+
+    def at(x: float, y: float) -> float:
+        return float(h[round(y * 10), round(x * 10)])
+
+    assert h.max() == 0 and h.min() == -6
+    for x, y in [(30, 40), (45, 40), (30, 22), (51, 40)]:
+        assert at(x, y) == -6, (x, y)     # T1's round pocket
+    for x, y in [(76, 40), (61, 40), (90.5, 68.5), (61.5, 11.5)]:
+        assert at(x, y) == -4, (x, y)     # T2's rounded rectangle
+    for x, y in [(55, 40), (30, 15), (50, 75)]:
+        assert at(x, y) == -0.5, (x, y)   # T3's grooves
+    for x, y in [(2, 2), (95, 5), (57.5, 40), (60.5, 10.5)]:
+        assert at(x, y) == 0, (x, y)      # untouched
+    # The round pocket's floor is -6 everywhere within its wall (r 22).
+    yy, xx = np.mgrid[0:801, 0:1001] / 10.0
+    inside = np.hypot(xx - 30, yy - 40) <= 21.9
+    assert (h[inside] == -6).all()
+
+
+def test_the_frontend_example_simulates_the_vcarve(swarfd, tmp_path):
+    """frontend.py on examples/vcarve.nc (a 60-degree V-bit): the frame's
+    groove across is the V of the bit at 1 mm deep; the widest leaf as deep
+    as its half-width over tan 30."""
+    run_frontend(ROOT / "examples" / "vcarve.nc", swarfd, tmp_path)
+    h = np.load(tmp_path / "vcarve-heights.npy")
+    assert h.shape == (801, 801)
+    assert h.max() == 0
+    t = np.tan(np.radians(30))
+    dx = np.arange(-8, 9) / 10.0               # across x = 5 at y = 40
+    want = np.minimum(0, -1 + np.abs(dx) / t)
+    np.testing.assert_allclose(h[400, 42:59], want, atol=1e-9)
+    # The node (69, 69) on the leaf's middle line near its widest point.
+    assert abs(h[690, 690] - (-3.4640)) < 1e-3
+    assert h.min() >= -2 / t - 1e-9            # never below the deepest tip
 
 
 @pytest.mark.parametrize("seq,tool,rapid,reposition,points", [
