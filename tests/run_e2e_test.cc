@@ -23,6 +23,7 @@
 #include "gcode/toolpath.h"
 #include "google/protobuf/struct.pb.h"
 #include "google/protobuf/util/json_util.h"
+#include "google/protobuf/util/message_differencer.h"
 #include "gtest/gtest.h"
 #include "server/server.h"
 #include "tests/shared_files.h"
@@ -332,6 +333,27 @@ TEST(GeneratedJobsTest, PocketFloorsAtTheirProgrammedDepths) {
   for (auto [x, y] : {std::pair{2.0, 2.0}, {95.0, 5.0}, {57.5, 40.0},
                       {30.0, 10.0}}) {
     EXPECT_NEAR(s.At(x, y), 0, tol) << x << ", " << y;
+  }
+}
+
+google::protobuf::Struct RunJson(const std::vector<std::string>& argv);
+
+// examples/pocket.camotics (its three tools, its workpiece) runs the
+// program as the flags do: the same moves, tools and stock.
+TEST(GeneratedJobsTest, PocketProjectIsTheJobWithItsTools) {
+  std::vector<std::string> flags = {kPocket.File(), "--spacing", "0.5",
+                                    "--json", "--quiet"};
+  flags.insert(flags.end(), kPocket.args.begin(), kPocket.args.end());
+  const google::protobuf::Struct a = RunJson(flags);
+  const google::protobuf::Struct b =
+      RunJson({"--project",
+               std::string(SWARF_EXAMPLES_DIR) + "/pocket.camotics",
+               "--spacing", "0.5", "--json", "--quiet"});
+  for (const char* k : {"moves", "tools", "stock", "error"}) {
+    EXPECT_TRUE(google::protobuf::util::MessageDifferencer::Equals(
+        a.fields().at(k), b.fields().at(k)))
+        << k << ": " << a.fields().at(k).DebugString() << " vs "
+        << b.fields().at(k).DebugString();
   }
 }
 
