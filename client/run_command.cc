@@ -86,6 +86,18 @@ const std::string kUsage =
     "                               1; rims on the stock top always stay)\n"
     "  --marks-min-length L         ...and pieces shorter than L mm\n"
     "                               (default 0.2)\n"
+    "  --design FILE                the part as designed (STL or STEP, in\n"
+    "                               the stock's coordinates): stats.json\n"
+    "                               gets a deviation (gouge and excess by\n"
+    "                               program line), --out a deviation.png\n"
+    "  --design-units mm|inch       the design file's units (default mm)\n"
+    "  --design-offset x,y,z        moves the design (mm)\n"
+    "  --allowance A                stock to leave (mm, default 0)\n"
+    "  --tolerance T                out of tolerance: gouge > T or excess >\n"
+    "                               A + T (mm, default 0.01); given, an\n"
+    "                               out-of-tolerance part exits with 3\n"
+    "  --deviation-samples N        per element edge, as the valuation\n"
+    "                               (default 5; 0: nodes only)\n"
     "  --json                       print the stats document instead\n"
     "  --view                       show the part live in a browser (a page\n"
     "                               on 127.0.0.1, kept up until Ctrl-C)\n"
@@ -264,6 +276,7 @@ int RunCommand(const std::vector<std::string>& argv) {
   valued.insert(std::begin(kToolpathFlags), std::end(kToolpathFlags));
   valued.insert(std::begin(kOutputFlags), std::end(kOutputFlags));
   valued.insert(std::begin(kViewerFlags), std::end(kViewerFlags));
+  valued.insert(std::begin(kDesignFlags), std::end(kDesignFlags));
   auto args = Args::Parse(argv, valued,
                           {"json", "help", "quiet", kStrictFlag, "view", "view-wait"});
   auto fail = [](const absl::Status& s, int code) {
@@ -358,14 +371,19 @@ int RunCommand(const std::vector<std::string>& argv) {
   if (absl::Status s = ParseOutputFlags(*args, &output_flags); !s.ok()) {
     return fail(s, 2);
   }
+  auto design = ParseDesignFlags(*args);
+  if (!design.ok()) return fail(design.status(), 2);
 
   const auto t_parse = std::chrono::steady_clock::now();
   absl::StatusOr<Toolpath> path;
   std::vector<ToolUse> uses;
+  // Where each program's points start (the moves' source files).
+  std::vector<int64_t> file_starts;
   for (const std::string& f : files) {
     auto one = ReadToolpathFile(f, gopt, tflags.format);
     if (!one.ok()) return fail(one.status(), 1);  // names the file
     AddToolUses(*one, f, &uses);
+    file_starts.push_back(path.ok() ? path->point_count() : 0);
     if (path.ok()) {
       path->AppendProgram(*one);
     } else {
@@ -394,6 +412,31 @@ int RunCommand(const std::vector<std::string>& argv) {
   auto stock = ChooseStock(*args, *path, max_radius,
                            project.has_value() ? &*project : nullptr);
   if (!stock.ok()) return fail(stock.status(), 2);
+  if (design->has_value()) {
+    DesignInput& d = **design;
+    if (absl::Status s = LoadDesign(*stock, &d); !s.ok()) return fail(s, 2);
+    d.sources = files;
+    // Move ids as RunMoves numbers them: every point but a run's first.
+    const auto& points = path->points();
+    d.move_lines.reserve(path->move_count());
+    int32_t f = 0;
+    for (size_t k = 0; k < points.size(); ++k) {
+      while (f + 1 < static_cast<int32_t>(file_starts.size()) &&
+             static_cast<int64_t>(k) >= file_starts[f + 1]) {
+        ++f;
+      }
+      if (k > 0 && !points[k].starts_run) {
+        d.move_lines.push_back({f, points[k].line});
+      }
+    }
+    if (!json) {
+      std::cerr << absl::StrFormat(
+          "swarf run: design %s: %d triangles, over %d nodes of the grid "
+          "(%.2f s)\n",
+          d.path, d.mesh.triangles.size(), d.envelope->covered_nodes(),
+          d.seconds);
+    }
+  }
   RunReport report;
   {
     std::vector<std::string> warnings;
@@ -503,6 +546,7 @@ int RunCommand(const std::vector<std::string>& argv) {
   }
   const std::vector<Move> moves = RunMoves(runs, cutter_by_tool);
   oopt.moves = &moves;
+  if (design->has_value()) oopt.design = &**design;
   absl::Status written = CollectAndWrite(**conn, id, oopt, &report);
   report.output_seconds = Since(t_out);
   if (!written.ok()) return fail(written, 1);
@@ -528,6 +572,10 @@ int RunCommand(const std::vector<std::string>& argv) {
     del.set_session_id(id);
     pb::DeleteSessionResponse resp;
     (*conn)->stub().DeleteSession(ctx.get(), del, &resp);
+  }
+  // A shop's CI gates programs on this: 3 = out of tolerance (1 = error).
+  if (report.deviation && report.tolerance_gate && !report.deviation->ok) {
+    return 3;
   }
   return 0;
 }

@@ -17,6 +17,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
 #include "client/run_outputs.h"
 #include "client/surface_grid.h"
 #include "core/cutting_marks.h"
@@ -182,6 +183,85 @@ absl::Status ParseOutputFlags(const Args& args, OutputOptions* out) {
   return number("marks-min-length", &out->marks_display.min_length);
 }
 
+absl::StatusOr<std::optional<DesignInput>> ParseDesignFlags(const Args& args) {
+  const auto path = args.Get("design");
+  for (const char* f : kDesignFlags) {
+    if (!path && args.Has(f)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("--", f, " needs --design FILE"));
+    }
+  }
+  if (!path) return std::optional<DesignInput>();
+  DesignInput d;
+  d.path = *path;
+  const std::string units = args.Get("design-units").value_or("mm");
+  if (units != "mm" && units != "inch") {
+    return absl::InvalidArgumentError("--design-units must be mm or inch");
+  }
+  d.read.scale = units == "inch" ? 25.4 : 1.0;
+  if (auto o = args.Get("design-offset")) {
+    std::vector<std::string> parts = absl::StrSplit(*o, ',');
+    double v[3];
+    bool good = parts.size() == 3;
+    for (int k = 0; good && k < 3; ++k) {
+      good = absl::SimpleAtod(parts[k], &v[k]) && std::isfinite(v[k]);
+    }
+    if (!good) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "--design-offset must be x,y,z in mm, got \"", *o, "\""));
+    }
+    d.read.offset = {v[0], v[1], v[2]};
+  }
+  auto number = [&](const char* flag, double* out) -> absl::Status {
+    const auto text = args.Get(flag);
+    if (!text) return absl::OkStatus();
+    if (!absl::SimpleAtod(*text, out) || !std::isfinite(*out) || *out < 0) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "--", flag, " must be a number >= 0 (mm), got \"", *text, "\""));
+    }
+    return absl::OkStatus();
+  };
+  if (absl::Status s = number("allowance", &d.deviation.allowance); !s.ok()) {
+    return s;
+  }
+  if (absl::Status s = number("tolerance", &d.deviation.tolerance); !s.ok()) {
+    return s;
+  }
+  d.tolerance_given = args.Has("tolerance");
+  if (auto n = args.Get("deviation-samples")) {
+    int v = 0;
+    if (!absl::SimpleAtoi(*n, &v) || v < 0 || v > 64) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "--deviation-samples must be an integer in [0, 64], got \"", *n,
+          "\""));
+    }
+    d.deviation.samples_per_edge = v;
+  }
+  return std::optional<DesignInput>(std::move(d));
+}
+
+absl::Status LoadDesign(const StockSpec& stock, DesignInput* d) {
+  const auto t0 = std::chrono::steady_clock::now();
+  auto mesh = design::ReadDesignFile(d->path, d->read);
+  if (!mesh.ok()) return mesh.status();
+  d->mesh = *std::move(mesh);
+  auto env = design::TopEnvelope::Build(d->mesh, GridGeometry(stock));
+  if (!env.ok()) {
+    return absl::Status(env.status().code(),
+                        absl::StrCat(d->path, ": ", env.status().message()));
+  }
+  d->envelope.emplace(*std::move(env));
+  auto index = design::ClosestPointIndex::Build(d->mesh);
+  if (!index.ok()) {
+    return absl::Status(index.status().code(),
+                        absl::StrCat(d->path, ": ", index.status().message()));
+  }
+  d->index = *std::move(index);
+  d->seconds = std::chrono::duration<double>(
+                   std::chrono::steady_clock::now() - t0).count();
+  return absl::OkStatus();
+}
+
 absl::Status CollectAndWrite(Connection& conn, const std::string& id,
                              const OutputOptions& options, RunReport* report) {
   const bool files = !options.dir.empty();
@@ -203,7 +283,8 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     });
   }
   std::future<std::pair<absl::StatusOr<SurfaceGrid>, double>> grid_fetch;
-  if (files) {
+  const DesignInput* design = options.design;
+  if (files || design != nullptr) {
     grid_fetch = std::async(std::launch::async, [&] {
       const auto t0 = Clock::now();
       auto g = Retrying<SurfaceGrid>("the tiles", [&] {
@@ -250,8 +331,33 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   if (!stats.ok()) return stats.status();
   report->error = *std::move(stats);
   if (!marks_status.ok()) return marks_status;
-  if (!files) return absl::OkStatus();
+  if (!files && design == nullptr) return absl::OkStatus();
   if (!grid.ok()) return grid.status();
+  if (options.moves != nullptr) grid->SetMoves(*options.moves);
+  std::optional<Image> deviation_map;
+  if (design != nullptr) {
+    const auto td = Clock::now();
+    auto dev = MeasureDeviation(*grid, *design->envelope, *design->index,
+                                design->move_lines, design->deviation);
+    if (!dev.ok()) return dev.status();
+    report->design = design->path;
+    report->design_triangles = static_cast<int64_t>(design->mesh.triangles.size());
+    report->sources = design->sources;
+    report->tolerance_gate = design->tolerance_given;
+    report->output_steps.emplace_back("deviation", seconds(td));
+    if (files) {
+      auto img = RenderDeviationMap(*grid, *dev);
+      if (!img.ok()) return img.status();
+      deviation_map = *std::move(img);
+    }
+    dev->node_deviation = {};  // the picture has it
+    if (dev->gouge_move >= 0 &&
+        dev->gouge_move < static_cast<int32_t>(design->move_lines.size())) {
+      report->gouge_source = design->move_lines[dev->gouge_move];
+    }
+    report->deviation = *std::move(dev);
+  }
+  if (!files) return absl::OkStatus();
 
   std::error_code ec;
   std::filesystem::create_directories(options.dir, ec);
@@ -259,7 +365,14 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     return absl::FailedPreconditionError(
         absl::StrCat("cannot create --out ", options.dir, ": ", ec.message()));
   }
-  if (options.moves != nullptr) grid->SetMoves(*options.moves);
+  if (deviation_map.has_value()) {
+    const auto tw = Clock::now();
+    const std::string path =
+        (std::filesystem::path(options.dir) / "deviation.png").string();
+    if (absl::Status s = WritePng(*deviation_map, path); !s.ok()) return s;
+    report->files.push_back(path);
+    report->output_steps.emplace_back("deviation.png", seconds(tw));
+  }
   ErrorRaster raster;
   raster.region = {stock.x0, stock.y0, stock.x1, stock.y1};
   raster.cols = report->error.map_cols();
@@ -343,6 +456,49 @@ std::string StatsJson(const RunReport& r) {
                  {"triangles", r.mesh.mesh_triangles},
                  {"full_triangles", r.mesh.full_mesh_triangles}};
   }
+  if (r.deviation) {
+    const DeviationReport& d = *r.deviation;
+    auto source = [&](int32_t file) -> std::string {
+      return file >= 0 && file < static_cast<int32_t>(r.sources.size())
+                 ? r.sources[file]
+                 : std::string();
+    };
+    auto lines = [&](const std::vector<LineDeviation>& v, const char* depth) {
+      Json a = Json::array();
+      for (const LineDeviation& l : v) {
+        a.push_back({{"file", source(l.file)}, {"line", l.line},
+                     {depth, l.depth}, {"x", l.x}, {"y", l.y},
+                     {"area_mm2", l.area_mm2}});
+      }
+      return a;
+    };
+    Json gouge = {{"max", d.gouge_max}, {"x", d.gouge_x}, {"y", d.gouge_y},
+                  {"file", nullptr}, {"line", nullptr},
+                  {"volume_mm3", d.gouge_volume}};
+    if (r.gouge_source) {
+      gouge["file"] = source(r.gouge_source->file);
+      gouge["line"] = r.gouge_source->line;
+    }
+    j["deviation"] = {
+        {"design", r.design},
+        {"triangles", r.design_triangles},
+        {"nodes", d.nodes},
+        {"samples", d.samples},
+        {"gouge", gouge},
+        {"excess",
+         {{"max", d.excess_max}, {"x", d.excess_x}, {"y", d.excess_y},
+          {"mean", d.excess_mean}, {"volume_mm3", d.excess_volume},
+          {"lines", lines(d.excess_lines, "excess_max")}}},
+        {"normal",
+         {{"gouge_max", d.normal_gouge_max},
+          {"excess_max", d.normal_excess_max}}},
+        {"allowance", d.allowance},
+        {"tolerance", d.tolerance},
+        {"out_of_tolerance",
+         {{"area_mm2", d.out_area_mm2},
+          {"lines", lines(d.gouge_lines, "gouge_max")}}},
+        {"ok", d.ok}};
+  }
   if (!r.ignored.empty()) j["ignored"] = r.ignored;
   j["dropped_moves"] = r.dropped_moves;
   if (!r.dropped.empty()) j["dropped"] = r.dropped;
@@ -397,6 +553,34 @@ std::string Summary(const RunReport& r) {
                           "vertical deviation %.3g mm (tolerance %g mm)\n",
                           r.mesh.mesh_triangles, r.mesh.full_mesh_triangles,
                           r.mesh.mesh_deviation, r.mesh_tolerance);
+  }
+  if (r.deviation) {
+    const DeviationReport& d = *r.deviation;
+    auto where = [&](const LineDeviation& l) {
+      const std::string f = l.file >= 0 && l.file < static_cast<int32_t>(r.sources.size())
+                                ? r.sources[l.file]
+                                : std::string("?");
+      return absl::StrFormat("%s line %d", f, l.line);
+    };
+    absl::StrAppendFormat(
+        &s,
+        "  design   %s: %s (tolerance %g mm, allowance %g mm): gouge max %.4g "
+        "mm, excess max %.4g mm (normal: gouge %.4g, excess %.4g)%s\n",
+        r.design, d.ok ? "IN TOLERANCE" : "OUT OF TOLERANCE", d.tolerance,
+        d.allowance, d.gouge_max, d.excess_max, d.normal_gouge_max,
+        d.normal_excess_max,
+        d.ok ? "" : absl::StrFormat(", %.4g mm2 out", d.out_area_mm2));
+    const size_t shown = std::min<size_t>(5, d.gouge_lines.size());
+    for (size_t k = 0; k < shown; ++k) {
+      const LineDeviation& l = d.gouge_lines[k];
+      absl::StrAppendFormat(&s,
+                            "    gouge %.4g mm by %s at (%.3f, %.3f), %.4g mm2\n",
+                            l.depth, where(l), l.x, l.y, l.area_mm2);
+    }
+    if (d.gouge_lines.size() > shown) {
+      absl::StrAppendFormat(&s, "    ... %d more lines gouge (stats.json)\n",
+                            d.gouge_lines.size() - shown);
+    }
   }
   if (!r.files.empty()) {
     absl::StrAppend(&s, "  wrote   ");

@@ -4,6 +4,7 @@
 #define SWARF_CLIENT_RUN_REPORT_H_
 
 #include <cstdint>
+#include <memory>
 #include <optional>
 #include <string>
 #include <utility>
@@ -12,11 +13,15 @@
 #include "absl/status/status.h"
 #include "client/args.h"
 #include "client/connection.h"
+#include "client/deviation.h"
 #include "client/marks_files.h"
 #include "client/run_outputs.h"
 #include "core/cutting_marks.h"
 #include "core/scheme.h"
 #include "core/stock.h"
+#include "design/closest_point.h"
+#include "design/design_mesh.h"
+#include "design/top_envelope.h"
 
 namespace swarf::cli {
 
@@ -45,11 +50,46 @@ struct RunReport {
   // The meshes written, with --out.
   double mesh_tolerance = 0;
   RunOutputSummary mesh;
+  // The comparison with the design model (--design).
+  std::string design;  // its path
+  int64_t design_triangles = 0;
+  std::optional<DeviationReport> deviation;
+  std::optional<SourceLine> gouge_source;  // the deepest gouge's line
+  std::vector<std::string> sources;  // the program files, SourceLine::file
+  bool tolerance_gate = false;  // --tolerance given: exit 3 when not ok
   std::vector<std::string> files;  // written, in order
   // Each output step and its wall time (s), in order: the error statistics,
   // the marks and the tiles fetched, then every file built and written.
   std::vector<std::pair<std::string, double>> output_steps;
 };
+
+// The design model of `swarf run --design`: read before the moves are sent
+// (a bad file fails at once), placed on the grid once the stock is known.
+struct DesignInput {
+  std::string path;
+  design::DesignReadOptions read;
+  DeviationOptions deviation;
+  bool tolerance_given = false;
+  design::DesignMesh mesh;
+  std::optional<design::TopEnvelope> envelope;
+  std::unique_ptr<design::ClosestPointIndex> index;
+  // Each move's source line (by move id), and the files they index.
+  std::vector<SourceLine> move_lines;
+  std::vector<std::string> sources;
+  double seconds = 0;  // reading and placing it
+};
+
+// The design flags (documented in `swarf run`'s usage); nullopt without
+// --design. InvalidArgument naming the flag.
+inline constexpr const char* kDesignFlags[] = {
+    "design", "design-units", "design-offset", "allowance", "tolerance",
+    "deviation-samples"};
+absl::StatusOr<std::optional<DesignInput>> ParseDesignFlags(const Args& args);
+
+// Reads the design (NotFound / InvalidArgument / ResourceExhausted naming
+// the file) and places it on `stock`'s grid: its top envelope and
+// closest-point index.
+absl::Status LoadDesign(const StockSpec& stock, DesignInput* design);
 
 struct OutputOptions {
   std::string dir;    // empty: no files, statistics only
@@ -58,6 +98,8 @@ struct OutputOptions {
   MarkDisplayFilter marks_display = kDefaultMarkDisplay;
   // The session's moves by id (SurfaceGrid::moves); not owned, may be null.
   const std::vector<Move>* moves = nullptr;
+  // The design to compare with (LoadDesign done); not owned, may be null.
+  const DesignInput* design = nullptr;
 };
 
 // The valued options ParseOutputFlags reads (documented in `swarf run`'s

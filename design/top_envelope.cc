@@ -1,0 +1,204 @@
+#include "design/top_envelope.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "absl/strings/str_format.h"
+
+namespace swarf::design {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+// Node rows a rasterizing task owns: tasks never write the same node.
+constexpr int32_t kBandRows = 16;
+
+}  // namespace
+
+double TriangleHeightAt(const DesignMesh& mesh, int32_t t, double x, double y) {
+  const auto& tri = mesh.triangles[t];
+  const Vec3& a = mesh.vertices[tri[0]];
+  const Vec3& b = mesh.vertices[tri[1]];
+  const Vec3& c = mesh.vertices[tri[2]];
+  // Twice the signed XY area, and the barycentric weights of (x, y).
+  const double d = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+  const double span = std::max({std::fabs(b.x - a.x), std::fabs(c.x - a.x),
+                                std::fabs(b.y - a.y), std::fabs(c.y - a.y)});
+  if (!(std::fabs(d) > 1e-12 * span * span)) return kNaN;  // vertical
+  const double wa = ((b.x - x) * (c.y - y) - (b.y - y) * (c.x - x)) / d;
+  const double wb = ((c.x - x) * (a.y - y) - (c.y - y) * (a.x - x)) / d;
+  const double wc = 1.0 - wa - wb;
+  constexpr double kEdge = -1e-12;
+  if (wa < kEdge || wb < kEdge || wc < kEdge) return kNaN;
+  return wa * a.z + wb * b.z + wc * c.z;
+}
+
+absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
+                                               const GridGeometry& grid,
+                                               ThreadPool* pool) {
+  const Rect stock = grid.bounds();
+  if (mesh.x.empty() || mesh.x.hi < stock.x0 || mesh.x.lo > stock.x1 ||
+      mesh.y.hi < stock.y0 || mesh.y.lo > stock.y1) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the design [%.4g, %.4g] x [%.4g, %.4g] lies outside the stock "
+        "[%.4g, %.4g] x [%.4g, %.4g] (check --design-offset and "
+        "--design-units)",
+        mesh.x.lo, mesh.x.hi, mesh.y.lo, mesh.y.hi, stock.x0, stock.x1,
+        stock.y0, stock.y1));
+  }
+  if (pool == nullptr) pool = &ThreadPool::Default();
+  TopEnvelope env(mesh, grid);
+  const int32_t nxn = grid.nodes_x(), nyn = grid.nodes_y();
+  env.nodes_.assign(static_cast<size_t>(grid.node_count()),
+                    std::numeric_limits<float>::quiet_NaN());
+
+  // Each triangle's node rectangle (clamped to the grid); empty: skip.
+  const int32_t ntri = static_cast<int32_t>(mesh.triangles.size());
+  struct NodeBox {
+    int32_t i0, i1, j0, j1;
+  };
+  std::vector<NodeBox> boxes(ntri);
+  const double dx = grid.dx(), dy = grid.dy();
+  auto lo_index = [](double v, double origin, double step, int32_t n) {
+    return static_cast<int32_t>(
+        std::clamp(std::ceil((v - origin) / step - 1e-9), 0.0, double(n)));
+  };
+  auto hi_index = [](double v, double origin, double step, int32_t n) {
+    return static_cast<int32_t>(
+        std::clamp(std::floor((v - origin) / step + 1e-9), -1.0, double(n - 1)));
+  };
+  std::vector<int64_t> band_count((nyn + kBandRows - 1) / kBandRows + 1, 0);
+  for (int32_t t = 0; t < ntri; ++t) {
+    const auto& tri = mesh.triangles[t];
+    const Vec3& a = mesh.vertices[tri[0]];
+    const Vec3& b = mesh.vertices[tri[1]];
+    const Vec3& c = mesh.vertices[tri[2]];
+    NodeBox& nb = boxes[t];
+    nb.i0 = lo_index(std::min({a.x, b.x, c.x}), stock.x0, dx, nxn);
+    nb.i1 = hi_index(std::max({a.x, b.x, c.x}), stock.x0, dx, nxn);
+    nb.j0 = lo_index(std::min({a.y, b.y, c.y}), stock.y0, dy, nyn);
+    nb.j1 = hi_index(std::max({a.y, b.y, c.y}), stock.y0, dy, nyn);
+    if (nb.i0 > nb.i1 || nb.j0 > nb.j1) continue;
+    for (int32_t band = nb.j0 / kBandRows; band <= nb.j1 / kBandRows; ++band) {
+      ++band_count[band + 1];
+    }
+  }
+  for (size_t k = 1; k < band_count.size(); ++k) band_count[k] += band_count[k - 1];
+  std::vector<int32_t> band_tris(band_count.back());
+  {
+    std::vector<int64_t> fill(band_count.begin(), band_count.end() - 1);
+    for (int32_t t = 0; t < ntri; ++t) {
+      const NodeBox& nb = boxes[t];
+      if (nb.i0 > nb.i1 || nb.j0 > nb.j1) continue;
+      for (int32_t band = nb.j0 / kBandRows; band <= nb.j1 / kBandRows;
+           ++band) {
+        band_tris[fill[band]++] = t;
+      }
+    }
+  }
+  const int64_t bands = static_cast<int64_t>(band_count.size()) - 1;
+  std::vector<int64_t> band_covered(bands, 0);
+  pool->ParallelFor(bands, [&](int64_t band) {
+    const int32_t jb0 = static_cast<int32_t>(band * kBandRows);
+    const int32_t jb1 = std::min(nyn - 1, jb0 + kBandRows - 1);
+    for (int64_t k = band_count[band]; k < band_count[band + 1]; ++k) {
+      const int32_t t = band_tris[k];
+      const NodeBox& nb = boxes[t];
+      for (int32_t j = std::max(jb0, nb.j0); j <= std::min(jb1, nb.j1); ++j) {
+        const double y = grid.NodeY(j);
+        float* row = &env.nodes_[int64_t{j} * nxn];
+        for (int32_t i = nb.i0; i <= nb.i1; ++i) {
+          const double z = TriangleHeightAt(mesh, t, grid.NodeX(i), y);
+          if (std::isnan(z)) continue;
+          const float zf = static_cast<float>(z);
+          if (!(row[i] >= zf)) row[i] = zf;  // NaN or lower
+        }
+      }
+    }
+    int64_t covered = 0;
+    for (int32_t j = jb0; j <= jb1; ++j) {
+      const float* row = &env.nodes_[int64_t{j} * nxn];
+      for (int32_t i = 0; i < nxn; ++i) covered += !std::isnan(row[i]);
+    }
+    band_covered[band] = covered;
+  });
+  for (int64_t c : band_covered) env.covered_ += c;
+
+  // Bins for At(): about two triangles a bin, at most 4 M bins.
+  const double w = std::max(mesh.x.hi - mesh.x.lo, 1e-9);
+  const double h = std::max(mesh.y.hi - mesh.y.lo, 1e-9);
+  env.bsize_ = std::max(std::sqrt(w * h / std::max(1, ntri / 2)),
+                        std::sqrt(w * h / 4e6));
+  env.bx0_ = mesh.x.lo;
+  env.by0_ = mesh.y.lo;
+  env.bnx_ = std::max(1, static_cast<int32_t>(std::ceil(w / env.bsize_)));
+  env.bny_ = std::max(1, static_cast<int32_t>(std::ceil(h / env.bsize_)));
+  const int64_t nbins = int64_t{env.bnx_} * env.bny_;
+  env.bin_start_.assign(nbins + 1, 0);
+  auto bin_range = [&](int32_t t, int32_t* bx0, int32_t* bx1, int32_t* by0,
+                       int32_t* by1) {
+    const auto& tri = mesh.triangles[t];
+    const Vec3& a = mesh.vertices[tri[0]];
+    const Vec3& b = mesh.vertices[tri[1]];
+    const Vec3& c = mesh.vertices[tri[2]];
+    auto cell = [&](double v, double o, int32_t n) {
+      return std::clamp(static_cast<int32_t>(std::floor((v - o) / env.bsize_)),
+                        0, n - 1);
+    };
+    *bx0 = cell(std::min({a.x, b.x, c.x}), env.bx0_, env.bnx_);
+    *bx1 = cell(std::max({a.x, b.x, c.x}), env.bx0_, env.bnx_);
+    *by0 = cell(std::min({a.y, b.y, c.y}), env.by0_, env.bny_);
+    *by1 = cell(std::max({a.y, b.y, c.y}), env.by0_, env.bny_);
+  };
+  std::vector<uint8_t> vertical(ntri);
+  for (int32_t t = 0; t < ntri; ++t) {
+    const auto& tri = mesh.triangles[t];
+    const Vec3& a = mesh.vertices[tri[0]];
+    const Vec3& b = mesh.vertices[tri[1]];
+    const Vec3& c = mesh.vertices[tri[2]];
+    const double d = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
+    const double span = std::max({std::fabs(b.x - a.x), std::fabs(c.x - a.x),
+                                  std::fabs(b.y - a.y), std::fabs(c.y - a.y)});
+    vertical[t] = !(std::fabs(d) > 1e-12 * span * span);
+    if (vertical[t]) continue;
+    int32_t bx0, bx1, by0, by1;
+    bin_range(t, &bx0, &bx1, &by0, &by1);
+    for (int32_t by = by0; by <= by1; ++by) {
+      for (int32_t bx = bx0; bx <= bx1; ++bx) {
+        ++env.bin_start_[int64_t{by} * env.bnx_ + bx + 1];
+      }
+    }
+  }
+  for (int64_t b = 1; b <= nbins; ++b) env.bin_start_[b] += env.bin_start_[b - 1];
+  env.bin_tris_.resize(env.bin_start_.back());
+  std::vector<int64_t> fill(env.bin_start_.begin(), env.bin_start_.end() - 1);
+  for (int32_t t = 0; t < ntri; ++t) {
+    if (vertical[t]) continue;
+    int32_t bx0, bx1, by0, by1;
+    bin_range(t, &bx0, &bx1, &by0, &by1);
+    for (int32_t by = by0; by <= by1; ++by) {
+      for (int32_t bx = bx0; bx <= bx1; ++bx) {
+        env.bin_tris_[fill[int64_t{by} * env.bnx_ + bx]++] = t;
+      }
+    }
+  }
+  return env;
+}
+
+double TopEnvelope::At(double x, double y) const {
+  const double fx = std::floor((x - bx0_) / bsize_);
+  const double fy = std::floor((y - by0_) / bsize_);
+  // A point on the bounds' far edge belongs to the last bin.
+  if (!(fx >= -1 && fx <= bnx_ && fy >= -1 && fy <= bny_)) return kNaN;
+  const int32_t bx = std::clamp(static_cast<int32_t>(fx), 0, bnx_ - 1);
+  const int32_t by = std::clamp(static_cast<int32_t>(fy), 0, bny_ - 1);
+  const int64_t b = int64_t{by} * bnx_ + bx;
+  double best = kNaN;
+  for (int64_t k = bin_start_[b]; k < bin_start_[b + 1]; ++k) {
+    const double z = TriangleHeightAt(*mesh_, bin_tris_[k], x, y);
+    if (!std::isnan(z) && !(best >= z)) best = z;
+  }
+  return best;
+}
+
+}  // namespace swarf::design

@@ -1,0 +1,76 @@
+// The design's top envelope z_d(x, y): the highest design surface above each
+// point of the XY plane (NaN where no triangle lies above it: nothing to
+// keep there). For 3-axis milling this is what must remain of the stock.
+//
+// Contract:
+// - Units: millimetres; the grid is the session's (GridGeometry), node (i, j)
+//   at NodeX(i), NodeY(j) exactly as in the core.
+// - The node raster is one float per node (4 bytes a node), computed once
+//   per design and grid. At() answers between nodes from the triangles
+//   themselves (a bin index over the design's XY projection), exact to the
+//   double arithmetic of one plane through three points.
+// - Immutable once built: every const method is thread-safe. Keeps a
+//   reference to the mesh, which must outlive it.
+#ifndef SWARF_DESIGN_TOP_ENVELOPE_H_
+#define SWARF_DESIGN_TOP_ENVELOPE_H_
+
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "core/stock.h"
+#include "core/thread_pool.h"
+#include "design/design_mesh.h"
+
+namespace swarf::design {
+
+class TopEnvelope {
+ public:
+  // Rasterizes every non-vertical triangle onto the grid's nodes (on
+  // `pool`, default ThreadPool::Default(); the same floats whatever its
+  // size) and indexes the triangles by XY bins. InvalidArgument when the
+  // design's XY bounds miss the stock rectangle entirely.
+  static absl::StatusOr<TopEnvelope> Build(const DesignMesh& mesh,
+                                           const GridGeometry& grid,
+                                           ThreadPool* pool = nullptr);
+
+  // z_d at node (i, j), NaN where no design lies above it.
+  float AtNode(int32_t i, int32_t j) const {
+    return nodes_[int64_t{j} * grid_.nodes_x() + i];
+  }
+  const std::vector<float>& nodes() const { return nodes_; }
+  // z_d at any point, NaN where no design lies above it.
+  double At(double x, double y) const;
+
+  const GridGeometry& grid() const { return grid_; }
+  const DesignMesh& mesh() const { return *mesh_; }
+  // Nodes with design above them.
+  int64_t covered_nodes() const { return covered_; }
+
+ private:
+  TopEnvelope(const DesignMesh& mesh, const GridGeometry& grid)
+      : mesh_(&mesh), grid_(grid) {}
+
+  const DesignMesh* mesh_;
+  GridGeometry grid_;
+  std::vector<float> nodes_;
+  int64_t covered_ = 0;
+  // Bins over the design's XY bounds: bin (bx, by) holds the non-vertical
+  // triangles whose XY bounds meet it, bin_start_[b] .. bin_start_[b + 1]
+  // in bin_tris_.
+  double bx0_ = 0, by0_ = 0, bsize_ = 1;
+  int32_t bnx_ = 1, bny_ = 1;
+  std::vector<int64_t> bin_start_;
+  std::vector<int32_t> bin_tris_;
+};
+
+// The height of triangle `t` of `mesh` above (x, y) if (x, y) lies in its
+// XY projection (edges included, with a relative tolerance of 1e-12 so that
+// points on a shared edge are never missed), else NaN; NaN for a vertical
+// triangle.
+double TriangleHeightAt(const DesignMesh& mesh, int32_t t, double x, double y);
+
+}  // namespace swarf::design
+
+#endif  // SWARF_DESIGN_TOP_ENVELOPE_H_
