@@ -8,7 +8,7 @@ ASAN_BUILD ?= build-asan
 FUZZ_SECONDS ?= 30
 
 .PHONY: all build deps demo test bench clean lint-deploy fuzz fuzz-build \
-	test-sanitize
+	test-sanitize test-fresh
 
 all: build
 
@@ -38,6 +38,12 @@ demo: deps build
 test: deps build fuzz-build
 	cd $(BUILD) && ctest --output-on-failure --timeout 900 -j $(JOBS)
 	cd $(FUZZ_BUILD) && ctest --output-on-failure -j 3 -L '^fuzz$$'
+
+# What a new user gets: `make test` in a fresh clone of the committed HEAD in
+# an empty temporary folder, nothing beside it (scripts/test-fresh). Long (a
+# full build); not part of CI.
+test-fresh:
+	JOBS=$(JOBS) scripts/test-fresh
 
 bench: deps build
 	$(BUILD)/bin/swarf_bench
