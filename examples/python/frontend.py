@@ -1,4 +1,4 @@
-"""A CAM frontend in 30 lines: a program's tool tips (G0/G1 with X/Y/Z words,
+"""A CAM frontend in 40 lines: a program's tool tips (G0/G1 with X/Y/Z words,
 tool changes T.. M6) through swarf_client, then the heights as a .npy and the
 cutting marks as a plot (if matplotlib is there).
 usage: frontend.py [PROGRAM] [HOST:PORT]   (swarfd must be running)
