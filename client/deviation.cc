@@ -225,27 +225,48 @@ absl::StatusOr<DeviationReport> MeasureDeviation(
     pool.ParallelFor(g.ny(), [&](int64_t ej) {
       Partial& p = sample_parts[ej];
       SurfaceSampler sampler(grid);
+      std::vector<int32_t> candidates;
+      std::vector<double> xs(n * n), ys(n * n), zds(n * n), zs(n * n);
       const double y0 = g.NodeY(static_cast<int32_t>(ej));
+      const double y1 = g.NodeY(static_cast<int32_t>(ej) + 1);
       for (int32_t ei = 0; ei < g.nx(); ++ei) {
         const double x0 = g.NodeX(ei);
+        // The move that cut deepest in the element: its lowest corner's
+        // owner (the nearest corner's may be a move whose cut ends beside).
+        int32_t owner = -1;
+        double lowest = 0;
+        for (int c = 0; c < 4; ++c) {
+          const int32_t ci = ei + (c & 1);
+          const int32_t cj = static_cast<int32_t>(ej) + (c >> 1);
+          const double w = grid.jet(ci, cj).w;
+          if (c == 0 || w < lowest) {
+            lowest = w;
+            owner = grid.owner(ci, cj);
+          }
+        }
+        // The design's triangles over the element, for all its samples.
+        const double x1 = g.NodeX(ei + 1);
+        envelope.Candidates({x0, y0, x1, y1}, &candidates);
+        if (candidates.empty()) continue;
+        int32_t m = 0;
         for (int t = 0; t < n; ++t) {
-          const double fy = static_cast<double>(t) / (n - 1);
-          const double y = t == n - 1 ? g.NodeY(static_cast<int32_t>(ej) + 1)
-                                      : y0 + fy * g.dy();
+          const double y = t == n - 1 ? y1 : y0 + t * g.dy() / (n - 1);
           for (int s = 0; s < n; ++s) {
             if ((s == 0 || s == n - 1) && (t == 0 || t == n - 1)) continue;
-            const double fx = static_cast<double>(s) / (n - 1);
-            const double x = s == n - 1 ? g.NodeX(ei + 1) : x0 + fx * g.dx();
-            const double zd = envelope.At(x, y);
+            const double x = s == n - 1 ? x1 : x0 + s * g.dx() / (n - 1);
+            const double zd = envelope.AtAmong(candidates, x, y);
             if (std::isnan(zd)) continue;
-            double gx, gy;
-            const double z = sampler.HeightAndGradient(x, y, &gx, &gy);
-            // The nearest corner's owner cut here.
-            const int32_t owner = grid.owner(ei + (fx > 0.5 ? 1 : 0),
-                                             static_cast<int32_t>(ej) +
-                                                 (fy > 0.5 ? 1 : 0));
-            cmp.Point(p, x, y, z, zd, owner, 0);
+            xs[m] = x;
+            ys[m] = y;
+            zds[m] = zd;
+            ++m;
           }
+        }
+        if (m == 0) continue;
+        sampler.ReconstructInElement(ei, static_cast<int32_t>(ej), xs.data(),
+                                     ys.data(), m, zs.data());
+        for (int32_t q = 0; q < m; ++q) {
+          cmp.Point(p, xs[q], ys[q], zs[q], zds[q], owner, 0);
         }
       }
     });

@@ -206,27 +206,36 @@ double SurfaceSampler::HeightAndGradient(double x, double y, double* gx,
   const GridGeometry g(grid_.spec);
   x = std::clamp(x, grid_.spec.x0, grid_.spec.x1);
   y = std::clamp(y, grid_.spec.y0, grid_.spec.y1);
-  const int32_t ei = g.ElementX(x), ej = g.ElementY(y);
-  if (ei != ei_ || ej != ej_) {
-    if (scheme_.kind() == SchemeKind::kGuarded) {
-      // Prepared from the nodes' regions (a node serves four elements);
-      // PrepareGuarded reads them for cut corners only.
-      e_ = grid_.Corners(ei, ej, /*prepare=*/false);
-      const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
-      const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
-      static const PatchTrustRegion kNone;
-      const PatchTrustRegion* trust[4];
-      for (int k = 0; k < 4; ++k) {
-        trust[k] = e_.owner[k] >= 0 ? Region(is[k], js[k]) : &kNone;
-      }
-      PrepareGuarded(&e_, trust);
-    } else {
-      e_ = grid_.Corners(ei, ej);
-    }
-    ei_ = ei;
-    ej_ = ej;
-  }
+  Select(g.ElementX(x), g.ElementY(y));
   return scheme_.HeightAndGradient(e_, x, y, gx, gy);
+}
+
+void SurfaceSampler::Select(int32_t ei, int32_t ej) {
+  if (ei == ei_ && ej == ej_) return;
+  if (scheme_.kind() == SchemeKind::kGuarded) {
+    // Prepared from the nodes' regions (a node serves four elements);
+    // PrepareGuarded reads them for cut corners only.
+    e_ = grid_.Corners(ei, ej, /*prepare=*/false);
+    const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
+    const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
+    static const PatchTrustRegion kNone;
+    const PatchTrustRegion* trust[4];
+    for (int k = 0; k < 4; ++k) {
+      trust[k] = e_.owner[k] >= 0 ? Region(is[k], js[k]) : &kNone;
+    }
+    PrepareGuarded(&e_, trust);
+  } else {
+    e_ = grid_.Corners(ei, ej);
+  }
+  ei_ = ei;
+  ej_ = ej;
+}
+
+void SurfaceSampler::ReconstructInElement(int32_t ei, int32_t ej,
+                                          const double* x, const double* y,
+                                          int32_t n, double* out) {
+  Select(ei, ej);
+  scheme_.ReconstructMany(e_, x, y, n, out);
 }
 
 double SurfaceGrid::MinNodeHeight() const {

@@ -98,8 +98,14 @@ class SurfaceSampler {
  public:
   explicit SurfaceSampler(const SurfaceGrid& grid);
   double HeightAndGradient(double x, double y, double* gx, double* gy);
+  // The reconstruction of element (ei, ej) at n points of it (its closed
+  // rectangle: points on its edges are taken from this element), as
+  // Scheme::ReconstructMany on the element prepared as above.
+  void ReconstructInElement(int32_t ei, int32_t ej, const double* x,
+                            const double* y, int32_t n, double* out);
 
  private:
+  void Select(int32_t ei, int32_t ej);
   const PatchTrustRegion* Region(int32_t i, int32_t j);
 
   const SurfaceGrid& grid_;

@@ -15,22 +15,36 @@ constexpr int32_t kBandRows = 16;
 
 }  // namespace
 
-double TriangleHeightAt(const DesignMesh& mesh, int32_t t, double x, double y) {
+TopEnvelope::Plane TopEnvelope::PlaneOf(const DesignMesh& mesh, int32_t t) {
   const auto& tri = mesh.triangles[t];
   const Vec3& a = mesh.vertices[tri[0]];
   const Vec3& b = mesh.vertices[tri[1]];
   const Vec3& c = mesh.vertices[tri[2]];
-  // Twice the signed XY area, and the barycentric weights of (x, y).
-  const double d = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
-  const double span = std::max({std::fabs(b.x - a.x), std::fabs(c.x - a.x),
-                                std::fabs(b.y - a.y), std::fabs(c.y - a.y)});
-  if (!(std::fabs(d) > 1e-12 * span * span)) return kNaN;  // vertical
-  const double wa = ((b.x - x) * (c.y - y) - (b.y - y) * (c.x - x)) / d;
-  const double wb = ((c.x - x) * (a.y - y) - (c.y - y) * (a.x - x)) / d;
-  const double wc = 1.0 - wa - wb;
-  constexpr double kEdge = -1e-12;
-  if (wa < kEdge || wb < kEdge || wc < kEdge) return kNaN;
-  return wa * a.z + wb * b.z + wc * c.z;
+  const double ux = b.x - a.x, uy = b.y - a.y, vx = c.x - a.x, vy = c.y - a.y;
+  // Twice the signed XY area; next to nothing: the triangle is vertical.
+  const double d = ux * vy - uy * vx;
+  const double span =
+      std::max({std::fabs(ux), std::fabs(uy), std::fabs(vx), std::fabs(vy)});
+  if (!(std::fabs(d) > 1e-12 * span * span)) {
+    return {kNaN, kNaN, kNaN, 0, 0, 0, 0, 0, 0};
+  }
+  // The inverse of [u v]: (x - xa, y - ya) = wb u + wc v.
+  return {a.x,     a.y,      a.z,          vy / d,      -vx / d,
+          -uy / d, ux / d,   b.z - a.z,    c.z - a.z};
+}
+
+double TopEnvelope::HeightAt(const Plane& p, double x, double y) {
+  const double rx = x - p.xa, ry = y - p.ya;
+  const double wb = p.m00 * rx + p.m01 * ry;
+  const double wc = p.m10 * rx + p.m11 * ry;
+  constexpr double kEdge = 1e-12;
+  // NaN (a vertical triangle) fails every comparison.
+  if (!(wb >= -kEdge && wc >= -kEdge && wb + wc <= 1 + kEdge)) return kNaN;
+  return p.za + wb * p.dzb + wc * p.dzc;
+}
+
+double TriangleHeightAt(const DesignMesh& mesh, int32_t t, double x, double y) {
+  return TopEnvelope::HeightAt(TopEnvelope::PlaneOf(mesh, t), x, y);
 }
 
 absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
@@ -54,6 +68,25 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
 
   // Each triangle's node rectangle (clamped to the grid); empty: skip.
   const int32_t ntri = static_cast<int32_t>(mesh.triangles.size());
+  env.planes_.resize(ntri);
+  env.bounds_.resize(ntri);
+  for (int32_t t = 0; t < ntri; ++t) {
+    env.planes_[t] = PlaneOf(mesh, t);
+    const auto& tri = mesh.triangles[t];
+    const Vec3& a = mesh.vertices[tri[0]];
+    const Vec3& b = mesh.vertices[tri[1]];
+    const Vec3& c = mesh.vertices[tri[2]];
+    auto down = [](double v) {
+      return std::nextafter(static_cast<float>(v), -HUGE_VALF);
+    };
+    auto up = [](double v) {
+      return std::nextafter(static_cast<float>(v), HUGE_VALF);
+    };
+    env.bounds_[t] = {down(std::min({a.x, b.x, c.x})),
+                      down(std::min({a.y, b.y, c.y})),
+                      up(std::max({a.x, b.x, c.x})),
+                      up(std::max({a.y, b.y, c.y}))};
+  }
   struct NodeBox {
     int32_t i0, i1, j0, j1;
   };
@@ -74,6 +107,10 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
     const Vec3& b = mesh.vertices[tri[1]];
     const Vec3& c = mesh.vertices[tri[2]];
     NodeBox& nb = boxes[t];
+    if (std::isnan(env.planes_[t].xa)) {  // vertical: covers no node
+      nb = {1, 0, 1, 0};
+      continue;
+    }
     nb.i0 = lo_index(std::min({a.x, b.x, c.x}), stock.x0, dx, nxn);
     nb.i1 = hi_index(std::max({a.x, b.x, c.x}), stock.x0, dx, nxn);
     nb.j0 = lo_index(std::min({a.y, b.y, c.y}), stock.y0, dy, nyn);
@@ -108,7 +145,7 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
         const double y = grid.NodeY(j);
         float* row = &env.nodes_[int64_t{j} * nxn];
         for (int32_t i = nb.i0; i <= nb.i1; ++i) {
-          const double z = TriangleHeightAt(mesh, t, grid.NodeX(i), y);
+          const double z = HeightAt(env.planes_[t], grid.NodeX(i), y);
           if (std::isnan(z)) continue;
           const float zf = static_cast<float>(z);
           if (!(row[i] >= zf)) row[i] = zf;  // NaN or lower
@@ -150,17 +187,8 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
     *by0 = cell(std::min({a.y, b.y, c.y}), env.by0_, env.bny_);
     *by1 = cell(std::max({a.y, b.y, c.y}), env.by0_, env.bny_);
   };
-  std::vector<uint8_t> vertical(ntri);
   for (int32_t t = 0; t < ntri; ++t) {
-    const auto& tri = mesh.triangles[t];
-    const Vec3& a = mesh.vertices[tri[0]];
-    const Vec3& b = mesh.vertices[tri[1]];
-    const Vec3& c = mesh.vertices[tri[2]];
-    const double d = (b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x);
-    const double span = std::max({std::fabs(b.x - a.x), std::fabs(c.x - a.x),
-                                  std::fabs(b.y - a.y), std::fabs(c.y - a.y)});
-    vertical[t] = !(std::fabs(d) > 1e-12 * span * span);
-    if (vertical[t]) continue;
+    if (std::isnan(env.planes_[t].xa)) continue;  // vertical
     int32_t bx0, bx1, by0, by1;
     bin_range(t, &bx0, &bx1, &by0, &by1);
     for (int32_t by = by0; by <= by1; ++by) {
@@ -173,7 +201,7 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
   env.bin_tris_.resize(env.bin_start_.back());
   std::vector<int64_t> fill(env.bin_start_.begin(), env.bin_start_.end() - 1);
   for (int32_t t = 0; t < ntri; ++t) {
-    if (vertical[t]) continue;
+    if (std::isnan(env.planes_[t].xa)) continue;
     int32_t bx0, bx1, by0, by1;
     bin_range(t, &bx0, &bx1, &by0, &by1);
     for (int32_t by = by0; by <= by1; ++by) {
@@ -183,6 +211,34 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
     }
   }
   return env;
+}
+
+void TopEnvelope::Candidates(const Rect& r, std::vector<int32_t>* out) const {
+  out->clear();
+  const double fx0 = std::floor((r.x0 - bx0_) / bsize_);
+  const double fx1 = std::floor((r.x1 - bx0_) / bsize_);
+  const double fy0 = std::floor((r.y0 - by0_) / bsize_);
+  const double fy1 = std::floor((r.y1 - by0_) / bsize_);
+  if (!(fx1 >= -1 && fx0 <= bnx_ && fy1 >= -1 && fy0 <= bny_)) return;
+  const int32_t bx0 = std::clamp(static_cast<int32_t>(std::max(fx0, -1.0)), 0, bnx_ - 1);
+  const int32_t bx1 = std::clamp(static_cast<int32_t>(std::min(fx1, double(bnx_))), 0, bnx_ - 1);
+  const int32_t by0 = std::clamp(static_cast<int32_t>(std::max(fy0, -1.0)), 0, bny_ - 1);
+  const int32_t by1 = std::clamp(static_cast<int32_t>(std::min(fy1, double(bny_))), 0, bny_ - 1);
+  for (int32_t by = by0; by <= by1; ++by) {
+    for (int32_t bx = bx0; bx <= bx1; ++bx) {
+      const int64_t b = int64_t{by} * bnx_ + bx;
+      for (int64_t k = bin_start_[b]; k < bin_start_[b + 1]; ++k) {
+        const int32_t t = bin_tris_[k];
+        const auto& bb = bounds_[t];
+        if (bb[0] > r.x1 || bb[2] < r.x0 || bb[1] > r.y1 || bb[3] < r.y0) {
+          continue;
+        }
+        if (std::find(out->begin(), out->end(), t) == out->end()) {
+          out->push_back(t);
+        }
+      }
+    }
+  }
 }
 
 double TopEnvelope::At(double x, double y) const {
@@ -195,7 +251,7 @@ double TopEnvelope::At(double x, double y) const {
   const int64_t b = int64_t{by} * bnx_ + bx;
   double best = kNaN;
   for (int64_t k = bin_start_[b]; k < bin_start_[b + 1]; ++k) {
-    const double z = TriangleHeightAt(*mesh_, bin_tris_[k], x, y);
+    const double z = HeightAt(planes_[bin_tris_[k]], x, y);
     if (!std::isnan(z) && !(best >= z)) best = z;
   }
   return best;

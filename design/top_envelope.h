@@ -15,7 +15,9 @@
 #define SWARF_DESIGN_TOP_ENVELOPE_H_
 
 #include <cmath>
+#include <array>
 #include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -42,11 +44,34 @@ class TopEnvelope {
   const std::vector<float>& nodes() const { return nodes_; }
   // z_d at any point, NaN where no design lies above it.
   double At(double x, double y) const;
+  // The same for points of a small rectangle r, from its candidates: the
+  // non-vertical triangles whose XY bounds meet r (Candidates replaces
+  // `out`'s contents), then AtAmong(out, x, y) == At(x, y) for (x, y) in r.
+  void Candidates(const Rect& r, std::vector<int32_t>* out) const;
+  double AtAmong(const std::vector<int32_t>& candidates, double x,
+                 double y) const {
+    double best = std::numeric_limits<double>::quiet_NaN();
+    for (int32_t t : candidates) {
+      const double z = HeightAt(planes_[t], x, y);
+      if (!std::isnan(z) && !(best >= z)) best = z;
+    }
+    return best;
+  }
 
   const GridGeometry& grid() const { return grid_; }
   const DesignMesh& mesh() const { return *mesh_; }
   // Nodes with design above them.
   int64_t covered_nodes() const { return covered_; }
+
+  // A non-vertical triangle as its barycentric map from vertex a:
+  // (wb, wc) = m * (x - xa, y - ya), inside when wb, wc >= 0 and
+  // wb + wc <= 1 (with a 1e-12 margin), z = za + wb dzb + wc dzc. xa is NaN
+  // for a vertical triangle.
+  struct Plane {
+    double xa, ya, za, m00, m01, m10, m11, dzb, dzc;
+  };
+  static Plane PlaneOf(const DesignMesh& mesh, int32_t t);
+  static double HeightAt(const Plane& p, double x, double y);
 
  private:
   TopEnvelope(const DesignMesh& mesh, const GridGeometry& grid)
@@ -54,6 +79,9 @@ class TopEnvelope {
 
   const DesignMesh* mesh_;
   GridGeometry grid_;
+  std::vector<Plane> planes_;  // one per triangle
+  // Each triangle's XY bounds (x0, y0, x1, y1), rounded outwards to floats.
+  std::vector<std::array<float, 4>> bounds_;
   std::vector<float> nodes_;
   int64_t covered_ = 0;
   // Bins over the design's XY bounds: bin (bx, by) holds the non-vertical
@@ -66,9 +94,9 @@ class TopEnvelope {
 };
 
 // The height of triangle `t` of `mesh` above (x, y) if (x, y) lies in its
-// XY projection (edges included, with a relative tolerance of 1e-12 so that
-// points on a shared edge are never missed), else NaN; NaN for a vertical
-// triangle.
+// XY projection (edges included, with a margin of 1e-12 in barycentric
+// weights so that points on a shared edge are never missed), else NaN; NaN
+// for a vertical triangle. As TopEnvelope computes it.
 double TriangleHeightAt(const DesignMesh& mesh, int32_t t, double x, double y);
 
 }  // namespace swarf::design
