@@ -107,9 +107,9 @@ class Comparer {
       if (v > excess_limit) {
         p.out_area += area;
         ++p.out_points;
+        if (src != nullptr) Note(p.excess_lines, *src, v, x, y, area);
       }
     }
-    if (v > 0 && src != nullptr) Note(p.excess_lines, *src, v, x, y, 0);
     return v;
   }
 

@@ -76,7 +76,8 @@ struct DeviationReport {
   bool ok = true;
   // Lines whose gouges are out of tolerance, deepest first.
   std::vector<LineDeviation> gouge_lines;
-  // Lines that left the largest excess where they cut last, largest first.
+  // Lines that left excess out of tolerance where they cut last (normal
+  // excess > allowance + tolerance), largest first.
   std::vector<LineDeviation> excess_lines;
   // Per node (row-major as the grid), for deviation.png: the signed normal
   // deviation where it was queried, else dz (then within tolerance); NaN

@@ -1,6 +1,10 @@
 #include "design/design_mesh.h"
 
+#include <unistd.h>
+
 #include <bit>
+#include <cstdio>
+#include <filesystem>
 #include <cmath>
 #include <cstring>
 #include <fstream>
@@ -131,6 +135,11 @@ absl::StatusOr<std::vector<double>> AsciiStlSoup(absl::string_view bytes,
   return soup;
 }
 
+bool IsStep(absl::string_view bytes) {
+  return absl::StartsWith(
+      absl::StripLeadingAsciiWhitespace(bytes.substr(0, 64)), "ISO-10303-21");
+}
+
 }  // namespace
 
 absl::StatusOr<DesignMesh> MeshFromSoup(const std::vector<double>& soup,
@@ -250,14 +259,43 @@ absl::StatusOr<DesignMesh> ReadDesignFile(const std::string& path,
   std::ostringstream text;
   text << in.rdbuf();
   const std::string bytes = std::move(text).str();
-  if (absl::StartsWith(absl::StripLeadingAsciiWhitespace(
-                           absl::string_view(bytes).substr(0, 64)),
-                       "ISO-10303-21")) {
+  if (IsStep(bytes)) {
     auto soup = TessellateStep(path, options);
     if (!soup.ok()) return soup.status();
     return MeshFromSoup(*soup, path, options.max_triangles);
   }
   return ParseStl(bytes, path, options);
+}
+
+absl::StatusOr<DesignMesh> ParseDesign(absl::string_view bytes,
+                                       const std::string& name,
+                                       const DesignReadOptions& options) {
+  if (!IsStep(bytes)) return ParseStl(bytes, name, options);
+  std::string tmpl =
+      (std::filesystem::temp_directory_path() / "swarf_design_XXXXXX.step")
+          .string();
+  const int fd = mkstemps(tmpl.data(), 5);
+  if (fd < 0) {
+    return absl::InternalError(
+        absl::StrCat(name, ": cannot write a temporary STEP file"));
+  }
+  bool written = true;
+  for (size_t done = 0; done < bytes.size();) {
+    const ssize_t n = write(fd, bytes.data() + done, bytes.size() - done);
+    if (n <= 0) {
+      written = false;
+      break;
+    }
+    done += static_cast<size_t>(n);
+  }
+  close(fd);
+  absl::StatusOr<std::vector<double>> soup =
+      written ? TessellateStep(tmpl, options, name)
+              : absl::InternalError(absl::StrCat(
+                    name, ": cannot write a temporary STEP file"));
+  std::remove(tmpl.c_str());
+  if (!soup.ok()) return soup.status();
+  return MeshFromSoup(*soup, name, options.max_triangles);
 }
 
 std::string ToBinaryStl(const DesignMesh& mesh) {

@@ -64,6 +64,12 @@ absl::StatusOr<DesignMesh> ParseStl(absl::string_view bytes,
 absl::StatusOr<DesignMesh> ReadDesignFile(const std::string& path,
                                           const DesignReadOptions& options = {});
 
+// The bytes of a design file by content, as ReadDesignFile: STEP through a
+// temporary file (OpenCASCADE reads files), else STL. `name` in messages.
+absl::StatusOr<DesignMesh> ParseDesign(absl::string_view bytes,
+                                       const std::string& name,
+                                       const DesignReadOptions& options = {});
+
 // Welds and checks a triangle soup (9 doubles a triangle, mm, options
 // applied by the caller): NaN or infinite coordinates, no triangle left,
 // more than options.max_triangles, an edge shared by more than two

@@ -17,18 +17,20 @@
 namespace swarf::design {
 
 absl::StatusOr<std::vector<double>> TessellateStep(
-    const std::string& path, const DesignReadOptions& options) {
+    const std::string& path, const DesignReadOptions& options,
+    const std::string& label) {
+  const std::string& name = label.empty() ? path : label;
   try {
     STEPControl_Reader reader;
     if (reader.ReadFile(path.c_str()) != IFSelect_RetDone) {
       return absl::InvalidArgumentError(
-          absl::StrCat(path, ": OpenCASCADE cannot read this STEP file"));
+          absl::StrCat(name, ": OpenCASCADE cannot read this STEP file"));
     }
     reader.TransferRoots();
     const TopoDS_Shape shape = reader.OneShape();
     if (shape.IsNull()) {
       return absl::InvalidArgumentError(
-          absl::StrCat(path, ": the STEP file holds no shape"));
+          absl::StrCat(name, ": the STEP file holds no shape"));
     }
     // The deflection is in the file's units (OpenCASCADE converts STEP's to
     // mm when it reads), so mm before `scale`.
@@ -49,7 +51,7 @@ absl::StatusOr<std::vector<double>> TessellateStep(
         if (reversed) std::swap(n[1], n[2]);
         if (static_cast<int64_t>(soup.size() / 9) >= options.max_triangles) {
           return absl::ResourceExhaustedError(absl::StrCat(
-              path, ": the tessellated design has more than ",
+              name, ": the tessellated design has more than ",
               options.max_triangles, " triangles"));
         }
         for (int k = 0; k < 3; ++k) {
@@ -62,12 +64,12 @@ absl::StatusOr<std::vector<double>> TessellateStep(
     }
     if (soup.empty()) {
       return absl::InvalidArgumentError(
-          absl::StrCat(path, ": the STEP file has no faces to tessellate"));
+          absl::StrCat(name, ": the STEP file has no faces to tessellate"));
     }
     return soup;
   } catch (const Standard_Failure& e) {
     return absl::InvalidArgumentError(absl::StrCat(
-        path, ": OpenCASCADE failed: ", e.GetMessageString()));
+        name, ": OpenCASCADE failed: ", e.GetMessageString()));
   }
 }
 

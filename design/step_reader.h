@@ -16,8 +16,10 @@ namespace swarf::design {
 // options.step_deflection in mm: the tessellation lies within it of the
 // exact surfaces. InvalidArgument naming the file when OpenCASCADE cannot
 // read it or it holds no faces.
+// Messages name `name` (default: the path).
 absl::StatusOr<std::vector<double>> TessellateStep(
-    const std::string& path, const DesignReadOptions& options);
+    const std::string& path, const DesignReadOptions& options,
+    const std::string& name = "");
 
 }  // namespace swarf::design
 

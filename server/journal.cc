@@ -263,6 +263,60 @@ absl::Status Journal::Remove(uint64_t seq) {
   return absl::OkStatus();
 }
 
+absl::Status Journal::PutBlob(const std::string& key,
+                              const std::string& value) {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_,
+                         "INSERT OR REPLACE INTO meta (key, value) VALUES "
+                         "(?, ?), (?, ?);",
+                         -1, &st, nullptr) != SQLITE_OK) {
+    return SqlError(db_, "prepare blob");
+  }
+  const std::string crc_key = key + "_crc";
+  sqlite3_bind_text(st, 1, key.c_str(), -1, SQLITE_TRANSIENT);
+  sqlite3_bind_blob64(st, 2, value.data(), value.size(), SQLITE_TRANSIENT);
+  sqlite3_bind_text(st, 3, crc_key.c_str(), -1, SQLITE_TRANSIENT);
+  sqlite3_bind_int64(st, 4, Crc32c(value.data(), value.size()));
+  const int rc = sqlite3_step(st);
+  sqlite3_finalize(st);
+  if (rc != SQLITE_DONE) return SqlError(db_, absl::StrCat("write ", key));
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::optional<std::string>> Journal::GetBlob(
+    const std::string& key) {
+  sqlite3_stmt* st = nullptr;
+  if (sqlite3_prepare_v2(db_, "SELECT key, value FROM meta WHERE key IN (?, ?);",
+                         -1, &st, nullptr) != SQLITE_OK) {
+    return SqlError(db_, "prepare blob read");
+  }
+  const std::string crc_key = key + "_crc";
+  sqlite3_bind_text(st, 1, key.c_str(), -1, SQLITE_TRANSIENT);
+  sqlite3_bind_text(st, 2, crc_key.c_str(), -1, SQLITE_TRANSIENT);
+  std::optional<std::string> value;
+  std::optional<int64_t> crc;
+  int rc;
+  while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+    const std::string k =
+        reinterpret_cast<const char*>(sqlite3_column_text(st, 0));
+    if (k == key) {
+      const void* b = sqlite3_column_blob(st, 1);
+      value.emplace(static_cast<const char*>(b), sqlite3_column_bytes(st, 1));
+    } else {
+      crc = sqlite3_column_int64(st, 1);
+    }
+  }
+  sqlite3_finalize(st);
+  if (rc != SQLITE_DONE) return SqlError(db_, absl::StrCat("read ", key));
+  if (!value.has_value()) return std::optional<std::string>();
+  if (!crc.has_value() ||
+      *crc != static_cast<int64_t>(Crc32c(value->data(), value->size()))) {
+    return absl::DataLossError(
+        absl::StrCat("journal ", path_, ": the ", key, " is damaged"));
+  }
+  return value;
+}
+
 absl::Status Journal::Truncate(uint64_t seq) {
   sqlite3_stmt* st = nullptr;
   if (sqlite3_prepare_v2(db_, "DELETE FROM batches WHERE seq > ?;", -1, &st,

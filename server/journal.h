@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -76,6 +77,12 @@ class Journal {
   // reading stopped early (empty when the journal is whole).
   absl::StatusOr<std::string> Replay(
       const std::function<absl::Status(const Batch&)>& fn);
+
+  // A named blob beside the definition (the session's design), replaced
+  // durably in one transaction with its CRC32C. GetBlob: nullopt when
+  // absent, DataLoss when its CRC does not match.
+  absl::Status PutBlob(const std::string& key, const std::string& value);
+  absl::StatusOr<std::optional<std::string>> GetBlob(const std::string& key);
 
   // Deletes the journal's files (the object is unusable afterwards).
   static void DeleteFiles(const std::string& path);

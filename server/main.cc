@@ -24,6 +24,8 @@ ABSL_FLAG(int64_t, max_total_memory_mb, 8192,
 ABSL_FLAG(int64_t, max_batch_points, int64_t{1} << 20,
           "points (moves) per move batch at most");
 ABSL_FLAG(int, max_message_mb, 64, "largest gRPC message (MiB)");
+ABSL_FLAG(int64_t, max_design_mb, 256,
+          "largest design file a session may upload (SetDesign, MiB)");
 ABSL_FLAG(int, max_streams_per_client, 16,
           "open Simulate streams per client (token, or address without auth)");
 ABSL_FLAG(double, idle_evict_seconds, 600,
@@ -100,6 +102,7 @@ int main(int argc, char** argv) {
       absl::GetFlag(FLAGS_max_total_memory_mb) << 20;
   options.limits.max_batch_points = absl::GetFlag(FLAGS_max_batch_points);
   options.limits.max_message_bytes = absl::GetFlag(FLAGS_max_message_mb) << 20;
+  options.limits.max_design_bytes = absl::GetFlag(FLAGS_max_design_mb) << 20;
   options.limits.max_streams_per_client =
       absl::GetFlag(FLAGS_max_streams_per_client);
   options.limits.idle_evict_seconds = absl::GetFlag(FLAGS_idle_evict_seconds);

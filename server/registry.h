@@ -26,6 +26,8 @@ struct Limits {
   // Journaled sessions idle this long leave memory until used (0: never).
   double idle_evict_seconds = 600;
   int32_t max_message_bytes = 64 << 20;
+  // Largest design upload per session (SetDesign).
+  int64_t max_design_bytes = int64_t{256} << 20;
 };
 
 // Where sessions are kept: in memory only (empty data_dir), or journaled

@@ -18,6 +18,8 @@
 #include "absl/synchronization/mutex.h"
 #include "absl/time/clock.h"
 #include "absl/time/time.h"
+#include "client/deviation.h"
+#include "client/surface_grid.h"
 #include "core/valuation.h"
 #include "server/convert.h"
 #include "server/status_util.h"
@@ -1031,6 +1033,111 @@ grpc::ServerUnaryReactor* SwarfService::Probe(
     }
     *resp = *std::move(probe);
     return absl::OkStatus();
+  });
+}
+
+grpc::ServerUnaryReactor* SwarfService::SetDesign(
+    grpc::CallbackServerContext* ctx, const pb::SetDesignRequest* req,
+    pb::DesignInfo* resp) {
+  return Unary(ctx, "SetDesign", [=, this]() -> absl::Status {
+    auto session = SessionOf(registry_, tokens_, ctx, req->session_id());
+    if (!session.ok()) return session.status();
+    DesignChunk c;
+    c.offset = req->offset();
+    c.data = std::string_view(req->data().data(), req->data().size());
+    c.last = req->last();
+    c.scale = req->scale() == 0 ? 1.0 : req->scale();
+    c.translation = {req->translation().x(), req->translation().y(),
+                     req->translation().z()};
+    if (!req->name().empty()) c.name = req->name();
+    c.max_bytes = registry_->limits().max_design_bytes;
+    auto state = (*session)->AddDesignChunk(c);
+    if (!state.ok()) return state.status();
+    resp->set_received(state->received);
+    if (state->placed != nullptr) {
+      const design::PlacedDesign& d = *state->placed;
+      resp->set_placed(true);
+      resp->set_triangles(static_cast<int64_t>(d.mesh().triangles.size()));
+      resp->set_covered_nodes(d.envelope().covered_nodes());
+      resp->mutable_min()->set_x(d.mesh().x.lo);
+      resp->mutable_min()->set_y(d.mesh().y.lo);
+      resp->mutable_min()->set_z(d.mesh().z.lo);
+      resp->mutable_max()->set_x(d.mesh().x.hi);
+      resp->mutable_max()->set_y(d.mesh().y.hi);
+      resp->mutable_max()->set_z(d.mesh().z.hi);
+      resp->set_name(d.name());
+    }
+    return absl::OkStatus();
+  });
+}
+
+grpc::ServerUnaryReactor* SwarfService::GetDeviation(
+    grpc::CallbackServerContext* ctx, const pb::GetDeviationRequest* req,
+    pb::Deviation* resp) {
+  return Unary(ctx, "GetDeviation", [=, this]() -> absl::Status {
+    auto session = SessionOf(registry_, tokens_, ctx, req->session_id());
+    if (!session.ok()) return session.status();
+    const std::shared_ptr<const design::PlacedDesign> design =
+        (*session)->design();
+    if (design == nullptr) {
+      return absl::FailedPreconditionError(
+          "the session has no design: SetDesign first");
+    }
+    cli::DeviationOptions o;
+    o.allowance = req->allowance();
+    if (req->has_tolerance()) o.tolerance = req->tolerance();
+    if (req->has_samples_per_edge()) {
+      if (req->samples_per_edge() < 0 || req->samples_per_edge() > 64) {
+        return absl::InvalidArgumentError(
+            "samples_per_edge must be in [0, 64]");
+      }
+      o.samples_per_edge = req->samples_per_edge();
+    }
+    if (req->max_moves() < 0) {
+      return absl::InvalidArgumentError("max_moves must be >= 0");
+    }
+    if (req->max_moves() > 0) o.max_lines = req->max_moves();
+    auto grid = (*session)->Read(
+        [](const Workpiece& wp) { return cli::SurfaceGrid::FromWorkpiece(wp); });
+    if (!grid.ok()) return grid.status();
+    // The moves themselves are the "lines": the client maps them.
+    std::vector<cli::SourceLine> moves(grid->moves.size());
+    for (size_t k = 0; k < moves.size(); ++k) {
+      moves[k] = {0, static_cast<int32_t>(k)};
+    }
+    auto r = cli::MeasureDeviation(*grid, design->envelope(), design->index(),
+                                   moves, o);
+    if (!r.ok()) return r.status();
+    resp->set_triangles(static_cast<int64_t>(design->mesh().triangles.size()));
+    resp->set_nodes(r->nodes);
+    resp->set_samples(r->samples);
+    resp->set_gouge_max(r->gouge_max);
+    resp->set_gouge_x(r->gouge_x);
+    resp->set_gouge_y(r->gouge_y);
+    resp->set_gouge_move(r->gouge_move);
+    resp->set_gouge_volume_mm3(r->gouge_volume);
+    resp->set_excess_max(r->excess_max);
+    resp->set_excess_x(r->excess_x);
+    resp->set_excess_y(r->excess_y);
+    resp->set_excess_mean(r->excess_mean);
+    resp->set_excess_volume_mm3(r->excess_volume);
+    resp->set_normal_gouge_max(r->normal_gouge_max);
+    resp->set_normal_excess_max(r->normal_excess_max);
+    resp->set_allowance(r->allowance);
+    resp->set_tolerance(r->tolerance);
+    resp->set_out_of_tolerance_area_mm2(r->out_area_mm2);
+    resp->set_ok(r->ok);
+    auto add = [](const cli::LineDeviation& l, pb::DeviationMove* m) {
+      m->set_move(l.line);
+      m->set_depth(l.depth);
+      m->set_x(l.x);
+      m->set_y(l.y);
+      m->set_area_mm2(l.area_mm2);
+    };
+    for (const auto& l : r->gouge_lines) add(l, resp->add_gouge_moves());
+    for (const auto& l : r->excess_lines) add(l, resp->add_excess_moves());
+    return FitsMessage(resp->ByteSizeLong(),
+                       registry_->limits().max_message_bytes, "the deviation");
   });
 }
 

@@ -36,7 +36,9 @@ using SwarfCallbackBase = ::swarf::v1::Swarf::WithCallbackMethod_CreateSession<
                         ::swarf::v1::Swarf::WithCallbackMethod_GetErrorStats<
                             ::swarf::v1::Swarf::WithCallbackMethod_GetCuttingMarks<
                                 ::swarf::v1::Swarf::WithCallbackMethod_Probe<
-                                    ::swarf::v1::Swarf::Service>>>>>>>>>;
+                                    ::swarf::v1::Swarf::WithCallbackMethod_SetDesign<
+                                        ::swarf::v1::Swarf::WithCallbackMethod_GetDeviation<
+                                            ::swarf::v1::Swarf::Service>>>>>>>>>>>;
 
 class SwarfService final : public SwarfCallbackBase {
  public:
@@ -83,6 +85,14 @@ class SwarfService final : public SwarfCallbackBase {
   grpc::ServerUnaryReactor* Probe(grpc::CallbackServerContext* ctx,
                                   const ::swarf::v1::ProbeRequest* req,
                                   ::swarf::v1::ProbeResponse* resp) override;
+  grpc::ServerUnaryReactor* SetDesign(
+      grpc::CallbackServerContext* ctx,
+      const ::swarf::v1::SetDesignRequest* req,
+      ::swarf::v1::DesignInfo* resp) override;
+  grpc::ServerUnaryReactor* GetDeviation(
+      grpc::CallbackServerContext* ctx,
+      const ::swarf::v1::GetDeviationRequest* req,
+      ::swarf::v1::Deviation* resp) override;
 
  private:
   // Open Simulate streams per client key. Thread-safe.

@@ -5,6 +5,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "server/convert.h"
+#include "design/design_mesh.h"
 #include "server/snapshot.h"
 #include "spdlog/spdlog.h"
 
@@ -85,6 +86,28 @@ absl::StatusOr<std::shared_ptr<Session>> Session::Restore(
     // Batches after the damage cannot be trusted: drop them, so that the
     // client resends from last_seq + 1 into a consistent journal.
     if (absl::Status t = s.journal_->Truncate(s.last_seq_); !t.ok()) return t;
+  }
+  // The design, if one was set: a damaged one is dropped with a warning
+  // (the client sets it again); the moves stay.
+  if (s.journal_ != nullptr) {
+    auto blob = s.journal_->GetBlob("design");
+    absl::StatusOr<std::shared_ptr<const design::PlacedDesign>> placed =
+        blob.ok() ? (blob->has_value() ? s.PlaceDesign(**blob)
+                                       : absl::StatusOr<std::shared_ptr<
+                                             const design::PlacedDesign>>(
+                                             nullptr))
+                  : absl::StatusOr<std::shared_ptr<const design::PlacedDesign>>(
+                        blob.status());
+    if (placed.ok()) {
+      absl::MutexLock dl(&s.design_mu_);
+      s.design_ = *std::move(placed);
+    } else {
+      spdlog::warn("session {}: the design is not restored: {}", s.spec_.id,
+                   std::string(placed.status().message()));
+      s.recovery_ += absl::StrCat(s.recovery_.empty() ? "" : "; ",
+                                  "the design was not restored: ",
+                                  placed.status().message());
+    }
   }
   spdlog::info("session {}: rebuilt in {:.3f} s", s.spec_.id,
                absl::ToDoubleSeconds(absl::Now() - start));
@@ -226,6 +249,95 @@ std::vector<Move> Session::BatchMoves(const ToolSpec& tool,
   }
   *end = pos;
   return moves;
+}
+
+absl::StatusOr<std::shared_ptr<const design::PlacedDesign>>
+Session::PlaceDesign(const std::string& request_bytes) const {
+  pb::SetDesignRequest req;
+  if (!req.ParseFromString(request_bytes)) {
+    return absl::DataLossError("the journaled design does not parse");
+  }
+  design::DesignReadOptions o;
+  o.scale = req.scale() > 0 ? req.scale() : 1.0;
+  o.offset = {req.translation().x(), req.translation().y(),
+              req.translation().z()};
+  const std::string name = req.name().empty() ? "design" : req.name();
+  auto mesh = design::ParseDesign(
+      absl::string_view(req.data().data(), req.data().size()), name, o);
+  if (!mesh.ok()) return mesh.status();
+  return design::PlacedDesign::Place(*std::move(mesh), GridGeometry(spec_.stock),
+                                     name);
+}
+
+absl::StatusOr<DesignUploadState> Session::AddDesignChunk(
+    const DesignChunk& c) {
+  Touch();
+  pb::SetDesignRequest whole;
+  {
+    absl::MutexLock l(&design_mu_);
+    if (c.offset == 0) upload_.clear();
+    if (c.offset < upload_.size()) {
+      // A resend of bytes held (the client lost the answer): nothing new.
+      if (c.offset + c.data.size() <= upload_.size() && !c.last) {
+        return DesignUploadState{upload_.size(), nullptr};
+      }
+    }
+    if (c.offset != upload_.size()) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "design upload: a chunk at offset ", c.offset, "; the server holds ",
+          upload_.size(), " bytes of this upload (send from there, or from 0 "
+          "to start again)"));
+    }
+    if (upload_.size() + c.data.size() > static_cast<uint64_t>(c.max_bytes)) {
+      upload_.clear();
+      upload_.shrink_to_fit();
+      return absl::ResourceExhaustedError(absl::StrCat(
+          "design upload: more than ", c.max_bytes, " bytes (the server's "
+          "--max_design_mb); the upload is dropped"));
+    }
+    upload_.append(c.data.data(), c.data.size());
+    if (!c.last) return DesignUploadState{upload_.size(), nullptr};
+    whole.set_data(std::move(upload_));
+    upload_ = std::string();
+  }
+  if (!(c.scale > 0) || !std::isfinite(c.scale) ||
+      !std::isfinite(c.translation.x) || !std::isfinite(c.translation.y) ||
+      !std::isfinite(c.translation.z)) {
+    return absl::InvalidArgumentError(
+        "design upload: scale must be > 0 and the translation finite");
+  }
+  whole.set_scale(c.scale);
+  whole.mutable_translation()->set_x(c.translation.x);
+  whole.mutable_translation()->set_y(c.translation.y);
+  whole.mutable_translation()->set_z(c.translation.z);
+  whole.set_name(c.name);
+  const uint64_t received = whole.data().size();
+  const std::string bytes = whole.SerializeAsString();
+  // Read and placed outside the locks: other calls go on meanwhile.
+  auto placed = PlaceDesign(bytes);
+  if (!placed.ok()) return placed.status();
+  {
+    absl::MutexLock l(&mu_);
+    if (deleted_) return absl::NotFoundError("the session was deleted");
+    if (journal_ != nullptr) {
+      if (absl::Status s = journal_->PutBlob("design", bytes); !s.ok()) {
+        spdlog::error("session {}: cannot journal the design: {}", spec_.id,
+                      std::string(s.message()));
+        return absl::UnavailableError(
+            "the design could not be journaled; try again");
+      }
+    }
+    absl::MutexLock dl(&design_mu_);
+    design_ = *placed;
+  }
+  spdlog::info("session {}: design {} placed ({} triangles)", spec_.id,
+               (*placed)->name(), (*placed)->mesh().triangles.size());
+  return DesignUploadState{received, *std::move(placed)};
+}
+
+std::shared_ptr<const design::PlacedDesign> Session::design() const {
+  absl::MutexLock l(&design_mu_);
+  return design_;
 }
 
 void Session::MarkDeleted() {

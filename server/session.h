@@ -11,6 +11,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -21,6 +22,7 @@
 #include "core/scheme.h"
 #include "core/stock.h"
 #include "core/workpiece.h"
+#include "design/placed_design.h"
 #include "server/journal.h"
 #include "server/snapshot.h"
 
@@ -59,6 +61,24 @@ struct SessionState {
   int64_t memory_bytes = 0;
   std::optional<Vec3> last_position;
   uint64_t snapshot_seq = 0;  // batches the snapshot on disk holds (0: none)
+};
+
+// One chunk of a design upload (the proto's SetDesignRequest).
+struct DesignChunk {
+  uint64_t offset = 0;  // bytes of the upload before `data`; 0: a new one
+  std::string_view data;
+  bool last = false;    // read and place the upload
+  double scale = 1;     // with the last chunk: file units to mm
+  Vec3 translation;     // mm
+  std::string name = "design";
+  int64_t max_bytes = int64_t{256} << 20;  // the upload's limit
+};
+
+// Where a design upload stands.
+struct DesignUploadState {
+  uint64_t received = 0;
+  // Set when the last chunk placed a design.
+  std::shared_ptr<const design::PlacedDesign> placed;
 };
 
 // Snapshots of a journaled session's workpiece (see snapshot.h).
@@ -122,6 +142,17 @@ class Session {
 
   SessionState State() const;
 
+  // A chunk of a design upload. A chunk at an offset other than the bytes
+  // held is FailedPrecondition naming the expected offset, unless it lies
+  // within them (a resend: acknowledged, nothing changes). Past
+  // chunk.max_bytes: ResourceExhausted, and the upload is dropped. The last
+  // chunk reads the file (design::ParseDesign) and places it on the
+  // session's grid; then, journaled first, it replaces the design. Any
+  // error drops the upload and leaves the current design.
+  absl::StatusOr<DesignUploadState> AddDesignChunk(const DesignChunk& chunk);
+  // The current design (null: none). Thread-safe.
+  std::shared_ptr<const design::PlacedDesign> design() const;
+
   // Runs fn(const Workpiece&) under the shared lock and returns its result
   // (reloading an evicted session first).
   template <typename F>
@@ -173,8 +204,16 @@ class Session {
   bool SnapshotDueLocked() const ABSL_SHARED_LOCKS_REQUIRED(mu_);
   void Touch() const;
 
+  // Reads and places a journaled design (SetDesignRequest bytes).
+  absl::StatusOr<std::shared_ptr<const design::PlacedDesign>> PlaceDesign(
+      const std::string& request_bytes) const;
+
   const SessionSpec spec_;
   std::string recovery_;  // set once, before the session is shared
+  // The design and an upload in progress.
+  mutable absl::Mutex design_mu_ ABSL_ACQUIRED_AFTER(mu_);
+  std::shared_ptr<const design::PlacedDesign> design_ ABSL_GUARDED_BY(design_mu_);
+  std::string upload_ ABSL_GUARDED_BY(design_mu_);
   mutable std::atomic<int64_t> last_used_ms_{0};
   mutable absl::Mutex mu_;
   // Null while evicted; rebuilt (mutable) on use.
