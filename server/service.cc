@@ -1085,13 +1085,14 @@ grpc::ServerUnaryReactor* SwarfService::GetDeviation(
     }
     cli::DeviationOptions o;
     o.allowance = req->allowance();
-    if (req->has_tolerance()) o.tolerance = req->tolerance();
+    if (req->has_tolerance()) o.tolerance = req->tolerance().value();
     if (req->has_samples_per_edge()) {
-      if (req->samples_per_edge() < 0 || req->samples_per_edge() > 64) {
+      const int32_t n = req->samples_per_edge().value();
+      if (n < 0 || n > 64) {
         return absl::InvalidArgumentError(
             "samples_per_edge must be in [0, 64]");
       }
-      o.samples_per_edge = req->samples_per_edge();
+      o.samples_per_edge = n;
     }
     if (req->max_moves() < 0) {
       return absl::InvalidArgumentError("max_moves must be >= 0");

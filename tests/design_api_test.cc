@@ -118,7 +118,7 @@ grpc::Status Deviation(pb::Swarf::Stub* stub, const std::string& id,
                        pb::Deviation* out, double tolerance = 0.05) {
   pb::GetDeviationRequest req;
   req.set_session_id(id);
-  req.set_tolerance(tolerance);
+  req.mutable_tolerance()->set_value(tolerance);
   grpc::ClientContext ctx;
   SetDeadline(&ctx);
   return stub->GetDeviation(&ctx, req, out);
@@ -255,7 +255,7 @@ TEST_F(DesignApiTest, BadUploadsAreRefusedAndLeaveTheDesign) {
             grpc::StatusCode::NOT_FOUND);
   pb::GetDeviationRequest req;
   req.set_session_id("d2");
-  req.set_samples_per_edge(65);
+  req.mutable_samples_per_edge()->set_value(65);
   grpc::ClientContext ctx;
   SetDeadline(&ctx);
   EXPECT_EQ(stub_->GetDeviation(&ctx, req, &d).error_code(),

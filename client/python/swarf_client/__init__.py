@@ -11,14 +11,17 @@
 
 Tools: a number is a ball-end radius; Ball, Flat, BullNose, Cone and
 TaperedBall describe every cutter (radii and half angles, as the API).
-Millimetres and degrees throughout; moves are tool-TIP positions. Errors
+The part as designed: s.set_design("part.stl") then s.deviation()
+(gouge and excess, the moves that gouge). Millimetres and degrees throughout; moves are tool-TIP positions. Errors
 are SwarfError carrying the gRPC status code.
 """
 
 from .client import (TILE_SIZE, Ball, BullNose, Client, Cone, Cutter,
-                     ErrorStats, Flat, Heights, Jets, Mark, ProbeResult,
-                     SendResult, Session, SwarfError, TaperedBall)
+                     DesignInfo, Deviation, DeviationMove, ErrorStats, Flat,
+                     Heights, Jets, Mark, ProbeResult, SendResult, Session,
+                     SwarfError, TaperedBall)
 
 __all__ = ["Client", "Session", "SwarfError", "SendResult", "Heights",
            "Jets", "ErrorStats", "Mark", "ProbeResult", "TILE_SIZE", "Ball",
-           "Flat", "BullNose", "Cone", "TaperedBall", "Cutter"]
+           "Flat", "BullNose", "Cone", "TaperedBall", "Cutter", "DesignInfo",
+           "Deviation", "DeviationMove"]

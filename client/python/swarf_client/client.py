@@ -241,6 +241,65 @@ class ProbeResult:
     owners: npt.NDArray[np.int64]
 
 
+@dataclasses.dataclass(frozen=True)
+class DesignInfo:
+    """The design a session holds: its triangle count, the grid nodes it
+    lies over and its bounds (mm)."""
+    name: str
+    triangles: int
+    covered_nodes: int
+    min: Tuple[float, float, float]
+    max: Tuple[float, float, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class DeviationMove:
+    """A move's share of the deviation: its worst gouge (or excess) out of
+    tolerance (mm, positive), where, and the area it cut out of tolerance."""
+    move: int
+    depth: float
+    x: float
+    y: float
+    area_mm2: float
+
+
+@dataclasses.dataclass(frozen=True)
+class Deviation:
+    """The machined surface against the design's top envelope (mm; depths
+    positive). gouge_moves / excess_moves are move ids (0-based, in the
+    order the session applied them), deepest first; lines() maps them to
+    program lines. The verdict (ok) uses the normal deviation."""
+    triangles: int
+    nodes: int
+    samples: int
+    gouge_max: float
+    gouge_at: Tuple[float, float]
+    gouge_move: int
+    gouge_volume_mm3: float
+    excess_max: float
+    excess_at: Tuple[float, float]
+    excess_mean: float
+    excess_volume_mm3: float
+    normal_gouge_max: float
+    normal_excess_max: float
+    allowance: float
+    tolerance: float
+    out_of_tolerance_area_mm2: float
+    ok: bool
+    gouge_moves: List[DeviationMove]
+    excess_moves: List[DeviationMove]
+
+    def lines(self, move_lines: Sequence[int]) -> List[Tuple[int, DeviationMove]]:
+        """The gouging moves as (program line, move), given each move's line
+        (move_lines[id])."""
+        return [(int(move_lines[m.move]), m) for m in self.gouge_moves
+                if 0 <= m.move < len(move_lines)]
+
+
+# Bytes per SetDesign chunk: well within gRPC's default 4 MiB.
+DESIGN_CHUNK_BYTES = 1 << 20
+
+
 def _read(path_or_bytes: Union[None, str, bytes]) -> Optional[bytes]:
     if path_or_bytes is None or isinstance(path_or_bytes, bytes):
         return path_or_bytes
@@ -828,6 +887,76 @@ class Session:
             o.append(np.asarray(r.owners, np.int64))
         return ProbeResult(np.concatenate(h), np.concatenate(n),
                            np.concatenate(o))
+
+    # -- the design
+
+    def set_design(self, design: Union[str, bytes, ArrayLike], *,
+                   units: str = "mm",
+                   offset: Sequence[float] = (0.0, 0.0, 0.0),
+                   name: Optional[str] = None) -> DesignInfo:
+        """Sets the part as designed, replacing any earlier one: a path or
+        the bytes of an STL or STEP file, or triangles (T, 3, 3) mm (sent as
+        a binary STL). Uploaded in chunks of DESIGN_CHUNK_BYTES; kept with
+        the session on the server (journaled, restored, deleted with it)."""
+        if units not in ("mm", "inch"):
+            raise SwarfError(grpc.StatusCode.INVALID_ARGUMENT,
+                             f"units must be mm or inch, got {units!r}")
+        if isinstance(design, (str, bytes)):
+            data = _read(design)
+            assert data is not None
+            label = name or (design if isinstance(design, str) else "design")
+        else:
+            tris = np.ascontiguousarray(design, dtype=np.float32)
+            if tris.ndim != 3 or tris.shape[1:] != (3, 3):
+                raise SwarfError(grpc.StatusCode.INVALID_ARGUMENT,
+                                 "triangles must have shape (T, 3, 3), got "
+                                 f"{tris.shape}")
+            rec = np.zeros(len(tris), dtype=[("n", "<f4", 3), ("v", "<f4", 9),
+                                             ("a", "<u2")])
+            rec["v"] = tris.reshape(-1, 9)
+            data = (b"swarf_client triangles".ljust(80) +
+                    np.uint32(len(tris)).tobytes() + rec.tobytes())
+            label = name or "triangles"
+        ox, oy, oz = (float(v) for v in offset)
+        info = None
+        for start in range(0, max(len(data), 1), DESIGN_CHUNK_BYTES):
+            chunk = data[start:start + DESIGN_CHUNK_BYTES]
+            last = start + DESIGN_CHUNK_BYTES >= len(data)
+            req = pb.SetDesignRequest(
+                session_id=self.id, offset=start, data=chunk, last=last,
+                scale=25.4 if units == "inch" else 1.0, name=label)
+            req.translation.CopyFrom(pb.Point3(x=ox, y=oy, z=oz))
+            info = self._client._call("SetDesign", req, self.id)
+        assert info is not None
+        return DesignInfo(info.name, info.triangles, info.covered_nodes,
+                          (info.min.x, info.min.y, info.min.z),
+                          (info.max.x, info.max.y, info.max.z))
+
+    def deviation(self, *, allowance: float = 0.0,
+                  tolerance: Optional[float] = None,
+                  samples_per_edge: Optional[int] = None,
+                  max_moves: int = 0) -> Deviation:
+        """The machined surface against the design (set_design first):
+        gouge and excess, vertical and normal, the verdict at `tolerance`
+        (default 0.01 mm) with `allowance`, and the moves that gouge."""
+        req = pb.GetDeviationRequest(session_id=self.id, allowance=allowance,
+                                     max_moves=max_moves)
+        if tolerance is not None:
+            req.tolerance.value = tolerance
+        if samples_per_edge is not None:
+            req.samples_per_edge.value = samples_per_edge
+        r = self._client._call("GetDeviation", req, self.id)
+
+        def moves(ms: Any) -> List[DeviationMove]:
+            return [DeviationMove(int(m.move), m.depth, m.x, m.y, m.area_mm2)
+                    for m in ms]
+        return Deviation(
+            r.triangles, r.nodes, r.samples, r.gouge_max,
+            (r.gouge_x, r.gouge_y), int(r.gouge_move), r.gouge_volume_mm3,
+            r.excess_max, (r.excess_x, r.excess_y), r.excess_mean,
+            r.excess_volume_mm3, r.normal_gouge_max, r.normal_excess_max,
+            r.allowance, r.tolerance, r.out_of_tolerance_area_mm2, r.ok,
+            moves(r.gouge_moves), moves(r.excess_moves))
 
     # -- lifetime
 
