@@ -902,6 +902,25 @@ SwarfService::Simulate(grpc::CallbackServerContext* ctx) {
                              trust_, replica_);
 }
 
+namespace {
+
+// Tile.deviation: each node's height less the design's envelope there.
+void AddDeviation(const design::TopEnvelope& env, pb::Tile* t) {
+  const int64_t n = int64_t{t->nx()} * t->ny();
+  t->mutable_deviation()->Resize(static_cast<int>(n), 0.0f);
+  for (int32_t j = 0; j < t->ny(); ++j) {
+    for (int32_t i = 0; i < t->nx(); ++i) {
+      const int64_t k = int64_t{j} * t->nx() + i;
+      const double z = t->heights_d_size() == n ? t->heights_d(k)
+                                                : double(t->heights_f(k));
+      t->set_deviation(k, static_cast<float>(
+                              z - env.AtNode(t->i0() + i, t->j0() + j)));
+    }
+  }
+}
+
+}  // namespace
+
 grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(
     grpc::CallbackServerContext* ctx, const pb::GetTilesRequest* req) {
   struct State {
@@ -910,6 +929,7 @@ grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(
     size_t next = 0;
     TileOptions options;
     bool started = false;
+    std::shared_ptr<const design::PlacedDesign> design;  // include_deviation
   };
   auto state = std::make_shared<State>();
   Registry* registry = registry_;
@@ -922,6 +942,14 @@ grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(
           auto session = SessionOf(registry, tokens, ctx, req->session_id());
           if (!session.ok()) return session.status();
           state->session = *session;
+          if (req->include_deviation()) {
+            state->design = state->session->design();
+            if (state->design == nullptr) {
+              return absl::FailedPreconditionError(
+                  "include_deviation: the session has no design (SetDesign "
+                  "first)");
+            }
+          }
           absl::Status st = state->session->Read([&](const Workpiece& wp) {
             auto options = TileOptionsFrom(wp, 0, req->precision(),
                                            req->include_derivatives(),
@@ -952,6 +980,9 @@ grpc::ServerWriteReactor<pb::Tile>* SwarfService::GetTiles(
                     std::span<const int32_t>(state->tiles.data() + state->next,
                                              chunk.size()),
                     state->options, chunk);
+          if (state->design != nullptr) {
+            for (pb::Tile* t : chunk) AddDeviation(state->design->envelope(), t);
+          }
           state->next = end;
           return 0;
         });

@@ -183,6 +183,15 @@ TEST_F(DesignApiTest, ChunkedDesignGivesTheCoresDeviationBitForBit) {
   pb::Deviation none;
   EXPECT_EQ(Deviation(stub_.get(), "d1", &none).error_code(),
             grpc::StatusCode::FAILED_PRECONDITION);
+  {
+    pb::GetTilesRequest treq;
+    treq.set_include_deviation(true);
+    std::vector<pb::Tile> tiles;
+    grpc::ClientContext tctx;
+    EXPECT_EQ(::swarf::testing::CollectTiles(stub_.get(), &tctx, "d1", treq,
+                                             &tiles).error_code(),
+              grpc::StatusCode::FAILED_PRECONDITION);
+  }
   const design::DesignMesh mesh = Floor();
   const std::string stl = design::ToBinaryStl(mesh);
   pb::DesignInfo info;
@@ -202,6 +211,33 @@ TEST_F(DesignApiTest, ChunkedDesignGivesTheCoresDeviationBitForBit) {
   EXPECT_EQ(d.gouge_moves(0).move(), 2 * kDeepPass);
   EXPECT_NEAR(d.gouge_moves(0).depth(), 0.25, 0.011);
   EXPECT_EQ(d.gouge_move(), 2 * kDeepPass);
+  // Deviation tiles: each node's height less the envelope there.
+  auto env = *design::TopEnvelope::Build(read, GridGeometry(kStock));
+  pb::GetTilesRequest treq;
+  treq.set_precision(pb::PRECISION_DOUBLE);
+  treq.set_include_deviation(true);
+  std::vector<pb::Tile> tiles;
+  grpc::ClientContext tctx;
+  ASSERT_TRUE(::swarf::testing::CollectTiles(stub_.get(), &tctx, "d1", treq,
+                                             &tiles).ok());
+  ASSERT_FALSE(tiles.empty());
+  int64_t checked = 0;
+  float deepest = 0;
+  for (const pb::Tile& t : tiles) {
+    ASSERT_EQ(t.deviation_size(), t.nx() * t.ny());
+    for (int32_t j = 0; j < t.ny(); ++j) {
+      for (int32_t i = 0; i < t.nx(); ++i) {
+        const int k = j * t.nx() + i;
+        EXPECT_EQ(t.deviation(k),
+                  static_cast<float>(t.heights_d(k) -
+                                     env.AtNode(t.i0() + i, t.j0() + j)));
+        deepest = std::min(deepest, t.deviation(k));
+        ++checked;
+      }
+    }
+  }
+  EXPECT_EQ(checked, 201 * 201);
+  EXPECT_NEAR(deepest, -d.gouge_max(), 1e-6);
 }
 
 TEST_F(DesignApiTest, BadUploadsAreRefusedAndLeaveTheDesign) {

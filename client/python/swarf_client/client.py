@@ -747,7 +747,8 @@ class Session:
     # -- reads
 
     def _tiles(self, window: Tuple[int, int, int, int], precision: Any,
-               derivatives: bool, owners: bool) -> Iterator[Any]:
+               derivatives: bool, owners: bool,
+               deviation: bool = False) -> Iterator[Any]:
         """The tiles holding the nodes [i0, i1) x [j0, j1), chosen by index
         so that no rounding of a region's edge can leave one out."""
         i0, i1, j0, j1 = window
@@ -761,7 +762,8 @@ class Session:
         req = pb.GetTilesRequest(session_id=self.id, selection=sel,
                                  precision=precision,
                                  include_derivatives=derivatives,
-                                 include_owners=owners)
+                                 include_owners=owners,
+                                 include_deviation=deviation)
         return self._client._stream("GetTiles", req, self.id)
 
     def _node_window(self, region: Optional[Sequence[float]]
@@ -957,6 +959,18 @@ class Session:
             r.excess_volume_mm3, r.normal_gouge_max, r.normal_excess_max,
             r.allowance, r.tolerance, r.out_of_tolerance_area_mm2, r.ok,
             moves(r.gouge_moves), moves(r.excess_moves))
+
+    def deviation_map(self, region: Optional[Sequence[float]] = None
+                      ) -> Heights:
+        """Per node, the vertical deviation from the design z - z_d (mm,
+        float32; positive excess, negative gouge, NaN where no design lies
+        above), as Heights(x, y, z=the deviations)."""
+        i0, i1, j0, j1 = window = self._node_window(region)
+        dev = np.empty((j1 - j0, i1 - i0), np.float32)
+        for t in self._tiles(window, pb.PRECISION_FLOAT, False, False, True):
+            self._paste(dev, np.asarray(t.deviation, np.float32).reshape(
+                t.ny, t.nx), t, i0, i1, j0, j1)
+        return Heights(self.node_x()[i0:i1], self.node_y()[j0:j1], dev, None)
 
     # -- lifetime
 

@@ -61,6 +61,12 @@ def test_deviation_names_the_deep_pass(client, tmp_path):
         # The scallops between 1 mm passes of a 2 mm-radius ball.
         assert d.excess_max == pytest.approx(R - math.sqrt(R * R - 0.25),
                                              abs=1e-6)
+        # Per node: the heights less the floor, the deep pass 0.25 below.
+        m = s.deviation_map()
+        h = s.heights(precision="float")
+        np.testing.assert_array_equal(m.z, h.z - np.float32(FLOOR))
+        assert float(m.z.min()) == pytest.approx(-0.25, abs=1e-6)
+        assert m.z.shape == (201, 201)
         # The same floor as an STL file: the same figures.
         stl = tmp_path / "floor.stl"
         tris = floor_triangles().astype(np.float32)
