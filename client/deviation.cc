@@ -248,20 +248,27 @@ absl::StatusOr<DeviationReport> MeasureDeviation(
         const double x1 = g.NodeX(ei + 1);
         envelope.Candidates({x0, y0, x1, y1}, &candidates);
         if (candidates.empty()) continue;
+        // The lattice, the design above it, then the points with design.
         int32_t m = 0;
         for (int t = 0; t < n; ++t) {
           const double y = t == n - 1 ? y1 : y0 + t * g.dy() / (n - 1);
           for (int s = 0; s < n; ++s) {
             if ((s == 0 || s == n - 1) && (t == 0 || t == n - 1)) continue;
-            const double x = s == n - 1 ? x1 : x0 + s * g.dx() / (n - 1);
-            const double zd = envelope.AtAmong(candidates, x, y);
-            if (std::isnan(zd)) continue;
-            xs[m] = x;
+            xs[m] = s == n - 1 ? x1 : x0 + s * g.dx() / (n - 1);
             ys[m] = y;
-            zds[m] = zd;
             ++m;
           }
         }
+        envelope.AtManyAmong(candidates, xs.data(), ys.data(), m, zds.data());
+        int32_t kept = 0;
+        for (int32_t q = 0; q < m; ++q) {
+          if (std::isnan(zds[q])) continue;
+          xs[kept] = xs[q];
+          ys[kept] = ys[q];
+          zds[kept] = zds[q];
+          ++kept;
+        }
+        m = kept;
         if (m == 0) continue;
         sampler.ReconstructInElement(ei, static_cast<int32_t>(ej), xs.data(),
                                      ys.data(), m, zs.data());

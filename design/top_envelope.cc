@@ -241,6 +241,26 @@ void TopEnvelope::Candidates(const Rect& r, std::vector<int32_t>* out) const {
   }
 }
 
+void TopEnvelope::AtManyAmong(const std::vector<int32_t>& candidates,
+                              const double* x, const double* y, int32_t n,
+                              double* out) const {
+  for (int32_t q = 0; q < n; ++q) out[q] = kNaN;
+  constexpr double kEdge = 1e-12;
+  for (int32_t t : candidates) {
+    const Plane& p = planes_[t];
+    // HeightAt, branch-free: the same arithmetic, so the same bits.
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) {
+      const double rx = x[q] - p.xa, ry = y[q] - p.ya;
+      const double wb = p.m00 * rx + p.m01 * ry;
+      const double wc = p.m10 * rx + p.m11 * ry;
+      const bool inside = wb >= -kEdge && wc >= -kEdge && wb + wc <= 1 + kEdge;
+      const double z = p.za + wb * p.dzb + wc * p.dzc;
+      out[q] = inside && !(out[q] >= z) ? z : out[q];
+    }
+  }
+}
+
 double TopEnvelope::At(double x, double y) const {
   const double fx = std::floor((x - bx0_) / bsize_);
   const double fy = std::floor((y - by0_) / bsize_);

@@ -48,6 +48,10 @@ class TopEnvelope {
   // non-vertical triangles whose XY bounds meet r (Candidates replaces
   // `out`'s contents), then AtAmong(out, x, y) == At(x, y) for (x, y) in r.
   void Candidates(const Rect& r, std::vector<int32_t>* out) const;
+  // AtAmong at n points at once: out[q] for (x[q], y[q]), bit for bit the
+  // same (a loop over the points per triangle, which vectorizes).
+  void AtManyAmong(const std::vector<int32_t>& candidates, const double* x,
+                   const double* y, int32_t n, double* out) const;
   double AtAmong(const std::vector<int32_t>& candidates, double x,
                  double y) const {
     double best = std::numeric_limits<double>::quiet_NaN();
