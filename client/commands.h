@@ -15,6 +15,7 @@ int HealthCommand(const std::vector<std::string>& args);
 int SessionsCommand(const std::vector<std::string>& args);
 int MarksCommand(const std::vector<std::string>& args);
 int ViewCommand(const std::vector<std::string>& args);
+int MovesCommand(const std::vector<std::string>& args);
 
 }  // namespace swarf::cli
 

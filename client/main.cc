@@ -18,6 +18,7 @@ constexpr char kUsage[] =
     "  sessions  the sessions of a running swarfd\n"
     "  load    many sessions streaming at once: throughput and latency\n"
     "  view    the live 3D viewer of a running swarfd's session\n"
+    "  moves   the interpreted moves of a program, one a line\n"
     "Run 'swarf <command> --help' for a command's options.\n";
 
 }  // namespace
@@ -39,6 +40,7 @@ int main(int argc, char** argv) {
   if (cmd == "sessions") return swarf::cli::SessionsCommand(args);
   if (cmd == "load") return swarf::cli::LoadCommand(args);
   if (cmd == "view") return swarf::cli::ViewCommand(args);
+  if (cmd == "moves") return swarf::cli::MovesCommand(args);
   if (cmd == "--help" || cmd == "-h" || cmd == "help") {
     std::cout << kUsage;
     return 0;

@@ -278,7 +278,8 @@ int RunCommand(const std::vector<std::string>& argv) {
   valued.insert(std::begin(kViewerFlags), std::end(kViewerFlags));
   valued.insert(std::begin(kDesignFlags), std::end(kDesignFlags));
   auto args = Args::Parse(argv, valued,
-                          {"json", "help", "quiet", kStrictFlag, "view", "view-wait"});
+                          {"json", "help", "quiet", kStrictFlag, kM6ForgetsFlag, "view",
+                           "view-wait"});
   auto fail = [](const absl::Status& s, int code) {
     std::cerr << "swarf run: " << s.message() << "\n";
     return code;

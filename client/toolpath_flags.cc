@@ -31,19 +31,36 @@ absl::Status ReadToolpathFlags(const Args& args, ToolpathFlags* flags) {
           "--dialect must be linuxcnc, fanuc or grbl");
     }
   }
-  if (auto h = args.Get("home")) {
+  // X,Y,Z in machine mm.
+  const auto point = [&args](const char* name, bool* known,
+                             double out[3]) -> absl::Status {
+    auto h = args.Get(name);
+    if (!h.has_value()) return absl::OkStatus();
     std::vector<std::string> f = absl::StrSplit(*h, ',');
     double v[3];
     if (f.size() != 3 || !absl::SimpleAtod(f[0], &v[0]) ||
         !absl::SimpleAtod(f[1], &v[1]) || !absl::SimpleAtod(f[2], &v[2]) ||
         !(std::fabs(v[0]) <= 1e9 && std::fabs(v[1]) <= 1e9 &&
           std::fabs(v[2]) <= 1e9)) {
-      return absl::InvalidArgumentError(
-          "--home must be X,Y,Z (three numbers, machine mm)");
+      return absl::InvalidArgumentError(absl::StrCat(
+          "--", name, " must be X,Y,Z (three numbers, machine mm)"));
     }
-    flags->options.home_known = true;
-    for (int a = 0; a < 3; ++a) flags->options.home[a] = v[a];
+    *known = true;
+    for (int a = 0; a < 3; ++a) out[a] = v[a];
+    return absl::OkStatus();
+  };
+  gcode::GcodeOptions& o = flags->options;
+  if (absl::Status s = point("home", &o.home_known, o.home); !s.ok()) return s;
+  if (absl::Status s = point("start", &o.start_known, o.start); !s.ok()) {
+    return s;
   }
+  if (absl::Status s = point("tool-change-position",
+                             &o.tool_change_position_known,
+                             o.tool_change_position);
+      !s.ok()) {
+    return s;
+  }
+  if (args.Has(kM6ForgetsFlag)) o.m6_forgets_position = true;
   if (auto m = args.Get("max-blocks")) {
     int64_t n;
     if (!absl::SimpleAtoi(*m, &n) || n < 1) {

@@ -15,11 +15,13 @@
 
 namespace swarf::cli {
 
-// Valued flags: --format --dialect --home --max-blocks (--arc-tolerance is
-// run_command's); the boolean one: --strict.
-inline constexpr const char* kToolpathFlags[] = {"format", "dialect", "home",
-                                                 "max-blocks"};
+// Valued flags: --format --dialect --home --max-blocks --start
+// --tool-change-position (--arc-tolerance is run_command's); the boolean
+// ones: --strict, --m6-forgets-position.
+inline constexpr const char* kToolpathFlags[] = {
+    "format", "dialect", "home", "max-blocks", "start", "tool-change-position"};
 inline constexpr char kStrictFlag[] = "strict";
+inline constexpr char kM6ForgetsFlag[] = "m6-forgets-position";
 inline constexpr char kToolpathUsage[] =
     "  --format gcode|xyz           the file's format (default: by content)\n"
     "  --dialect linuxcnc|fanuc|grbl  G-code dialect (default linuxcnc;\n"
@@ -28,6 +30,11 @@ inline constexpr char kToolpathUsage[] =
     "                               default unknown\n"
     "  --max-blocks N               stop after N executed blocks (default\n"
     "                               200M: an endless loop is an error)\n"
+    "  --start X,Y,Z                where the machine starts (machine mm);\n"
+    "                               default unknown (G91 first is an error)\n"
+    "  --tool-change-position X,Y,Z  M6 rapids there first (machine mm)\n"
+    "  --m6-forgets-position        M6 makes the position unknown (swarf's\n"
+    "                               old behaviour; default: it stays)\n"
     "  --strict                     dropped moves are an error\n";
 
 struct ToolpathFlags {

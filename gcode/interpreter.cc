@@ -54,10 +54,20 @@ constexpr double kSpiralRel = 0.001;
 // G73/G83: the rapid stops this far above the previous peck (LinuxCNC's
 // G83_RAPID_DELTA, 0.010 inch).
 constexpr double kPeckClearanceMm = 0.254;
+// Cutter compensation: a concave corner sharper than this (radians, about
+// the sine of the angle) whose offset moves don't meet is taken as
+// tangent (rounded coordinates); LinuxCNC takes concave corners up to
+// 0.05 rad as convex.
+constexpr double kNearlyTangent = 1e-3;
 
 constexpr uint32_t Bit(char letter) { return uint32_t{1} << (letter - 'A'); }
 constexpr uint32_t kAxisWords = Bit('X') | Bit('Y') | Bit('Z');
 constexpr uint32_t kArcWords = Bit('I') | Bit('J') | Bit('K') | Bit('R');
+// Polar coordinates: '@' (radius) and '^' (angle, degrees) after the letters.
+constexpr int kRadiusWord = 26;
+constexpr int kAngleWord = 27;
+constexpr uint32_t kPolarWords = (uint32_t{1} << kRadiusWord) |
+                                 (uint32_t{1} << kAngleWord);
 // Words that never move the tool unless a code uses them: feed, speed,
 // length and radius offset numbers, cycle parameters, repeat counts, dwell.
 constexpr uint32_t kIgnoredLetters = Bit('F') | Bit('S') | Bit('H') |
@@ -175,8 +185,10 @@ std::string OLabel(const std::string& label) {
 
 // The words of one line.
 struct Block {
-  uint32_t words = 0;  // Bit(letter) of each word other than G, M, N, O
-  double value[26];
+  // Bit(letter) of each word other than G, M, N, O; bits kRadiusWord and
+  // kAngleWord for '@' and '^'.
+  uint32_t words = 0;
+  double value[28];
   int ng = 0;
   int32_t g[kMaxCodesPerLine];  // x10
   int nm = 0;
@@ -292,6 +304,12 @@ struct CompSeg {
   double ts[2], te[2];
   double tr = 0, ta = 0, tsweep = 0;
   double dir_s[2], dir_e[2];
+  // The entry move (a line from the uncompensated start): its corner with
+  // the next move is found on its offset line, through os parallel to the
+  // programmed move (as LinuxCNC), not on the tool's path from ts.
+  bool entry = false;
+  double os[2] = {0, 0};
+  const double* LineStart() const { return entry ? os : ts; }
 };
 
 struct Source {
@@ -306,8 +324,10 @@ struct Source {
 
 class Interpreter final : public ParameterSource {
  public:
-  explicit Interpreter(const GcodeOptions& options)
+  Interpreter(const GcodeOptions& options, CanonSink* sink)
       : options_(options),
+        builder_(&path_, options.arc_tolerance, options.max_points),
+        sink_(sink),
         params_(kParameterCount, 0.0),
         g_ignored_(kGCodeLimit),
         m_ignored_(kMCodeCounted) {}
@@ -351,7 +371,8 @@ class Interpreter final : public ParameterSource {
                            bool* g53, int* length_code, bool* motion_given);
   absl::Status NonModal(const Block& b, int code, uint32_t* used);
   absl::Status ToolLength(const Block& b, int code, uint32_t* used);
-  void ToolChange();
+  absl::Status ToolChange();
+  absl::Status BeginRun();
   absl::Status EndPoint(const Block& b, bool machine, double end[3]);
   absl::Status Linear(const Block& b, bool machine, bool rapid);
   absl::Status Arc(const Block& b);
@@ -361,9 +382,11 @@ class Interpreter final : public ParameterSource {
   absl::Status ChordArc(int p0, int p1, int p2, double cx, double cy,
                         double r0, double r1, double a0, double sweep,
                         double z0, const double end[3], bool rapid);
+  absl::Status Polar(const Block& b, double end[3]);
   // Cutter compensation (G41/G42, G17 only).
   absl::Status CompStart(const Block& b, int code);
   absl::Status CompAdd(CompSeg seg);
+  absl::Status CompArcEntry(CompSeg seg);
   absl::Status CompFlush();
   absl::Status CompEmit(const CompSeg& seg);
   absl::Status CompJoin(CompSeg* a, CompSeg* b);
@@ -400,6 +423,11 @@ class Interpreter final : public ParameterSource {
 
   const GcodeOptions options_;
   Toolpath path_;
+  ToolpathBuilder builder_;  // the sink unless sink_ is set
+  CanonSink* sink_;
+  double last_[3] = {0, 0, 0};  // the last position emitted
+  bool emitted_ = false;        // anything was
+  bool start_pending_ = false;  // options_.start is to begin the first run
   std::vector<double> params_;
   mutable double offset_[3] = {0, 0, 0};
   mutable bool offsets_dirty_ = true;
@@ -429,11 +457,18 @@ class Interpreter final : public ParameterSource {
   bool arc_absolute_ = false;  // G90.1
   int plane_ = 17;
   bool retract_r_ = false;     // G99
+  // The height before a series of canned cycles (LinuxCNC's initial
+  // level): G98 retracts to it; set by a series' first cycle.
+  bool cycle_il_set_ = false;
+  double cycle_il_ = 0;
   int comp_side_ = 0;          // +1 G41 (tool left), -1 G42, 0 off
   double comp_r_ = 0;          // mm
   bool comp_pending_ = false;  // comp_seg_ waits for the next move
   int64_t emit_line_ = -1;     // >= 0: the line of the points emitted
   bool comp_entry_ = false;    // the next move is the entry move
+  // After G40: moves without X or Y words keep the last offset X, Y (as
+  // LinuxCNC); the first with them (the exit) starts there.
+  bool comp_exit_ = false;
   CompSeg comp_seg_;
   bool home_known_[2] = {false, false};  // G28, G30
   bool home_noted_ = false;
@@ -651,7 +686,8 @@ absl::Status Interpreter::ReadBlock(const char* p, const char* end, Block* b) {
       continue;
     }
     const char letter = static_cast<char>(c & ~0x20);  // upper case
-    if (letter < 'A' || letter > 'Z') {
+    const int polar = c == '@' ? kRadiusWord : c == '^' ? kAngleWord : -1;
+    if (polar < 0 && (letter < 'A' || letter > 'Z')) {
       switch (c) {
         case '[':
           return Err("an expression ('[') must follow a word letter");
@@ -684,9 +720,19 @@ absl::Status Interpreter::ReadBlock(const char* p, const char* end, Block* b) {
       if (q >= end || *q == '(' || *q == ';' ||
           ((*q & ~0x20) >= 'A' && (*q & ~0x20) <= 'Z' &&
            !(q + 1 < end && ((q[1] & ~0x20) >= 'A' && (q[1] & ~0x20) <= 'Z')))) {
-        return Err(absl::StrCat(std::string(1, letter), " word has no number"));
+        return Err(absl::StrCat(std::string(1, polar >= 0 ? c : letter),
+                                " word has no number"));
       }
       SWARF_RETURN_IF_ERROR(Wrap(ReadReal(&p, end, *this, &v)));
+    }
+    if (polar >= 0) {
+      const uint32_t bit = uint32_t{1} << polar;
+      if (b->words & bit) {
+        return Err(absl::StrCat("two ", std::string(1, c), " words on one line"));
+      }
+      b->words |= bit;
+      b->value[polar] = v;
+      continue;
     }
     switch (letter) {
       case 'G': {
@@ -752,6 +798,18 @@ absl::StatusOr<Toolpath> Interpreter::Run(std::string_view text) {
     }
   }
   params_[kCoordSystem] = 1;  // G54
+  for (int a = 0; a < 3; ++a) {
+    if (!(std::fabs(options_.start[a]) <= kMaxCoordinateMm &&
+          std::fabs(options_.tool_change_position[a]) <= kMaxCoordinateMm)) {
+      return absl::InvalidArgumentError(
+          "start or tool-change position out of range");
+    }
+  }
+  if (options_.start_known) {
+    for (int a = 0; a < 3; ++a) pos_[a] = options_.start[a];
+    known_ = 7;
+    start_pending_ = true;
+  }
   const char* begin = SkipBom(text.data(), text.data() + text.size());
   files_.emplace_back();
   files_[0].text = text.substr(begin - text.data());
@@ -961,8 +1019,16 @@ absl::Status Interpreter::ExecuteO(const Block& b, bool arrived) {
         return Err(name + " outside a subroutine");
       }
       if (frame().label != label) {
-        return Err(absl::StrCat(name, " inside subroutine ",
-                                OLabel(frame().label)));
+        // As LinuxCNC: a return may carry the label of a structure it is
+        // in ("o1010 return" inside "o1010 if" in "o1000 sub").
+        bool enclosing = false;
+        if (b.o_kind == OKind::kReturn) {
+          for (const Control& c : control) enclosing |= c.label == label;
+        }
+        if (!enclosing) {
+          return Err(absl::StrCat(name, " inside subroutine ",
+                                  OLabel(frame().label)));
+        }
       }
       return Return(b.o_has_value, b.o_value);
     case OKind::kCall:
@@ -1327,12 +1393,15 @@ absl::Status Interpreter::Execute(const Block& b) {
     if (comp_side_ != 0) {
       return Err("M6 with cutter compensation on (G40 first)");
     }
-    ToolChange();
+    SWARF_RETURN_IF_ERROR(ToolChange());
   }
   if (length_code >= 0) SWARF_RETURN_IF_ERROR(ToolLength(b, length_code, &used));
-  if (new_motion >= 0) motion_ = new_motion;
+  if (new_motion >= 0) {
+    motion_ = new_motion;
+    if (!IsCycle(motion_)) cycle_il_set_ = false;  // a series ends
+  }
 
-  const uint32_t axes = b.words & kAxisWords;
+  const uint32_t axes = b.words & (kAxisWords | kPolarWords);
   if (nonmodal >= 0) {
     if (comp_side_ != 0 && (nonmodal == 280 || nonmodal == 300)) {
       return Err(absl::StrCat(GName(nonmodal),
@@ -1341,6 +1410,10 @@ absl::Status Interpreter::Execute(const Block& b) {
     SWARF_RETURN_IF_ERROR(NonModal(b, nonmodal, &used));
   }
   const bool axes_taken = (used & kAxisWords) != 0;
+  if (axes_taken && (b.words & kPolarWords)) {
+    return Err(absl::StrCat("@/^ (polar coordinates) with ",
+                            GName(nonmodal >= 0 ? nonmodal : 431)));
+  }
   if (axes_taken && motion_given) {
     return Err(absl::StrCat(GName(nonmodal >= 0 ? nonmodal : 431),
                             " and a motion code on one line both use the "
@@ -1513,6 +1586,7 @@ absl::Status Interpreter::ApplyGCodes(const Block& b, int* new_motion,
   if (g80 && *new_motion < 0) *new_motion = 800;
   if (comp_code == 400) {
     SWARF_RETURN_IF_ERROR(CompFlush());
+    if (comp_side_ != 0) comp_exit_ = emitted_;
     comp_side_ = 0;
     ++g_ignored_[400];
   } else if (comp_code >= 0) {
@@ -1596,6 +1670,10 @@ absl::Status Interpreter::NonModal(const Block& b, int code, uint32_t* used) {
   };
   switch (code) {
     case 40:  // dwell: its P is counted as ignored
+      if (sink_ != nullptr) {
+        sink_->Dwell(static_cast<int32_t>(main_line_),
+                     (b.words & Bit('P')) ? b.value['P' - 'A'] : 0);
+      }
       return absl::OkStatus();
     case 100: {
       *used |= kAxisWords | Bit('L') | Bit('P') | Bit('R');
@@ -1646,6 +1724,7 @@ absl::Status Interpreter::NonModal(const Block& b, int code, uint32_t* used) {
         // Like a tool change: the machine goes where we can't follow.
         known_ &= ~move;
         in_run_ = false;
+        start_pending_ = false;
         if (!home_noted_) {
           home_noted_ = true;
           path_.AddNote(absl::StrCat(
@@ -1662,7 +1741,7 @@ absl::Status Interpreter::NonModal(const Block& b, int code, uint32_t* used) {
       }
       known_ |= move;
       if (known_ != 7) return absl::OkStatus();
-      if (before != 7) in_run_ = false;
+      if (before != 7) in_run_ = false, start_pending_ = false;
       return Emit(pos_[0], pos_[1], pos_[2], true);
     }
     case 281: case 301: {
@@ -1715,16 +1794,26 @@ absl::Status Interpreter::NonModal(const Block& b, int code, uint32_t* used) {
   }
 }
 
-// The machine may travel to a tool-change position: every axis becomes
+// M6: as LinuxCNC, the position stays (a rapid to the tool-change position
+// first when one is given); with m6_forgets_position every axis becomes
 // unknown and the next known position starts a new run.
-void Interpreter::ToolChange() {
+absl::Status Interpreter::ToolChange() {
+  if (options_.tool_change_position_known) {
+    const double* t = options_.tool_change_position;
+    SWARF_RETURN_IF_ERROR(MoveTo(t[0], t[1], t[2], true));  // the old tool
+  }
   if (last_t_ >= 0) {
     tool_ = static_cast<uint16_t>(last_t_);
     path_.NoteToolSelected(tool_, static_cast<int32_t>(main_line_));
   }
   had_m6_ = true;
-  known_ = 0;
-  in_run_ = false;
+  if (options_.m6_forgets_position) {
+    known_ = 0;
+    in_run_ = false;
+    start_pending_ = false;
+  }
+  if (sink_ != nullptr) sink_->ToolChange(static_cast<int32_t>(main_line_), tool_);
+  return absl::OkStatus();
 }
 
 // The programmed end of a move: axis words in the current units, distance
@@ -1759,6 +1848,52 @@ absl::Status Interpreter::EndPoint(const Block& b, bool machine,
     }
     end[a] = v;
   }
+  if (b.words & kPolarWords) return Polar(b, end);
+  return absl::OkStatus();
+}
+
+// '@' (radius) and '^' (angle, degrees) give X and Y, as LinuxCNC: in G90
+// about the origin of the program coordinates (a missing one from the
+// current position), in G91 added to the current position's radius and
+// angle. G17 only.
+absl::Status Interpreter::Polar(const Block& b, double end[3]) {
+  if (b.words & (Bit('X') | Bit('Y'))) {
+    return Err("X or Y with polar coordinates (@, ^)");
+  }
+  if (plane_ != 17) {
+    return Err("polar coordinates (@, ^) only in the XY plane (G17)");
+  }
+  const bool has_r = b.words & (uint32_t{1} << kRadiusWord);
+  const bool has_a = b.words & (uint32_t{1} << kAngleWord);
+  const bool need_here = incremental_ || !has_r || !has_a;
+  if (need_here && (known_ & 3) != 3) {
+    return Err("polar coordinates (@, ^) relative to an unknown X or Y");
+  }
+  const double px = need_here ? ProgramPosition(0) : 0;
+  const double py = need_here ? ProgramPosition(1) : 0;
+  if (incremental_ && px == 0 && py == 0) {
+    return Err("incremental polar coordinates (@, ^) at the origin: the "
+               "angle is undefined");
+  }
+  double radius = need_here ? std::hypot(py, px) : 0;
+  double angle = need_here ? std::atan2(py, px) : 0;
+  const double rv = b.value[kRadiusWord], av = b.value[kAngleWord] * kPi / 180;
+  if (incremental_) {
+    if (has_r) radius += rv;
+    if (has_a) angle += av;
+  } else {
+    if (has_r) radius = rv;
+    if (has_a) angle = av;
+  }
+  const double xy[2] = {radius * std::cos(angle), radius * std::sin(angle)};
+  for (int a = 0; a < 2; ++a) {
+    const double v = xy[a] * scale() + Offset(a);
+    if (!(std::fabs(v) <= kMaxCoordinateMm)) {
+      return Err(absl::StrCat(std::string(1, kAxisName[a]), " position ", v,
+                              " mm is out of range"));
+    }
+    end[a] = v;
+  }
   return absl::OkStatus();
 }
 
@@ -1779,7 +1914,15 @@ absl::Status Interpreter::Linear(const Block& b, bool machine, bool rapid) {
     }
     return CompAdd(seg);
   }
+  if (comp_exit_) {
+    if (!(b.words & (Bit('X') | Bit('Y') | kPolarWords)) && known_ == 7) {
+      pos_[2] = end[2];
+      return Emit(last_[0], last_[1], end[2], rapid);
+    }
+    comp_exit_ = false;
+  }
   const unsigned before = known_;
+  if (b.words & kPolarWords) known_ |= 3;
   for (int a = 0; a < 3; ++a) {
     if (b.words & Bit(kAxisName[a])) known_ |= 1u << a;
     pos_[a] = end[a];
@@ -1802,23 +1945,34 @@ absl::Status Interpreter::MoveTo(double x, double y, double z, bool rapid) {
   return Emit(x, y, z, rapid);
 }
 
+// A known start (GcodeOptions::start) begins the first run: the first
+// move starts there.
+absl::Status Interpreter::BeginRun() {
+  start_pending_ = false;
+  if (in_run_) return absl::OkStatus();
+  const double* s = options_.start;
+  return Emit(s[0], s[1], s[2], true);
+}
+
 absl::Status Interpreter::Emit(double x, double y, double z, bool rapid) {
-  if (path_.point_count() >= options_.max_points) {
-    return Err(absl::StrCat("more than ", options_.max_points,
-                            " points (max_points)"));
-  }
-  ToolpathPoint p;
-  p.position = {x, y, z};
-  p.line = static_cast<int32_t>(emit_line_ >= 0 ? emit_line_ : main_line_);
-  p.tool = tool_;
-  p.rapid = rapid;
-  p.starts_run = !in_run_;
+  if (start_pending_) SWARF_RETURN_IF_ERROR(BeginRun());
+  CanonStraight m;
+  m.end = {x, y, z};
+  m.line = static_cast<int32_t>(emit_line_ >= 0 ? emit_line_ : main_line_);
+  m.tool = tool_;
+  m.rapid = rapid;
+  m.starts_run = !in_run_;
   in_run_ = true;
-  path_.Append(p);
-  return absl::OkStatus();
+  last_[0] = x, last_[1] = y, last_[2] = z;
+  emitted_ = true;
+  absl::Status st =
+      sink_ == nullptr ? builder_.Straight(m) : sink_->Straight(m);
+  if (!st.ok()) return Err(std::string(st.message()));
+  return st;
 }
 
 absl::Status Interpreter::Arc(const Block& b) {
+  comp_exit_ = false;
   const bool cw = motion_ == 20;
   const char* gname = cw ? "G2" : "G3";
   // The plane's axes (first, second, linear) and centre words; the first
@@ -1841,7 +1995,7 @@ absl::Status Interpreter::Arc(const Block& b) {
     return Err(absl::StrCat(gname, " in the ", plane_name,
                             " with cutter compensation on (G17 only)"));
   }
-  if (!in_run_ || known_ != 7) {
+  if ((!in_run_ && !start_pending_) || known_ != 7) {
     return Err(absl::StrCat(gname,
                             " arc before the start position is known (X, Y "
                             "and Z must all be given first)"));
@@ -1945,9 +2099,8 @@ absl::Status Interpreter::Arc(const Block& b) {
     seg.sweep = sweep;
     SWARF_RETURN_IF_ERROR(CompAdd(seg));
   } else {
-    const double e3[3] = {end[p0], end[p1], end[p2]};
     SWARF_RETURN_IF_ERROR(ChordArc(p0, p1, p2, cx, cy, r0, r1, a0, sweep, z0,
-                                   e3, false));
+                                   end, false));
   }
   for (int a = 0; a < 3; ++a) pos_[a] = end[a];
   return absl::OkStatus();
@@ -1955,55 +2108,41 @@ absl::Status Interpreter::Arc(const Block& b) {
 
 // Emits an arc in the plane of axes (p0, p1) from angle a0 through `sweep`
 // (radius r0 to r1, linear: a spiral when they differ; the third axis
-// linear from z0), ending exactly at `end` (in plane order). Chords of angle
-// `step` deviate from the arc by the sagitta r (1 - cos(step / 2)) =
-// 2 r sin^2(step / 4) <= tolerance; asin form for accuracy when tolerance
-// << r. At most a quarter turn per chord.
+// linear from z0), ending exactly at `end` (x, y, z): a CanonArc.
 absl::Status Interpreter::ChordArc(int p0, int p1, int p2, double cx,
                                    double cy, double r0, double r1, double a0,
                                    double sweep, double z0, const double end[3],
                                    bool rapid) {
-  const double q = options_.arc_tolerance / (2 * std::max(r0, r1));
-  const double step =
-      q >= 0.5 ? kPi / 2 : std::min(kPi / 2, 4 * std::asin(std::sqrt(q)));
-  const double segments = std::ceil(std::fabs(sweep) / step);
-  if (!(segments <=
-        static_cast<double>(options_.max_points - path_.point_count()))) {
-    return Err(absl::StrCat("an arc needs ", segments,
-                            " points: more than max_points (",
-                            options_.max_points, ")"));
-  }
-  const int64_t n = std::max<int64_t>(1, static_cast<int64_t>(segments));
-  double pt[3];
-  for (int64_t k = 1; k < n; ++k) {
-    const double t = static_cast<double>(k) / static_cast<double>(n);
-    const double a = a0 + sweep * t;
-    const double r = r0 + (r1 - r0) * t;
-    pt[p0] = cx + r * std::cos(a);
-    pt[p1] = cy + r * std::sin(a);
-    pt[p2] = z0 + (end[2] - z0) * t;
-    // The arc may bulge past the bound its end points keep.
-    if (!(std::fabs(pt[p0]) <= kMaxCoordinateMm &&
-          std::fabs(pt[p1]) <= kMaxCoordinateMm)) {
-      return Err(absl::StrCat("an arc leaves the range of +-",
-                              kMaxCoordinateMm, " mm at (", pt[0], ", ", pt[1],
-                              ", ", pt[2], ")"));
-    }
-    SWARF_RETURN_IF_ERROR(Emit(pt[0], pt[1], pt[2], rapid));
-  }
-  // The end, exactly.
-  pt[p0] = end[0];
-  pt[p1] = end[1];
-  pt[p2] = end[2];
-  return Emit(pt[0], pt[1], pt[2], rapid);
+  if (start_pending_) SWARF_RETURN_IF_ERROR(BeginRun());
+  CanonArc arc;
+  arc.end = {end[0], end[1], end[2]};
+  arc.p0 = p0, arc.p1 = p1, arc.p2 = p2;
+  arc.cx = cx, arc.cy = cy;
+  arc.r0 = r0, arc.r1 = r1;
+  arc.a0 = a0, arc.sweep = sweep;
+  arc.z0 = z0;
+  arc.line = static_cast<int32_t>(emit_line_ >= 0 ? emit_line_ : main_line_);
+  arc.tool = tool_;
+  arc.rapid = rapid;
+  in_run_ = true;
+  last_[0] = end[0], last_[1] = end[1], last_[2] = end[2];
+  emitted_ = true;
+  absl::Status st =
+      sink_ == nullptr ? builder_.ArcFeed(arc) : sink_->ArcFeed(arc);
+  if (!st.ok()) return Err(std::string(st.message()));
+  return st;
 }
 
-// Canned cycles, after LinuxCNC (XY plane): from the current height, up to
-// R if below it, over to the hole, down to R, the cycle's own moves, then
-// back to the clearance height: R under G99, max(R, the height before the
-// cycle) under G98. Under G91, R is relative to the height before the cycle,
-// Z to R, and X/Y step from hole to hole for L repeats.
+// Canned cycles, after LinuxCNC (XY plane). A series of cycles (until G80
+// or another motion mode) keeps its initial level: the height before its
+// first cycle, raised to R when below it. Each hole: over to it (the
+// series' first at the current height, the others at the clearance
+// height: a straight rapid, diagonal when the height changes), down to R,
+// the cycle's own moves, then back to the clearance height: R under G99,
+// the initial level under G98. Under G91, R is relative to the initial
+// level, Z to R, and X/Y (or @/^) step from hole to hole for L repeats.
 absl::Status Interpreter::Cycle(const Block& b, uint32_t* used) {
+  comp_exit_ = false;
   const std::string g = GName(motion_);
   *used |= Bit('R') | Bit('Q') | Bit('P') | Bit('L');
   const bool fanuc = options_.dialect == Dialect::kFanuc;
@@ -2051,10 +2190,15 @@ absl::Status Interpreter::Cycle(const Block& b, uint32_t* used) {
     peck = cycle_q_ * s;
     if (!(peck > 0)) return Err(g + " needs Q > 0 (the peck depth)");
   }
-  const double z0 = pos_[2];
+  // The series' initial level: the height before its first cycle.
+  if (!cycle_il_set_) {
+    cycle_il_set_ = true;
+    cycle_il_ = pos_[2];
+  }
+  double old_z = cycle_il_;
   double r, bottom;
   if (incremental_) {
-    r = z0 + cycle_r_ * s;
+    r = old_z + cycle_r_ * s;
     bottom = r + cycle_z_ * s;
   } else {
     r = cycle_r_ * s + Offset(2);
@@ -2067,7 +2211,17 @@ absl::Status Interpreter::Cycle(const Block& b, uint32_t* used) {
     return Err(absl::StrCat(g, ": the hole bottom Z is above the retract "
                                "height R"));
   }
-  const double clear = retract_r_ ? r : std::max(z0, r);
+  // Below R at the initial level: straight up (or down) to R first.
+  double current = pos_[2];
+  if (old_z < r) {
+    if ((known_ & 3) == 3) {
+      SWARF_RETURN_IF_ERROR(MoveTo(pos_[0], pos_[1], r, true));
+    } else {
+      pos_[2] = r;
+    }
+    old_z = current = r;
+  }
+  const double clear = retract_r_ ? r : old_z;
   double middle = 0, off[2] = {0, 0};
   if (motion_ == 870) {
     if ((b.words & (Bit('I') | Bit('J') | Bit('K'))) !=
@@ -2097,7 +2251,12 @@ absl::Status Interpreter::Cycle(const Block& b, uint32_t* used) {
   };
   for (int64_t k = 0; k < repeats; ++k) {
     double x = 0, y = 0;
-    for (int a = 0; a < 2; ++a) {
+    if (b.words & kPolarWords) {
+      double e[3] = {pos_[0], pos_[1], pos_[2]};
+      SWARF_RETURN_IF_ERROR(Polar(b, e));
+      x = e[0], y = e[1];
+    }
+    for (int a = 0; a < 2 && !(b.words & kPolarWords); ++a) {
       const char name = kAxisName[a];
       const bool given = b.words & Bit(name);
       double v = pos_[a];
@@ -2112,15 +2271,10 @@ absl::Status Interpreter::Cycle(const Block& b, uint32_t* used) {
       if (!(std::fabs(v) <= kMaxCoordinateMm)) return Err(g + ": out of range");
       (a == 0 ? x : y) = v;
     }
-    // Up to R first if below it, then over to the hole and down to R.
-    if (pos_[2] < r) {
-      if ((known_ & 3) == 3) {
-        SWARF_RETURN_IF_ERROR(rapid(pos_[0], pos_[1], r));
-      } else {
-        pos_[2] = r;
-      }
-    }
-    SWARF_RETURN_IF_ERROR(rapid(x, y, pos_[2]));
+    // Over to the hole (the first at the current height, the others at the
+    // clearance height) and down to R.
+    const double over = k == 0 && current > r ? current : clear;
+    SWARF_RETURN_IF_ERROR(rapid(x, y, over));
     SWARF_RETURN_IF_ERROR(rapid(x, y, r));
     switch (motion_) {
       case 730:  // chip-breaking pecks: a short retract after each
@@ -2234,6 +2388,61 @@ absl::Status Interpreter::CompStart(const Block& b, int code) {
   return absl::OkStatus();
 }
 
+// An arc as the entry move, as LinuxCNC: it ends offset along the
+// programmed arc's radius at its end, on an arc from where the tool is
+// whose centre lies on that radius (so the tool leaves it along the
+// programmed arc's end direction); a spiral-free arc, so its centre moves.
+absl::Status Interpreter::CompArcEntry(CompSeg seg) {
+  if (!(seg.tr >= kRadiusTolerance)) {
+    return Err(absl::StrCat("arc of radius ", seg.radius,
+                            " mm is too small for the compensated tool "
+                            "radius ",
+                            comp_r_, " mm on its inside"));
+  }
+  const double sign = seg.sweep > 0 ? 1 : -1;
+  const double a1 = std::atan2(seg.e[1] - seg.c[1], seg.e[0] - seg.c[0]);
+  seg.te[0] = seg.c[0] + seg.tr * std::cos(a1);
+  seg.te[1] = seg.c[1] + seg.tr * std::sin(a1);
+  // The new centre: te + t u, u towards the programmed centre, as far from
+  // the start as from te.
+  const double ux = -std::cos(a1), uy = -std::sin(a1);
+  const double dx = seg.te[0] - seg.s[0], dy = seg.te[1] - seg.s[1];
+  const double den = 2 * (ux * dx + uy * dy);
+  if (!(std::fabs(den) > 1e-9)) {
+    return Err("cutter compensation: the entry arc cannot start where the "
+               "tool is (it is on the arc's end tangent)");
+  }
+  const double t = -(dx * dx + dy * dy) / den;
+  seg.c[0] = seg.te[0] + t * ux;
+  seg.c[1] = seg.te[1] + t * uy;
+  seg.tr = std::fabs(t);
+  seg.ts[0] = seg.s[0];
+  seg.ts[1] = seg.s[1];
+  seg.ta = std::atan2(seg.s[1] - seg.c[1], seg.s[0] - seg.c[0]);
+  double sweep = std::atan2(seg.te[1] - seg.c[1], seg.te[0] - seg.c[0]) - seg.ta;
+  const double whole =
+      std::floor((std::fabs(seg.sweep) - 1e-9) / (2 * kPi)) * 2 * kPi;
+  // The centre beyond te from the programmed one turns the other way.
+  const double rot = t > 0 ? sign : -sign;
+  if (rot > 0) {
+    while (sweep <= 0) sweep += 2 * kPi;
+    sweep += whole;
+  } else {
+    while (sweep >= 0) sweep -= 2 * kPi;
+    sweep -= whole;
+  }
+  seg.tsweep = sweep;
+  seg.dir_s[0] = -std::sin(seg.ta) * rot;
+  seg.dir_s[1] = std::cos(seg.ta) * rot;
+  // The end tangent is the programmed arc's (the centre is on its radius).
+  seg.dir_e[0] = -std::sin(a1) * sign;
+  seg.dir_e[1] = std::cos(a1) * sign;
+  comp_entry_ = false;
+  comp_seg_ = seg;
+  comp_pending_ = true;
+  return absl::OkStatus();
+}
+
 absl::Status Interpreter::CompAdd(CompSeg seg) {
   const double dx = seg.e[0] - seg.s[0], dy = seg.e[1] - seg.s[1];
   const double r = comp_r_ * comp_side_;  // signed: + left
@@ -2243,9 +2452,9 @@ absl::Status Interpreter::CompAdd(CompSeg seg) {
       // A move along Z only: the tool stays where it is in XY.
       SWARF_RETURN_IF_ERROR(CompFlush());
       double here[2] = {seg.s[0], seg.s[1]};
-      if (!path_.points().empty()) {
-        here[0] = path_.points().back().position.x;
-        here[1] = path_.points().back().position.y;
+      if (emitted_) {
+        here[0] = last_[0];
+        here[1] = last_[1];
       }
       return Emit(here[0], here[1], seg.e[2], seg.rapid);
     }
@@ -2258,15 +2467,23 @@ absl::Status Interpreter::CompAdd(CompSeg seg) {
     seg.te[1] = seg.e[1] + ny;
     if (comp_entry_) {
       // The entry: from where the tool is to the offset end.
+      seg.entry = true;
+      seg.os[0] = seg.ts[0];
+      seg.os[1] = seg.ts[1];
       seg.ts[0] = seg.s[0];
       seg.ts[1] = seg.s[1];
     }
   } else {
-    if (comp_entry_) {
-      return Err("the entry move after G41/G42 must be a straight line");
-    }
     const double sign = seg.sweep > 0 ? 1 : -1;
     seg.tr = seg.radius - r * sign;
+    if (comp_entry_) return CompArcEntry(seg);
+    if (std::fabs(seg.tr) < kRadiusTolerance) {
+      // A tool as large as the arc, on its inside: its centre stays on the
+      // arc's (LinuxCNC's arc of radius zero; a helix plunges).
+      SWARF_RETURN_IF_ERROR(CompFlush());
+      comp_entry_ = false;
+      return Emit(seg.c[0], seg.c[1], seg.e[2], seg.rapid);
+    }
     if (!(seg.tr >= kRadiusTolerance)) {
       return Err(absl::StrCat("arc of radius ", seg.radius,
                               " mm is too small for the compensated tool "
@@ -2298,24 +2515,26 @@ absl::Status Interpreter::CompAdd(CompSeg seg) {
 // infinite lines, arcs as circles.
 int Intersect(const CompSeg& a, const CompSeg& b, double out[2][2]) {
   if (!a.arc && !b.arc) {
-    const double ux = a.te[0] - a.ts[0], uy = a.te[1] - a.ts[1];
+    const double* as = a.LineStart();
+    const double ux = a.te[0] - as[0], uy = a.te[1] - as[1];
     const double vx = b.te[0] - b.ts[0], vy = b.te[1] - b.ts[1];
     const double den = ux * vy - uy * vx;
     if (std::fabs(den) < 1e-300) return 0;
     const double t =
-        ((b.ts[0] - a.ts[0]) * vy - (b.ts[1] - a.ts[1]) * vx) / den;
-    out[0][0] = a.ts[0] + t * ux;
-    out[0][1] = a.ts[1] + t * uy;
+        ((b.ts[0] - as[0]) * vy - (b.ts[1] - as[1]) * vx) / den;
+    out[0][0] = as[0] + t * ux;
+    out[0][1] = as[1] + t * uy;
     return 1;
   }
   // A circle (c, r) against a line (p, d) or a circle.
   const CompSeg& circ = a.arc ? a : b;
   const CompSeg& other = a.arc ? b : a;
   if (!other.arc) {
-    const double dx = other.te[0] - other.ts[0], dy = other.te[1] - other.ts[1];
+    const double* os = other.LineStart();
+    const double dx = other.te[0] - os[0], dy = other.te[1] - os[1];
     const double len = std::hypot(dx, dy);
     const double ux = dx / len, uy = dy / len;
-    const double fx = other.ts[0] - circ.c[0], fy = other.ts[1] - circ.c[1];
+    const double fx = os[0] - circ.c[0], fy = os[1] - circ.c[1];
     const double bq = fx * ux + fy * uy;
     const double cq = fx * fx + fy * fy - circ.tr * circ.tr;
     const double disc = bq * bq - cq;
@@ -2323,8 +2542,8 @@ int Intersect(const CompSeg& a, const CompSeg& b, double out[2][2]) {
     const double sq = std::sqrt(disc);
     for (int k = 0; k < 2; ++k) {
       const double t = -bq + (k == 0 ? -sq : sq);
-      out[k][0] = other.ts[0] + t * ux;
-      out[k][1] = other.ts[1] + t * uy;
+      out[k][0] = os[0] + t * ux;
+      out[k][1] = os[1] + t * uy;
     }
     return 2;
   }
@@ -2342,12 +2561,14 @@ int Intersect(const CompSeg& a, const CompSeg& b, double out[2][2]) {
 }
 
 // Where p lies along a segment's tool path: 0 at its start, 1 at its end
-// (lines: the parameter; arcs: the fraction of the sweep).
-double Along(const CompSeg& s, const double p[2]) {
+// (lines: the parameter; arcs: the fraction of the sweep). On an entry
+// line, `offset_line` measures along its offset line instead.
+double Along(const CompSeg& s, const double p[2], bool offset_line = false) {
   if (!s.arc) {
-    const double ux = s.te[0] - s.ts[0], uy = s.te[1] - s.ts[1];
+    const double* st = offset_line ? s.LineStart() : s.ts;
+    const double ux = s.te[0] - st[0], uy = s.te[1] - st[1];
     const double len2 = ux * ux + uy * uy;
-    return len2 > 0 ? ((p[0] - s.ts[0]) * ux + (p[1] - s.ts[1]) * uy) / len2
+    return len2 > 0 ? ((p[0] - st[0]) * ux + (p[1] - st[1]) * uy) / len2
                     : 0;
   }
   double a = std::atan2(p[1] - s.c[1], p[0] - s.c[0]) - s.ta;
@@ -2394,7 +2615,7 @@ absl::Status Interpreter::CompJoin(CompSeg* a, CompSeg* b) {
   int best = -1;
   double best_d = INFINITY;
   for (int k = 0; k < n; ++k) {
-    const double ta = Along(*a, x[k]), tb = Along(*b, x[k]);
+    const double ta = Along(*a, x[k], true), tb = Along(*b, x[k]);
     if (!(ta >= -1e-9 && ta <= 1 + 1e-9 && tb >= -1e-9 && tb <= 1 + 1e-9)) {
       continue;
     }
@@ -2403,6 +2624,11 @@ absl::Status Interpreter::CompJoin(CompSeg* a, CompSeg* b) {
       best_d = d;
       best = k;
     }
+  }
+  if (best < 0 && dot > 0 && std::fabs(cross) < kNearlyTangent) {
+    // Tangent but for rounding (a line into an arc with coordinates of
+    // a few decimals): no corner to cut, as LinuxCNC.
+    return CompEmit(*a);
   }
   if (best < 0) {
     return LineError(b->line,
@@ -2437,9 +2663,7 @@ absl::Status Interpreter::CompEmit(const CompSeg& seg) {
     st = Emit(seg.te[0], seg.te[1], seg.e[2], seg.rapid);
   } else {
     const double end[3] = {seg.te[0], seg.te[1], seg.e[2]};
-    const double z0 = path_.points().empty()
-                          ? seg.s[2]
-                          : path_.points().back().position.z;
+    const double z0 = emitted_ ? last_[2] : seg.s[2];
     st = ChordArc(0, 1, 2, seg.c[0], seg.c[1], seg.tr, seg.tr, seg.ta,
                   seg.tsweep, z0, end, seg.rapid);
   }
@@ -2456,8 +2680,9 @@ absl::Status Interpreter::CompFlush() {
 }  // namespace
 
 absl::StatusOr<Toolpath> ParseGcode(std::string_view text,
-                                    const GcodeOptions& options) {
-  Interpreter interpreter(options);
+                                    const GcodeOptions& options,
+                                    CanonSink* sink) {
+  Interpreter interpreter(options, sink);
   return interpreter.Run(text);
 }
 

@@ -15,6 +15,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "core/status_macros.h"
 #include "gcode/text.h"
 
 namespace swarf::gcode {
@@ -41,6 +42,60 @@ WordKey KeyOf(const std::string& w) {
 }
 
 }  // namespace
+
+int64_t CanonArc::Turns() const {
+  const double t = std::fabs(sweep) / (2 * std::numbers::pi);
+  const int64_t n = std::max<int64_t>(1, static_cast<int64_t>(std::ceil(t - 1e-9)));
+  return sweep < 0 ? -n : n;
+}
+
+absl::Status ToolpathBuilder::TooManyPoints() const {
+  return absl::InvalidArgumentError(
+      absl::StrCat("more than ", max_points_, " points (max_points)"));
+}
+
+// Chords of angle `step` deviate from the arc by the sagitta
+// r (1 - cos(step / 2)) = 2 r sin^2(step / 4) <= tolerance; asin form for
+// accuracy when tolerance << r. At most a quarter turn per chord.
+absl::Status ToolpathBuilder::ArcFeed(const CanonArc& a) {
+  constexpr double kPi = std::numbers::pi;
+  const double q = arc_tolerance_ / (2 * std::max(a.r0, a.r1));
+  const double step =
+      q >= 0.5 ? kPi / 2 : std::min(kPi / 2, 4 * std::asin(std::sqrt(q)));
+  const double segments = std::ceil(std::fabs(a.sweep) / step);
+  if (!(segments <= static_cast<double>(max_points_ - path_->point_count()))) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("an arc needs ", segments,
+                     " points: more than max_points (", max_points_, ")"));
+  }
+  const int64_t n = std::max<int64_t>(1, static_cast<int64_t>(segments));
+  const double end[3] = {a.end.x, a.end.y, a.end.z};
+  CanonStraight m;
+  m.line = a.line;
+  m.tool = a.tool;
+  m.rapid = a.rapid;
+  double pt[3];
+  for (int64_t k = 1; k < n; ++k) {
+    const double t = static_cast<double>(k) / static_cast<double>(n);
+    const double ang = a.a0 + a.sweep * t;
+    const double r = a.r0 + (a.r1 - a.r0) * t;
+    pt[a.p0] = a.cx + r * std::cos(ang);
+    pt[a.p1] = a.cy + r * std::sin(ang);
+    pt[a.p2] = a.z0 + (end[a.p2] - a.z0) * t;
+    // The arc may bulge past the bound its end points keep.
+    if (!(std::fabs(pt[a.p0]) <= kMaxCoordinateMm &&
+          std::fabs(pt[a.p1]) <= kMaxCoordinateMm)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "an arc leaves the range of +-", kMaxCoordinateMm, " mm at (",
+          pt[0], ", ", pt[1], ", ", pt[2], ")"));
+    }
+    m.end = {pt[0], pt[1], pt[2]};
+    SWARF_RETURN_IF_ERROR(Straight(m));
+  }
+  // The end, exactly.
+  m.end = a.end;
+  return Straight(m);
+}
 
 void Toolpath::Append(const ToolpathPoint& p) {
   ToolpathPoint pt = p;
@@ -332,7 +387,8 @@ ToolpathFormat DetectToolpathFormat(std::string_view text) {
 
 absl::StatusOr<Toolpath> ReadToolpathFile(const std::string& path,
                                           const GcodeOptions& options,
-                                          std::optional<ToolpathFormat> format) {
+                                          std::optional<ToolpathFormat> format,
+                                          CanonSink* sink) {
   const auto prefixed = [&path](const absl::Status& st) {
     return absl::Status(st.code(), absl::StrCat(path, ": ", st.message()));
   };
@@ -344,8 +400,10 @@ absl::StatusOr<Toolpath> ReadToolpathFile(const std::string& path,
     opt.subroutine_dir = slash == std::string::npos ? "." : path.substr(0, slash);
     if (opt.subroutine_dir.empty()) opt.subroutine_dir = "/";
   }
-  absl::StatusOr<Toolpath> tp = ParseToolpath(
-      *data, format.value_or(DetectToolpathFormat(*data)), opt);
+  const ToolpathFormat f = format.value_or(DetectToolpathFormat(*data));
+  absl::StatusOr<Toolpath> tp = f == ToolpathFormat::kGcode
+                                    ? ParseGcode(*data, opt, sink)
+                                    : ParseToolpath(*data, f, opt);
   if (!tp.ok()) return prefixed(tp.status());
   return tp;
 }

@@ -55,6 +55,7 @@
 
 #include "absl/status/statusor.h"
 #include "core/geometry.h"
+#include "gcode/canon.h"
 
 namespace swarf::gcode {
 
@@ -197,14 +198,58 @@ struct GcodeOptions {
   // D n, or the current tool); nullopt or unset: unknown (then G41/G42
   // are errors; G41.1/G42.1 give the diameter themselves).
   std::function<std::optional<double>(int tool)> tool_radius;
+  // Where the machine is when the program starts (machine mm), as LinuxCNC
+  // starts where the machine stands; unknown when unset (every axis unknown
+  // until a word gives it; incremental moves of an unknown axis are
+  // errors). Known, the first move starts a run at it.
+  bool start_known = false;
+  double start[3] = {0, 0, 0};
+  // M6 keeps the position (LinuxCNC without a tool-change position). With
+  // tool_change_position_known, M6 first rapids there (one straight
+  // traverse in machine coordinates, with the old tool). With
+  // m6_forgets_position (swarf before issue 27), M6 makes every axis
+  // unknown instead.
+  bool m6_forgets_position = false;
+  bool tool_change_position_known = false;
+  double tool_change_position[3] = {0, 0, 0};
+};
+
+// The canonical-command sink that makes a Toolpath: straight moves are
+// points, arcs chords within the arc tolerance (the last point the arc's
+// end, bit for bit). What ParseGcode uses unless given another sink.
+class ToolpathBuilder final : public CanonSink {
+ public:
+  ToolpathBuilder(Toolpath* path, double arc_tolerance, int64_t max_points)
+      : path_(path), arc_tolerance_(arc_tolerance), max_points_(max_points) {}
+  absl::Status Straight(const CanonStraight& m) override {
+    if (path_->point_count() >= max_points_) return TooManyPoints();
+    ToolpathPoint p;
+    p.position = m.end;
+    p.line = m.line;
+    p.tool = m.tool;
+    p.rapid = m.rapid;
+    p.starts_run = m.starts_run;
+    path_->Append(p);
+    return absl::OkStatus();
+  }
+  absl::Status ArcFeed(const CanonArc& a) override;
+
+ private:
+  absl::Status TooManyPoints() const;
+  Toolpath* path_;
+  double arc_tolerance_;
+  int64_t max_points_;
 };
 
 // Parses a G-code program (rules above). Tool numbers: the T of the last
 // M6, or, before any M6, the last T word (programs that select tools with T
 // alone); 0 when none; T above 65535 is an error. InvalidArgument
 // "line N: ..." on any error, or for bad options.
+// With a sink, the canonical commands go to it instead: the Toolpath
+// returned has the counts, notes and dropped moves but no points.
 absl::StatusOr<Toolpath> ParseGcode(std::string_view text,
-                                    const GcodeOptions& options = {});
+                                    const GcodeOptions& options = {},
+                                    CanonSink* sink = nullptr);
 
 // Parses tool-tip positions in mm, one "x y z" per line, separated by
 // commas and/or blanks (spaces, tabs). Blank lines and '#' comments (whole
@@ -245,9 +290,12 @@ absl::StatusOr<Toolpath> ParseToolpath(std::string_view text,
 // the file's directory unless options.subroutine_dir is set. Errors are
 // prefixed with the path once: "<path>: line N: ...". NotFound when the file
 // can't be opened.
+// With a sink, G-code's canonical commands go to it (see ParseGcode; an
+// XYZ file is parsed as usual).
 absl::StatusOr<Toolpath> ReadToolpathFile(
     const std::string& path, const GcodeOptions& options = {},
-    std::optional<ToolpathFormat> format = std::nullopt);
+    std::optional<ToolpathFormat> format = std::nullopt,
+    CanonSink* sink = nullptr);
 
 }  // namespace swarf::gcode
 

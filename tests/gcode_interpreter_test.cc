@@ -633,9 +633,10 @@ TEST(CompensationTest, InsideACircleTheToolRunsOnTheSmallerRadius) {
   const Toolpath tp = MustRun(
       "G21 G0 X0 Y0 Z1\nG1 Z-1\nG41.1 D2\nG1 X10 Y0\nG3 X10 Y0 I-10 J0\n"
       "G40 G1 X0 Y0\n");
-  const double t = 9 / std::sqrt(101.0);  // the entry meets the circle
+  // The entry's offset line (y = 1) meets the circle (r 9) at (sqrt 80, 1):
+  // rs274 gives STRAIGHT_FEED(8.9443, 1.0000, -1.0000).
   ASSERT_GE(tp.point_count(), 5);
-  ExpectNear({Xyz(tp)[2]}, {{10 * t, t, -1}}, 1e-12);
+  ExpectNear({Xyz(tp)[2]}, {{std::sqrt(80.0), 1, -1}}, 1e-12);
   int on_circle = 0;
   for (const ToolpathPoint& p : tp.points()) {
     if (p.line != 5) continue;
@@ -653,8 +654,10 @@ TEST(CompensationTest, InsideACircleTheToolRunsOnTheSmallerRadius) {
                       "G40\n"),
               StartsWith("line 5: cutter compensation: the tool (radius 2 mm) "
                          "cannot reach the concave corner between line 4"));
+  // An arc may be the entry move (LinuxCncParityTest.CompWithAnArcAs...),
+  // but not one smaller than the tool on its inside.
   EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z0\nG41.1 D2\nG3 X2 Y0 I1\n"),
-              HasSubstr("entry move after G41/G42 must be a straight line"));
+              HasSubstr("too small for the compensated tool radius"));
   EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z0\nG41.1 D2\nG1 X1\nM6 T2\n"),
               HasSubstr("M6 with cutter compensation on"));
 }
@@ -662,9 +665,11 @@ TEST(CompensationTest, InsideACircleTheToolRunsOnTheSmallerRadius) {
 // ------------------------------------------------------------ never silent
 
 TEST(DroppedTest, MovesAfterM6AndWithoutZAreCountedAndNamed) {
+  GcodeOptions forget;  // swarf's M6 before issue 27
+  forget.m6_forgets_position = true;
   const Toolpath tp = MustRun(
       "G21\nT1 M6\nG0 X0 Y0 Z5\nG1 Z-1\nX5\nT2 M6\nG1 X20\nG0 Z5\n"
-      "G1 X10 Y10 Z-1\nX11\n");
+      "G1 X10 Y10 Z-1\nX11\n", forget);
   EXPECT_EQ(tp.dropped_moves(), 2);
   ASSERT_EQ(tp.first_dropped().size(), 2u);
   EXPECT_EQ(tp.first_dropped()[0].line, 7);
@@ -783,6 +788,234 @@ TEST(ModalStateTest, M70SavesAndM72RestoresUnitsAndDistanceMode) {
   const Toolpath tp =
       MustRun("G21 G0 X0 Y0 Z0\nM70\nG20 G91\nG0 X1\nM72\nG0 X1\n");
   ExpectNear(Xyz(tp), {{0, 0, 0}, {25.4, 0, 0}, {1, 0, 0}});
+}
+
+
+// ------------------------------------------------- parity with LinuxCNC (27)
+//
+// Each program was run by LinuxCNC 2.9's rs274 (scripts/linuxcnc-diff); the
+// positions it printed (4 decimals) are in the comments, the expected values
+// are worked out by hand.
+
+TEST(LinuxCncParityTest, G98InASeriesRetractsToTheSeriesInitialLevel) {
+  // rs274: ... (0,0,2) then STRAIGHT_TRAVERSE(5, 0, 10) (diagonal, at the
+  // initial level), (5,0,2), feed (5,0,-1), back to (5,0,10).
+  const Toolpath tp = MustRun(
+      "G21 G0 X0 Y0 Z10\nG99 G81 X0 Y0 Z-1 R2\nG98 X5\nG80\n");
+  ExpectNear(Xyz(tp), {{0, 0, 10}, {0, 0, 2}, {0, 0, -1}, {0, 0, 2},
+                       {5, 0, 10}, {5, 0, 2}, {5, 0, -1}, {5, 0, 10}});
+  // G91: R from the initial level (not the height after a G99 hole), L
+  // repeats at the clearance height; a G0 ends the series.
+  const Toolpath inc = MustRun(
+      "G21 G0 X0 Y0 Z1\nG99 G81 X15 Z-1 R2\nG91 G98 G81 X5 R-1 Z-2 L2\n"
+      "G90 G0 Z5\nG98 G81 X40 Z-1 R2\n");
+  // rs274: (15,0,2) hole, then (20,0,2) (20,0,0) feed (20,0,-2) up to 1,
+  // (25,0,1) (25,0,0) (25,0,-2) (25,0,1); the new series: (40,0,5) ...
+  ExpectNear(Xyz(inc), {{0, 0, 1},   {0, 0, 2},   {15, 0, 2},  {15, 0, -1},
+                        {15, 0, 2},  {20, 0, 2},  {20, 0, 0},  {20, 0, -2},
+                        {20, 0, 1},  {25, 0, 1},  {25, 0, 0},  {25, 0, -2},
+                        {25, 0, 1},  {25, 0, 5},  {40, 0, 5},  {40, 0, 2},
+                        {40, 0, -1}, {40, 0, 5}});
+}
+
+TEST(LinuxCncParityTest, CompEntryIntoAConcaveCornerEndsOnTheOffsetLine) {
+  // Radius 1.5: the entry's offset line y = -x/2 + 37.5/sqrt(500) meets the
+  // next move's offset x = 18.5 at y = -9.25 + 37.5/sqrt(500) = -7.572949;
+  // rs274: STRAIGHT_FEED(18.5000, -7.5729), (18.5, 0), exit (30, 10).
+  const Toolpath tp = MustRun(
+      "G21 G0 X0 Y0 Z0\nG41.1 D3\nG1 X20 Y-10\nG1 X20 Y0\nG40 G1 X30 Y10\n");
+  ExpectNear(Xyz(tp), {{0, 0, 0},
+                       {18.5, -9.25 + 37.5 / std::sqrt(500.0), 0},
+                       {18.5, 0, 0},
+                       {30, 10, 0}});
+}
+
+TEST(LinuxCncParityTest, TangentLineIntoArcUnderCompWithManyDecimals) {
+  // useful-subroutines.ngc's slot (o200) written out with 15 decimals: the
+  // line is tangent to the arc but for rounding. It was refused ("cannot
+  // reach the concave corner"); rs274 runs it, as it runs 13 decimals.
+  const auto slot = [](int decimals) {
+    const double bx = -0.111803398874989, by = -0.055901699437495;
+    const double sx = 0.055901699437495, sy = -0.111803398874989;
+    char buf[1024];
+    const int d = decimals;
+    std::snprintf(
+        buf, sizeof buf,
+        "G20 G0 Z0.1\nG0 X%.*f Y%.*f\nG41.1 D0.0625 G0 X%.*f Y%.*f\n"
+        "G1 X%.*f Y%.*f Z-0.1\nG3 X%.*f Y%.*f R0.125\nG1 X%.*f Y%.*f\n"
+        "G3 X%.*f Y%.*f R0.125\nG1 X%.*f Y%.*f\nG0 Z0.1\nG40\n",
+        d, bx + sx, d, by + sy, d, sx, d, sy, d, 1 + sx, d, 0.5 + sy, d,
+        1 - sx, d, 0.5 - sy, d, -sx, d, -sy, d, sx, d, sy, d, 1 + sx, d,
+        0.5 + sy);
+    return std::string(buf);
+  };
+  for (const int d : {7, 8, 10, 12, 13, 14, 15}) {
+    const absl::StatusOr<Toolpath> tp = ParseGcode(slot(d));
+    ASSERT_TRUE(tp.ok()) << d << " decimals: " << tp.status();
+  }
+  // The same path whatever the decimals.
+  const Toolpath a = MustRun(slot(13)), b = MustRun(slot(15));
+  ASSERT_EQ(a.point_count(), b.point_count());
+  for (int64_t i = 0; i < a.point_count(); ++i) {
+    EXPECT_NEAR(a.points()[i].position.x, b.points()[i].position.x, 1e-6);
+    EXPECT_NEAR(a.points()[i].position.y, b.points()[i].position.y, 1e-6);
+  }
+}
+
+TEST(LinuxCncParityTest, ReturnLabelledWithAnEnclosingIf) {
+  // retval.ngc's form; rs274: STRAIGHT_FEED(246, 0, 0), (246, 4712, 0).
+  const Toolpath tp = MustRun(
+      "o1000 sub\n  o1010 if [#1 GT 0]\n    o1010 return [123*#1]\n"
+      "  o1010 endif\no1000 endsub [4712]\nG21 G0 X0 Y0 Z0\n"
+      "o1000 call [2]\nG1 X#<_value>\no1000 call [0]\nG1 Y#<_value>\n");
+  ExpectNear(Xyz(tp), {{0, 0, 0}, {246, 0, 0}, {246, 4712, 0}});
+  // A label that encloses nothing is still an error.
+  EXPECT_THAT(ErrorOf("o1 sub\no2 return\no1 endsub\nG21\no1 call\n"),
+              HasSubstr("o2 return inside subroutine o1"));
+}
+
+TEST(LinuxCncParityTest, PolarCoordinates) {
+  // rs274: (8.6603, 5), (0, 10), (-3.5355, 3.5355); after G92 X0 Y0 there
+  // (program origin moved), @2 ^180 is (-2, 0) in program coordinates; the
+  // G91 G81 @1 ^90 L3 holes step radius and angle: program (0,-3), (4,0),
+  // (0,5).
+  const Toolpath tp = MustRun(
+      "G21 G0 X0 Y0 Z0\nG1 @10 ^30\nG1 ^90\nG91 G1 @-5 ^45\n"
+      "G90 G92 X0 Y0\nG1 @2 ^180\nG91 G81 @1 ^90 R1 Z-2 L3\nG80 G90\n");
+  const double h = 5 / std::sqrt(2.0);
+  const double ox = -h, oy = h;  // the G92 origin
+  ExpectNear(Xyz(tp),
+             {{0, 0, 0},           {5 * std::sqrt(3.0), 5, 0},
+              {0, 10, 0},          {-h, h, 0},
+              {ox - 2, oy, 0},     {ox - 2, oy, 1},
+              {ox, oy - 3, 1},     {ox, oy - 3, -1},
+              {ox, oy - 3, 1},     {ox + 4, oy, 1},
+              {ox + 4, oy, -1},    {ox + 4, oy, 1},
+              {ox, oy + 5, 1},     {ox, oy + 5, -1},
+              {ox, oy + 5, 1}},
+             1e-9);
+  EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z0\nG1 X1 @2\n"),
+              HasSubstr("X or Y with polar coordinates"));
+  EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z0\nG91 G1 @2\n"),
+              HasSubstr("at the origin"));
+  EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z0\nG18 G1 @2 ^0\n"),
+              HasSubstr("only in the XY plane"));
+  EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z0\nG1 @1 @2\n"), HasSubstr("two @"));
+}
+
+TEST(LinuxCncParityTest, M6KeepsThePositionOrGoesToTheToolChangePosition) {
+  // rs274: (10,10,5) then feed (10,10,-1) with T2: the position stays.
+  const std::string prog = "G21 G0 X10 Y10 Z5\nT2 M6\nG1 Z-1\nX20\n";
+  const Toolpath tp = MustRun(prog);
+  ExpectNear(Xyz(tp), {{10, 10, 5}, {10, 10, -1}, {20, 10, -1}});
+  EXPECT_EQ(tp.run_count(), 1);
+  EXPECT_EQ(tp.points()[0].tool, 0);
+  EXPECT_EQ(tp.points()[1].tool, 2);
+  EXPECT_EQ(tp.dropped_moves(), 0);
+  // A tool-change position: a rapid there with the old tool first; the
+  // machine stays there (LinuxCNC resynchronises to it).
+  GcodeOptions tc;
+  tc.tool_change_position_known = true;
+  tc.tool_change_position[0] = 0;
+  tc.tool_change_position[1] = 0;
+  tc.tool_change_position[2] = 50;
+  const Toolpath at = MustRun("G21 T1 M6\n" + prog, tc);
+  ExpectNear(Xyz(at), {{0, 0, 50}, {10, 10, 5}, {0, 0, 50}, {0, 0, -1},
+                       {20, 0, -1}});
+  EXPECT_TRUE(at.points()[2].rapid);
+  EXPECT_EQ(at.points()[2].tool, 1);
+  EXPECT_EQ(at.points()[3].tool, 2);
+  // The old behaviour: the position is lost, the feeds dropped.
+  GcodeOptions forget;
+  forget.m6_forgets_position = true;
+  const Toolpath lost = MustRun(prog, forget);
+  EXPECT_EQ(lost.point_count(), 1);
+  EXPECT_EQ(lost.dropped_moves(), 2);
+}
+
+TEST(LinuxCncParityTest, AKnownStartAllowsIncrementalFirstMoves) {
+  const std::string prog = "G21 G91\nG0 X5 Y5\nG1 Z-2\nX10\n";
+  EXPECT_THAT(ErrorOf(prog), HasSubstr("incremental (G91) X move while X is "
+                                       "unknown"));
+  // rs274 (from the machine origin): (5,5,0), feed (5,5,-2), (15,5,-2).
+  GcodeOptions start;
+  start.start_known = true;
+  const Toolpath tp = MustRun(prog, start);
+  ExpectNear(Xyz(tp), {{0, 0, 0}, {5, 5, 0}, {5, 5, -2}, {15, 5, -2}});
+  EXPECT_TRUE(tp.points()[0].starts_run);
+  EXPECT_FALSE(tp.points()[1].starts_run);
+  EXPECT_TRUE(tp.points()[1].rapid);
+  // An arc may be the first move.
+  const Toolpath arc = MustRun("G21 G3 X2 Y0 I1 J0\n", start);
+  EXPECT_GT(arc.point_count(), 3);
+  ExpectNear({Xyz(arc).back()}, {{2, 0, 0}});
+}
+
+TEST(LinuxCncParityTest, CompWithAnArcAsTheEntryMove) {
+  // comp311_2.ngc's entry, radius 0.25: the arc ends at (2, 3.25) (offset
+  // along the programmed radius) on a circle through the start (1, 4)
+  // centred on that radius: (2, 3.25 + 1.5625 / 1.5); rs274:
+  // ARC_FEED(2.0000, 3.2500, 2.0000, 4.2917, 1), then (3.25, 2) about
+  // (2, 2), (3.25, -1), exit (5, -1).
+  const Toolpath tp = MustRun(
+      "G21 G0 X1 Y4 Z0\nG41.1 D0.5\nG3 X2 Y3 I1\nG2 X3 Y2 J-1\nG1 Y-1\n"
+      "G40 G1 X5\n");
+  const double cy = 3.25 + 1.5625 / 1.5, r = 1.5625 / 1.5;
+  bool reached = false;
+  for (const ToolpathPoint& p : tp.points()) {
+    if (p.line != 3) continue;
+    EXPECT_NEAR(std::hypot(p.position.x - 2, p.position.y - cy), r, 1e-9);
+    reached |= p.position.x == 2 && std::fabs(p.position.y - 3.25) < 1e-12;
+  }
+  EXPECT_TRUE(reached);
+  ExpectNear({Xyz(tp)[tp.points().size() - 2], Xyz(tp).back()},
+             {{3.25, -1, 0}, {5, -1, 0}});
+}
+
+TEST(LinuxCncParityTest, AfterG40MovesWithoutXYKeepTheOffsetPoint) {
+  // rs274: ... (10, 1, 0), Z up at (10, 1), then the exit to (20, 0, 5).
+  const Toolpath tp = MustRun(
+      "G21 G0 X0 Y0 Z0\nG41.1 D2\nG1 X10\nG40\nG0 Z5\nG0 X20\n");
+  ExpectNear(Xyz(tp), {{0, 0, 0}, {10, 1, 0}, {10, 1, 5}, {20, 0, 5}});
+}
+
+// The canonical-command seam: a sink sees arcs as arcs.
+class Recorder final : public CanonSink {
+ public:
+  absl::Status Straight(const CanonStraight& m) override {
+    kinds += m.starts_run ? 's' : m.rapid ? 'r' : 'f';
+    return absl::OkStatus();
+  }
+  absl::Status ArcFeed(const CanonArc& a) override {
+    kinds += 'a';
+    arcs.push_back(a);
+    return absl::OkStatus();
+  }
+  void ToolChange(int32_t, int tool) override { tools.push_back(tool); }
+  std::string kinds;
+  std::vector<CanonArc> arcs;
+  std::vector<int> tools;
+};
+
+TEST(CanonSinkTest, ArcsComeWithCentreAxisAndTurns) {
+  Recorder rec;
+  const absl::StatusOr<Toolpath> tp = ParseGcode(
+      "G21 G0 X10 Y0 Z0\nG1 Z-1\nG2 X0 Y-10 I-10 J0\nT3 M6\n"
+      "G18 G3 X0 Z-1 I0 K1 P2\n",
+      {}, &rec);
+  ASSERT_TRUE(tp.ok()) << tp.status();
+  EXPECT_EQ(tp->point_count(), 0);  // the commands went to the sink
+  EXPECT_EQ(rec.kinds, "sfaa");
+  ASSERT_EQ(rec.arcs.size(), 2u);
+  EXPECT_EQ(rec.arcs[0].Turns(), -1);
+  EXPECT_EQ(rec.arcs[0].p2, 2);
+  EXPECT_NEAR(rec.arcs[0].Centre().x, 0, 1e-12);
+  EXPECT_NEAR(rec.arcs[0].Centre().y, 0, 1e-12);
+  EXPECT_NEAR(rec.arcs[0].sweep, -std::acos(-1.0) / 2, 1e-12);
+  EXPECT_EQ(rec.arcs[1].p2, 1);  // about Y
+  EXPECT_EQ(rec.arcs[1].Turns(), 2);
+  EXPECT_EQ(rec.arcs[1].tool, 3);
+  EXPECT_EQ(rec.tools, std::vector<int>{3});
 }
 
 }  // namespace
