@@ -165,6 +165,13 @@ absl::StatusOr<DesignMesh> MeshFromSoup(const std::vector<double>& soup,
             name, ": triangle ", t + 1, " has a coordinate that is not a "
             "finite number"));
       }
+      if (std::fabs(p.x) > kMaxDesignCoordinate ||
+          std::fabs(p.y) > kMaxDesignCoordinate ||
+          std::fabs(p.z) > kMaxDesignCoordinate) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            name, ": triangle ", t + 1, " has a coordinate beyond +-",
+            kMaxDesignCoordinate, " mm: ", Point(p)));
+      }
       auto [it, added] = index.try_emplace(
           VertexKey{Bits(p.x), Bits(p.y), Bits(p.z)},
           static_cast<int32_t>(m.vertices.size()));

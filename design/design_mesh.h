@@ -42,6 +42,10 @@ struct DesignMesh {
 // vertices and indices at its worst.
 inline constexpr int64_t kDefaultMaxDesignTriangles = 20'000'000;
 
+// Coordinates beyond +-1e9 mm are refused (as the toolpath parsers'):
+// the envelope holds floats.
+inline constexpr double kMaxDesignCoordinate = 1e9;
+
 struct DesignReadOptions {
   double scale = 1.0;   // file units -> mm (25.4 for inches)
   Vec3 offset;          // added after scaling, mm
@@ -71,7 +75,8 @@ absl::StatusOr<DesignMesh> ParseDesign(absl::string_view bytes,
                                        const DesignReadOptions& options = {});
 
 // Welds and checks a triangle soup (9 doubles a triangle, mm, options
-// applied by the caller): NaN or infinite coordinates, no triangle left,
+// applied by the caller): NaN, infinite or out-of-range coordinates
+// (kMaxDesignCoordinate), no triangle left,
 // more than options.max_triangles, an edge shared by more than two
 // triangles (non-manifold). Used by the readers and for uploaded designs.
 absl::StatusOr<DesignMesh> MeshFromSoup(const std::vector<double>& soup,

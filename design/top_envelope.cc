@@ -26,11 +26,12 @@ TopEnvelope::Plane TopEnvelope::PlaneOf(const DesignMesh& mesh, int32_t t) {
   const double span =
       std::max({std::fabs(ux), std::fabs(uy), std::fabs(vx), std::fabs(vy)});
   if (!(std::fabs(d) > 1e-12 * span * span)) {
-    return {kNaN, kNaN, kNaN, 0, 0, 0, 0, 0, 0};
+    return {kNaN, kNaN, kNaN, 0, 0, 0, 0, 0, 0, 0, 0};
   }
   // The inverse of [u v]: (x - xa, y - ya) = wb u + wc v.
-  return {a.x,     a.y,      a.z,          vy / d,      -vx / d,
-          -uy / d, ux / d,   b.z - a.z,    c.z - a.z};
+  return {a.x,       a.y,       a.z,       vy / d,
+          -vx / d,   -uy / d,   ux / d,    b.z - a.z,
+          c.z - a.z, std::min({a.z, b.z, c.z}), std::max({a.z, b.z, c.z})};
 }
 
 double TopEnvelope::HeightAt(const Plane& p, double x, double y) {
@@ -40,7 +41,7 @@ double TopEnvelope::HeightAt(const Plane& p, double x, double y) {
   constexpr double kEdge = 1e-12;
   // NaN (a vertical triangle) fails every comparison.
   if (!(wb >= -kEdge && wc >= -kEdge && wb + wc <= 1 + kEdge)) return kNaN;
-  return p.za + wb * p.dzb + wc * p.dzc;
+  return std::min(std::max(p.za + wb * p.dzb + wc * p.dzc, p.zlo), p.zhi);
 }
 
 double TriangleHeightAt(const DesignMesh& mesh, int32_t t, double x, double y) {
@@ -255,7 +256,8 @@ void TopEnvelope::AtManyAmong(const std::vector<int32_t>& candidates,
       const double wb = p.m00 * rx + p.m01 * ry;
       const double wc = p.m10 * rx + p.m11 * ry;
       const bool inside = wb >= -kEdge && wc >= -kEdge && wb + wc <= 1 + kEdge;
-      const double z = p.za + wb * p.dzb + wc * p.dzc;
+      const double z =
+          std::min(std::max(p.za + wb * p.dzb + wc * p.dzc, p.zlo), p.zhi);
       out[q] = inside && !(out[q] >= z) ? z : out[q];
     }
   }

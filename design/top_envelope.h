@@ -69,10 +69,11 @@ class TopEnvelope {
 
   // A non-vertical triangle as its barycentric map from vertex a:
   // (wb, wc) = m * (x - xa, y - ya), inside when wb, wc >= 0 and
-  // wb + wc <= 1 (with a 1e-12 margin), z = za + wb dzb + wc dzc. xa is NaN
-  // for a vertical triangle.
+  // wb + wc <= 1 (with a 1e-12 margin), z = za + wb dzb + wc dzc clamped
+  // to the triangle's [zlo, zhi] (inside a near-vertical sliver rounding
+  // may not extrapolate far). xa is NaN for a vertical triangle.
   struct Plane {
-    double xa, ya, za, m00, m01, m10, m11, dzb, dzc;
+    double xa, ya, za, m00, m01, m10, m11, dzb, dzc, zlo, zhi;
   };
   static Plane PlaneOf(const DesignMesh& mesh, int32_t t);
   static double HeightAt(const Plane& p, double x, double y);

@@ -241,6 +241,25 @@ TEST(TopEnvelopeTest, AnOverhangKeepsItsTop) {
   EXPECT_EQ(small->covered_nodes(), 11 * 11);
 }
 
+TEST(TopEnvelopeTest, ANearVerticalSliverNeverReachesBeyondItsHeights) {
+  // A wall 1e-9 mm out of vertical, 10 mm high: inside its XY projection
+  // rounding may not extrapolate the plane beyond the wall's heights.
+  std::vector<double> soup = {0, 0, 0, 0, 10, 0, 1e-9, 5, 10};
+  const DesignMesh m = Mesh(soup);
+  const GridGeometry g(Stock(10, 0.5));
+  auto env = design::TopEnvelope::Build(m, g);
+  ASSERT_TRUE(env.ok());
+  for (double y = 0; y <= 10; y += 0.125) {
+    for (double x : {0.0, 1e-10, 5e-10}) {
+      const double z = env->At(x, y);
+      if (!std::isnan(z)) {
+        EXPECT_GE(z, 0);
+        EXPECT_LE(z, 10);
+      }
+    }
+  }
+}
+
 TEST(TopEnvelopeTest, ASlopeIsInterpolatedExactly) {
   std::vector<double> soup;
   // z = 0.25 x - 0.5 y - 3 over [0, 8]^2.
@@ -356,6 +375,11 @@ TEST(DesignMeshTest, BadInputIsNamed) {
   EXPECT_EQ(code(nm), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(msg(nm).find("non-manifold"), std::string::npos) << msg(nm);
   EXPECT_NE(msg(nm).find("(0, 0, 0) - (1, 0, 0)"), std::string::npos) << msg(nm);
+  // A coordinate the envelope's floats cannot hold.
+  std::vector<double> far_z = {0, 0, 0, 1, 0, 0, 0, 1, 5e12};
+  auto huge = design::MeshFromSoup(far_z, "huge.stl");
+  EXPECT_EQ(code(huge), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(msg(huge).find("beyond"), std::string::npos) << msg(huge);
   // Over the limit.
   auto big = design::MeshFromSoup(fin, "fin.stl", 2);
   EXPECT_EQ(code(big), absl::StatusCode::kResourceExhausted);
