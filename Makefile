@@ -77,3 +77,19 @@ test-sanitize: deps $(ASAN_BUILD)/build.ninja
 	cd $(ASAN_BUILD) && UBSAN_OPTIONS=print_stacktrace=1 \
 	  LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp \
 	  ctest --output-on-failure --timeout 900 -j $(JOBS) -E '^ViewerBrowserTest'
+
+# The differential test against LinuxCNC's own interpreter (issue 27):
+# rs274 (Debian's linuxcnc-uspace, installed here when missing: it is large,
+# so not in scripts/install-deps) and `swarf moves` on LinuxCNC's example
+# programs and on tests/linuxcnc/*.ngc; verdicts in tests/linuxcnc/expected.txt.
+.PHONY: test-linuxcnc
+test-linuxcnc: $(BUILD)/build.ninja
+	@command -v rs274 >/dev/null || { \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update && \
+	  DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y \
+	    --no-install-recommends linuxcnc-uspace; }
+	cmake --build $(BUILD) -j $(JOBS) --target swarf
+	scripts/linuxcnc-diff --swarf $(BUILD)/bin/swarf \
+	  --expect tests/linuxcnc/expected.txt \
+	  /usr/share/linuxcnc/ncfiles/*.ngc tests/linuxcnc/*.ngc

@@ -469,6 +469,7 @@ class Interpreter final : public ParameterSource {
   // After G40: moves without X or Y words keep the last offset X, Y (as
   // LinuxCNC); the first with them (the exit) starts there.
   bool comp_exit_ = false;
+  int64_t comp_exit_block_ = 0;  // the G40 line's block: its move exits
   CompSeg comp_seg_;
   bool home_known_[2] = {false, false};  // G28, G30
   bool home_noted_ = false;
@@ -1586,7 +1587,7 @@ absl::Status Interpreter::ApplyGCodes(const Block& b, int* new_motion,
   if (g80 && *new_motion < 0) *new_motion = 800;
   if (comp_code == 400) {
     SWARF_RETURN_IF_ERROR(CompFlush());
-    if (comp_side_ != 0) comp_exit_ = emitted_;
+    if (comp_side_ != 0) comp_exit_ = emitted_, comp_exit_block_ = blocks_;
     comp_side_ = 0;
     ++g_ignored_[400];
   } else if (comp_code >= 0) {
@@ -1915,7 +1916,8 @@ absl::Status Interpreter::Linear(const Block& b, bool machine, bool rapid) {
     return CompAdd(seg);
   }
   if (comp_exit_) {
-    if (!(b.words & (Bit('X') | Bit('Y') | kPolarWords)) && known_ == 7) {
+    if (!(b.words & (Bit('X') | Bit('Y') | kPolarWords)) && known_ == 7 &&
+        blocks_ != comp_exit_block_) {
       pos_[2] = end[2];
       return Emit(last_[0], last_[1], end[2], rapid);
     }
