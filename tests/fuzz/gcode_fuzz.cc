@@ -80,6 +80,20 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   } else {
     CheckError(gcode.status());
   }
+  if (size % 2 == 1) {
+    // A known start (--start) and a tool-change position (issue 27).
+    GcodeOptions known = options;
+    known.start_known = true;
+    known.start[2] = 10;
+    known.tool_change_position_known = true;
+    known.tool_change_position[2] = 50;
+    auto k = ParseGcode(text, known);
+    if (k.ok()) {
+      CheckToolpath(*k, /*xyz=*/false);
+    } else {
+      CheckError(k.status());
+    }
+  }
   auto xyz = ParseXyz(text, kMaxPoints);
   if (xyz.ok()) {
     CheckToolpath(*xyz, /*xyz=*/true);
