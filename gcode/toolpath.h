@@ -3,18 +3,21 @@
 // tool-tip positions, parsed into a polyline of tool-tip points in mm.
 //
 // G-code rules (every G, M and O word: the README's G-code table):
-// - Start position. A program starts from an unknown machine position. Each
-//   axis is unknown until a word gives it; moves before X, Y and Z are all
-//   known only set the known axes and produce no point. The polyline starts
-//   at the first position where all three are known. Incremental moves (G91)
-//   of an unknown axis and arcs before the start are errors. A feed move
-//   whose start or end is unknown is dropped and counted
-//   (Toolpath::dropped_moves); rapids from an unknown position only
-//   position the machine.
-// - Tool changes. M6 may move the machine to a tool-change position we don't
-//   know, so it makes all axes unknown again (so do G28/G30 to an unknown
-//   home); the next fully known position starts a new run
+// - Start position. A program starts from an unknown machine position
+//   unless GcodeOptions::start is given. Each axis is unknown until a word
+//   gives it; moves before X, Y and Z are all known only set the known axes
+//   and produce no point. The polyline starts at the first position where
+//   all three are known. Incremental moves (G91) of an unknown axis and arcs
+//   before the start are errors. A feed move whose start or end is unknown
+//   is dropped and counted (Toolpath::dropped_moves); rapids from an unknown
+//   position only position the machine.
+// - Tool changes. M6 keeps the position, as LinuxCNC (optionally after a
+//   rapid to GcodeOptions::tool_change_position); with
+//   m6_forgets_position, and after G28/G30 to an unknown home, the axes
+//   become unknown and the next fully known position starts a new run
 //   (ToolpathPoint::starts_run). No move joins two runs.
+// - Parity with LinuxCNC's rs274 is checked by scripts/linuxcnc-diff (the
+//   README's G-code section lists where they differ and why).
 // - Units: G21 mm (the default when neither G20 nor G21 is given, with a
 //   note), G20 inches (x25.4). G90/G91, G90.1/G91.1.
 // - Parameters, expressions (gcode/expression.h), O-word subroutines and
@@ -23,7 +26,9 @@
 //   G92.x, G53, G43.1), G28/G30, canned cycles G73 G74 G81-G89 with
 //   G98/G99, arcs in G17/G18/G19 (I/J/K or R, helical, P turns; chords
 //   within GcodeOptions::arc_tolerance, the last point the programmed end
-//   bit for bit), cutter compensation G41/G42 in G17.
+//   bit for bit), polar coordinates (@, ^), cutter compensation G41/G42 in
+//   G17. The interpreter emits canonical commands (gcode/canon.h) to a
+//   sink: ToolpathBuilder unless ParseGcode is given another.
 // - Words that don't move the tool (F, S, H, M3, M8, G17, G40, G43, G49,
 //   G54, G80, G94, ...) are counted in Toolpath::ignored(). Anything that
 //   would change the tool's path and isn't simulated (G33, G38.x, G76 in
