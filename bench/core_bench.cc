@@ -121,6 +121,34 @@ BENCHMARK_CAPTURE(BM_FinishingMoves, zmap, SchemeKind::kZmap)
 BENCHMARK_CAPTURE(BM_FinishingMoves, taylor, SchemeKind::kTaylor)
     ->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// The same with what each move cut (issue 30's safety checks and process
+// facts: ApplyOptions::cuts and a flute length per move).
+void BM_FinishingMovesCuts(benchmark::State& state, SchemeKind scheme) {
+  const std::vector<Move> moves = FinishingRaster(0.2, 0.1, 100);
+  const size_t batch = static_cast<size_t>(state.range(0));
+  const std::vector<double> flutes(batch, 10.0);
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto wp = *Workpiece::Create({0, 0, 100, 100, 0, 1000, 1000}, scheme);
+    state.ResumeTiming();
+    for (size_t k = 0; k < moves.size(); k += batch) {
+      const size_t n = std::min(batch, moves.size() - k);
+      ApplyOptions opts;
+      opts.cuts = true;
+      opts.drop_limit = std::span<const double>(flutes.data(), n);
+      auto r = wp->Apply(std::span<const Move>(moves.data() + k, n), opts);
+      benchmark::DoNotOptimize(r->cuts.data());
+    }
+    state.PauseTiming();
+    wp.reset();
+    state.ResumeTiming();
+  }
+  state.SetItemsProcessed(state.iterations() * moves.size());
+  state.counters["ns_per_move"] = TimePerMove(moves.size());
+}
+BENCHMARK_CAPTURE(BM_FinishingMovesCuts, taylor, SchemeKind::kTaylor)
+    ->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // Cutter shapes (issue 16): the same paths for the ball and each new shape,
 // applied to a 100 mm stock at 1000x1000 (0.1 mm) in batches of 10000.
 // - finishing: the zig-zag raster above (0.2 mm moves on a gentle wave,

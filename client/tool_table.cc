@@ -64,6 +64,59 @@ std::string Format(double v) { return absl::StrCat(v); }
 
 }  // namespace
 
+absl::Status TakeAssemblyKeys(
+    std::vector<std::pair<std::string, std::string>>* keys, ToolAssembly* out,
+    absl::string_view where) {
+  std::set<std::string> seen;
+  std::vector<std::pair<std::string, std::string>> rest;
+  for (auto& [key, text] : *keys) {
+    double* field = key == "flute"      ? &out->flute_length
+                    : key == "shank"    ? &out->shank_diameter
+                    : key == "holder"   ? &out->holder_diameter
+                    : key == "stickout" ? &out->stickout
+                                        : nullptr;
+    if (field == nullptr && key != "center") {
+      rest.emplace_back(std::move(key), std::move(text));
+      continue;
+    }
+    if (!seen.insert(key).second) return Bad(where, absl::StrCat(key, " is given twice"));
+    double x;
+    const bool number = absl::SimpleAtod(text, &x) && std::isfinite(x);
+    if (key == "center") {
+      if (!number || (x != 0 && x != 1)) {
+        return Bad(where, absl::StrCat("center must be 0 or 1 (does the tool cut "
+                                       "at its centre), got \"", text, "\""));
+      }
+      out->center_cutting = x == 1;
+      continue;
+    }
+    if (!number || !(x > 0) || x > 2 * kMaxRadius) {
+      return Bad(where, absl::StrCat(key, " must be a length in (0, ",
+                                     Format(2 * kMaxRadius), "] mm, got \"",
+                                     text, "\""));
+    }
+    *field = x;
+  }
+  if ((out->holder_diameter > 0) != (out->stickout > 0)) {
+    return Bad(where, "holder= and stickout= go together (the holder's "
+                      "diameter and its face's height above the tip)");
+  }
+  *keys = std::move(rest);
+  return absl::OkStatus();
+}
+
+std::string AssemblySummary(const ToolAssembly& a) {
+  std::vector<std::string> parts;
+  if (a.flute_length > 0) parts.push_back(absl::StrCat("flute=", Format(a.flute_length)));
+  if (a.shank_diameter > 0) parts.push_back(absl::StrCat("shank=", Format(a.shank_diameter)));
+  if (a.holder_diameter > 0) {
+    parts.push_back(absl::StrCat("holder=", Format(a.holder_diameter)));
+    parts.push_back(absl::StrCat("stickout=", Format(a.stickout)));
+  }
+  if (!a.center_cutting) parts.push_back("center=0");
+  return absl::StrJoin(parts, " ");
+}
+
 absl::StatusOr<Cutter> CutterFromKeys(
     absl::string_view shape_name,
     const std::vector<std::pair<std::string, std::string>>& keys,
@@ -179,6 +232,9 @@ absl::StatusOr<ToolOption> ParseToolOption(absl::string_view value) {
     keys.emplace_back(absl::AsciiStrToLower(absl::StripAsciiWhitespace(kv.substr(0, e))),
                       std::string(absl::StripAsciiWhitespace(kv.substr(e + 1))));
   }
+  if (absl::Status s = TakeAssemblyKeys(&keys, &out.assembly, where); !s.ok()) {
+    return s;
+  }
   auto c = CutterFromKeys(spec.substr(0, sep), keys, where);
   if (!c.ok()) return c.status();
   out.cutter = *c;
@@ -212,11 +268,31 @@ std::string CutterSummary(const Cutter& c) {
 namespace {
 
 // The cutter a .tbl line describes: D and the shape in its comment.
+// The assembly keys (flute=15 ...) anywhere in the comment go to
+// `assembly`.
 absl::StatusOr<Cutter> TableLineCutter(std::optional<double> diameter,
                                        absl::string_view comment,
-                                       absl::string_view where) {
+                                       absl::string_view where,
+                                       ToolAssembly* assembly) {
   std::vector<std::string> words = absl::StrSplit(
       absl::AsciiStrToLower(comment), absl::ByAnyChar(" \t,"), absl::SkipEmpty());
+  {
+    std::vector<std::pair<std::string, std::string>> parts;
+    std::vector<std::string> others;
+    for (const std::string& w : words) {
+      const size_t e = w.find('=');
+      const std::string key = w.substr(0, e);
+      if (e != std::string::npos &&
+          (key == "flute" || key == "shank" || key == "holder" ||
+           key == "stickout" || key == "center")) {
+        parts.emplace_back(key, w.substr(e + 1));
+      } else {
+        others.push_back(w);
+      }
+    }
+    if (absl::Status s = TakeAssemblyKeys(&parts, assembly, where); !s.ok()) return s;
+    words = std::move(others);
+  }
   std::string shape = "flat";
   std::vector<std::pair<std::string, std::string>> keys;
   if (diameter.has_value()) keys.emplace_back("d", absl::StrFormat("%.17g", *diameter));
@@ -300,7 +376,10 @@ absl::StatusOr<ToolTable> ParseLinuxCncToolTable(absl::string_view text,
                                      table.tools[*number].source, ")"));
     }
     const std::string source = absl::StrCat(where, " (T", *number, ")");
-    table.tools[*number] = {TableLineCutter(diameter, comment, source), where};
+    TableTool tool;
+    tool.cutter = TableLineCutter(diameter, comment, source, &tool.assembly);
+    tool.source = where;
+    table.tools[*number] = std::move(tool);
   }
   return table;
 }
@@ -348,6 +427,9 @@ absl::StatusOr<TableTool> CamoticsTool(const Json& t, absl::string_view where) {
   const double d = *diameter * scale, len = *length * scale, sd = *snub * scale;
   TableTool out;
   out.source = std::string(where);
+  // CAMotics' length: the flutes' (only when given; its default is not a
+  // fact about the tool).
+  if (t.contains("length") && len > 0) out.assembly.flute_length = len;
   auto dims = [&](absl::string_view what) {
     return Bad(where, absl::StrCat(shape, ": ", what));
   };
@@ -580,6 +662,27 @@ absl::StatusOr<std::map<int, Cutter>> ChooseTools(
     out[u.number] = **c;
   }
   return out;
+}
+
+ToolAssembly KnownAssembly(const ToolChoices& c, int n) {
+  const ToolOption* any = nullptr;
+  for (const ToolOption& o : c.options) {
+    if (o.number == n) return o.assembly;
+    if (!o.number.has_value()) any = &o;
+  }
+  const bool has_table = c.table.has_value();
+  if (n == 0) {
+    if (any != nullptr) return any->assembly;
+    if (has_table && c.table->tools.size() == 1) {
+      return c.table->tools.begin()->second.assembly;
+    }
+    return {};
+  }
+  if (has_table) {
+    auto it = c.table->tools.find(n);
+    return it == c.table->tools.end() ? ToolAssembly{} : it->second.assembly;
+  }
+  return any != nullptr ? any->assembly : ToolAssembly{};
 }
 
 std::optional<Cutter> KnownTool(const ToolChoices& choices, int n) {

@@ -21,6 +21,7 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "core/cutter/cutter.h"
+#include "core/safety.h"
 
 namespace swarf::cli {
 
@@ -32,10 +33,17 @@ namespace swarf::cli {
 //                              flat tip of diameter T (default 0, sharp)
 //   taper:d=D,tip=T,angle=A    tapered ball: ball tip of diameter T,
 //                              included taper angle A in (0, 180)
+// and for every shape the tool's non-cutting parts (all optional, mm):
+//   flute=L      flute length from the tip (the shank rubs above it)
+//   shank=D      shank diameter (default: the cutter's)
+//   holder=D     holder diameter, with
+//   stickout=S   the stick-out from the holder's face down to the tip
+//   center=0     the tool does not cut at its centre (no plunging)
 // `number` is set when the value carries a tool number.
 struct ToolOption {
   std::optional<int> number;
   Cutter cutter;
+  ToolAssembly assembly;
 };
 absl::StatusOr<ToolOption> ParseToolOption(absl::string_view value);
 
@@ -53,6 +61,7 @@ absl::StatusOr<Cutter> CutterFromKeys(
 // tool without a diameter): only using it is an error.
 struct TableTool {
   absl::StatusOr<Cutter> cutter = Cutter{};
+  ToolAssembly assembly;  // the comment's flute=... keys; CAMotics' length
   std::string source;  // "FILE line N" or "FILE tool \"N\""
 };
 struct ToolTable {
@@ -135,6 +144,21 @@ absl::StatusOr<std::map<int, Cutter>> ChooseTools(
 // The cutter of tool number `n` if it is known before the program runs
 // (for cutter compensation, G41/G42): rules 1-3 without errors.
 std::optional<Cutter> KnownTool(const ToolChoices& choices, int n);
+
+// Takes the assembly keys (flute, shank, holder, stickout, center) out of
+// `keys` into `out`. InvalidArgument prefixed with `where` for a value that
+// is not a positive number (center: 0 or 1), a key given twice, or a
+// holder without a stick-out (or the reverse).
+absl::Status TakeAssemblyKeys(
+    std::vector<std::pair<std::string, std::string>>* keys, ToolAssembly* out,
+    absl::string_view where);
+
+// The assembly of tool number `n` (ChooseTools' rules 1-3); none known: a
+// default ToolAssembly (no checks).
+ToolAssembly KnownAssembly(const ToolChoices& choices, int n);
+
+// "flute=15 holder=40 stickout=30", "" for an unknown assembly.
+std::string AssemblySummary(const ToolAssembly& a);
 
 // "ball d=6", "vbit d=6 angle=90 tip=0.2": a cutter in the user's terms.
 std::string CutterSummary(const Cutter& c);

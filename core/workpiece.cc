@@ -141,7 +141,9 @@ std::unique_ptr<Workpiece::Tile> Workpiece::NewTile() const {
 int64_t Workpiece::CutTile(int32_t t, Tile* tile,
                            std::span<const Sweep> sweeps,
                            std::span<const uint32_t> batch_moves,
-                           int64_t first_id) const {
+                           int64_t first_id,
+                           std::span<const double> drop_limit,
+                           std::vector<TileCut>* cuts) const {
   const int32_t ti = t % tiles_x_, tj = t / tiles_x_;
   const int32_t i_base = ti * kTileSize, j_base = tj * kTileSize;
   const int32_t i_max = std::min(i_base + kTileSize - 1, grid_.nx());
@@ -161,6 +163,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   constexpr int32_t kChunk = 256;
   static_assert(kChunk >= kTileSize);
   alignas(64) double cx[kChunk], cy[kChunk], h[kChunk];
+  alignas(64) double drop[kChunk];  // with `cuts`: each node's lowering
   int32_t ck[kChunk];
 
   // One move of one shape: S is the shape's sweep class (chosen once per
@@ -175,10 +178,52 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     if (cap.empty) return;
     const int32_t id = static_cast<int32_t>(first_id + m);
     int32_t n = 0;
+    // What the move cut here (with `cuts`): drop sums, the deepest node.
+    double drop_sum = 0, max_drop = 0, max_z = 0, over = 0;
+    int32_t max_k = -1;
+    const double limit = drop_limit.empty() ? kInf : drop_limit[m];
     // The chunk's sweep heights (vectorized), then lowering.
     auto flush = [&] {
       sweep.Heights(cx, cy, n, h);
       int32_t low = 0;
+      if (cuts != nullptr) {
+        // Lowering as below, keeping each node's drop; then the sums and
+        // the deepest in loops the compiler vectorizes.
+        for (int32_t q = 0; q < n; ++q) {
+          const int32_t k = ck[q];
+          const double old = w[k];
+          const bool lower = h[q] < old || (h[q] == old && id < owner[k]);
+          drop[q] = 0;
+          if (lower) {
+            drop[q] = old - h[q];
+            w[k] = h[q];
+            owner[k] = id;
+            ++low;
+          }
+        }
+        double sum = 0, top = 0, excess = 0;
+#pragma omp simd reduction(+ : sum, excess) reduction(max : top)
+        for (int32_t q = 0; q < n; ++q) {
+          sum += drop[q];
+          excess += std::max(drop[q] - limit, 0.0);
+          top = std::max(top, drop[q]);
+        }
+        drop_sum += sum;
+        over += excess;
+        if (top > max_drop) {
+          for (int32_t q = 0; q < n; ++q) {
+            if (drop[q] == top) {
+              max_drop = top;
+              max_k = ck[q];
+              max_z = h[q];
+              break;
+            }
+          }
+        }
+        lowered += low;
+        n = 0;
+        return;
+      }
       for (int32_t q = 0; q < n; ++q) {
         const int32_t k = ck[q];
         const bool lower = h[q] < w[k] || (h[q] == w[k] && id < owner[k]);
@@ -210,6 +255,17 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       }
     }
     if (n > 0) flush();
+    if (cuts != nullptr && max_k >= 0) {
+      MoveCut c;
+      const double area = dx * dy;
+      c.removed_mm3 = drop_sum * area;
+      c.max_drop = max_drop;
+      c.i = i_base + (max_k & (kTileSize - 1));
+      c.j = j_base + (max_k >> kTileBits);
+      c.z = max_z;
+      c.over_limit_mm3 = over * area;
+      cuts->push_back({m, c});
+    }
   };
   for (uint32_t m : batch_moves) {
     sweeps[m].Visit([&](const auto& s) { cut_move(s, m); });
@@ -251,7 +307,17 @@ absl::Status Workpiece::AdmitMoves(std::span<const Move> moves) const {
 }
 
 absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
+  return Apply(moves, ApplyOptions{});
+}
+
+absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
+                                             const ApplyOptions& options) {
   SWARF_RETURN_IF_ERROR(AdmitMoves(moves));
+  if (!options.drop_limit.empty() && options.drop_limit.size() != moves.size()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "drop_limit has ", options.drop_limit.size(), " entries for ",
+        moves.size(), " moves"));
+  }
   ApplyResult result;
   result.first_move_id = move_count();
   result.moves = static_cast<int64_t>(moves.size());
@@ -295,6 +361,7 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
   const int64_t n_touched = static_cast<int64_t>(touched.size()) - 1;
 
   std::vector<int64_t> lowered(n_touched, 0);
+  std::vector<std::vector<TileCut>> tile_cuts(options.cuts ? n_touched : 0);
   pool_->ParallelFor(n_touched, [&](int64_t k) {
     const int32_t t = touched[k].first;
     std::span<const uint32_t> list(tile_moves.data() + touched[k].second,
@@ -305,7 +372,9 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
       fresh = NewTile();
       tile = fresh.get();
     }
-    lowered[k] = CutTile(t, tile, sweeps, list, result.first_move_id);
+    lowered[k] = CutTile(t, tile, sweeps, list, result.first_move_id,
+                         options.drop_limit,
+                         options.cuts ? &tile_cuts[k] : nullptr);
     // Only a tile that was really cut stays allocated.
     if (fresh != nullptr && lowered[k] > 0) tiles_[t] = std::move(fresh);
   });
@@ -320,6 +389,23 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves) {
     tile_version_[touched[k].first] = version_;
   }
   result.version = version_;
+  if (options.cuts) {
+    // Merged in tile order: the same sums whatever the threads did.
+    result.cuts.resize(moves.size());
+    for (const std::vector<TileCut>& list : tile_cuts) {
+      for (const TileCut& tc : list) {
+        MoveCut& c = result.cuts[tc.m];
+        c.removed_mm3 += tc.cut.removed_mm3;
+        c.over_limit_mm3 += tc.cut.over_limit_mm3;
+        if (tc.cut.max_drop > c.max_drop) {
+          c.max_drop = tc.cut.max_drop;
+          c.i = tc.cut.i;
+          c.j = tc.cut.j;
+          c.z = tc.cut.z;
+        }
+      }
+    }
+  }
   return result;
 }
 
@@ -607,6 +693,18 @@ int32_t Workpiece::OwnerAt(int32_t i, int32_t j) const {
       tiles_[(j >> kTileBits) * tiles_x_ + (i >> kTileBits)].get();
   if (tile == nullptr) return -1;
   return tile->owner[(j & (kTileSize - 1)) * kTileSize + (i & (kTileSize - 1))];
+}
+
+double Workpiece::HeightAt(int32_t i, int32_t j) const {
+  const Tile* tile =
+      tiles_[(j >> kTileBits) * tiles_x_ + (i >> kTileBits)].get();
+  if (tile == nullptr) return spec().z_top;
+  return tile->w[(j & (kTileSize - 1)) * kTileSize + (i & (kTileSize - 1))];
+}
+
+double Workpiece::TileMax(int32_t t) const {
+  const Tile* tile = tiles_[t].get();
+  return tile == nullptr ? spec().z_top : tile->zmax;
 }
 
 NodeValue Workpiece::Node(int32_t i, int32_t j) const {

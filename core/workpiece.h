@@ -125,12 +125,36 @@ struct NodeValue {
   int32_t owner = -1;  // id of the move that set the node, -1: stock top
 };
 
+// What one move of a batch cut (Workpiece::Apply with ApplyOptions::cuts):
+// the node lowerings it made, in move order (the lowering of a node by a
+// move is its height before that move, after the batch's earlier ones,
+// minus the sweep's height there). Exact to the grid: summed over every
+// move of a workpiece, removed_mm3 is the stock's volume minus the nodes'
+// (each node standing for dx * dy).
+struct MoveCut {
+  double removed_mm3 = 0;  // sum of the lowerings times dx * dy
+  double max_drop = 0;     // the largest lowering (mm), 0: cut nothing
+  int32_t i = -1, j = -1;  // its node (-1: none)
+  double z = 0;            // the node's height after that lowering
+  // Sum of (lowering - drop_limit) times dx * dy over the lowerings deeper
+  // than the move's ApplyOptions::drop_limit (0 without one).
+  double over_limit_mm3 = 0;
+};
+
+struct ApplyOptions {
+  bool cuts = false;  // fill ApplyResult::cuts
+  // Per move of the batch (or empty): lowerings deeper than this are summed
+  // into MoveCut::over_limit_mm3 (a flute length: the shank rubs).
+  std::span<const double> drop_limit;
+};
+
 struct ApplyResult {
   int64_t first_move_id = 0;  // id of the batch's first move
   int64_t moves = 0;          // moves in the batch
   int64_t node_lowerings = 0;  // node updates (a node lowered twice counts 2)
   uint64_t version = 0;       // workpiece version after the batch
   std::vector<int32_t> changed_tiles;  // ascending tile indices
+  std::vector<MoveCut> cuts;  // per move, with ApplyOptions::cuts
 };
 
 class Workpiece {
@@ -148,6 +172,10 @@ class Workpiece {
   // Applies a batch whole, or nothing on error. Move ids continue from the
   // previous batch.
   absl::StatusOr<ApplyResult> Apply(std::span<const Move> moves);
+  // The same, and what each move cut (options.cuts); the nodes end
+  // bit-identical to Apply(moves).
+  absl::StatusOr<ApplyResult> Apply(std::span<const Move> moves,
+                                    const ApplyOptions& options);
 
   // Snapshots: restoring a workpiece without redoing every cut.
   //
@@ -188,6 +216,10 @@ class Workpiece {
   NodeValue Node(int32_t i, int32_t j) const;
   // Node (i, j)'s owner (-1: uncut), without its jet: Node(i, j).owner.
   int32_t OwnerAt(int32_t i, int32_t j) const;
+  // Node (i, j)'s height alone (no derivatives): Node(i, j).jet.w.
+  double HeightAt(int32_t i, int32_t j) const;
+  // An upper bound on the heights of tile t's nodes (z_top when uncut).
+  double TileMax(int32_t t) const;
   // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny, with the corners'
   // owners, each cut corner's reach (ReachOf its owner), the candidates and
   // the moves' surfaces where the scheme uses them, prepared by the scheme
@@ -274,9 +306,16 @@ class Workpiece {
   absl::Status AdmitMoves(std::span<const Move> moves) const;
   // The highest node of tile t (what CutTile caps cuts with).
   double TileTop(int32_t t, const Tile& tile) const;
+  // With `cuts` non-null, appends (batch move, what it cut here) for every
+  // move that lowered a node of the tile.
+  struct TileCut {
+    uint32_t m;
+    MoveCut cut;
+  };
   int64_t CutTile(int32_t t, Tile* tile, std::span<const Sweep> sweeps,
-                  std::span<const uint32_t> batch_moves,
-                  int64_t first_id) const;
+                  std::span<const uint32_t> batch_moves, int64_t first_id,
+                  std::span<const double> drop_limit = {},
+                  std::vector<TileCut>* cuts = nullptr) const;
 
   // The derivatives of tile t's nodes at its current version, computed from
   // the owners' sweeps once and cached (thread-safe). The reference stays

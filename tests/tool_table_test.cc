@@ -346,3 +346,79 @@ TEST(ChooseToolsTest, ToolOptionsGivenTwiceAreErrors) {
 
 }  // namespace
 }  // namespace swarf::cli
+
+// ------------------------------------------------- tool assemblies (issue 30)
+
+namespace swarf::cli {
+namespace {
+
+TEST(ToolAssemblyTest, ToolOptionKeys) {
+  auto o = ParseToolOption("T2=flat:d=6,flute=15,shank=6,holder=40,stickout=30");
+  ASSERT_TRUE(o.ok()) << o.status();
+  EXPECT_EQ(o->cutter, Cutter::Flat(3));
+  EXPECT_EQ(o->assembly.flute_length, 15);
+  EXPECT_EQ(o->assembly.shank_diameter, 6);
+  EXPECT_EQ(o->assembly.holder_diameter, 40);
+  EXPECT_EQ(o->assembly.stickout, 30);
+  EXPECT_TRUE(o->assembly.center_cutting);
+  EXPECT_EQ(AssemblySummary(o->assembly),
+            "flute=15 shank=6 holder=40 stickout=30");
+  auto plain = ParseToolOption("ball:d=3");
+  ASSERT_TRUE(plain.ok());
+  EXPECT_FALSE(plain->assembly.known());
+  auto nc = ParseToolOption("flat:d=6,center=0");
+  ASSERT_TRUE(nc.ok());
+  EXPECT_FALSE(nc->assembly.center_cutting);
+  EXPECT_TRUE(nc->assembly.known());
+}
+
+TEST(ToolAssemblyTest, ErrorsNameTheOptionAndTheKey) {
+  auto bad = ParseToolOption("flat:d=6,flute=-1");
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad.status().message(),
+            "--tool \"flat:d=6,flute=-1\": flute must be a length in (0, 200000] "
+            "mm, got \"-1\"");
+  auto lone = ParseToolOption("flat:d=6,holder=40");
+  EXPECT_TRUE(absl::StrContains(lone.status().message(),
+                                "holder= and stickout= go together"))
+      << lone.status();
+  auto center = ParseToolOption("flat:d=6,center=2");
+  EXPECT_TRUE(absl::StrContains(center.status().message(),
+                                "center must be 0 or 1"))
+      << center.status();
+}
+
+TEST(ToolAssemblyTest, LinuxCncCommentKeysAndCamoticsLength) {
+  auto t = ParseLinuxCncToolTable(
+      "T1 P1 D6 ;flat flute=15 holder=40 stickout=30\n"
+      "T2 P2 D3 ;1/8 2 flute flute=12 center=0\n"
+      "T3 P3 D2 ;ball\n",
+      "tools.tbl");
+  ASSERT_TRUE(t.ok()) << t.status();
+  EXPECT_EQ(*t->tools.at(1).cutter, Cutter::Flat(3));
+  EXPECT_EQ(t->tools.at(1).assembly.flute_length, 15);
+  EXPECT_EQ(t->tools.at(1).assembly.holder_diameter, 40);
+  EXPECT_EQ(t->tools.at(1).assembly.stickout, 30);
+  EXPECT_EQ(*t->tools.at(2).cutter, Cutter::Flat(1.5));
+  EXPECT_EQ(t->tools.at(2).assembly.flute_length, 12);
+  EXPECT_FALSE(t->tools.at(2).assembly.center_cutting);
+  EXPECT_FALSE(t->tools.at(3).assembly.known());
+
+  auto p = ParseCamoticsProject(
+      R"({"tools": {"1": {"shape": "cylindrical", "diameter": 6, "length": 20},
+                    "2": {"shape": "ballnose", "diameter": 2}}})",
+      "job.camotics");
+  ASSERT_TRUE(p.ok()) << p.status();
+  EXPECT_EQ(p->tools.tools.at(1).assembly.flute_length, 20);
+  EXPECT_EQ(p->tools.tools.at(2).assembly.flute_length, 0);  // not given
+
+  ToolChoices choices;
+  choices.table = *t;
+  EXPECT_EQ(KnownAssembly(choices, 1).stickout, 30);
+  EXPECT_FALSE(KnownAssembly(choices, 7).known());
+  choices.options.push_back(*ParseToolOption("1=flat:d=6,flute=9"));
+  EXPECT_EQ(KnownAssembly(choices, 1).flute_length, 9);
+}
+
+}  // namespace
+}  // namespace swarf::cli
