@@ -501,7 +501,21 @@ int RunCommand(const std::vector<std::string>& argv) {
   if (args->Has("view") || args->Has("view-port") || args->Has("view-wait")) {
     auto vopt = ViewerOptionsFrom(*args);
     if (!vopt.ok()) return fail(vopt.status(), 2);
-    auto v = Viewer::Start(conn->get(), id, *vopt, ViewerPathOf(runs));
+    ViewerPath vpath = ViewerPathOf(runs);
+    if (design->has_value()) {
+      // The page colours by the deviation the session computes, names the
+      // line under the pointer and overlays the design.
+      const DesignInput& d = **design;
+      if (absl::Status s = UploadDesign(**conn, id, d); !s.ok()) {
+        return fail(s, 1);
+      }
+      vpath.move_lines = d.move_lines;
+      vpath.sources = d.sources;
+      vpath.design = &d.mesh;
+      vpath.allowance = d.deviation.allowance;
+      vpath.tolerance = d.deviation.tolerance;
+    }
+    auto v = Viewer::Start(conn->get(), id, *vopt, std::move(vpath));
     if (!v.ok()) return fail(v.status(), 1);
     viewer = *std::move(v);
     std::cerr << "swarf run: viewer at " << viewer->url() << std::endl;

@@ -10,6 +10,7 @@
 #include <thread>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <system_error>
 
 #include <nlohmann/json.hpp>
@@ -259,6 +260,33 @@ absl::Status LoadDesign(const StockSpec& stock, DesignInput* d) {
   d->index = *std::move(index);
   d->seconds = std::chrono::duration<double>(
                    std::chrono::steady_clock::now() - t0).count();
+  return absl::OkStatus();
+}
+
+absl::Status UploadDesign(Connection& conn, const std::string& id,
+                          const DesignInput& d) {
+  std::ifstream in(d.path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat("cannot open ", d.path));
+  const std::string bytes((std::istreambuf_iterator<char>(in)),
+                          std::istreambuf_iterator<char>());
+  constexpr size_t kChunk = size_t{1} << 20;
+  for (size_t off = 0; off < bytes.size() || off == 0; off += kChunk) {
+    pb::SetDesignRequest req;
+    req.set_session_id(id);
+    req.set_offset(off);
+    req.set_data(bytes.substr(off, kChunk));
+    req.set_last(off + kChunk >= bytes.size());
+    req.set_scale(d.read.scale);
+    req.mutable_translation()->set_x(d.read.offset.x);
+    req.mutable_translation()->set_y(d.read.offset.y);
+    req.mutable_translation()->set_z(d.read.offset.z);
+    req.set_name(d.path);
+    pb::DesignInfo info;
+    auto ctx = conn.Context(id, 600);
+    grpc::Status st = conn.stub().SetDesign(ctx.get(), req, &info);
+    if (!st.ok()) return FromGrpc(st);
+    if (req.last()) break;
+  }
   return absl::OkStatus();
 }
 

@@ -91,6 +91,12 @@ absl::StatusOr<std::optional<DesignInput>> ParseDesignFlags(const Args& args);
 // closest-point index.
 absl::Status LoadDesign(const StockSpec& stock, DesignInput* design);
 
+// Sends the design file to session `id` (SetDesign, 1 MiB chunks), with
+// its units and offset: the session then has it (deviation tiles for the
+// viewer). Errors as the server gives them, naming the file.
+absl::Status UploadDesign(Connection& conn, const std::string& id,
+                          const DesignInput& design);
+
 struct OutputOptions {
   std::string dir;    // empty: no files, statistics only
   int subdivide = 1;  // STL: sub-elements per element side

@@ -3,6 +3,7 @@
 // only changed tiles after a version; Probe; marks; error map; the path),
 // and bad requests get clear errors.
 #include <cstring>
+#include <map>
 #include <set>
 #include <string>
 #include <thread>
@@ -10,6 +11,7 @@
 
 #include "client/connection.h"
 #include "client/viewer/viewer.h"
+#include "design/design_mesh.h"
 #include "google/protobuf/struct.pb.h"
 #include "google/protobuf/util/json_util.h"
 #include "gtest/gtest.h"
@@ -331,6 +333,124 @@ TEST_F(ViewerApiTest, ProbeMarksErrorMapAndPathAreTheApis) {
 
 // The page draws every tool from /api/session: each shape with its
 // dimensions, as the API gives them.
+// The design: the session's deviation tiles at the display nodes, the
+// verdict, the mesh for the overlay, and the line under the pointer.
+TEST_F(ViewerApiTest, DeviationDesignAndLineAreTheApis) {
+  Cut(5, 30);
+  // Without a design: no deviation colouring offered, the layer refused.
+  {
+    auto plain = StartViewer(ViewerPathOf(runs_));
+    ASSERT_TRUE(plain);
+    httplib::Client http("127.0.0.1", plain->port());
+    auto s = http.Get("/api/session");
+    ASSERT_TRUE(s);
+    EXPECT_FALSE(Json(s->body).fields().at("design").bool_value());
+    auto d = http.Get("/api/deviation");
+    ASSERT_TRUE(d);
+    EXPECT_EQ(d->status, 400) << d->body;  // FAILED_PRECONDITION
+    auto m = http.Get("/api/design");
+    ASSERT_TRUE(m);
+    EXPECT_EQ(m->status, 404) << m->body;
+  }
+  // A level design at z = -1.25 over the stock, set on the session.
+  std::vector<double> soup = {-1, -1, -1.25, 151, -1, -1.25, 151, 61, -1.25,
+                              -1, -1, -1.25, 151, 61, -1.25, -1, 61, -1.25};
+  const design::DesignMesh mesh = *design::MeshFromSoup(soup, "level");
+  pb::SetDesignRequest up;
+  up.set_session_id(id_);
+  up.set_data(design::ToBinaryStl(mesh));
+  up.set_last(true);
+  pb::DesignInfo info;
+  {
+    auto ctx = conn_->Context(id_);
+    ASSERT_TRUE(conn_->stub().SetDesign(ctx.get(), up, &info).ok());
+  }
+  ViewerPath path = ViewerPathOf(runs_);
+  for (int64_t k = 0; k < path.moves_total; ++k) {
+    path.move_lines.push_back({0, static_cast<int32_t>(1000 + k)});
+  }
+  path.sources = {"prog.nc"};
+  path.design = &mesh;
+  path.tolerance = 0.05;
+  auto viewer = StartViewer(path);
+  ASSERT_TRUE(viewer);
+  httplib::Client http("127.0.0.1", viewer->port());
+  AwaitVersion(http, Session().version());
+  auto s = http.Get("/api/session");
+  ASSERT_TRUE(s);
+  const auto session = Json(s->body);
+  EXPECT_TRUE(session.fields().at("design").bool_value());
+  EXPECT_TRUE(session.fields().at("design_mesh").bool_value());
+  const int stride = session.fields().at("stride").number_value();
+  const int cols = session.fields().at("cols").number_value();
+  const int rows = session.fields().at("rows").number_value();
+
+  auto d = http.Get("/api/deviation");
+  ASSERT_TRUE(d);
+  ASSERT_EQ(d->status, 200) << d->body;
+  size_t off = 0;
+  EXPECT_EQ(Take<uint32_t>(d->body, &off), static_cast<uint32_t>(cols));
+  EXPECT_EQ(Take<uint32_t>(d->body, &off), static_cast<uint32_t>(rows));
+  EXPECT_EQ(Take<float>(d->body, &off), 0.0f);    // allowance
+  EXPECT_EQ(Take<float>(d->body, &off), 0.05f);   // tolerance
+  Take<float>(d->body, &off);
+  Take<float>(d->body, &off);
+  const float gouge = Take<float>(d->body, &off);
+  pb::GetDeviationRequest dreq;
+  dreq.set_session_id(id_);
+  dreq.mutable_tolerance()->set_value(0.05);
+  dreq.mutable_samples_per_edge()->set_value(0);  // as the viewer asks
+  pb::Deviation want;
+  {
+    auto ctx = conn_->Context(id_);
+    ASSERT_TRUE(conn_->stub().GetDeviation(ctx.get(), dreq, &want).ok());
+  }
+  EXPECT_EQ(gouge, static_cast<float>(want.gouge_max()));
+  EXPECT_EQ(Take<uint32_t>(d->body, &off), want.ok() ? 1u : 0u);
+  ASSERT_EQ(d->body.size(), off + sizeof(float) * cols * rows);
+  // Every display node is the API's deviation at node (c, r) * stride.
+  pb::GetTilesRequest treq;
+  treq.set_session_id(id_);
+  treq.set_precision(pb::PRECISION_FLOAT);
+  treq.set_include_deviation(true);
+  std::map<std::pair<int, int>, float> api;
+  {
+    auto ctx = conn_->Context(id_);
+    auto reader = conn_->stub().GetTiles(ctx.get(), treq);
+    pb::Tile t;
+    while (reader->Read(&t)) {
+      for (int j = 0; j < t.ny(); ++j) {
+        for (int i = 0; i < t.nx(); ++i) {
+          api[{t.i0() + i, t.j0() + j}] = t.deviation(j * t.nx() + i);
+        }
+      }
+    }
+    ASSERT_TRUE(reader->Finish().ok());
+  }
+  for (int r = 0; r < rows; ++r) {
+    for (int c = 0; c < cols; ++c) {
+      EXPECT_EQ(Take<float>(d->body, &off), (api[{c * stride, r * stride}]))
+          << c << "," << r;
+    }
+  }
+  // The overlay's triangles.
+  auto m = http.Get("/api/design");
+  ASSERT_TRUE(m);
+  ASSERT_EQ(m->status, 200);
+  ASSERT_EQ(m->body.size(), 4u + 2 * 36);
+  size_t moff = 0;
+  EXPECT_EQ(Take<uint32_t>(m->body, &moff), 2u);
+  // The line under the pointer: the owner's line.
+  auto p = http.Get("/api/probe?x=75&y=12");
+  ASSERT_TRUE(p);
+  ASSERT_EQ(p->status, 200) << p->body;
+  const auto probe = Json(p->body);
+  const double owner = probe.fields().at("owner").number_value();
+  ASSERT_GE(owner, 0);
+  EXPECT_EQ(probe.fields().at("line").number_value(), 1000 + owner);
+  EXPECT_EQ(probe.fields().at("file").string_value(), "prog.nc");
+}
+
 TEST_F(ViewerApiTest, SessionListsEveryCutterShape) {
   pb::CreateSessionRequest req;
   req.set_session_id("viewer-shapes");

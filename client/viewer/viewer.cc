@@ -11,6 +11,7 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <thread>
 
 #include "absl/strings/numbers.h"
@@ -67,6 +68,7 @@ void SendError(httplib::Response& res, const absl::Status& s) {
   int http = 500;
   switch (s.code()) {
     case absl::StatusCode::kInvalidArgument: http = 400; break;
+    case absl::StatusCode::kFailedPrecondition: http = 400; break;  // as AIP-193
     case absl::StatusCode::kNotFound: http = 404; break;
     case absl::StatusCode::kUnauthenticated: http = 401; break;
     case absl::StatusCode::kPermissionDenied: http = 403; break;
@@ -110,6 +112,7 @@ class ViewerImpl {
     cols_ = session_.nx() / stride_ + 1;
     rows_ = session_.ny() / stride_ + 1;
     tiles_.resize(static_cast<size_t>(session_.tiles_x()) * session_.tiles_y());
+    server_design_ = HasServerDesign();
     Routes();
     // SO_REUSEADDR only: cpp-httplib's default also sets SO_REUSEPORT, which
     // would let two viewers share a port silently.
@@ -200,6 +203,102 @@ class ViewerImpl {
                           absl::StrCat("session ", id_, ": ", e.message()));
     }
     return s;
+  }
+
+  // Whether the session holds a design (SetDesign): one tile with its
+  // deviation answers.
+  bool HasServerDesign() {
+    auto ctx = conn_->Context(id_, 30);
+    pb::GetTilesRequest req;
+    req.set_session_id(id_);
+    req.set_include_deviation(true);
+    pb::TileIndex* t = req.mutable_selection()->add_tiles();
+    t->set_tx(0);
+    t->set_ty(0);
+    auto reader = conn_->stub().GetTiles(ctx.get(), req);
+    pb::Tile tile;
+    while (reader->Read(&tile)) {
+    }
+    return reader->Finish().ok();
+  }
+
+  // Binary: u32 cols, rows; f32 allowance, tolerance, normal gouge max,
+  // normal excess max, gouge max (vertical); u32 ok; f32 deviation[cols *
+  // rows] (z - z_d at the display nodes, NaN without design above).
+  absl::StatusOr<std::string> Deviation(double allowance, double tolerance) {
+    pb::GetDeviationRequest dreq;
+    dreq.set_session_id(id_);
+    dreq.set_allowance(allowance);
+    dreq.mutable_tolerance()->set_value(tolerance);
+    dreq.set_max_moves(1);
+    // At the nodes (the page shows nodes): a pass the page may repeat
+    // every 2 s while the job is cut.
+    dreq.mutable_samples_per_edge()->set_value(0);
+    pb::Deviation d;
+    {
+      auto ctx = conn_->Context(id_, 600);
+      grpc::Status st = conn_->stub().GetDeviation(ctx.get(), dreq, &d);
+      if (!st.ok()) return FromGrpc(st);
+    }
+    std::vector<float> grid(static_cast<size_t>(cols_) * rows_,
+                            std::numeric_limits<float>::quiet_NaN());
+    auto ctx = conn_->Context(id_, 600);
+    pb::GetTilesRequest req;
+    req.set_session_id(id_);
+    req.set_precision(pb::PRECISION_FLOAT);
+    req.set_include_deviation(true);
+    auto reader = conn_->stub().GetTiles(ctx.get(), req);
+    pb::Tile t;
+    const int32_t s = stride_;
+    while (reader->Read(&t)) {
+      if (t.deviation_size() != t.nx() * t.ny()) continue;
+      // Display nodes are every stride-th node; tiles start on multiples.
+      for (int32_t j = 0; j < t.ny(); j += s) {
+        for (int32_t i = 0; i < t.nx(); i += s) {
+          const int32_t c = (t.i0() + i) / s, r = (t.j0() + j) / s;
+          if (c < cols_ && r < rows_) {
+            grid[static_cast<size_t>(r) * cols_ + c] =
+                t.deviation(j * t.nx() + i);
+          }
+        }
+      }
+    }
+    grpc::Status st = reader->Finish();
+    if (!st.ok()) return FromGrpc(st);
+    std::string out;
+    Put<uint32_t>(&out, cols_);
+    Put<uint32_t>(&out, rows_);
+    Put<float>(&out, static_cast<float>(d.allowance()));
+    Put<float>(&out, static_cast<float>(d.tolerance()));
+    Put<float>(&out, static_cast<float>(d.normal_gouge_max()));
+    Put<float>(&out, static_cast<float>(d.normal_excess_max()));
+    Put<float>(&out, static_cast<float>(d.gouge_max()));
+    Put<uint32_t>(&out, d.ok() ? 1 : 0);
+    out.append(reinterpret_cast<const char*>(grid.data()),
+               grid.size() * sizeof(float));
+    return out;
+  }
+
+  // Binary: u32 triangles; f32 (x, y, z) x 3 per triangle.
+  absl::StatusOr<std::string> DesignTriangles() const {
+    const design::DesignMesh* m = path_.design;
+    if (m == nullptr) {
+      return absl::NotFoundError(
+          "the viewer was not given the design's mesh (swarf run --design "
+          "--view gives it)");
+    }
+    std::string out;
+    out.reserve(4 + m->triangles.size() * 36);
+    Put<uint32_t>(&out, static_cast<uint32_t>(m->triangles.size()));
+    for (const auto& tri : m->triangles) {
+      for (int k = 0; k < 3; ++k) {
+        const Vec3& v = m->vertices[tri[k]];
+        Put<float>(&out, static_cast<float>(v.x));
+        Put<float>(&out, static_cast<float>(v.y));
+        Put<float>(&out, static_cast<float>(v.z));
+      }
+    }
+    return out;
   }
 
   // Tiles changed since `since` (0: all), subsampled; sets *any when the
@@ -369,6 +468,12 @@ class ViewerImpl {
     w.Key("stride").Int(stride_);
     w.Key("cols").Int(cols_).Key("rows").Int(rows_);
     w.Key("known_path").Bool(!path_.points.empty());
+    // The session holds a design (deviation colouring), and the viewer its
+    // mesh (the overlay), with the verdict's allowance and tolerance.
+    w.Key("design").Bool(server_design_);
+    w.Key("design_mesh").Bool(path_.design != nullptr);
+    w.Key("allowance").Double(path_.allowance);
+    w.Key("tolerance").Double(path_.tolerance);
     w.Key("path_total").Int(static_cast<int64_t>(path_.points.size()));
     w.Key("tools").BeginArray();
     for (const pb::Tool& t : session_.tools()) {
@@ -443,7 +548,17 @@ class ViewerImpl {
     w.Key("normal").BeginArray();
     for (double n : resp.normals()) w.Double(n);
     w.EndArray();
-    w.Key("owner").Int(resp.owners_size() ? resp.owners(0) : -1);
+    const int64_t owner = resp.owners_size() ? resp.owners(0) : -1;
+    w.Key("owner").Int(owner);
+    // The program line of that move, when the program is known.
+    if (owner >= 0 && owner < static_cast<int64_t>(path_.move_lines.size())) {
+      const SourceLine& l = path_.move_lines[owner];
+      w.Key("line").Int(l.line);
+      w.Key("file").String(l.file >= 0 && l.file < static_cast<int32_t>(
+                                                      path_.sources.size())
+                               ? path_.sources[l.file]
+                               : std::string());
+    }
     w.EndObject();
     return w.str();
   }
@@ -616,6 +731,22 @@ class ViewerImpl {
       if (!r.ok()) return SendError(res, r.status());
       res.set_content(*r, "application/octet-stream");
     });
+    http_.Get("/api/deviation", [this](const httplib::Request& req,
+                                       httplib::Response& res) {
+      const double allowance =
+          DoubleParam(req, "allowance").value_or(path_.allowance);
+      const double tolerance =
+          DoubleParam(req, "tolerance").value_or(path_.tolerance);
+      auto r = Deviation(allowance, tolerance);
+      if (!r.ok()) return SendError(res, r.status());
+      res.set_content(*r, "application/octet-stream");
+    });
+    http_.Get("/api/design", [this](const httplib::Request&,
+                                    httplib::Response& res) {
+      auto r = DesignTriangles();
+      if (!r.ok()) return SendError(res, r.status());
+      res.set_content(*r, "application/octet-stream");
+    });
     http_.Get("/api/path", [this](const httplib::Request& req,
                                   httplib::Response& res) {
       const double from = DoubleParam(req, "from").value_or(0);
@@ -629,6 +760,7 @@ class ViewerImpl {
   const ViewerOptions options_;
   const ViewerPath path_;
   pb::Session session_;  // as at start: grid and tools
+  bool server_design_ = false;  // the session held a design at start
   int32_t stride_ = 1;
   int32_t cols_ = 0, rows_ = 0;  // subsampled nodes
   std::string three_js_, orbit_js_;

@@ -31,6 +31,8 @@
 
 #include "absl/status/statusor.h"
 #include "client/connection.h"
+#include "client/deviation.h"
+#include "design/design_mesh.h"
 
 namespace swarf::cli {
 
@@ -56,6 +58,15 @@ struct ViewerPath {
   std::vector<int64_t> moves_at;  // same size, non-decreasing
   std::vector<int32_t> tools;     // same size: the tool cutting to it
   int64_t moves_total = 0;
+  // Each move's program line (by move id) and the files they index: the
+  // pointer's readout names the line that cut there. Empty: move ids.
+  std::vector<SourceLine> move_lines;
+  std::vector<std::string> sources;
+  // The design the session was given (SetDesign), for the page's
+  // translucent overlay (not owned; outlives the viewer; null: none), and
+  // the verdict's allowance and tolerance for the deviation colouring.
+  const design::DesignMesh* design = nullptr;
+  double allowance = 0, tolerance = 0.01;
 };
 
 class ViewerImpl;
