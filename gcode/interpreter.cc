@@ -389,6 +389,22 @@ class Interpreter final : public ParameterSource {
   absl::Status CompArcEntry(CompSeg seg);
   absl::Status CompFlush();
   absl::Status CompEmit(const CompSeg& seg);
+  // Emits the point (u, v, w) of compensation's plane coordinates.
+  absl::Status EmitPlane(double u, double v, double w, bool rapid) {
+    double p[3];
+    p[comp_axes_[0]] = u;
+    p[comp_axes_[1]] = v;
+    p[comp_axes_[2]] = w;
+    return Emit(p[0], p[1], p[2], rapid);
+  }
+  absl::Status ChordPlaneArc(double cx, double cy, double r, double a0,
+                             double sweep, double z0, const double uvw[3],
+                             bool rapid) {
+    double end[3];
+    for (int k = 0; k < 3; ++k) end[comp_axes_[k]] = uvw[k];
+    return ChordArc(comp_axes_[0], comp_axes_[1], comp_axes_[2], cx, cy, r, r,
+                    a0, sweep, z0, end, rapid);
+  }
   absl::Status CompJoin(CompSeg* a, CompSeg* b);
   void SaveModal(ModalState* s) const {
     *s = {true, inches_, incremental_, arc_absolute_, plane_};
@@ -462,6 +478,9 @@ class Interpreter final : public ParameterSource {
   bool cycle_il_set_ = false;
   double cycle_il_ = 0;
   int comp_side_ = 0;          // +1 G41 (tool left), -1 G42, 0 off
+  // Compensation's plane: CompSeg coordinate k is machine axis
+  // comp_axes_[k] (G17: X Y Z, G18: Z X Y, G19: Y Z X).
+  int comp_axes_[3] = {0, 1, 2};
   double comp_r_ = 0;          // mm
   bool comp_pending_ = false;  // comp_seg_ waits for the next move
   int64_t emit_line_ = -1;     // >= 0: the line of the points emitted
@@ -1593,6 +1612,10 @@ absl::Status Interpreter::ApplyGCodes(const Block& b, int* new_motion,
   } else if (comp_code >= 0) {
     SWARF_RETURN_IF_ERROR(CompStart(b, comp_code));
   }
+  if (plane >= 0 && plane != plane_ && comp_side_ != 0) {
+    return Err(absl::StrCat("G", plane,
+                            " with cutter compensation on (G40 first)"));
+  }
   if (plane >= 0) plane_ = plane;
   if (units >= 0) {
     inches_ = units == 200;
@@ -1909,17 +1932,19 @@ absl::Status Interpreter::Linear(const Block& b, bool machine, bool rapid) {
     seg.rapid = rapid;
     seg.line = main_line_;
     for (int a = 0; a < 3; ++a) {
-      seg.s[a] = pos_[a];
-      seg.e[a] = end[a];
-      pos_[a] = end[a];
+      seg.s[a] = pos_[comp_axes_[a]];
+      seg.e[a] = end[comp_axes_[a]];
     }
+    for (int a = 0; a < 3; ++a) pos_[a] = end[a];
     return CompAdd(seg);
   }
   if (comp_exit_) {
-    if (!(b.words & (Bit('X') | Bit('Y') | kPolarWords)) && known_ == 7 &&
-        blocks_ != comp_exit_block_) {
-      pos_[2] = end[2];
-      return Emit(last_[0], last_[1], end[2], rapid);
+    const int u = comp_axes_[0], v = comp_axes_[1], w = comp_axes_[2];
+    const uint32_t in_plane = Bit(kAxisName[u]) | Bit(kAxisName[v]) |
+                              (u + v == 1 ? kPolarWords : 0);
+    if (!(b.words & in_plane) && known_ == 7 && blocks_ != comp_exit_block_) {
+      pos_[w] = end[w];
+      return EmitPlane(last_[u], last_[v], end[w], rapid);
     }
     comp_exit_ = false;
   }
@@ -1992,10 +2017,6 @@ absl::Status Interpreter::Arc(const Block& b) {
   if (b.words & Bit(bad)) {
     return Err(absl::StrCat(std::string(1, bad), " word in an ", plane_name,
                             " ", gname, " arc"));
-  }
-  if (comp_side_ != 0 && plane_ != 17) {
-    return Err(absl::StrCat(gname, " in the ", plane_name,
-                            " with cutter compensation on (G17 only)"));
   }
   if ((!in_run_ && !start_pending_) || known_ != 7) {
     return Err(absl::StrCat(gname,
@@ -2342,11 +2363,11 @@ absl::Status Interpreter::CompStart(const Block& b, int code) {
                             " with cutter compensation already on (G40 "
                             "first)"));
   }
-  if (plane_ != 17) {
-    return Err(absl::StrCat(GName(code),
-                            ": cutter compensation only in the XY plane "
-                            "(G17)"));
-  }
+  // The plane's axes, as Arc() orders them (first to second counterclockwise
+  // seen from the third's positive side).
+  comp_axes_[0] = plane_ == 17 ? 0 : plane_ == 18 ? 2 : 1;
+  comp_axes_[1] = plane_ == 17 ? 1 : plane_ == 18 ? 0 : 2;
+  comp_axes_[2] = plane_ == 17 ? 2 : plane_ == 18 ? 1 : 0;
   if (known_ != 7) {
     return Err(absl::StrCat(GName(code),
                             " before the position is known (X, Y and Z)"));
@@ -2455,10 +2476,10 @@ absl::Status Interpreter::CompAdd(CompSeg seg) {
       SWARF_RETURN_IF_ERROR(CompFlush());
       double here[2] = {seg.s[0], seg.s[1]};
       if (emitted_) {
-        here[0] = last_[0];
-        here[1] = last_[1];
+        here[0] = last_[comp_axes_[0]];
+        here[1] = last_[comp_axes_[1]];
       }
-      return Emit(here[0], here[1], seg.e[2], seg.rapid);
+      return EmitPlane(here[0], here[1], seg.e[2], seg.rapid);
     }
     seg.dir_s[0] = seg.dir_e[0] = dx / len;
     seg.dir_s[1] = seg.dir_e[1] = dy / len;
@@ -2484,7 +2505,7 @@ absl::Status Interpreter::CompAdd(CompSeg seg) {
       // arc's (LinuxCNC's arc of radius zero; a helix plunges).
       SWARF_RETURN_IF_ERROR(CompFlush());
       comp_entry_ = false;
-      return Emit(seg.c[0], seg.c[1], seg.e[2], seg.rapid);
+      return EmitPlane(seg.c[0], seg.c[1], seg.e[2], seg.rapid);
     }
     if (!(seg.tr >= kRadiusTolerance)) {
       return Err(absl::StrCat("arc of radius ", seg.radius,
@@ -2606,8 +2627,8 @@ absl::Status Interpreter::CompJoin(CompSeg* a, CompSeg* b) {
     }
     const double end[3] = {b->ts[0], b->ts[1], a->e[2]};
     emit_line_ = b->line;  // the corner belongs to the move after it
-    absl::Status st = ChordArc(0, 1, 2, px, py, comp_r_, comp_r_, a0, sweep,
-                               a->e[2], end, b->rapid);
+    absl::Status st = ChordPlaneArc(px, py, comp_r_, a0, sweep, a->e[2], end,
+                                    b->rapid);
     emit_line_ = -1;
     return st;
   }
@@ -2662,12 +2683,12 @@ absl::Status Interpreter::CompEmit(const CompSeg& seg) {
   emit_line_ = seg.line;
   absl::Status st;
   if (!seg.arc) {
-    st = Emit(seg.te[0], seg.te[1], seg.e[2], seg.rapid);
+    st = EmitPlane(seg.te[0], seg.te[1], seg.e[2], seg.rapid);
   } else {
     const double end[3] = {seg.te[0], seg.te[1], seg.e[2]};
-    const double z0 = emitted_ ? last_[2] : seg.s[2];
-    st = ChordArc(0, 1, 2, seg.c[0], seg.c[1], seg.tr, seg.tr, seg.ta,
-                  seg.tsweep, z0, end, seg.rapid);
+    const double z0 = emitted_ ? last_[comp_axes_[2]] : seg.s[2];
+    st = ChordPlaneArc(seg.c[0], seg.c[1], seg.tr, seg.ta, seg.tsweep, z0,
+                       end, seg.rapid);
   }
   emit_line_ = -1;
   return st;

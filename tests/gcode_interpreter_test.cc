@@ -979,6 +979,27 @@ TEST(LinuxCncParityTest, AfterG40MovesWithoutXYKeepTheOffsetPoint) {
   ExpectNear(Xyz(tp), {{0, 0, 0}, {10, 1, 0}, {10, 1, 5}, {20, 0, 5}});
 }
 
+TEST(LinuxCncParityTest, CompInTheXZPlane) {
+  // G18: (Z, X) is the plane (Z first, as its arcs); G42 puts the tool
+  // right of the path there. The entry's offset line x = z - sqrt 2 meets
+  // x = -1 at z = sqrt 2 - 1; rs274: STRAIGHT_FEED(-1, 0, 0.4142), (-1, 0,
+  // 10), ARC_FEED to z 14, x -5 about (10, -5), (-10, 0, 14), exit.
+  const Toolpath tp = MustRun(
+      "G21 G18\nG0 X-5 Z-5 Y0\nG42.1 D2\nG1 X0 Z0\nG1 Z10\n"
+      "G2 R5 X-5 Z15\nG1 X-10\nG40 G0 X-15 Z20\n");
+  ASSERT_GE(tp.point_count(), 6);
+  ExpectNear({Xyz(tp)[1], Xyz(tp)[2]},
+             {{-1, 0, std::sqrt(2.0) - 1}, {-1, 0, 10}});
+  for (const ToolpathPoint& p : tp.points()) {
+    if (p.line != 6) continue;
+    EXPECT_NEAR(std::hypot(p.position.z - 10, p.position.x + 5), 4, 1e-9);
+  }
+  ExpectNear({Xyz(tp)[tp.points().size() - 2], Xyz(tp).back()},
+             {{-10, 0, 14}, {-15, 0, 20}});
+  EXPECT_THAT(ErrorOf("G21 G0 X0 Y0 Z0\nG41.1 D2\nG1 X5\nG18 G1 Z5\n"),
+              HasSubstr("G18 with cutter compensation on"));
+}
+
 // The canonical-command seam: a sink sees arcs as arcs.
 class Recorder final : public CanonSink {
  public:
