@@ -109,6 +109,77 @@ absl::Status MapFits(int32_t cols, int32_t rows, int64_t limit) {
                                   " cells"));
 }
 
+// GetDeviation's answer (also a Simulate stream's DeviationRequest).
+absl::StatusOr<pb::Deviation> ComputeDeviation(
+    const Session& session, double allowance, std::optional<double> tolerance,
+    std::optional<int32_t> samples_per_edge, int32_t max_moves,
+    int64_t max_message_bytes) {
+  const std::shared_ptr<const design::PlacedDesign> design = session.design();
+  if (design == nullptr) {
+    return absl::FailedPreconditionError(
+        "the session has no design: SetDesign first");
+  }
+  cli::DeviationOptions o;
+  o.allowance = allowance;
+  if (tolerance.has_value()) o.tolerance = *tolerance;
+  if (samples_per_edge.has_value()) {
+    if (*samples_per_edge < 0 || *samples_per_edge > 64) {
+      return absl::InvalidArgumentError("samples_per_edge must be in [0, 64]");
+    }
+    o.samples_per_edge = *samples_per_edge;
+  }
+  if (max_moves < 0) {
+    return absl::InvalidArgumentError("max_moves must be >= 0");
+  }
+  if (max_moves > 0) o.max_lines = max_moves;
+  auto grid = session.Read(
+      [](const Workpiece& wp) { return cli::SurfaceGrid::FromWorkpiece(wp); });
+  if (!grid.ok()) return grid.status();
+  // The moves themselves are the "lines": the client maps them.
+  std::vector<cli::SourceLine> moves(grid->moves.size());
+  for (size_t k = 0; k < moves.size(); ++k) {
+    moves[k] = {0, static_cast<int32_t>(k)};
+  }
+  auto r = cli::MeasureDeviation(*grid, design->envelope(), design->index(),
+                                 moves, o);
+  if (!r.ok()) return r.status();
+  pb::Deviation out;
+  out.set_triangles(static_cast<int64_t>(design->mesh().triangles.size()));
+  out.set_nodes(r->nodes);
+  out.set_samples(r->samples);
+  out.set_gouge_max(r->gouge_max);
+  out.set_gouge_x(r->gouge_x);
+  out.set_gouge_y(r->gouge_y);
+  out.set_gouge_move(r->gouge_move);
+  out.set_gouge_volume_mm3(r->gouge_volume);
+  out.set_excess_max(r->excess_max);
+  out.set_excess_x(r->excess_x);
+  out.set_excess_y(r->excess_y);
+  out.set_excess_mean(r->excess_mean);
+  out.set_excess_volume_mm3(r->excess_volume);
+  out.set_normal_gouge_max(r->normal_gouge_max);
+  out.set_normal_excess_max(r->normal_excess_max);
+  out.set_allowance(r->allowance);
+  out.set_tolerance(r->tolerance);
+  out.set_out_of_tolerance_area_mm2(r->out_area_mm2);
+  out.set_ok(r->ok);
+  auto add = [](const cli::LineDeviation& l, pb::DeviationMove* m) {
+    m->set_move(l.line);
+    m->set_depth(l.depth);
+    m->set_x(l.x);
+    m->set_y(l.y);
+    m->set_area_mm2(l.area_mm2);
+  };
+  for (const auto& l : r->gouge_lines) add(l, out.add_gouge_moves());
+  for (const auto& l : r->excess_lines) add(l, out.add_excess_moves());
+  if (absl::Status fits =
+          FitsMessage(out.ByteSizeLong(), max_message_bytes, "the deviation");
+      !fits.ok()) {
+    return fits;
+  }
+  return out;
+}
+
 // The kind of request a RequestError answers.
 pb::RequestKind KindOf(pb::SimulateRequest::RequestCase c) {
   switch (c) {
@@ -122,6 +193,8 @@ pb::RequestKind KindOf(pb::SimulateRequest::RequestCase c) {
       return pb::REQUEST_KIND_MARKS;
     case pb::SimulateRequest::kSubscribe:
       return pb::REQUEST_KIND_SUBSCRIBE;
+    case pb::SimulateRequest::kDeviation:
+      return pb::REQUEST_KIND_DEVIATION;
     case pb::SimulateRequest::REQUEST_NOT_SET:
       break;
   }
@@ -144,6 +217,8 @@ std::pair<uint64_t, pb::RequestKind> RequestOf(const pb::SimulateResponse& r) {
       return {r.polylines().request_id(), pb::REQUEST_KIND_MARKS};
     case pb::SimulateResponse::kError:
       return {r.error().request_id(), r.error().kind()};
+    case pb::SimulateResponse::kDeviation:
+      return {r.deviation().request_id(), pb::REQUEST_KIND_DEVIATION};
     case pb::SimulateResponse::RESPONSE_NOT_SET:
       break;
   }
@@ -649,6 +724,21 @@ class SimulateReactor
       }
       case pb::SimulateRequest::kSubscribe:
         return HandleSubscribe(req.subscribe(), out);
+      case pb::SimulateRequest::kDeviation: {
+        const pb::DeviationRequest& r = req.deviation();
+        auto d = ComputeDeviation(
+            *session_, r.allowance(),
+            r.has_tolerance() ? std::optional<double>(r.tolerance().value())
+                              : std::nullopt,
+            r.has_samples_per_edge()
+                ? std::optional<int32_t>(r.samples_per_edge().value())
+                : std::nullopt,
+            r.max_moves(), registry_->limits().max_message_bytes);
+        if (!d.ok()) return Error(r.request_id(), d.status(), out);
+        d->set_request_id(r.request_id());
+        *out->emplace_back().mutable_deviation() = *std::move(d);
+        return;
+      }
       case pb::SimulateRequest::REQUEST_NOT_SET:
         break;
     }
@@ -657,9 +747,13 @@ class SimulateReactor
 
   void HandleMoves(const pb::MoveBatch& b,
                    std::vector<pb::SimulateResponse>* out) {
+    BatchOptions options;
+    options.reposition = b.reposition();
+    options.rapid = b.rapid();
+    options.report_cuts = b.report_cuts();
     auto r = session_->ApplyBatch(
         b.seq(), b.tool_id(), std::span<const double>(b.xyz().data(), b.xyz_size()),
-        registry_->limits().max_batch_points, b.reposition());
+        registry_->limits().max_batch_points, options);
     if (!r.ok()) {
       // A gap, or another batch under an acknowledged seq: what follows on
       // this stream continues a history the session does not have.
@@ -679,6 +773,19 @@ class SimulateReactor
     ack->set_node_lowerings(r->node_lowerings);
     ack->set_version(r->version);
     ack->set_duplicate(r->duplicate);
+    ack->mutable_removed_mm3()->Assign(r->removed_mm3.begin(),
+                                       r->removed_mm3.end());
+    for (const SafetyFinding& f : r->safety) {
+      pb::SafetyEvent* e = ack->add_safety();
+      e->set_kind(static_cast<pb::SafetyEvent::Kind>(f.kind));
+      e->set_move_index(f.move_index);
+      e->set_move_id(f.move_id);
+      e->set_x(f.x);
+      e->set_y(f.y);
+      e->set_z(f.z);
+      e->set_depth(f.depth);
+      e->set_volume_mm3(f.volume_mm3);
+    }
     const int32_t tiles_x = session_->spec().stock.nx / kTileSize + 1;
     for (const auto& [t, v] : r->changed_tiles) {
       pb::TileVersion* tv = ack->add_changed_tiles();
@@ -1108,68 +1215,17 @@ grpc::ServerUnaryReactor* SwarfService::GetDeviation(
   return Unary(ctx, "GetDeviation", [=, this]() -> absl::Status {
     auto session = SessionOf(registry_, tokens_, ctx, req->session_id());
     if (!session.ok()) return session.status();
-    const std::shared_ptr<const design::PlacedDesign> design =
-        (*session)->design();
-    if (design == nullptr) {
-      return absl::FailedPreconditionError(
-          "the session has no design: SetDesign first");
-    }
-    cli::DeviationOptions o;
-    o.allowance = req->allowance();
-    if (req->has_tolerance()) o.tolerance = req->tolerance().value();
-    if (req->has_samples_per_edge()) {
-      const int32_t n = req->samples_per_edge().value();
-      if (n < 0 || n > 64) {
-        return absl::InvalidArgumentError(
-            "samples_per_edge must be in [0, 64]");
-      }
-      o.samples_per_edge = n;
-    }
-    if (req->max_moves() < 0) {
-      return absl::InvalidArgumentError("max_moves must be >= 0");
-    }
-    if (req->max_moves() > 0) o.max_lines = req->max_moves();
-    auto grid = (*session)->Read(
-        [](const Workpiece& wp) { return cli::SurfaceGrid::FromWorkpiece(wp); });
-    if (!grid.ok()) return grid.status();
-    // The moves themselves are the "lines": the client maps them.
-    std::vector<cli::SourceLine> moves(grid->moves.size());
-    for (size_t k = 0; k < moves.size(); ++k) {
-      moves[k] = {0, static_cast<int32_t>(k)};
-    }
-    auto r = cli::MeasureDeviation(*grid, design->envelope(), design->index(),
-                                   moves, o);
-    if (!r.ok()) return r.status();
-    resp->set_triangles(static_cast<int64_t>(design->mesh().triangles.size()));
-    resp->set_nodes(r->nodes);
-    resp->set_samples(r->samples);
-    resp->set_gouge_max(r->gouge_max);
-    resp->set_gouge_x(r->gouge_x);
-    resp->set_gouge_y(r->gouge_y);
-    resp->set_gouge_move(r->gouge_move);
-    resp->set_gouge_volume_mm3(r->gouge_volume);
-    resp->set_excess_max(r->excess_max);
-    resp->set_excess_x(r->excess_x);
-    resp->set_excess_y(r->excess_y);
-    resp->set_excess_mean(r->excess_mean);
-    resp->set_excess_volume_mm3(r->excess_volume);
-    resp->set_normal_gouge_max(r->normal_gouge_max);
-    resp->set_normal_excess_max(r->normal_excess_max);
-    resp->set_allowance(r->allowance);
-    resp->set_tolerance(r->tolerance);
-    resp->set_out_of_tolerance_area_mm2(r->out_area_mm2);
-    resp->set_ok(r->ok);
-    auto add = [](const cli::LineDeviation& l, pb::DeviationMove* m) {
-      m->set_move(l.line);
-      m->set_depth(l.depth);
-      m->set_x(l.x);
-      m->set_y(l.y);
-      m->set_area_mm2(l.area_mm2);
-    };
-    for (const auto& l : r->gouge_lines) add(l, resp->add_gouge_moves());
-    for (const auto& l : r->excess_lines) add(l, resp->add_excess_moves());
-    return FitsMessage(resp->ByteSizeLong(),
-                       registry_->limits().max_message_bytes, "the deviation");
+    auto d = ComputeDeviation(
+        **session, req->allowance(),
+        req->has_tolerance() ? std::optional<double>(req->tolerance().value())
+                             : std::nullopt,
+        req->has_samples_per_edge()
+            ? std::optional<int32_t>(req->samples_per_edge().value())
+            : std::nullopt,
+        req->max_moves(), registry_->limits().max_message_bytes);
+    if (!d.ok()) return d.status();
+    *resp = *std::move(d);
+    return absl::OkStatus();
   });
 }
 

@@ -240,6 +240,81 @@ TEST_F(DesignApiTest, ChunkedDesignGivesTheCoresDeviationBitForBit) {
   EXPECT_NEAR(deepest, -d.gouge_max(), 1e-6);
 }
 
+// A DeviationRequest on the Simulate stream sees exactly the batches sent
+// before it: after the first half of the raster nothing gouges, after the
+// deep pass it does, with GetDeviation's figures.
+TEST_F(DesignApiTest, DeviationOnTheStreamFollowsTheBatches) {
+  pb::CreateSessionRequest create;
+  create.set_session_id("d3");
+  SetStock(kStock, &create);
+  pb::Tool* tool = create.add_tools();
+  tool->set_id(kTool);
+  tool->mutable_ball()->set_radius(kRadius);
+  pb::Session session;
+  {
+    grpc::ClientContext ctx;
+    SetDeadline(&ctx);
+    ASSERT_TRUE(stub_->CreateSession(&ctx, create, &session).ok());
+  }
+  pb::DesignInfo info;
+  ASSERT_TRUE(Upload(stub_.get(), "d3", design::ToBinaryStl(Floor()), 65536,
+                     &info).ok());
+  const std::vector<Vec3> p = RasterPoints();
+  auto batch = [&](uint64_t seq, size_t from, size_t to) {
+    std::vector<double> xyz;
+    for (size_t k = from; k < to; ++k) xyz.insert(xyz.end(), {p[k].x, p[k].y, p[k].z});
+    return ::swarf::testing::MovesRequest(seq, kTool, xyz);
+  };
+  auto dev_request = [](uint64_t id) {
+    pb::SimulateRequest r;
+    r.mutable_deviation()->set_request_id(id);
+    r.mutable_deviation()->mutable_tolerance()->set_value(0.05);
+    return r;
+  };
+  SimStream s(stub_.get(), "d3");
+  // Passes 0..8 (points 0..17), then the rest (the deep pass 9 is next).
+  ASSERT_TRUE(s.Write(batch(1, 0, 18)));
+  ASSERT_TRUE(s.Write(dev_request(101)));
+  ASSERT_TRUE(s.Write(batch(2, 17, p.size())));
+  ASSERT_TRUE(s.Write(dev_request(102)));
+  ASSERT_TRUE(s.WaitForCount(4));
+  ASSERT_TRUE(s.Finish().ok());
+  const auto responses = s.responses();
+  ASSERT_EQ(responses.size(), 4u);
+  ASSERT_TRUE(responses[1].has_deviation()) << responses[1].DebugString();
+  ASSERT_TRUE(responses[3].has_deviation()) << responses[3].DebugString();
+  EXPECT_EQ(responses[1].deviation().request_id(), 101u);
+  EXPECT_LT(responses[1].deviation().gouge_max(), 0.02);
+  EXPECT_EQ(responses[1].deviation().gouge_moves_size(), 0);
+  const pb::Deviation& last = responses[3].deviation();
+  EXPECT_EQ(last.request_id(), 102u);
+  pb::Deviation unary;
+  ASSERT_TRUE(Deviation(stub_.get(), "d3", &unary).ok());
+  pb::Deviation same = last;
+  same.set_request_id(0);
+  EXPECT_EQ(same.SerializeAsString(), unary.SerializeAsString());
+  EXPECT_GT(last.gouge_max(), 0.2);
+  // Without a design: that request's error, the stream goes on.
+  pb::CreateSessionRequest bare = create;
+  bare.set_session_id("d4");
+  {
+    grpc::ClientContext ctx;
+    SetDeadline(&ctx);
+    ASSERT_TRUE(stub_->CreateSession(&ctx, bare, &session).ok());
+  }
+  SimStream s2(stub_.get(), "d4");
+  ASSERT_TRUE(s2.Write(dev_request(7)));
+  ASSERT_TRUE(s2.Write(batch(1, 0, 4)));
+  ASSERT_TRUE(s2.WaitForCount(2));
+  ASSERT_TRUE(s2.Finish().ok());
+  const auto r2 = s2.responses();
+  ASSERT_TRUE(r2[0].has_error());
+  EXPECT_EQ(r2[0].error().request_id(), 7u);
+  EXPECT_EQ(r2[0].error().kind(), pb::REQUEST_KIND_DEVIATION);
+  EXPECT_EQ(r2[0].error().code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_TRUE(r2[1].has_ack());
+}
+
 TEST_F(DesignApiTest, BadUploadsAreRefusedAndLeaveTheDesign) {
   CreateAndCut(stub_.get(), "d2");
   const std::string stl = design::ToBinaryStl(Floor());
