@@ -76,13 +76,37 @@ absl::StatusOr<SchemeKind> SchemeFromProto(int value,
 }
 
 absl::Status ValidateTool(const ToolSpec& tool, int k) {
+  const ToolAssembly& a = tool.assembly;
+  const struct {
+    const char* name;
+    double v;
+  } parts[] = {{"flute_length", a.flute_length},
+               {"shank_diameter", a.shank_diameter},
+               {"holder_diameter", a.holder_diameter},
+               {"stickout", a.stickout}};
+  for (const auto& p : parts) {
+    if (!(p.v >= 0 && p.v <= 2 * kMaxRadius)) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("tools[", k, "].", p.name, " must be in [0, ",
+                       2 * kMaxRadius, "] mm (0: not known), got ", p.v));
+    }
+  }
+  if ((a.holder_diameter > 0) != (a.stickout > 0)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "tools[", k, "]: holder_diameter and stickout go together"));
+  }
   return ValidateCutter(
       tool.cutter, absl::StrCat("tools[", k, "].",
                                 std::string(CutterKindName(tool.cutter.kind))));
 }
 
 absl::StatusOr<ToolSpec> ToolFromProto(const pb::Tool& t, int k) {
-  ToolSpec tool{t.id(), {}};
+  ToolSpec tool{t.id(), {}, {}};
+  tool.assembly.flute_length = t.flute_length();
+  tool.assembly.shank_diameter = t.shank_diameter();
+  tool.assembly.holder_diameter = t.holder_diameter();
+  tool.assembly.stickout = t.stickout();
+  tool.assembly.center_cutting = !t.not_center_cutting();
   switch (t.shape_case()) {
     case pb::Tool::kBall:
       tool.cutter = Cutter::Ball(t.ball().radius());
@@ -115,6 +139,11 @@ absl::StatusOr<ToolSpec> ToolFromProto(const pb::Tool& t, int k) {
 
 void ToolToProto(const ToolSpec& t, pb::Tool* out) {
   out->set_id(t.id);
+  out->set_flute_length(t.assembly.flute_length);
+  out->set_shank_diameter(t.assembly.shank_diameter);
+  out->set_holder_diameter(t.assembly.holder_diameter);
+  out->set_stickout(t.assembly.stickout);
+  out->set_not_center_cutting(!t.assembly.center_cutting);
   const Cutter& c = t.cutter;
   switch (c.kind) {
     case CutterKind::kBall:

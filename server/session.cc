@@ -359,6 +359,16 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
                                                 std::span<const double> xyz,
                                                 int64_t max_points,
                                                 bool reposition) {
+  BatchOptions options;
+  options.reposition = reposition;
+  return ApplyBatch(seq, tool_id, xyz, max_points, options);
+}
+
+absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
+                                                std::span<const double> xyz,
+                                                int64_t max_points,
+                                                const BatchOptions& options) {
+  const bool reposition = options.reposition;
   if (seq == 0) {
     return absl::InvalidArgumentError("moves.seq must start at 1");
   }
@@ -403,7 +413,7 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
   if (wp_ == nullptr) {
     if (absl::Status s = ReloadLocked(); !s.ok()) return s;
   }
-  auto result = ApplyLocked(seq, *tool, xyz, reposition, true);
+  auto result = ApplyLocked(seq, *tool, xyz, reposition, true, &options);
   if (result.ok() && SnapshotDueLocked()) {
     SaveSnapshotLocked().IgnoreError();  // logged inside
   }
@@ -471,7 +481,8 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
                                                  const ToolSpec& tool,
                                                  std::span<const double> xyz,
                                                  bool reposition,
-                                                 bool journal) const {
+                                                 bool journal,
+                                                 const BatchOptions* checks) const {
   BatchResult r;
   r.seq = seq;
   const uint32_t digest = BatchDigest(tool.id, reposition, xyz);
@@ -509,7 +520,21 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
           "logged on the server); nothing was applied"));
     }
   }
-  auto applied = wp_->Apply(moves);
+  // The checks need what each move cut: asked of the kernel only when some
+  // check can fire or the client wants the volumes.
+  const ToolAssembly& as = tool.assembly;
+  const bool check = checks != nullptr &&
+                     (checks->rapid || checks->report_cuts || as.known());
+  std::vector<double> flutes;
+  ApplyOptions apply_options;
+  if (check) {
+    apply_options.cuts = true;
+    if (as.flute_length > 0) {
+      flutes.assign(moves.size(), as.flute_length);
+      apply_options.drop_limit = flutes;
+    }
+  }
+  auto applied = wp_->Apply(moves, apply_options);
   if (!applied.ok()) {
     if (journal && journal_ != nullptr) journal_->Remove(seq).IgnoreError();
     return applied.status();
@@ -523,7 +548,65 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
   for (int32_t t : applied->changed_tiles) {
     r.changed_tiles.emplace_back(t, wp_->TileVersion(t));
   }
+  if (check) Check(*checks, tool, moves, *applied, &r);
   return r;
+}
+
+void Session::Check(const BatchOptions& checks, const ToolSpec& tool,
+                    std::span<const Move> moves, const ApplyResult& applied,
+                    BatchResult* r) const {
+  const ToolAssembly& as = tool.assembly;
+  const GridGeometry& g = wp_->grid();
+  const double shank_r = as.shank_diameter / 2;
+  if (checks.report_cuts) r->removed_mm3.resize(moves.size());
+  for (size_t k = 0; k < moves.size(); ++k) {
+    const MoveCut& c = applied.cuts[k];
+    if (checks.report_cuts) r->removed_mm3[k] = c.removed_mm3;
+    auto add = [&](SafetyFinding::Kind kind, double x, double y, double z,
+                   double depth, double volume) {
+      SafetyFinding f;
+      f.kind = kind;
+      f.move_index = static_cast<int64_t>(k);
+      f.move_id = applied.first_move_id + static_cast<int64_t>(k);
+      f.x = x;
+      f.y = y;
+      f.z = z;
+      f.depth = depth;
+      f.volume_mm3 = volume;
+      r->safety.push_back(f);
+    };
+    const Move& m = moves[k];
+    if (c.max_drop > 0) {
+      const double x = g.NodeX(c.i), y = g.NodeY(c.j);
+      if (checks.rapid) {
+        add(SafetyFinding::kRapidCut, x, y, c.z, c.max_drop, c.removed_mm3);
+      }
+      if (as.flute_length > 0 && c.max_drop > as.flute_length) {
+        add(SafetyFinding::kShankContact, x, y, c.z + c.max_drop,
+            c.max_drop - as.flute_length, c.over_limit_mm3);
+      }
+      if (!as.center_cutting && m.from.x == m.to.x && m.from.y == m.to.y &&
+          m.to.z < m.from.z) {
+        add(SafetyFinding::kPlunge, x, y, c.z, c.max_drop, c.removed_mm3);
+      }
+    }
+    // A shank wider than the cutter meets material beside the cut.
+    if (as.flute_length > 0 && shank_r > m.cutter.radius) {
+      const Contact s = CylinderContact(*wp_, m.from, m.to, shank_r,
+                                        as.flute_length);
+      if (s.hit) {
+        add(SafetyFinding::kShankContact, s.x, s.y, s.z, s.depth, s.volume_mm3);
+      }
+    }
+    if (as.holder_diameter > 0) {
+      const Contact h = CylinderContact(*wp_, m.from, m.to,
+                                        as.holder_diameter / 2, as.stickout);
+      if (h.hit) {
+        add(SafetyFinding::kHolderContact, h.x, h.y, h.z, h.depth,
+            h.volume_mm3);
+      }
+    }
+  }
 }
 
 SessionState Session::State() const {

@@ -22,6 +22,7 @@
 #include "core/scheme.h"
 #include "core/stock.h"
 #include "core/workpiece.h"
+#include "core/safety.h"
 #include "design/placed_design.h"
 #include "server/journal.h"
 #include "server/snapshot.h"
@@ -31,6 +32,7 @@ namespace swarf::server {
 struct ToolSpec {
   int32_t id = 0;
   Cutter cutter;  // valid per ValidateTool (server/convert.h)
+  ToolAssembly assembly;  // the non-cutting parts, for the safety checks
 };
 
 struct SessionSpec {
@@ -42,6 +44,23 @@ struct SessionSpec {
   std::vector<ToolSpec> tools;
 };
 
+// What a batch's move did that can crash or break the tool (Ack.safety).
+struct SafetyFinding {
+  enum Kind { kRapidCut = 1, kShankContact = 2, kHolderContact = 3, kPlunge = 4 };
+  Kind kind = kRapidCut;
+  int64_t move_index = 0;  // in the batch
+  int64_t move_id = 0;     // in the session
+  double x = 0, y = 0, z = 0, depth = 0, volume_mm3 = 0;
+};
+
+// How a batch is applied beyond its moves (not journaled: the cuts are the
+// same either way).
+struct BatchOptions {
+  bool reposition = false;  // the first point only places the tool
+  bool rapid = false;       // rapids: any material removed is reported
+  bool report_cuts = false;  // BatchResult::removed_mm3
+};
+
 // What a batch did, for its Ack.
 struct BatchResult {
   uint64_t seq = 0;
@@ -50,6 +69,9 @@ struct BatchResult {
   uint64_t version = 0;       // after the batch
   std::vector<std::pair<int32_t, uint64_t>> changed_tiles;  // tile, version
   bool duplicate = false;  // seq already applied: nothing done
+  // With BatchOptions::report_cuts: each move's removed volume (mm^3).
+  std::vector<double> removed_mm3;
+  std::vector<SafetyFinding> safety;  // in move order
 };
 
 // A snapshot of the session's counters.
@@ -139,6 +161,13 @@ class Session {
                                          std::span<const double> xyz,
                                          int64_t max_points,
                                          bool reposition = false);
+  // The same, with the safety checks (rapids that cut, shank and holder
+  // contacts, plunges of tools not cutting at their centre) made as the
+  // moves are applied, and each move's removed volume when asked.
+  absl::StatusOr<BatchResult> ApplyBatch(uint64_t seq, int32_t tool_id,
+                                         std::span<const double> xyz,
+                                         int64_t max_points,
+                                         const BatchOptions& options);
 
   SessionState State() const;
 
@@ -175,8 +204,14 @@ class Session {
   // ApplyBatch after validation, under mu_; `journal` false when replaying.
   absl::StatusOr<BatchResult> ApplyLocked(uint64_t seq, const ToolSpec& tool,
                                           std::span<const double> xyz,
-                                          bool reposition, bool journal) const
-      ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+                                          bool reposition, bool journal,
+                                          const BatchOptions* checks = nullptr)
+      const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+
+  // The safety checks of an applied batch (ApplyResult with cuts) into r.
+  void Check(const BatchOptions& checks, const ToolSpec& tool,
+             std::span<const Move> moves, const ApplyResult& applied,
+             BatchResult* r) const ABSL_SHARED_LOCKS_REQUIRED(mu_);
 
   // Rebuilds an evicted session's grid from its snapshot and journal.
   void EnsureLoaded() const;
