@@ -110,28 +110,28 @@ absl::Status MapFits(int32_t cols, int32_t rows, int64_t limit) {
 }
 
 // GetDeviation's answer (also a Simulate stream's DeviationRequest).
-absl::StatusOr<pb::Deviation> ComputeDeviation(
-    const Session& session, double allowance, std::optional<double> tolerance,
-    std::optional<int32_t> samples_per_edge, int32_t max_moves,
-    int64_t max_message_bytes) {
+absl::StatusOr<pb::Deviation> ComputeDeviation(const Session& session,
+                                               const pb::DeviationRequest& req,
+                                               int64_t max_message_bytes) {
   const std::shared_ptr<const design::PlacedDesign> design = session.design();
   if (design == nullptr) {
     return absl::FailedPreconditionError(
         "the session has no design: SetDesign first");
   }
   cli::DeviationOptions o;
-  o.allowance = allowance;
-  if (tolerance.has_value()) o.tolerance = *tolerance;
-  if (samples_per_edge.has_value()) {
-    if (*samples_per_edge < 0 || *samples_per_edge > 64) {
+  o.allowance = req.allowance();
+  if (req.has_tolerance()) o.tolerance = req.tolerance().value();
+  if (req.has_samples_per_edge()) {
+    const int32_t n = req.samples_per_edge().value();
+    if (n < 0 || n > 64) {
       return absl::InvalidArgumentError("samples_per_edge must be in [0, 64]");
     }
-    o.samples_per_edge = *samples_per_edge;
+    o.samples_per_edge = n;
   }
-  if (max_moves < 0) {
+  if (req.max_moves() < 0) {
     return absl::InvalidArgumentError("max_moves must be >= 0");
   }
-  if (max_moves > 0) o.max_lines = max_moves;
+  if (req.max_moves() > 0) o.max_lines = req.max_moves();
   auto grid = session.Read(
       [](const Workpiece& wp) { return cli::SurfaceGrid::FromWorkpiece(wp); });
   if (!grid.ok()) return grid.status();
@@ -726,14 +726,8 @@ class SimulateReactor
         return HandleSubscribe(req.subscribe(), out);
       case pb::SimulateRequest::kDeviation: {
         const pb::DeviationRequest& r = req.deviation();
-        auto d = ComputeDeviation(
-            *session_, r.allowance(),
-            r.has_tolerance() ? std::optional<double>(r.tolerance().value())
-                              : std::nullopt,
-            r.has_samples_per_edge()
-                ? std::optional<int32_t>(r.samples_per_edge().value())
-                : std::nullopt,
-            r.max_moves(), registry_->limits().max_message_bytes);
+        auto d = ComputeDeviation(*session_, r,
+                                  registry_->limits().max_message_bytes);
         if (!d.ok()) return Error(r.request_id(), d.status(), out);
         d->set_request_id(r.request_id());
         *out->emplace_back().mutable_deviation() = *std::move(d);
@@ -1215,14 +1209,8 @@ grpc::ServerUnaryReactor* SwarfService::GetDeviation(
   return Unary(ctx, "GetDeviation", [=, this]() -> absl::Status {
     auto session = SessionOf(registry_, tokens_, ctx, req->session_id());
     if (!session.ok()) return session.status();
-    auto d = ComputeDeviation(
-        **session, req->allowance(),
-        req->has_tolerance() ? std::optional<double>(req->tolerance().value())
-                             : std::nullopt,
-        req->has_samples_per_edge()
-            ? std::optional<int32_t>(req->samples_per_edge().value())
-            : std::nullopt,
-        req->max_moves(), registry_->limits().max_message_bytes);
+    auto d = ComputeDeviation(**session, req->options(),
+                              registry_->limits().max_message_bytes);
     if (!d.ok()) return d.status();
     *resp = *std::move(d);
     return absl::OkStatus();

@@ -94,7 +94,8 @@ grpc::Status Upload(pb::Swarf::Stub* stub, const std::string& id,
   return grpc::Status::OK;
 }
 
-void CreateAndCut(pb::Swarf::Stub* stub, const std::string& id) {
+// A guarded session over kStock with the ball kTool.
+void Create(pb::Swarf::Stub* stub, const std::string& id) {
   pb::CreateSessionRequest create;
   create.set_session_id(id);
   SetStock(kStock, &create);
@@ -106,6 +107,11 @@ void CreateAndCut(pb::Swarf::Stub* stub, const std::string& id) {
   grpc::ClientContext ctx;
   SetDeadline(&ctx);
   ASSERT_TRUE(stub->CreateSession(&ctx, create, &session).ok());
+}
+
+// Create, then the whole raster in one batch.
+void CreateAndCut(pb::Swarf::Stub* stub, const std::string& id) {
+  Create(stub, id);
   std::vector<double> xyz;
   for (const Vec3& p : RasterPoints()) xyz.insert(xyz.end(), {p.x, p.y, p.z});
   SimStream s(stub, id);
@@ -118,7 +124,7 @@ grpc::Status Deviation(pb::Swarf::Stub* stub, const std::string& id,
                        pb::Deviation* out, double tolerance = 0.05) {
   pb::GetDeviationRequest req;
   req.set_session_id(id);
-  req.mutable_tolerance()->set_value(tolerance);
+  req.mutable_options()->mutable_tolerance()->set_value(tolerance);
   grpc::ClientContext ctx;
   SetDeadline(&ctx);
   return stub->GetDeviation(&ctx, req, out);
@@ -244,18 +250,7 @@ TEST_F(DesignApiTest, ChunkedDesignGivesTheCoresDeviationBitForBit) {
 // before it: after the first half of the raster nothing gouges, after the
 // deep pass it does, with GetDeviation's figures.
 TEST_F(DesignApiTest, DeviationOnTheStreamFollowsTheBatches) {
-  pb::CreateSessionRequest create;
-  create.set_session_id("d3");
-  SetStock(kStock, &create);
-  pb::Tool* tool = create.add_tools();
-  tool->set_id(kTool);
-  tool->mutable_ball()->set_radius(kRadius);
-  pb::Session session;
-  {
-    grpc::ClientContext ctx;
-    SetDeadline(&ctx);
-    ASSERT_TRUE(stub_->CreateSession(&ctx, create, &session).ok());
-  }
+  Create(stub_.get(), "d3");
   pb::DesignInfo info;
   ASSERT_TRUE(Upload(stub_.get(), "d3", design::ToBinaryStl(Floor()), 65536,
                      &info).ok());
@@ -295,13 +290,7 @@ TEST_F(DesignApiTest, DeviationOnTheStreamFollowsTheBatches) {
   EXPECT_EQ(same.SerializeAsString(), unary.SerializeAsString());
   EXPECT_GT(last.gouge_max(), 0.2);
   // Without a design: that request's error, the stream goes on.
-  pb::CreateSessionRequest bare = create;
-  bare.set_session_id("d4");
-  {
-    grpc::ClientContext ctx;
-    SetDeadline(&ctx);
-    ASSERT_TRUE(stub_->CreateSession(&ctx, bare, &session).ok());
-  }
+  Create(stub_.get(), "d4");
   SimStream s2(stub_.get(), "d4");
   ASSERT_TRUE(s2.Write(dev_request(7)));
   ASSERT_TRUE(s2.Write(batch(1, 0, 4)));
@@ -366,7 +355,7 @@ TEST_F(DesignApiTest, BadUploadsAreRefusedAndLeaveTheDesign) {
             grpc::StatusCode::NOT_FOUND);
   pb::GetDeviationRequest req;
   req.set_session_id("d2");
-  req.mutable_samples_per_edge()->set_value(65);
+  req.mutable_options()->mutable_samples_per_edge()->set_value(65);
   grpc::ClientContext ctx;
   SetDeadline(&ctx);
   EXPECT_EQ(stub_->GetDeviation(&ctx, req, &d).error_code(),

@@ -398,8 +398,9 @@ TEST_F(ViewerApiTest, DeviationDesignAndLineAreTheApis) {
   const float gouge = Take<float>(d->body, &off);
   pb::GetDeviationRequest dreq;
   dreq.set_session_id(id_);
-  dreq.mutable_tolerance()->set_value(0.05);
-  dreq.mutable_samples_per_edge()->set_value(0);  // as the viewer asks
+  dreq.mutable_options()->mutable_tolerance()->set_value(0.05);
+  // As the viewer asks: at the nodes.
+  dreq.mutable_options()->mutable_samples_per_edge()->set_value(0);
   pb::Deviation want;
   {
     auto ctx = conn_->Context(id_);

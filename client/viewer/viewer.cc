@@ -228,12 +228,13 @@ class ViewerImpl {
   absl::StatusOr<std::string> Deviation(double allowance, double tolerance) {
     pb::GetDeviationRequest dreq;
     dreq.set_session_id(id_);
-    dreq.set_allowance(allowance);
-    dreq.mutable_tolerance()->set_value(tolerance);
-    dreq.set_max_moves(1);
+    pb::DeviationRequest* o = dreq.mutable_options();
+    o->set_allowance(allowance);
+    o->mutable_tolerance()->set_value(tolerance);
+    o->set_max_moves(1);
     // At the nodes (the page shows nodes): a pass the page may repeat
     // every 2 s while the job is cut.
-    dreq.mutable_samples_per_edge()->set_value(0);
+    o->mutable_samples_per_edge()->set_value(0);
     pb::Deviation d;
     {
       auto ctx = conn_->Context(id_, 600);

@@ -941,12 +941,12 @@ class Session:
         """The machined surface against the design (set_design first):
         gouge and excess, vertical and normal, the verdict at `tolerance`
         (default 0.01 mm) with `allowance`, and the moves that gouge."""
-        req = pb.GetDeviationRequest(session_id=self.id, allowance=allowance,
-                                     max_moves=max_moves)
+        opts = pb.DeviationRequest(allowance=allowance, max_moves=max_moves)
         if tolerance is not None:
-            req.tolerance.value = tolerance
+            opts.tolerance.value = tolerance
         if samples_per_edge is not None:
-            req.samples_per_edge.value = samples_per_edge
+            opts.samples_per_edge.value = samples_per_edge
+        req = pb.GetDeviationRequest(session_id=self.id, options=opts)
         r = self._client._call("GetDeviation", req, self.id)
 
         def moves(ms: Any) -> List[DeviationMove]:
