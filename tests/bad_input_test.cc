@@ -8,7 +8,8 @@
 // Kinds: NaN/Inf in every numeric field; negative and zero sizes; a grid of
 // 10^12 nodes; unknown session or tool; seq gaps and repeats; messages over
 // the 64 MiB limit; bytes that are not protobuf; streams cancelled in the
-// middle of batches; a client that never reads its responses.
+// middle of batches; a client that never reads its responses; designs that
+// are not one.
 
 #include <atomic>
 #include <bit>
@@ -871,6 +872,71 @@ TEST_F(BadInputTest, UnknownSessionOrTool) {
   ASSERT_TRUE(rs[1].has_ack());
   EXPECT_EQ(rs[1].ack().seq(), 1u);
   EXPECT_EQ(rs[1].ack().moves_applied(), 3);
+  EXPECT_TRUE(WitnessServed());
+  CheckWitness();
+}
+
+// A design that is not one (not STL, a NaN, non-manifold, outside the
+// stock, over --max_design_mb, a chunk out of order): each its exact code,
+// the session's design unharmed, the witness served.
+TEST_F(BadInputTest, BadDesignsAreRefusedAndTheSessionKeepsItsDesign) {
+  Limits limits;
+  limits.max_design_bytes = 1 << 19;  // --max_design_mb 0.5
+  ASSERT_NO_FATAL_FAILURE(StartServer(limits));
+  ASSERT_TRUE(Create(SmallRequest("design")).ok());
+  auto set = [&](const std::string& bytes, uint64_t offset = 0,
+                 bool last = true) {
+    grpc::ClientContext ctx;
+    ForSession(&ctx, "design");
+    pb::SetDesignRequest req;
+    req.set_session_id("design");
+    req.set_offset(offset);
+    req.set_data(bytes);
+    req.set_last(last);
+    req.set_name("part.stl");
+    pb::DesignInfo info;
+    return stub_->SetDesign(&ctx, req, &info);
+  };
+  auto facet = [](const std::string& a, const std::string& b,
+                  const std::string& c) {
+    return "facet normal 0 0 1\nouter loop\nvertex " + a + "\nvertex " + b +
+           "\nvertex " + c + "\nendloop\nendfacet\n";
+  };
+  const std::string good =
+      "solid p\n" + facet("-1 -1 -0.5", "11 -1 -0.5", "11 11 -0.5") +
+      facet("-1 -1 -0.5", "11 11 -0.5", "-1 11 -0.5") + "endsolid p\n";
+  ASSERT_TRUE(set(good).ok());
+  auto deviation = [&](pb::Deviation* d) {
+    grpc::ClientContext ctx;
+    ForSession(&ctx, "design");
+    pb::GetDeviationRequest req;
+    req.set_session_id("design");
+    return stub_->GetDeviation(&ctx, req, d);
+  };
+  pb::Deviation before;
+  ASSERT_TRUE(deviation(&before).ok());
+  const auto kBad = grpc::StatusCode::INVALID_ARGUMENT;
+  EXPECT_TRUE(IsStatus(set("G0 X1 Y1\n"), kBad, "not an STL file"));
+  EXPECT_TRUE(IsStatus(
+      set("solid p\n" + facet("0 0 0", "nan 0 0", "0 1 0") + "endsolid\n"),
+      kBad, "part.stl: line 5"));
+  EXPECT_TRUE(IsStatus(
+      set("solid p\n" + facet("0 0 0", "1 0 0", "0 1 1") +
+          facet("0 0 0", "1 0 0", "0 1 -1") + facet("0 0 0", "1 0 0", "0 -1 0") +
+          "endsolid\n"),
+      kBad, "non-manifold"));
+  EXPECT_TRUE(IsStatus(
+      set("solid p\n" + facet("100 100 0", "101 100 0", "100 101 0") +
+          "endsolid\n"),
+      kBad, "outside the stock"));
+  EXPECT_TRUE(IsStatus(set("solid p\nendsolid p\n"), kBad, "no triangles"));
+  EXPECT_TRUE(IsStatus(set(std::string(1 << 20, 'x'), 0, false),
+                       grpc::StatusCode::RESOURCE_EXHAUSTED, "max_design_mb"));
+  EXPECT_TRUE(IsStatus(set("solid", 77, false),
+                       grpc::StatusCode::FAILED_PRECONDITION, "offset 77"));
+  pb::Deviation after;
+  ASSERT_TRUE(deviation(&after).ok());
+  EXPECT_EQ(after.SerializeAsString(), before.SerializeAsString());
   EXPECT_TRUE(WitnessServed());
   CheckWitness();
 }
