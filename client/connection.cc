@@ -117,10 +117,12 @@ std::vector<Move> RunMoves(const std::vector<PathRun>& runs,
 absl::Status StreamPath(
     Connection& conn, const std::string& session_id,
     const std::vector<PathRun>& runs, int64_t batch_points,
-    const std::function<void(const StreamProgress&)>& progress) {
+    const std::function<void(const StreamProgress&)>& progress,
+    const std::function<void(const pb::Ack&, int64_t first_move_id)>& on_ack) {
   // Batches in order, and how many moves each one makes.
   std::vector<pb::SimulateRequest> reqs;
   std::vector<int64_t> moves_of;
+  std::vector<int64_t> first_of;  // each batch's first move id
   StreamProgress p;
   uint64_t seq = 0;
   bool started = false;
@@ -133,6 +135,7 @@ absl::Status StreamPath(
       b->set_rapid(run.rapid);
       const bool places = run.reposition && k == 0;
       b->set_reposition(places);
+      b->set_report_cuts(on_ack != nullptr);
       b->mutable_xyz()->Reserve(3 * (end - k));
       for (size_t i = k; i < end; ++i) {
         b->add_xyz(run.points[i].x);
@@ -144,6 +147,7 @@ absl::Status StreamPath(
           static_cast<int64_t>(end - k) - (started && !places ? 0 : 1);
       started = true;
       moves_of.push_back(moves);
+      first_of.push_back(p.moves_total);
       p.moves_total += moves;
     }
   }
@@ -172,6 +176,9 @@ absl::Status StreamPath(
         if (a.seq() > acked) {
           for (uint64_t k = acked + 1; k <= a.seq(); ++k) {
             p.moves_done += moves_of[k - 1];
+          }
+          if (on_ack && a.seq() == acked + 1 && !a.duplicate()) {
+            on_ack(a, first_of[a.seq() - 1]);
           }
           acked = a.seq();
           p.node_lowerings += a.node_lowerings();

@@ -89,10 +89,15 @@ struct StreamProgress {
 // Streams runs into the session as move batches of at most `batch_points`
 // points, pipelined (a writer thread; acks read here), calling `progress`
 // after every ack. The first point of the first run is the start position.
-absl::Status StreamPath(Connection& conn, const std::string& session_id,
-                        const std::vector<PathRun>& runs, int64_t batch_points,
-                        const std::function<void(const StreamProgress&)>&
-                            progress);
+// With `on_ack`, every batch asks for its moves' removed volumes
+// (MoveBatch.report_cuts) and its first acknowledgement is passed on with
+// the session's id of the batch's first move (safety events included).
+absl::Status StreamPath(
+    Connection& conn, const std::string& session_id,
+    const std::vector<PathRun>& runs, int64_t batch_points,
+    const std::function<void(const StreamProgress&)>& progress,
+    const std::function<void(const pb::Ack&, int64_t first_move_id)>& on_ack =
+        nullptr);
 
 }  // namespace swarf::cli
 

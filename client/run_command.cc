@@ -24,6 +24,7 @@
 #include "client/connection.h"
 #include "client/json_writer.h"
 #include "client/run_report.h"
+#include "client/safety_report.h"
 #include "client/tool_table.h"
 #include "client/toolpath_flags.h"
 #include "gcode/toolpath.h"
@@ -98,6 +99,18 @@ const std::string kUsage =
     "                               out-of-tolerance part exits with 3\n"
     "  --deviation-samples N        per element edge, as the valuation\n"
     "                               (default 5; 0: nodes only)\n"
+    "  --floor Z                    report moves whose tip goes below Z (a\n"
+    "                               fixture, the table)\n"
+    "  --limits x0,y0,z0,x1,y1,z1   report moves ending outside the\n"
+    "                               machine's travel\n"
+    "  --rapid-rate R               G0 speed for the rapid time (mm/min,\n"
+    "                               default 5000)\n"
+    "  --check                      exit with 3 when a rapid cuts, the\n"
+    "                               shank or holder meets material, a tool\n"
+    "                               not cutting at its centre plunges, or a\n"
+    "                               move passes --floor or --limits (the\n"
+    "                               tool keys flute=, holder=, stickout=,\n"
+    "                               shank=, center=0 give the assembly)\n"
     "  --json                       print the stats document instead\n"
     "  --view                       show the part live in a browser (a page\n"
     "                               on 127.0.0.1, kept up until Ctrl-C)\n"
@@ -277,9 +290,10 @@ int RunCommand(const std::vector<std::string>& argv) {
   valued.insert(std::begin(kOutputFlags), std::end(kOutputFlags));
   valued.insert(std::begin(kViewerFlags), std::end(kViewerFlags));
   valued.insert(std::begin(kDesignFlags), std::end(kDesignFlags));
+  valued.insert(std::begin(kSafetyFlags), std::end(kSafetyFlags));
   auto args = Args::Parse(argv, valued,
                           {"json", "help", "quiet", kStrictFlag, kM6ForgetsFlag, "view",
-                           "view-wait"});
+                           "view-wait", kCheckFlag});
   auto fail = [](const absl::Status& s, int code) {
     std::cerr << "swarf run: " << s.message() << "\n";
     return code;
@@ -408,6 +422,10 @@ int RunCommand(const std::vector<std::string>& argv) {
   }
   auto tools = ChooseTools(*choices, uses);
   if (!tools.ok()) return fail(tools.status(), 2);
+  auto safety_options = ParseSafetyFlags(*args);
+  if (!safety_options.ok()) return fail(safety_options.status(), 2);
+  std::map<int, ToolAssembly> assemblies;
+  for (const auto& [t, c] : *tools) assemblies[t] = KnownAssembly(*choices, t);
   double max_radius = 0;
   for (const auto& [t, c] : *tools) max_radius = std::max(max_radius, c.radius);
   auto stock = ChooseStock(*args, *path, max_radius,
@@ -473,7 +491,7 @@ int RunCommand(const std::vector<std::string>& argv) {
   create.set_scheme(server::SchemeToProto(scheme));
   std::map<int, int32_t> tool_ids;
   for (const auto& [t, c] : *tools) {
-    server::ToolToProto({t, c}, create.add_tools());
+    server::ToolToProto({t, c, assemblies[t]}, create.add_tools());
     tool_ids[t] = t;
   }
   pb::Session session;
@@ -529,15 +547,24 @@ int RunCommand(const std::vector<std::string>& argv) {
   const auto t_sim = std::chrono::steady_clock::now();
   ProgressBar bar(json || args->Has("quiet"));
   StreamProgress last;
+  SafetyCollector safety(*path, file_starts, files, assemblies, *safety_options);
   absl::Status streamed = StreamPath(
       **conn, id, runs, batch_points,
       [&](const StreamProgress& p) {
         last = p;
         bar.Update(p);
-      });
+      },
+      [&](const pb::Ack& a, int64_t first) { safety.OnAck(a, first); });
   const double sim_s = Since(t_sim);
   if (viewer) viewer->MarkFinished();
   if (!streamed.ok()) return fail(streamed, 1);
+  if (!json) {
+    for (const std::string& w : safety.Warnings()) {
+      std::cerr << "swarf run: " << w << "\n";
+    }
+  }
+  report.json_sections.emplace_back("safety", safety.SafetyJson());
+  report.json_sections.emplace_back("process", safety.ProcessJson());
 
   // Outputs.
   report.file = file;
@@ -590,6 +617,10 @@ int RunCommand(const std::vector<std::string>& argv) {
   }
   // A shop's CI gates programs on this: 3 = out of tolerance (1 = error).
   if (report.deviation && report.tolerance_gate && !report.deviation->ok) {
+    return 3;
+  }
+  if (args->Has(kCheckFlag) &&
+      (safety.total() > 0 || (report.deviation && !report.deviation->ok))) {
     return 3;
   }
   return 0;

@@ -535,6 +535,7 @@ std::string StatsJson(const RunReport& r) {
                           {"line", r.outside_line},
                           {"message", r.outside_stock}};
   }
+  for (const auto& [key, text] : r.json_sections) j[key] = Json::parse(text);
   j["files"] = r.files;
   // Paths and G-code words are not always UTF-8: replaced, not thrown on.
   return j.dump(-1, ' ', false, Json::error_handler_t::replace);

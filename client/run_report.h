@@ -61,6 +61,9 @@ struct RunReport {
   // Each output step and its wall time (s), in order: the error statistics,
   // the marks and the tiles fetched, then every file built and written.
   std::vector<std::pair<std::string, double>> output_steps;
+  // Objects computed elsewhere, by stats.json key: JSON text ("safety" and
+  // "process", client/safety_report.h).
+  std::vector<std::pair<std::string, std::string>> json_sections;
 };
 
 // The design model of `swarf run --design`: read before the moves are sent

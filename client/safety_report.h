@@ -1,0 +1,97 @@
+// `swarf run`'s safety checks and process facts (issue 30), gathered from
+// the session's acknowledgements as the batches are applied: the server's
+// events (rapid cuts, shank and holder contacts, plunges), each move's
+// removed volume, and the checks on the tip itself (--floor, --limits),
+// named by file and line.
+#ifndef SWARF_CLIENT_SAFETY_REPORT_H_
+#define SWARF_CLIENT_SAFETY_REPORT_H_
+
+#include <array>
+#include <map>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "client/args.h"
+#include "core/safety.h"
+#include "gcode/toolpath.h"
+#include "swarf/v1/swarf.pb.h"
+
+namespace swarf::cli {
+namespace pb = ::swarf::v1;
+}  // namespace swarf::cli
+
+namespace swarf::cli {
+
+// The valued flags (documented in `swarf run`'s usage) and the boolean one.
+inline constexpr const char* kSafetyFlags[] = {"floor", "limits", "rapid-rate"};
+inline constexpr const char* kCheckFlag = "check";
+
+struct SafetyOptions {
+  std::optional<double> floor;                // --floor Z
+  std::optional<std::array<double, 6>> limits;  // x0, y0, z0, x1, y1, z1
+  double rapid_rate = 5000;                   // mm/min
+};
+// InvalidArgument naming the flag.
+absl::StatusOr<SafetyOptions> ParseSafetyFlags(const Args& args);
+
+struct SafetyItem {
+  int32_t file = 0, line = 0;
+  int64_t move_id = 0;
+  double x = 0, y = 0, z = 0, depth = 0, volume_mm3 = 0;
+};
+
+class SafetyCollector {
+ public:
+  // `path`'s points; `file_starts` the first point of each file (as
+  // run_command numbers them); `assemblies` by tool number.
+  SafetyCollector(const gcode::Toolpath& path,
+                  const std::vector<int64_t>& file_starts,
+                  std::vector<std::string> files,
+                  std::map<int, ToolAssembly> assemblies,
+                  const SafetyOptions& options);
+
+  // Each acknowledged batch (first_move_id: the session's id of its first
+  // move), in order.
+  void OnAck(const pb::Ack& ack, int64_t first_move_id);
+
+  // Kinds of findings, stats.json's names.
+  static constexpr int kKinds = 6;
+  static constexpr const char* kKindNames[kKinds] = {
+      "rapid_cuts",     "shank_contacts", "holder_contacts",
+      "center_plunges", "below_floor",    "outside_limits"};
+  int64_t total() const;
+  // One warning line per kind found (the first item and the count), and the
+  // note on tools without an assembly.
+  std::vector<std::string> Warnings() const;
+  // stats.json's "safety" and "process" objects.
+  std::string SafetyJson() const;
+  std::string ProcessJson() const;
+
+  // Kept per kind (the count goes on).
+  static constexpr size_t kMaxItems = 1000;
+
+ private:
+  void Add(int kind, const SafetyItem& item);
+  SafetyItem At(int64_t move_id) const;
+
+  const gcode::Toolpath& path_;
+  std::vector<int64_t> move_point_;  // point index of each move id
+  std::vector<int64_t> file_starts_;
+  std::vector<std::string> files_;
+  std::map<int, ToolAssembly> assemblies_;
+  SafetyOptions options_;
+  std::array<std::vector<SafetyItem>, kKinds> items_;
+  std::array<int64_t, kKinds> counts_{};
+  // Process facts.
+  double removed_ = 0, rapid_mm_ = 0, feed_mm_ = 0, air_mm_ = 0;
+  int64_t air_moves_ = 0, cutting_moves_ = 0;
+  std::map<int, double> by_tool_;
+  std::map<std::pair<int32_t, int32_t>, double> by_line_;  // (file, line)
+  std::map<std::pair<int32_t, int32_t>, double> air_by_line_;  // mm
+};
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_SAFETY_REPORT_H_
