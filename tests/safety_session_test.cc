@@ -139,5 +139,71 @@ TEST(SafetySessionTest, FinishingPassesWithinTheFlutesRaiseNothing) {
   }
 }
 
+TEST(SafetySessionTest, AMillionFinishingMovesRaiseNothing) {
+  // A ball (1 mm radius, 5 mm flutes, a 20 mm holder 20 mm out) finishing
+  // a wavy surface up to 1.5 mm deep in 1,000,000 moves of 0.1 mm
+  // (zig-zag, 0.1 mm stepover): nothing it cuts with its flutes is a
+  // contact, and the holder stays above the top.
+  SessionSpec spec;
+  spec.id = "million";
+  spec.stock = StockSpec{0, 0, 100, 100, 0, 1000, 1000};
+  spec.scheme = SchemeKind::kTaylor;
+  ToolSpec ball{1, Cutter::Ball(1), {}};
+  ball.assembly.flute_length = 5;
+  ball.assembly.holder_diameter = 20;
+  ball.assembly.stickout = 20;
+  spec.tools = {ball};
+  auto s = Session::Create(spec);
+  ASSERT_TRUE(s.ok()) << s.status();
+  auto z = [](double x, double y) {
+    return -1 + 0.5 * std::sin(x / 7) * std::cos(y / 5);
+  };
+  std::vector<double> xyz;
+  uint64_t seq = 0;
+  int64_t moves = 0, events = 0;
+  double removed = 0;
+  bool first = true;
+  for (int row = 0; row < 1000; ++row) {
+    const double y = 0.05 + 0.1 * row;
+    for (int k = 0; k <= 1000; ++k) {
+      if (k == 0 && row > 0) continue;  // the row's start ended the last
+      const double x = (row % 2 == 0) ? 0.1 * k : 100 - 0.1 * k;
+      xyz.insert(xyz.end(), {x, y, z(x, y)});
+      if (xyz.size() == 3 * 20000) {
+        auto r = (*s)->ApplyBatch(++seq, 1, xyz, 1 << 20, Opts(first, false));
+        ASSERT_TRUE(r.ok()) << r.status();
+        first = false;
+        events += static_cast<int64_t>(r->safety.size());
+        for (double v : r->removed_mm3) removed += v;
+        moves = r->moves_applied;
+        xyz.clear();
+      }
+    }
+    // Each row's end steps over to the next row's start.
+    const double x_end = (row % 2 == 0) ? 100 : 0;
+    xyz.insert(xyz.end(), {x_end, y + 0.1, z(x_end, y + 0.1)});
+  }
+  if (!xyz.empty()) {
+    auto r = (*s)->ApplyBatch(++seq, 1, xyz, 1 << 20, Opts(false, false));
+    ASSERT_TRUE(r.ok()) << r.status();
+    events += static_cast<int64_t>(r->safety.size());
+    for (double v : r->removed_mm3) removed += v;
+    moves = r->moves_applied;
+  }
+  EXPECT_GE(moves, 1000000);
+  EXPECT_EQ(events, 0);
+  // The volumes add up to the stock's volume minus the nodes'.
+  const double by_nodes = (*s)->Read([](const Workpiece& wp) {
+    double sum = 0;
+    for (int32_t j = 0; j <= wp.grid().ny(); ++j) {
+      for (int32_t i = 0; i <= wp.grid().nx(); ++i) {
+        sum += wp.spec().z_top - wp.HeightAt(i, j);
+      }
+    }
+    return sum * wp.grid().dx() * wp.grid().dy();
+  });
+  EXPECT_NEAR(removed, by_nodes, 1e-9 * by_nodes);
+}
+
 }  // namespace
 }  // namespace swarf::server
