@@ -163,7 +163,6 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   constexpr int32_t kChunk = 256;
   static_assert(kChunk >= kTileSize);
   alignas(64) double cx[kChunk], cy[kChunk], h[kChunk];
-  alignas(64) double drop[kChunk];  // with `cuts`: each node's lowering
   int32_t ck[kChunk];
 
   // One move of one shape: S is the shape's sweep class (chosen once per
@@ -187,38 +186,33 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       sweep.Heights(cx, cy, n, h);
       int32_t low = 0;
       if (cuts != nullptr) {
-        // Lowering as below, keeping each node's drop; then the sums and
-        // the deepest in loops the compiler vectorizes.
+        // Lowering as below, summing the drops of the nodes lowered (a
+        // fraction of the chunk) as they go.
+        double sum = 0, top = 0, excess = 0;
+        int32_t top_q = -1;
         for (int32_t q = 0; q < n; ++q) {
           const int32_t k = ck[q];
           const double old = w[k];
           const bool lower = h[q] < old || (h[q] == old && id < owner[k]);
-          drop[q] = 0;
           if (lower) {
-            drop[q] = old - h[q];
+            const double d = old - h[q];
+            sum += d;
+            if (d > top) {
+              top = d;
+              top_q = q;
+            }
+            if (d > limit) excess += d - limit;
             w[k] = h[q];
             owner[k] = id;
             ++low;
           }
         }
-        double sum = 0, top = 0, excess = 0;
-#pragma omp simd reduction(+ : sum, excess) reduction(max : top)
-        for (int32_t q = 0; q < n; ++q) {
-          sum += drop[q];
-          excess += std::max(drop[q] - limit, 0.0);
-          top = std::max(top, drop[q]);
-        }
         drop_sum += sum;
         over += excess;
         if (top > max_drop) {
-          for (int32_t q = 0; q < n; ++q) {
-            if (drop[q] == top) {
-              max_drop = top;
-              max_k = ck[q];
-              max_z = h[q];
-              break;
-            }
-          }
+          max_drop = top;
+          max_k = ck[top_q];
+          max_z = h[top_q];
         }
         lowered += low;
         n = 0;
