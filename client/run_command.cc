@@ -203,13 +203,16 @@ absl::StatusOr<StockSpec> ChooseStock(const Args& args, const Toolpath& path,
 std::vector<PathRun> Runs(const Toolpath& path,
                           const std::map<int, int32_t>& tool_ids) {
   std::vector<PathRun> runs;
-  for (const ToolpathPoint& p : path.points()) {
+  for (size_t k = 0; k < path.points().size(); ++k) {
+    const ToolpathPoint& p = path.points()[k];
     const int32_t tool = tool_ids.at(p.tool);
+    // A feed of F0 moves as fast as the machine goes: checked as a rapid.
+    const bool rapid = p.rapid || path.feed(static_cast<int64_t>(k)) == 0;
     if (runs.empty() || p.starts_run || runs.back().tool_id != tool ||
-        runs.back().rapid != p.rapid) {
+        runs.back().rapid != rapid) {
       PathRun r;
       r.tool_id = tool;
-      r.rapid = p.rapid;
+      r.rapid = rapid;
       r.reposition = p.starts_run;
       runs.push_back(std::move(r));
     }
@@ -593,6 +596,9 @@ int RunCommand(const std::vector<std::string>& argv) {
   report.output_seconds = Since(t_out);
   if (!written.ok()) return fail(written, 1);
   if (!oopt.dir.empty()) {
+    if (safety.WriteLoadPng(oopt.dir + "/load.png").ok()) {
+      report.files.push_back(oopt.dir + "/load.png");
+    }
     absl::Status s = WriteStatsJson(report, oopt.dir + "/stats.json");
     if (!s.ok()) return fail(s, 1);
   }

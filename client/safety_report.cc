@@ -8,6 +8,8 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "absl/strings/str_split.h"
+#include "client/png_image.h"
+#include "client/text.h"
 #include "nlohmann/json.hpp"
 
 namespace swarf::cli {
@@ -115,22 +117,43 @@ void SafetyCollector::OnAck(const pb::Ack& ack, int64_t first_move_id) {
     const SafetyItem where = At(id);
     const std::pair<int32_t, int32_t> key{where.file, where.line};
     removed_ += v;
-    if (v > 0) {
-      by_tool_[to.tool] += v;
-      by_line_[key] += v;
-    }
-    if (to.rapid) {
+    // The time at the programmed feed; rapids and feeds of F0 at the rapid
+    // rate; none where the feed is not known (x,y,z files).
+    const double feed = path_.feed(p);
+    double seconds = 0;
+    if (to.rapid || feed == 0) {
+      seconds = len / options_.rapid_rate * 60;
       rapid_mm_ += len;
+      rapid_s_ += seconds;
+      if (!to.rapid) ++f0_moves_;
     } else {
       feed_mm_ += len;
+      if (feed > 0) {
+        seconds = len / feed * 60;
+      } else {
+        unknown_feed_mm_ += len;
+      }
       if (v > 0) {
         ++cutting_moves_;
+        cutting_s_ += seconds;
       } else {
         ++air_moves_;
         air_mm_ += len;
-        air_by_line_[key] += len;
+        air_s_ += seconds;
+        Amount& a = air_by_line_[key];
+        a.mm += len;
+        a.seconds += seconds;
       }
     }
+    Amount& t = by_tool_[to.tool];
+    t.volume += v;
+    t.seconds += seconds;
+    if (v > 0 || seconds > 0) {
+      Amount& l = by_line_[key];
+      l.volume += v;
+      l.seconds += seconds;
+    }
+    load_.push_back({seconds, v, to.tool});
     if (options_.floor && std::min(a.z, b.z) < *options_.floor) {
       SafetyItem it = where;
       const Vec3& low = a.z < b.z ? a : b;
@@ -237,40 +260,116 @@ std::string SafetyCollector::SafetyJson() const {
 
 std::string SafetyCollector::ProcessJson() const {
   using Json = nlohmann::ordered_json;
-  auto top = [&](const std::map<std::pair<int32_t, int32_t>, double>& m,
-                 const char* what) {
+  // The ten largest by `by`, each with its volume, time and length.
+  auto top = [&](const std::map<std::pair<int32_t, int32_t>, Amount>& m,
+                 double Amount::*by, bool air) {
     std::vector<std::pair<double, std::pair<int32_t, int32_t>>> v;
-    for (const auto& [key, x] : m) v.push_back({x, key});
+    for (const auto& [key, x] : m) v.push_back({x.*by, key});
     const size_t n = std::min<size_t>(10, v.size());
     std::partial_sort(v.begin(), v.begin() + n, v.end(),
                       [](const auto& a, const auto& b) { return a.first > b.first; });
     Json a = Json::array();
     for (size_t k = 0; k < n; ++k) {
       const auto [file, line] = v[k].second;
-      a.push_back({{"file", file < static_cast<int32_t>(files_.size())
-                                ? files_[file]
-                                : std::string()},
-                   {"line", line},
-                   {what, v[k].first}});
+      const Amount& x = m.at(v[k].second);
+      Json e = {{"file", file < static_cast<int32_t>(files_.size())
+                             ? files_[file]
+                             : std::string()},
+                {"line", line}};
+      if (air) {
+        e["mm"] = x.mm;
+      } else {
+        e["volume_mm3"] = x.volume;
+      }
+      e["time_s"] = x.seconds;
+      a.push_back(e);
     }
     return a;
   };
   Json by_tool = Json::object();
-  for (const auto& [t, v] : by_tool_) by_tool[absl::StrCat(t)] = {{"volume_mm3", v}};
+  for (const auto& [t, a] : by_tool_) {
+    by_tool[absl::StrCat(t)] = {{"volume_mm3", a.volume}, {"time_s", a.seconds}};
+  }
   Json j = {
+      {"cycle_time_s", rapid_s_ + cutting_s_ + air_s_},
+      {"cutting_s", cutting_s_},
+      {"air_s", air_s_},
+      {"rapid_s", rapid_s_},
       {"removed_mm3", removed_},
       {"by_tool", by_tool},
-      {"lines", top(by_line_, "volume_mm3")},
+      {"lines", top(by_line_, &Amount::volume, false)},
+      {"air_lines", top(air_by_line_, &Amount::mm, true)},
       {"rapid_mm", rapid_mm_},
       {"rapid_rate_mm_min", options_.rapid_rate},
-      {"rapid_s", rapid_mm_ / options_.rapid_rate * 60},
+      {"f0_moves", f0_moves_},
       {"feed_mm", feed_mm_},
+      {"feed_unknown_mm", unknown_feed_mm_},
       {"cutting_moves", cutting_moves_},
       {"air_moves", air_moves_},
       {"air_mm", air_mm_},
-      {"air_lines", top(air_by_line_, "mm")},
   };
   return j.dump(-1, ' ', false, Json::error_handler_t::replace);
+}
+
+absl::Status SafetyCollector::WriteLoadPng(const std::string& path) const {
+  double total = 0;
+  for (const LoadStep& s : load_) total += s.seconds;
+  if (!(total > 0)) {
+    return absl::FailedPreconditionError(
+        "load.png: the program's time is not known (no feeds)");
+  }
+  constexpr int kW = 1000, kH = 360, kLeft = 70, kRight = 20, kTop = 30,
+                kBottom = 40;
+  const int plot_w = kW - kLeft - kRight, plot_h = kH - kTop - kBottom;
+  // Volume per column of equal time, spread over the moves' durations.
+  std::vector<double> vol(plot_w, 0);
+  const double dt = total / plot_w;
+  double t = 0;
+  std::vector<std::pair<double, int>> changes;  // time, new tool
+  int tool = load_.empty() ? 0 : load_.front().tool;
+  for (const LoadStep& s : load_) {
+    if (s.tool != tool) {
+      changes.push_back({t, s.tool});
+      tool = s.tool;
+    }
+    if (s.seconds > 0 && s.volume > 0) {
+      const double a = t / dt, b = (t + s.seconds) / dt;
+      for (int c = std::max(0, static_cast<int>(a));
+           c < plot_w && c < static_cast<int>(std::ceil(b)); ++c) {
+        const double overlap = std::min<double>(b, c + 1) - std::max<double>(a, c);
+        if (overlap > 0) vol[c] += s.volume * overlap / (b - a);
+      }
+    }
+    t += s.seconds;
+  }
+  double peak = 0;
+  for (double v : vol) peak = std::max(peak, v / dt * 60);  // mm^3/min
+  Image img(kW, kH, 3, Rgb{255, 255, 255});
+  const Rgb axis{60, 60, 60}, bar{40, 110, 190}, change{200, 60, 40};
+  for (int c = 0; c < plot_w; ++c) {
+    const double rate = vol[c] / dt * 60;
+    const int h = peak > 0 ? static_cast<int>(std::lround(rate / peak * plot_h)) : 0;
+    for (int y = 0; y < h; ++y) img.Set(kLeft + c, kTop + plot_h - 1 - y, bar);
+  }
+  for (int x = kLeft; x < kLeft + plot_w; ++x) img.Set(x, kTop + plot_h, axis);
+  for (int y = kTop; y <= kTop + plot_h; ++y) img.Set(kLeft - 1, y, axis);
+  for (const auto& [when, n] : changes) {
+    const int x = kLeft + std::min(plot_w - 1, static_cast<int>(when / dt));
+    for (int y = kTop; y < kTop + plot_h; y += 2) img.Set(x, y, change);
+    DrawText(img, x + 2, kTop + 2, absl::StrCat("T", n), change, 1);
+  }
+  DrawText(img, kLeft, 8,
+           absl::StrFormat("removal rate (mm3/min) over program time: peak "
+                           "%.4g mm3/min, cycle %.1f s",
+                           peak, total),
+           axis, 1);
+  DrawText(img, 4, kTop, absl::StrFormat("%.3g", peak), axis, 1);
+  DrawText(img, 4, kTop + plot_h - 8, "0", axis, 1);
+  DrawText(img, kLeft, kTop + plot_h + 6, "0 s", axis, 1);
+  const std::string end = absl::StrFormat("%.1f s", total);
+  DrawText(img, kLeft + plot_w - TextWidth(end, 1), kTop + plot_h + 6, end,
+           axis, 1);
+  return WritePng(img, path);
 }
 
 }  // namespace swarf::cli

@@ -68,6 +68,10 @@ class SafetyCollector {
   // stats.json's "safety" and "process" objects.
   std::string SafetyJson() const;
   std::string ProcessJson() const;
+  // load.png: the removal rate (mm^3/min) against program time, the tool
+  // changes marked and labelled. FailedPrecondition when the program's
+  // time is not known (no feeds).
+  absl::Status WriteLoadPng(const std::string& path) const;
 
   // Kept per kind (the count goes on).
   static constexpr size_t kMaxItems = 1000;
@@ -86,10 +90,20 @@ class SafetyCollector {
   std::array<int64_t, kKinds> counts_{};
   // Process facts.
   double removed_ = 0, rapid_mm_ = 0, feed_mm_ = 0, air_mm_ = 0;
-  int64_t air_moves_ = 0, cutting_moves_ = 0;
-  std::map<int, double> by_tool_;
-  std::map<std::pair<int32_t, int32_t>, double> by_line_;  // (file, line)
-  std::map<std::pair<int32_t, int32_t>, double> air_by_line_;  // mm
+  double rapid_s_ = 0, cutting_s_ = 0, air_s_ = 0, unknown_feed_mm_ = 0;
+  int64_t air_moves_ = 0, cutting_moves_ = 0, f0_moves_ = 0;
+  struct Amount {
+    double volume = 0, seconds = 0, mm = 0;
+  };
+  std::map<int, Amount> by_tool_;
+  std::map<std::pair<int32_t, int32_t>, Amount> by_line_;  // (file, line)
+  std::map<std::pair<int32_t, int32_t>, Amount> air_by_line_;
+  // Per move in id order: its time, volume and tool (load.png).
+  struct LoadStep {
+    double seconds, volume;
+    int tool;
+  };
+  std::vector<LoadStep> load_;
 };
 
 }  // namespace swarf::cli

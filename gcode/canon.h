@@ -22,6 +22,9 @@ struct CanonStraight {
   int32_t line = 0;    // the main program's line
   uint16_t tool = 0;   // tool in effect
   bool rapid = false;  // a traverse (G0 and the cycles' rapids)
+  // A feed move's programmed feed (mm/min: F times the units; 0 for F0 or
+  // before any F); 0 for rapids.
+  double feed = 0;
   // No move reaches `end`: the position became known here (the program's
   // first point, or the first after the position was lost).
   bool starts_run = false;
@@ -43,6 +46,7 @@ struct CanonArc {
   int32_t line = 0;
   uint16_t tool = 0;
   bool rapid = false;  // (never for programmed arcs)
+  double feed = 0;     // as CanonStraight::feed
 
   // The centre in x, y, z (the axis coordinate of the start).
   Vec3 Centre() const {

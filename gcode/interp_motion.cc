@@ -163,6 +163,7 @@ absl::Status Interpreter::Emit(double x, double y, double z, bool rapid) {
   m.line = static_cast<int32_t>(emit_line_ >= 0 ? emit_line_ : main_line_);
   m.tool = tool_;
   m.rapid = rapid;
+  m.feed = rapid ? 0 : feed_ * scale();
   m.starts_run = !in_run_;
   in_run_ = true;
   last_[0] = x, last_[1] = y, last_[2] = z;
@@ -322,6 +323,7 @@ absl::Status Interpreter::ChordArc(int p0, int p1, int p2, double cx,
   arc.line = static_cast<int32_t>(emit_line_ >= 0 ? emit_line_ : main_line_);
   arc.tool = tool_;
   arc.rapid = rapid;
+  arc.feed = rapid ? 0 : feed_ * scale();
   in_run_ = true;
   last_[0] = end[0], last_[1] = end[1], last_[2] = end[2];
   emitted_ = true;

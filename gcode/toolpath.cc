@@ -74,6 +74,7 @@ absl::Status ToolpathBuilder::ArcFeed(const CanonArc& a) {
   m.line = a.line;
   m.tool = a.tool;
   m.rapid = a.rapid;
+  m.feed = a.feed;
   double pt[3];
   for (int64_t k = 1; k < n; ++k) {
     const double t = static_cast<double>(k) / static_cast<double>(n);
@@ -97,7 +98,9 @@ absl::Status ToolpathBuilder::ArcFeed(const CanonArc& a) {
   return Straight(m);
 }
 
-void Toolpath::Append(const ToolpathPoint& p) {
+void Toolpath::Append(const ToolpathPoint& p) { Append(p, -1); }
+
+void Toolpath::Append(const ToolpathPoint& p, float feed) {
   ToolpathPoint pt = p;
   if (points_.empty()) {
     pt.starts_run = true;
@@ -124,6 +127,7 @@ void Toolpath::Append(const ToolpathPoint& p) {
     points_.reserve(points_.size() + std::max<size_t>(points_.size() / 4, 1024));
   }
   points_.push_back(pt);
+  feeds_.push_back(feed);
 }
 
 void Toolpath::AppendProgram(const Toolpath& next) {
@@ -131,7 +135,7 @@ void Toolpath::AppendProgram(const Toolpath& next) {
   for (size_t k = 0; k < next.points_.size(); ++k) {
     ToolpathPoint p = next.points_[k];
     if (k == 0) p.starts_run = true;
-    Append(p);
+    Append(p, next.feeds_[k]);
   }
   source_lines_ += next.source_lines_;
   blocks_executed_ += next.blocks_executed_;

@@ -141,6 +141,12 @@ class Toolpath {
   // previous point's position within a run: a zero-length move sweeps
   // nothing.
   void Append(const ToolpathPoint& p);
+  // With the feed of the move ending at p (mm/min; see feed()).
+  void Append(const ToolpathPoint& p, float feed);
+  // The programmed feed of the move ending at point k (mm/min): > 0 a
+  // feed, 0 a feed of F0 (or before any F) or a rapid, < 0 not known (x,y,z
+  // files).
+  float feed(int64_t k) const { return feeds_[k]; }
   void CountIgnored(const std::string& word, int64_t n = 1);
   void AddNote(std::string note) { notes_.push_back(std::move(note)); }
   void set_source_lines(int64_t n) { source_lines_ = n; }
@@ -151,17 +157,22 @@ class Toolpath {
   void NoteToolSelected(int tool, int32_t line) {
     tool_selected_.emplace(tool, line);
   }
-  void Reserve(int64_t points) { points_.reserve(points); }
+  void Reserve(int64_t points) {
+    points_.reserve(points);
+    feeds_.reserve(points);
+  }
   // Gives back capacity beyond half the size over it (a trim copies every
   // point into freshly faulted memory: slow, so only for a large waste).
   void Trim() {
     if (points_.capacity() > points_.size() + points_.size() / 2) {
       points_.shrink_to_fit();
+      feeds_.shrink_to_fit();
     }
   }
 
  private:
   std::vector<ToolpathPoint> points_;
+  std::vector<float> feeds_;  // per point, feed()
   int64_t runs_ = 0;
   Interval x_bounds_, y_bounds_, z_bounds_;
   int64_t source_lines_ = 0;
@@ -234,7 +245,7 @@ class ToolpathBuilder final : public CanonSink {
     p.tool = m.tool;
     p.rapid = m.rapid;
     p.starts_run = m.starts_run;
-    path_->Append(p);
+    path_->Append(p, static_cast<float>(m.feed));
     return absl::OkStatus();
   }
   absl::Status ArcFeed(const CanonArc& a) override;

@@ -167,6 +167,12 @@ TEST_F(SafetyRunTest, AirTimeAndLimitsOfAProgramThatCutsNothing) {
   EXPECT_DOUBLE_EQ(p["air_mm"].get<double>(), 30 + 40 + 115);
   EXPECT_DOUBLE_EQ(p["rapid_mm"].get<double>(), 50);  // the 30-40-50 diagonal
   EXPECT_DOUBLE_EQ(p["rapid_s"].get<double>(), 50.0 / 6000 * 60);
+  // At F600: 30, 40 and 115 mm in 3, 4 and 11.5 s; the rapid 50 mm at
+  // 6000 mm/min in 0.5 s.
+  EXPECT_DOUBLE_EQ(p["air_s"].get<double>(), 18.5);
+  EXPECT_DOUBLE_EQ(p["cutting_s"].get<double>(), 0);
+  EXPECT_DOUBLE_EQ(p["cycle_time_s"].get<double>(), 19);
+  EXPECT_DOUBLE_EQ(p["air_lines"][0]["time_s"].get<double>(), 11.5);
   EXPECT_EQ(p["air_lines"][0]["line"], 6);
   EXPECT_DOUBLE_EQ(p["air_lines"][0]["mm"].get<double>(), 115);
   // Only line 6 leaves the limits, by 20 mm.
@@ -182,6 +188,38 @@ TEST_F(SafetyRunTest, AirTimeAndLimitsOfAProgramThatCutsNothing) {
                      "holder check"),
             std::string::npos)
       << err;
+}
+
+TEST_F(SafetyRunTest, AFeedOfF0IsARapidAndTimesFollowTheFeeds) {
+  const std::string nc = Write("f0.nc",
+                               "G21 G90\n"              // 1
+                               "G0 X10.05 Y20.05 Z5\n"  // 2
+                               "G1 Z-1 F0\n"            // 3: F0 into the top
+                               "G1 X40.05 F300\n"       // 4: a 30 mm slot
+                               "G1 Z5 F0\n"             // 5
+                               "M2\n");
+  Json s;
+  std::string err;
+  const std::string out = (dir_ / "out").string();
+  ASSERT_EQ(Run({nc, "--tool", "flat:d=6", "--stock", "0,0,60,40,0", "--out",
+                 out, "--check"},
+                &s, &err),
+            3)
+      << err;
+  const Json& rc = s["safety"]["rapid_cuts"];
+  ASSERT_EQ(rc.size(), 1u) << rc.dump();
+  EXPECT_EQ(rc[0]["line"], 3);
+  EXPECT_DOUBLE_EQ(rc[0]["depth"].get<double>(), 1);
+  const Json& p = s["process"];
+  EXPECT_EQ(p["f0_moves"], 2);
+  // The slot: 30 mm at 300 mm/min, 6 s; it removed 1 * 30 * 6 mm^3 beyond
+  // the plunge's disc.
+  EXPECT_DOUBLE_EQ(p["cutting_s"].get<double>(), 6);
+  EXPECT_NEAR(p["lines"][0]["volume_mm3"].get<double>(), 180, 0.9);
+  EXPECT_EQ(p["lines"][0]["line"], 4);
+  // The F0 moves (6 mm each) at the default 5000 mm/min.
+  EXPECT_DOUBLE_EQ(p["rapid_s"].get<double>(), 12.0 / 5000 * 60);
+  EXPECT_TRUE(std::filesystem::exists(out + "/load.png"));
 }
 
 TEST_F(SafetyRunTest, RealProgramsRaiseNothingAndVolumesAddUp) {
