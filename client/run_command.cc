@@ -551,13 +551,32 @@ int RunCommand(const std::vector<std::string>& argv) {
   ProgressBar bar(json || args->Has("quiet"));
   StreamProgress last;
   SafetyCollector safety(*path, file_starts, files, assemblies, *safety_options);
+  safety.Follow(viewer != nullptr);
   absl::Status streamed = StreamPath(
       **conn, id, runs, batch_points,
       [&](const StreamProgress& p) {
         last = p;
         bar.Update(p);
       },
-      [&](const pb::Ack& a, int64_t first) { safety.OnAck(a, first); });
+      [&](const pb::Ack& a, int64_t first) {
+        safety.OnAck(a, first);
+        if (viewer) {
+          // The page marks the findings and dashes the air moves as the
+          // batches are acknowledged.
+          SafetyCollector::NewFindings found = safety.TakeNew();
+          std::vector<ViewerMarker> markers;
+          for (const auto& [kind, it] : found.items) {
+            const auto& files = safety.files();
+            markers.push_back(
+                {{it.x, it.y, it.z}, SafetyCollector::kKindNames[kind],
+                 it.file >= 0 && it.file < static_cast<int32_t>(files.size())
+                     ? files[it.file]
+                     : std::string(),
+                 it.line, it.depth, it.volume_mm3});
+          }
+          viewer->AddSafety(std::move(markers), std::move(found.air));
+        }
+      });
   const double sim_s = Since(t_sim);
   if (viewer) viewer->MarkFinished();
   if (!streamed.ok()) return fail(streamed, 1);

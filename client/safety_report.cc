@@ -81,7 +81,16 @@ SafetyItem SafetyCollector::At(int64_t move_id) const {
 
 void SafetyCollector::Add(int kind, const SafetyItem& item) {
   ++counts_[kind];
-  if (items_[kind].size() < kMaxItems) items_[kind].push_back(item);
+  if (items_[kind].size() < kMaxItems) {
+    items_[kind].push_back(item);
+    if (follow_) new_.items.emplace_back(kind, item);
+  }
+}
+
+SafetyCollector::NewFindings SafetyCollector::TakeNew() {
+  NewFindings out;
+  std::swap(out, new_);
+  return out;
 }
 
 void SafetyCollector::OnAck(const pb::Ack& ack, int64_t first_move_id) {
@@ -138,6 +147,10 @@ void SafetyCollector::OnAck(const pb::Ack& ack, int64_t first_move_id) {
         cutting_s_ += seconds;
       } else {
         ++air_moves_;
+        if (follow_ && air_taken_ < kMaxAirSegments) {
+          new_.air.emplace_back(a, b);
+          ++air_taken_;
+        }
         air_mm_ += len;
         air_s_ += seconds;
         Amount& a = air_by_line_[key];

@@ -76,6 +76,19 @@ class SafetyCollector {
   // Kept per kind (the count goes on).
   static constexpr size_t kMaxItems = 1000;
 
+  // For the live viewer: with Follow(true), the findings and the air moves
+  // (feed moves that removed nothing, as tip segments) since the last
+  // TakeNew (at most kMaxItems findings a kind and kMaxAirSegments air
+  // segments in all).
+  static constexpr size_t kMaxAirSegments = 200000;
+  struct NewFindings {
+    std::vector<std::pair<int, SafetyItem>> items;  // kind, item
+    std::vector<std::pair<Vec3, Vec3>> air;
+  };
+  void Follow(bool on) { follow_ = on; }
+  NewFindings TakeNew();
+  const std::vector<std::string>& files() const { return files_; }
+
  private:
   void Add(int kind, const SafetyItem& item);
   SafetyItem At(int64_t move_id) const;
@@ -104,6 +117,9 @@ class SafetyCollector {
     int tool;
   };
   std::vector<LoadStep> load_;
+  bool follow_ = false;
+  NewFindings new_;
+  size_t air_taken_ = 0;  // air segments handed out so far
 };
 
 }  // namespace swarf::cli

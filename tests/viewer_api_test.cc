@@ -452,6 +452,35 @@ TEST_F(ViewerApiTest, DeviationDesignAndLineAreTheApis) {
   EXPECT_EQ(probe.fields().at("file").string_value(), "prog.nc");
 }
 
+// Safety findings and air moves handed to the viewer come back to the page
+// as they were, and the state counts them.
+TEST_F(ViewerApiTest, SafetyMarkersAndAirMovesReachThePage) {
+  Cut(5, 10);
+  auto viewer = StartViewer(ViewerPathOf(runs_));
+  ASSERT_TRUE(viewer);
+  httplib::Client http("127.0.0.1", viewer->port());
+  viewer->AddSafety({{{1.5, 2.5, -0.25}, "rapid_cuts", "prog.nc", 42, 0.25, 3.5}},
+                    {{{0, 0, -1}, {10, 0, -1}}});
+  auto st = http.Get("/api/state");
+  ASSERT_TRUE(st);
+  EXPECT_EQ(Json(st->body).fields().at("safety").number_value(), 2);
+  auto r = http.Get("/api/safety");
+  ASSERT_TRUE(r);
+  ASSERT_EQ(r->status, 200);
+  const auto j = Json(r->body);
+  const auto& markers = j.fields().at("markers").list_value();
+  ASSERT_EQ(markers.values_size(), 1);
+  const auto& m = markers.values(0).struct_value().fields();
+  EXPECT_EQ(m.at("kind").string_value(), "rapid_cuts");
+  EXPECT_EQ(m.at("file").string_value(), "prog.nc");
+  EXPECT_EQ(m.at("line").number_value(), 42);
+  EXPECT_EQ(m.at("x").number_value(), 1.5);
+  EXPECT_EQ(m.at("depth").number_value(), 0.25);
+  const auto& air = j.fields().at("air").list_value();
+  ASSERT_EQ(air.values_size(), 6);
+  EXPECT_EQ(air.values(3).number_value(), 10);
+}
+
 TEST_F(ViewerApiTest, SessionListsEveryCutterShape) {
   pb::CreateSessionRequest req;
   req.set_session_id("viewer-shapes");

@@ -165,6 +165,40 @@ class ViewerImpl {
     ++state_seq_;
   }
 
+  void AddSafety(std::vector<ViewerMarker> markers,
+                 std::vector<std::pair<Vec3, Vec3>> air) {
+    if (markers.empty() && air.empty()) return;
+    absl::MutexLock l(&mu_);
+    for (ViewerMarker& m : markers) markers_.push_back(std::move(m));
+    for (const auto& seg : air) air_.push_back(seg);
+    ++state_seq_;
+  }
+
+  // {"markers": [{x, y, z, kind, file, line, depth, volume_mm3}], "air":
+  // [x0, y0, z0, x1, y1, z1, ...]}.
+  std::string SafetyJson() {
+    absl::MutexLock l(&mu_);
+    JsonWriter w;
+    w.BeginObject();
+    w.Key("markers").BeginArray();
+    for (const ViewerMarker& m : markers_) {
+      w.BeginObject();
+      w.Key("x").Double(m.at.x).Key("y").Double(m.at.y).Key("z").Double(m.at.z);
+      w.Key("kind").String(m.kind).Key("file").String(m.file);
+      w.Key("line").Int(m.line);
+      w.Key("depth").Double(m.depth).Key("volume_mm3").Double(m.volume_mm3);
+      w.EndObject();
+    }
+    w.EndArray();
+    w.Key("air").BeginArray();
+    for (const auto& [a, b] : air_) {
+      w.Double(a.x).Double(a.y).Double(a.z).Double(b.x).Double(b.y).Double(b.z);
+    }
+    w.EndArray();
+    w.EndObject();
+    return w.str();
+  }
+
  private:
   absl::Status LoadThree() {
     std::vector<std::string> dirs;
@@ -440,6 +474,8 @@ class ViewerImpl {
                           ? path_.tools[reached - 1]
                           : -1);
     w.Key("finished").Bool(finished_);
+    // Safety markers and air segments so far (the page refetches on change).
+    w.Key("safety").Int(static_cast<int64_t>(markers_.size() + air_.size()));
     w.Key("error").String(error_);
     w.EndObject();
     return w.str();
@@ -742,6 +778,10 @@ class ViewerImpl {
       if (!r.ok()) return SendError(res, r.status());
       res.set_content(*r, "application/octet-stream");
     });
+    http_.Get("/api/safety", [this](const httplib::Request&,
+                                    httplib::Response& res) {
+      res.set_content(SafetyJson(), "application/json");
+    });
     http_.Get("/api/design", [this](const httplib::Request&,
                                     httplib::Response& res) {
       auto r = DesignTriangles();
@@ -783,6 +823,8 @@ class ViewerImpl {
   Vec3 position_ ABSL_GUARDED_BY(mu_);
   std::vector<Vec3> trail_ ABSL_GUARDED_BY(mu_);
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
+  std::vector<ViewerMarker> markers_ ABSL_GUARDED_BY(mu_);
+  std::vector<std::pair<Vec3, Vec3>> air_ ABSL_GUARDED_BY(mu_);
   int pages_ ABSL_GUARDED_BY(mu_) = 0;  // with the event stream open
   std::string error_ ABSL_GUARDED_BY(mu_);
   // Bumps when the state the page sees changes (events are sent on change).
@@ -804,6 +846,10 @@ Viewer::~Viewer() = default;
 int Viewer::port() const { return impl_->port(); }
 std::string Viewer::url() const { return impl_->url(); }
 void Viewer::MarkFinished() { impl_->MarkFinished(); }
+void Viewer::AddSafety(std::vector<ViewerMarker> markers,
+                       std::vector<std::pair<Vec3, Vec3>> air) {
+  impl_->AddSafety(std::move(markers), std::move(air));
+}
 void Viewer::WaitForPage() { impl_->WaitForPage(); }
 
 namespace {

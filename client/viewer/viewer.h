@@ -69,6 +69,15 @@ struct ViewerPath {
   double allowance = 0, tolerance = 0.01;
 };
 
+// A safety finding drawn on the part (swarf run's checks, issue 30).
+struct ViewerMarker {
+  Vec3 at;
+  std::string kind;  // stats.json's name: "rapid_cuts", ...
+  std::string file;
+  int32_t line = 0;
+  double depth = 0, volume_mm3 = 0;
+};
+
 class ViewerImpl;
 
 // Thread-safe. Serves until destroyed.
@@ -87,6 +96,10 @@ class Viewer {
   std::string url() const;
   // Blocks until a page has opened (its event stream is connected).
   void WaitForPage();
+  // Safety findings to mark on the part, and air moves (feed moves that
+  // removed nothing) to draw dashed, as the client learns them. Thread-safe.
+  void AddSafety(std::vector<ViewerMarker> markers,
+                 std::vector<std::pair<Vec3, Vec3>> air);
   // The streaming client is done (the page says so); the viewer keeps
   // serving.
   void MarkFinished();
