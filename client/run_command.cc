@@ -455,7 +455,8 @@ int RunCommand(const std::vector<std::string>& argv) {
       std::cerr << absl::StrFormat(
           "swarf run: design %s: %d triangles, over %d nodes of the grid "
           "(%.2f s)\n",
-          d.path, d.mesh.triangles.size(), d.envelope->covered_nodes(),
+          d.path, d.placed->mesh().triangles.size(),
+          d.placed->envelope().covered_nodes(),
           d.seconds);
     }
   }
@@ -532,7 +533,7 @@ int RunCommand(const std::vector<std::string>& argv) {
       }
       vpath.move_lines = d.move_lines;
       vpath.sources = d.sources;
-      vpath.design = &d.mesh;
+      vpath.design = &d.placed->mesh();
       vpath.allowance = d.deviation.allowance;
       vpath.tolerance = d.deviation.tolerance;
     }

@@ -245,19 +245,10 @@ absl::Status LoadDesign(const StockSpec& stock, DesignInput* d) {
   const auto t0 = std::chrono::steady_clock::now();
   auto mesh = design::ReadDesignFile(d->path, d->read);
   if (!mesh.ok()) return mesh.status();
-  d->mesh = *std::move(mesh);
-  auto env = design::TopEnvelope::Build(d->mesh, GridGeometry(stock));
-  if (!env.ok()) {
-    return absl::Status(env.status().code(),
-                        absl::StrCat(d->path, ": ", env.status().message()));
-  }
-  d->envelope.emplace(*std::move(env));
-  auto index = design::ClosestPointIndex::Build(d->mesh);
-  if (!index.ok()) {
-    return absl::Status(index.status().code(),
-                        absl::StrCat(d->path, ": ", index.status().message()));
-  }
-  d->index = *std::move(index);
+  auto placed = design::PlacedDesign::Place(*std::move(mesh),
+                                            GridGeometry(stock), d->path);
+  if (!placed.ok()) return placed.status();
+  d->placed = *std::move(placed);
   d->seconds = std::chrono::duration<double>(
                    std::chrono::steady_clock::now() - t0).count();
   return absl::OkStatus();
@@ -365,11 +356,13 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   std::optional<Image> deviation_map;
   if (design != nullptr) {
     const auto td = Clock::now();
-    auto dev = MeasureDeviation(*grid, *design->envelope, *design->index,
+    const design::PlacedDesign& placed = *design->placed;
+    auto dev = MeasureDeviation(*grid, placed.envelope(), placed.index(),
                                 design->move_lines, design->deviation);
     if (!dev.ok()) return dev.status();
     report->design = design->path;
-    report->design_triangles = static_cast<int64_t>(design->mesh.triangles.size());
+    report->design_triangles =
+        static_cast<int64_t>(placed.mesh().triangles.size());
     report->sources = design->sources;
     report->tolerance_gate = design->tolerance_given;
     report->output_steps.emplace_back("deviation", seconds(td));

@@ -19,9 +19,8 @@
 #include "core/cutting_marks.h"
 #include "core/scheme.h"
 #include "core/stock.h"
-#include "design/closest_point.h"
 #include "design/design_mesh.h"
-#include "design/top_envelope.h"
+#include "design/placed_design.h"
 
 namespace swarf::cli {
 
@@ -73,9 +72,8 @@ struct DesignInput {
   design::DesignReadOptions read;
   DeviationOptions deviation;
   bool tolerance_given = false;
-  design::DesignMesh mesh;
-  std::optional<design::TopEnvelope> envelope;
-  std::unique_ptr<design::ClosestPointIndex> index;
+  // Set by LoadDesign: the mesh, its envelope on the grid, its index.
+  std::shared_ptr<const design::PlacedDesign> placed;
   // Each move's source line (by move id), and the files they index.
   std::vector<SourceLine> move_lines;
   std::vector<std::string> sources;
