@@ -13,6 +13,24 @@ constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 // Node rows a rasterizing task owns: tasks never write the same node.
 constexpr int32_t kBandRows = 16;
 
+// Lists of items per bucket, compressed: bucket b holds
+// items[start[b] .. start[b + 1]), in item order. visit(t, add) calls
+// add(bucket) for each bucket of item t; it runs twice (count, then fill).
+template <typename Visit>
+void BuildBuckets(int64_t buckets, int32_t n, const Visit& visit,
+                  std::vector<int64_t>* start, std::vector<int32_t>* items) {
+  start->assign(buckets + 1, 0);
+  for (int32_t t = 0; t < n; ++t) {
+    visit(t, [&](int64_t b) { ++(*start)[b + 1]; });
+  }
+  for (int64_t b = 1; b <= buckets; ++b) (*start)[b] += (*start)[b - 1];
+  items->resize(start->back());
+  std::vector<int64_t> fill(start->begin(), start->end() - 1);
+  for (int32_t t = 0; t < n; ++t) {
+    visit(t, [&](int64_t b) { (*items)[fill[b]++] = t; });
+  }
+}
+
 }  // namespace
 
 TopEnvelope::Plane TopEnvelope::PlaneOf(const DesignMesh& mesh, int32_t t) {
@@ -44,10 +62,6 @@ double TopEnvelope::HeightAt(const Plane& p, double x, double y) {
   return std::min(std::max(p.za + wb * p.dzb + wc * p.dzc, p.zlo), p.zhi);
 }
 
-double TriangleHeightAt(const DesignMesh& mesh, int32_t t, double x, double y) {
-  return TopEnvelope::HeightAt(TopEnvelope::PlaneOf(mesh, t), x, y);
-}
-
 absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
                                                const GridGeometry& grid,
                                                ThreadPool* pool) {
@@ -67,27 +81,32 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
   env.nodes_.assign(static_cast<size_t>(grid.node_count()),
                     std::numeric_limits<float>::quiet_NaN());
 
-  // Each triangle's node rectangle (clamped to the grid); empty: skip.
+  // Each triangle's plane and XY bounds, read once.
   const int32_t ntri = static_cast<int32_t>(mesh.triangles.size());
   env.planes_.resize(ntri);
   env.bounds_.resize(ntri);
+  std::vector<Rect> xy(ntri);
   for (int32_t t = 0; t < ntri; ++t) {
     env.planes_[t] = PlaneOf(mesh, t);
     const auto& tri = mesh.triangles[t];
     const Vec3& a = mesh.vertices[tri[0]];
     const Vec3& b = mesh.vertices[tri[1]];
     const Vec3& c = mesh.vertices[tri[2]];
+    xy[t] = {std::min({a.x, b.x, c.x}), std::min({a.y, b.y, c.y}),
+             std::max({a.x, b.x, c.x}), std::max({a.y, b.y, c.y})};
     auto down = [](double v) {
       return std::nextafter(static_cast<float>(v), -HUGE_VALF);
     };
     auto up = [](double v) {
       return std::nextafter(static_cast<float>(v), HUGE_VALF);
     };
-    env.bounds_[t] = {down(std::min({a.x, b.x, c.x})),
-                      down(std::min({a.y, b.y, c.y})),
-                      up(std::max({a.x, b.x, c.x})),
-                      up(std::max({a.y, b.y, c.y}))};
+    env.bounds_[t] = {down(xy[t].x0), down(xy[t].y0), up(xy[t].x1),
+                      up(xy[t].y1)};
   }
+  auto vertical = [&](int32_t t) { return std::isnan(env.planes_[t].xa); };
+
+  // Each non-vertical triangle's node rectangle (clamped to the grid; empty:
+  // none), listed in the bands of node rows it meets.
   struct NodeBox {
     int32_t i0, i1, j0, j1;
   };
@@ -101,39 +120,26 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
     return static_cast<int32_t>(
         std::clamp(std::floor((v - origin) / step + 1e-9), -1.0, double(n - 1)));
   };
-  std::vector<int64_t> band_count((nyn + kBandRows - 1) / kBandRows + 1, 0);
   for (int32_t t = 0; t < ntri; ++t) {
-    const auto& tri = mesh.triangles[t];
-    const Vec3& a = mesh.vertices[tri[0]];
-    const Vec3& b = mesh.vertices[tri[1]];
-    const Vec3& c = mesh.vertices[tri[2]];
-    NodeBox& nb = boxes[t];
-    if (std::isnan(env.planes_[t].xa)) {  // vertical: covers no node
-      nb = {1, 0, 1, 0};
-      continue;
-    }
-    nb.i0 = lo_index(std::min({a.x, b.x, c.x}), stock.x0, dx, nxn);
-    nb.i1 = hi_index(std::max({a.x, b.x, c.x}), stock.x0, dx, nxn);
-    nb.j0 = lo_index(std::min({a.y, b.y, c.y}), stock.y0, dy, nyn);
-    nb.j1 = hi_index(std::max({a.y, b.y, c.y}), stock.y0, dy, nyn);
-    if (nb.i0 > nb.i1 || nb.j0 > nb.j1) continue;
-    for (int32_t band = nb.j0 / kBandRows; band <= nb.j1 / kBandRows; ++band) {
-      ++band_count[band + 1];
-    }
+    boxes[t] = vertical(t)
+                   ? NodeBox{1, 0, 1, 0}
+                   : NodeBox{lo_index(xy[t].x0, stock.x0, dx, nxn),
+                             hi_index(xy[t].x1, stock.x0, dx, nxn),
+                             lo_index(xy[t].y0, stock.y0, dy, nyn),
+                             hi_index(xy[t].y1, stock.y0, dy, nyn)};
   }
-  for (size_t k = 1; k < band_count.size(); ++k) band_count[k] += band_count[k - 1];
-  std::vector<int32_t> band_tris(band_count.back());
-  {
-    std::vector<int64_t> fill(band_count.begin(), band_count.end() - 1);
-    for (int32_t t = 0; t < ntri; ++t) {
-      const NodeBox& nb = boxes[t];
-      if (nb.i0 > nb.i1 || nb.j0 > nb.j1) continue;
-      for (int32_t band = nb.j0 / kBandRows; band <= nb.j1 / kBandRows;
-           ++band) {
-        band_tris[fill[band]++] = t;
-      }
-    }
-  }
+  std::vector<int64_t> band_count;
+  std::vector<int32_t> band_tris;
+  BuildBuckets((nyn + kBandRows - 1) / kBandRows, ntri,
+               [&](int32_t t, const auto& add) {
+                 const NodeBox& nb = boxes[t];
+                 if (nb.i0 > nb.i1 || nb.j0 > nb.j1) return;
+                 for (int32_t band = nb.j0 / kBandRows;
+                      band <= nb.j1 / kBandRows; ++band) {
+                   add(band);
+                 }
+               },
+               &band_count, &band_tris);
   const int64_t bands = static_cast<int64_t>(band_count.size()) - 1;
   std::vector<int64_t> band_covered(bands, 0);
   pool->ParallelFor(bands, [&](int64_t band) {
@@ -172,45 +178,24 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
   env.bnx_ = std::max(1, static_cast<int32_t>(std::ceil(w / env.bsize_)));
   env.bny_ = std::max(1, static_cast<int32_t>(std::ceil(h / env.bsize_)));
   const int64_t nbins = int64_t{env.bnx_} * env.bny_;
-  env.bin_start_.assign(nbins + 1, 0);
-  auto bin_range = [&](int32_t t, int32_t* bx0, int32_t* bx1, int32_t* by0,
-                       int32_t* by1) {
-    const auto& tri = mesh.triangles[t];
-    const Vec3& a = mesh.vertices[tri[0]];
-    const Vec3& b = mesh.vertices[tri[1]];
-    const Vec3& c = mesh.vertices[tri[2]];
-    auto cell = [&](double v, double o, int32_t n) {
-      return std::clamp(static_cast<int32_t>(std::floor((v - o) / env.bsize_)),
-                        0, n - 1);
-    };
-    *bx0 = cell(std::min({a.x, b.x, c.x}), env.bx0_, env.bnx_);
-    *bx1 = cell(std::max({a.x, b.x, c.x}), env.bx0_, env.bnx_);
-    *by0 = cell(std::min({a.y, b.y, c.y}), env.by0_, env.bny_);
-    *by1 = cell(std::max({a.y, b.y, c.y}), env.by0_, env.bny_);
+  auto cell = [&](double v, double o, int32_t n) {
+    return std::clamp(static_cast<int32_t>(std::floor((v - o) / env.bsize_)),
+                      0, n - 1);
   };
-  for (int32_t t = 0; t < ntri; ++t) {
-    if (std::isnan(env.planes_[t].xa)) continue;  // vertical
-    int32_t bx0, bx1, by0, by1;
-    bin_range(t, &bx0, &bx1, &by0, &by1);
-    for (int32_t by = by0; by <= by1; ++by) {
-      for (int32_t bx = bx0; bx <= bx1; ++bx) {
-        ++env.bin_start_[int64_t{by} * env.bnx_ + bx + 1];
-      }
-    }
-  }
-  for (int64_t b = 1; b <= nbins; ++b) env.bin_start_[b] += env.bin_start_[b - 1];
-  env.bin_tris_.resize(env.bin_start_.back());
-  std::vector<int64_t> fill(env.bin_start_.begin(), env.bin_start_.end() - 1);
-  for (int32_t t = 0; t < ntri; ++t) {
-    if (std::isnan(env.planes_[t].xa)) continue;
-    int32_t bx0, bx1, by0, by1;
-    bin_range(t, &bx0, &bx1, &by0, &by1);
-    for (int32_t by = by0; by <= by1; ++by) {
-      for (int32_t bx = bx0; bx <= bx1; ++bx) {
-        env.bin_tris_[fill[int64_t{by} * env.bnx_ + bx]++] = t;
-      }
-    }
-  }
+  BuildBuckets(nbins, ntri,
+               [&](int32_t t, const auto& add) {
+                 if (vertical(t)) return;
+                 const int32_t bx0 = cell(xy[t].x0, env.bx0_, env.bnx_);
+                 const int32_t bx1 = cell(xy[t].x1, env.bx0_, env.bnx_);
+                 const int32_t by0 = cell(xy[t].y0, env.by0_, env.bny_);
+                 const int32_t by1 = cell(xy[t].y1, env.by0_, env.bny_);
+                 for (int32_t by = by0; by <= by1; ++by) {
+                   for (int32_t bx = bx0; bx <= bx1; ++bx) {
+                     add(int64_t{by} * env.bnx_ + bx);
+                   }
+                 }
+               },
+               &env.bin_start_, &env.bin_tris_);
   return env;
 }
 

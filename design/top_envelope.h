@@ -98,12 +98,6 @@ class TopEnvelope {
   std::vector<int32_t> bin_tris_;
 };
 
-// The height of triangle `t` of `mesh` above (x, y) if (x, y) lies in its
-// XY projection (edges included, with a margin of 1e-12 in barycentric
-// weights so that points on a shared edge are never missed), else NaN; NaN
-// for a vertical triangle. As TopEnvelope computes it.
-double TriangleHeightAt(const DesignMesh& mesh, int32_t t, double x, double y);
-
 }  // namespace swarf::design
 
 #endif  // SWARF_DESIGN_TOP_ENVELOPE_H_
