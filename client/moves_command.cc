@@ -147,18 +147,9 @@ int MovesCommand(const std::vector<std::string>& argv) {
     return 2;
   }
   const std::string file = args->positional()[0];
-  std::optional<ToolTable> table;
-  if (auto t = args->Get("tools")) {
-    const std::string units = args->Get("tools-units").value_or("mm");
-    if (units != "mm" && units != "inch") {
-      return fail(absl::InvalidArgumentError("--tools-units must be mm or inch"),
-                  2);
-    }
-    auto read = ReadToolTableFile(*t, units == "inch" ? 25.4 : 1);
-    if (!read.ok()) return fail(read.status(), 2);
-    table = *std::move(read);
-  }
-  auto choices = ParseToolChoices(args->All("tool"), std::move(table));
+  auto table = ReadToolsFlags(*args);
+  if (!table.ok()) return fail(table.status(), 2);
+  auto choices = ParseToolChoices(args->All("tool"), *std::move(table));
   if (!choices.ok()) return fail(choices.status(), 2);
   ToolpathFlags tflags;
   if (absl::Status st = ReadToolpathFlags(*args, &tflags); !st.ok()) {

@@ -334,16 +334,9 @@ int RunCommand(const std::vector<std::string>& argv) {
   const bool json = args->Has("json");
   std::optional<ToolTable> table;
   if (project.has_value()) table = project->tools;
-  if (auto t = args->Get("tools")) {
-    const std::string units = args->Get("tools-units").value_or("mm");
-    if (units != "mm" && units != "inch") {
-      return fail(absl::InvalidArgumentError("--tools-units must be mm or inch"),
-                  2);
-    }
-    auto read = ReadToolTableFile(*t, units == "inch" ? 25.4 : 1);
-    if (!read.ok()) return fail(read.status(), 2);
-    table = *std::move(read);
-  }
+  auto tools_flag = ReadToolsFlags(*args);
+  if (!tools_flag.ok()) return fail(tools_flag.status(), 2);
+  if (tools_flag->has_value()) table = **std::move(tools_flag);
   if (!table.has_value() && !args->Has("tool")) {
     return fail(absl::InvalidArgumentError(
                     "--tool (or --tools FILE) is required, e.g. --tool "

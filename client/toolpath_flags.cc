@@ -102,4 +102,16 @@ absl::Status CheckToolpath(const gcode::Toolpath& path, bool strict,
   return absl::OkStatus();
 }
 
+absl::StatusOr<std::optional<ToolTable>> ReadToolsFlags(const Args& args) {
+  const auto t = args.Get("tools");
+  if (!t) return std::optional<ToolTable>();
+  const std::string units = args.Get("tools-units").value_or("mm");
+  if (units != "mm" && units != "inch") {
+    return absl::InvalidArgumentError("--tools-units must be mm or inch");
+  }
+  auto read = ReadToolTableFile(*t, units == "inch" ? 25.4 : 1);
+  if (!read.ok()) return read.status();
+  return std::optional<ToolTable>(*std::move(read));
+}
+
 }  // namespace swarf::cli

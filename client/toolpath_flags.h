@@ -10,6 +10,7 @@
 #include "absl/status/status.h"
 #include "client/args.h"
 #include "client/run_report.h"
+#include "client/tool_table.h"
 #include "core/stock.h"
 #include "gcode/toolpath.h"
 
@@ -46,6 +47,11 @@ struct ToolpathFlags {
 // Reads the flags above into `flags` (options keep what they hold for
 // flags not given). InvalidArgument naming the flag.
 absl::Status ReadToolpathFlags(const Args& args, ToolpathFlags* flags);
+
+// --tools FILE with --tools-units mm|inch (swarf run, swarf moves): the
+// table, nullopt without --tools. InvalidArgument naming the flag, or the
+// table's own error.
+absl::StatusOr<std::optional<ToolTable>> ReadToolsFlags(const Args& args);
 
 // The never-silent checks after parsing: dropped moves (an error under
 // --strict), and, against an explicit stock, a cut leaving the stock's XY
