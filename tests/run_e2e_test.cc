@@ -710,16 +710,13 @@ google::protobuf::Struct RunJson(const std::vector<std::string>& argv) {
   return s;
 }
 
-TEST_P(CorpusPrecisionTest, DefaultSchemeNeverWorseThanTheZmap) {
-  const auto [name, spacing] = GetParam();
-  const std::string project =
-      std::string(SWARF_CORPUS_DIR) + "/" + name + ".camotics";
-  SWARF_SKIP_UNLESS_SHARED_FILE(project);
+// `swarf run argv` with the z-map and with the default scheme: the
+// default's max, mean and RMS errors at most the z-map's, its mean a tenth.
+void ExpectDefaultNeverWorseThanZmap(const std::vector<std::string>& argv) {
   auto error = [&](const char* scheme) {
-    std::vector<std::string> argv = {"--project", project, "--spacing",
-                                     spacing,     "--json",  "--quiet"};
-    if (scheme != nullptr) argv.insert(argv.end(), {"--scheme", scheme});
-    const google::protobuf::Struct stats = RunJson(argv);
+    std::vector<std::string> a = argv;
+    if (scheme != nullptr) a.insert(a.end(), {"--scheme", scheme});
+    const google::protobuf::Struct stats = RunJson(a);
     const auto& e = stats.fields().at("error").struct_value().fields();
     return std::tuple{e.at("max").number_value(), e.at("mean").number_value(),
                       e.at("rms").number_value()};
@@ -730,6 +727,15 @@ TEST_P(CorpusPrecisionTest, DefaultSchemeNeverWorseThanTheZmap) {
   EXPECT_LE(gmax, zmax);
   EXPECT_LE(grms, zrms);
   EXPECT_LE(gmean, zmean / 10) << "default " << gmean << " zmap " << zmean;
+}
+
+TEST_P(CorpusPrecisionTest, DefaultSchemeNeverWorseThanTheZmap) {
+  const auto [name, spacing] = GetParam();
+  const std::string project =
+      std::string(SWARF_CORPUS_DIR) + "/" + name + ".camotics";
+  SWARF_SKIP_UNLESS_SHARED_FILE(project);
+  ExpectDefaultNeverWorseThanZmap(
+      {"--project", project, "--spacing", spacing, "--json", "--quiet"});
 }
 
 INSTANTIATE_TEST_SUITE_P(
@@ -751,22 +757,10 @@ class GeneratedPrecisionTest
 
 TEST_P(GeneratedPrecisionTest, DefaultSchemeNeverWorseThanTheZmap) {
   const auto& [job, spacing] = GetParam();
-  auto error = [&](const char* scheme) {
-    std::vector<std::string> argv = {job.File(), "--spacing", spacing,
-                                     "--json", "--quiet"};
-    argv.insert(argv.end(), job.args.begin(), job.args.end());
-    if (scheme != nullptr) argv.insert(argv.end(), {"--scheme", scheme});
-    const google::protobuf::Struct stats = RunJson(argv);
-    const auto& e = stats.fields().at("error").struct_value().fields();
-    return std::tuple{e.at("max").number_value(), e.at("mean").number_value(),
-                      e.at("rms").number_value()};
-  };
-  const auto [zmax, zmean, zrms] = error("zmap");
-  const auto [gmax, gmean, grms] = error(nullptr);  // the default
-  EXPECT_GT(zmean, 0);
-  EXPECT_LE(gmax, zmax);
-  EXPECT_LE(grms, zrms);
-  EXPECT_LE(gmean, zmean / 10) << "default " << gmean << " zmap " << zmean;
+  std::vector<std::string> argv = {job.File(), "--spacing", spacing, "--json",
+                                   "--quiet"};
+  argv.insert(argv.end(), job.args.begin(), job.args.end());
+  ExpectDefaultNeverWorseThanZmap(argv);
 }
 
 INSTANTIATE_TEST_SUITE_P(
