@@ -97,33 +97,10 @@ std::vector<Move> FinishingRaster(double step, double stepover, int rows) {
   return moves;
 }
 
-void BM_FinishingMoves(benchmark::State& state, SchemeKind scheme) {
-  const std::vector<Move> moves = FinishingRaster(0.2, 0.1, 100);
-  const size_t batch = static_cast<size_t>(state.range(0));
-  for (auto _ : state) {
-    state.PauseTiming();
-    auto wp = *Workpiece::Create({0, 0, 100, 100, 0, 1000, 1000}, scheme);
-    state.ResumeTiming();
-    for (size_t k = 0; k < moves.size(); k += batch) {
-      const size_t n = std::min(batch, moves.size() - k);
-      auto r = wp->Apply(std::span<const Move>(moves.data() + k, n));
-      benchmark::DoNotOptimize(r->node_lowerings);
-    }
-    state.PauseTiming();
-    wp.reset();
-    state.ResumeTiming();
-  }
-  state.SetItemsProcessed(state.iterations() * moves.size());
-  state.counters["ns_per_move"] = TimePerMove(moves.size());
-}
-BENCHMARK_CAPTURE(BM_FinishingMoves, zmap, SchemeKind::kZmap)
-    ->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(BM_FinishingMoves, taylor, SchemeKind::kTaylor)
-    ->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
-
-// The same with what each move cut (issue 30's safety checks and process
-// facts: ApplyOptions::cuts and a flute length per move).
-void BM_FinishingMovesCuts(benchmark::State& state, SchemeKind scheme) {
+// Applies the finishing raster in batches of state.range(0) moves; with
+// `cuts`, asking what each move cut (ApplyOptions::cuts and a flute length
+// per move).
+void FinishingApply(benchmark::State& state, SchemeKind scheme, bool cuts) {
   const std::vector<Move> moves = FinishingRaster(0.2, 0.1, 100);
   const size_t batch = static_cast<size_t>(state.range(0));
   const std::vector<double> flutes(batch, 10.0);
@@ -133,11 +110,17 @@ void BM_FinishingMovesCuts(benchmark::State& state, SchemeKind scheme) {
     state.ResumeTiming();
     for (size_t k = 0; k < moves.size(); k += batch) {
       const size_t n = std::min(batch, moves.size() - k);
-      ApplyOptions opts;
-      opts.cuts = true;
-      opts.drop_limit = std::span<const double>(flutes.data(), n);
-      auto r = wp->Apply(std::span<const Move>(moves.data() + k, n), opts);
-      benchmark::DoNotOptimize(r->cuts.data());
+      const std::span<const Move> span(moves.data() + k, n);
+      if (cuts) {
+        ApplyOptions opts;
+        opts.cuts = true;
+        opts.drop_limit = std::span<const double>(flutes.data(), n);
+        auto r = wp->Apply(span, opts);
+        benchmark::DoNotOptimize(r->cuts.data());
+      } else {
+        auto r = wp->Apply(span);
+        benchmark::DoNotOptimize(r->node_lowerings);
+      }
     }
     state.PauseTiming();
     wp.reset();
@@ -145,6 +128,20 @@ void BM_FinishingMovesCuts(benchmark::State& state, SchemeKind scheme) {
   }
   state.SetItemsProcessed(state.iterations() * moves.size());
   state.counters["ns_per_move"] = TimePerMove(moves.size());
+}
+
+void BM_FinishingMoves(benchmark::State& state, SchemeKind scheme) {
+  FinishingApply(state, scheme, /*cuts=*/false);
+}
+BENCHMARK_CAPTURE(BM_FinishingMoves, zmap, SchemeKind::kZmap)
+    ->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(BM_FinishingMoves, taylor, SchemeKind::kTaylor)
+    ->Arg(1000)->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The same with what each move cut (issue 30's safety checks and process
+// facts).
+void BM_FinishingMovesCuts(benchmark::State& state, SchemeKind scheme) {
+  FinishingApply(state, scheme, /*cuts=*/true);
 }
 BENCHMARK_CAPTURE(BM_FinishingMovesCuts, taylor, SchemeKind::kTaylor)
     ->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
