@@ -49,7 +49,7 @@ void RunSession(Connection& conn, const std::string& id, const Cutter& cutter,
   create.mutable_stock()->set_y1(side);
   create.set_nx(mesh);
   create.set_ny(mesh);
-  server::ToolToProto({1, cutter}, create.add_tools());
+  server::ToolToProto({1, cutter, {}}, create.add_tools());  // no assembly
   {
     pb::Session s;
     auto ctx = conn.Context(id, 60);
