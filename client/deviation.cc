@@ -398,7 +398,7 @@ absl::StatusOr<Image> RenderDeviationMap(const SurfaceGrid& grid,
   img.FillRect(bar_x0 - 1, bar_y0, bar_x0, bar_y1, kInk);
   img.FillRect(bar_x1, bar_y0, bar_x1 + 1, bar_y1, kInk);
   auto label = [&](int y, const std::string& s) {
-    DrawText(img, bar_x1 + 5, std::clamp(y - 9, 0, height - 20), s, kInk, 1 + 0);
+    DrawText(img, bar_x1 + 5, std::clamp(y - 9, 0, height - 20), s, kInk, 1);
   };
   label(bar_y0 + 8, absl::StrFormat("+%.3g excess", excess_top));
   label(bar_y0 + static_cast<int>(0.4 * bar_h), absl::StrFormat("+%.3g", excess_limit));
