@@ -1,0 +1,323 @@
+#!/usr/bin/env python3
+# The FreeCAD add-on (client/freecad) end to end, headless: FreeCAD builds a
+# Job (make_job.py), simulate-job simulates it, and the results are checked
+# against `swarf run` on the same program, tools and stock (bit for bit),
+# against analytic heights, and in FreeCAD (the Mesh object).
+#
+#   addon_test.py --swarf PATH --swarfd PATH [--work DIR]
+#
+# Exits 77 (ctest's SKIP_RETURN_CODE) when freecadcmd is not installed.
+import argparse
+import json
+import math
+import os
+import shutil
+import struct
+import subprocess
+import sys
+import tempfile
+import unittest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+SIMULATE_JOB = os.path.join(ROOT, "client", "freecad", "simulate-job")
+SPACING = "0.25"
+ARGS = None
+
+
+def freecadcmd(script, env_extra):
+    env = dict(os.environ, **env_extra)
+    p = subprocess.run(
+        ["freecadcmd", "-c", "exec(open(%r).read())" % script], env=env,
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, timeout=120)
+    if p.returncode != 0:
+        raise AssertionError("freecadcmd %s failed (%d): %s" % (
+            script, p.returncode, p.stderr.decode()[-2000:]))
+
+
+def read_stl(path):
+    """Binary STL -> list of triangles ((x, y, z) * 3)."""
+    with open(path, "rb") as f:
+        data = f.read()
+    n = struct.unpack_from("<I", data, 80)[0]
+    tris = []
+    for i in range(n):
+        v = struct.unpack_from("<12f", data, 84 + 50 * i)
+        tris.append((v[3:6], v[6:9], v[9:12]))
+    return tris
+
+
+def volume(tris):
+    return sum(a[0] * (b[1] * c[2] - b[2] * c[1]) -
+               a[1] * (b[0] * c[2] - b[2] * c[0]) +
+               a[2] * (b[0] * c[1] - b[1] * c[0]) for a, b, c in tris) / 6
+
+
+# stats.json figures that are not results: timings, and the paths given.
+VOLATILE = {"seconds", "moves_per_second", "file", "files", "server"}
+
+
+def comparable(stats, program):
+    """stats without VOLATILE, the program's path written P."""
+    out = {k: v for k, v in stats.items() if k not in VOLATILE}
+    if "deviation" in out:
+        out["deviation"] = dict(out["deviation"], design=None)
+    return json.loads(json.dumps(out).replace(json.dumps(program), '"P"'))
+
+
+def height_at(tris, x, y):
+    """The surface's z above (x, y): the highest triangle over it."""
+    best = None
+    for a, b, c in tris:
+        d = (b[1] - c[1]) * (a[0] - c[0]) + (c[0] - b[0]) * (a[1] - c[1])
+        if abs(d) < 1e-12:
+            continue  # a wall
+        l1 = ((b[1] - c[1]) * (x - c[0]) + (c[0] - b[0]) * (y - c[1])) / d
+        l2 = ((c[1] - a[1]) * (x - c[0]) + (a[0] - c[0]) * (y - c[1])) / d
+        l3 = 1 - l1 - l2
+        if min(l1, l2, l3) < -1e-9:
+            continue
+        z = l1 * a[2] + l2 * b[2] + l3 * c[2]
+        best = z if best is None else max(best, z)
+    return best
+
+
+class AddonTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.work = ARGS.work or tempfile.mkdtemp(prefix="swarf-freecad-")
+        shutil.rmtree(cls.work, ignore_errors=True)
+        os.makedirs(cls.work)
+        freecadcmd(os.path.join(HERE, "make_job.py"),
+                   {"SWARF_TEST_DIR": cls.work})
+        with open(os.path.join(cls.work, "ref", "facts.json")) as f:
+            cls.facts = json.load(f)
+        cls.addon = os.path.join(cls.work, "addon")
+        cls.run_addon = cls.simulate_job(
+            "job.FCStd", "--out", cls.addon, "--embedded",
+            "--save", os.path.join(cls.work, "simulated.FCStd"))
+
+    @classmethod
+    def simulate_job(cls, *args):
+        return subprocess.run(
+            [sys.executable, SIMULATE_JOB, os.path.join(cls.work, args[0]),
+             "--swarf", ARGS.swarf, "--spacing", SPACING] + list(args[1:]),
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, timeout=120,
+            cwd=cls.work)
+
+    def stats(self, out):
+        with open(os.path.join(out, "stats.json")) as f:
+            return json.load(f)
+
+    def test_simulate_job_succeeds(self):
+        r = self.run_addon
+        self.assertEqual(r.returncode, 0, r.stderr.decode()[-3000:])
+        for name in ("relief.png", "error.png", "marks.png", "marks.svg",
+                     "marks.json", "surface.stl", "surface.wrl",
+                     "stats.json", "deviation.png", "report.txt",
+                     "program.ngc", "tools.tbl", "design.stl", "lines.json"):
+            self.assertTrue(os.path.isfile(os.path.join(self.addon, name)),
+                            name)
+
+    def test_posted_program_is_freecads(self):
+        """program.ngc is FreeCAD's LinuxCNC post of the Job's post list
+        (make_job posts it without the add-on); only the time differs."""
+        def body(path):
+            with open(path) as f:
+                return [l for l in f if not l.startswith("(Output Time")]
+        self.assertEqual(body(os.path.join(self.addon, "program.ngc")),
+                         body(os.path.join(self.work, "ref", "program.ngc")))
+
+    def test_tool_table(self):
+        """endmill -> flat, bullnose (flat radius 1.5 of 3) -> bull r=1.5,
+        drill 119 degrees -> a cone; FreeCAD's flute and shank kept."""
+        with open(os.path.join(self.addon, "tools.tbl")) as f:
+            self.assertEqual(f.read(),
+                             "T1 P1 D5 ;flat flute=30 shank=3\n"
+                             "T2 P2 D6 ;bull r=1.5 flute=40 shank=3\n"
+                             "T3 P3 D5 ;vbit angle=119\n")
+
+    def test_equals_swarf_run_bit_for_bit(self):
+        """The add-on's files equal `swarf run` on the same program, a tool
+        table written here from the ToolBits' catalogue figures, and the
+        Job's stock from FreeCAD: surface.stl byte for byte, stats.json
+        figure for figure (deviation included)."""
+        ref = os.path.join(self.work, "ref")
+        table = os.path.join(ref, "tools.tbl")
+        with open(table, "w") as f:
+            f.write("T1 P1 D5.0 ;endmill flute=30 shank=3\n"
+                    "T2 P2 D6.0 ;bullnose r=1.5 flute=40 shank=3\n"
+                    "T3 P3 D5.0 ;cone 119\n")
+        stock = ",".join(repr(v) for v in self.facts["stock"])
+        self.assertEqual(stock, "-1.0,-1.0,41.0,31.0,13.0")
+        out = os.path.join(self.work, "direct")
+        r = subprocess.run(
+            [ARGS.swarf, "run", os.path.join(ref, "program.ngc"),
+             "--tools", table, "--stock", stock, "--spacing", SPACING,
+             "--design", os.path.join(self.addon, "design.stl"),
+             "--out", out], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            timeout=120)
+        self.assertEqual(r.returncode, 0, r.stdout.decode()[-2000:])
+        for name in ("surface.stl", "surface.wrl", "marks.json"):
+            with open(os.path.join(out, name), "rb") as a, \
+                    open(os.path.join(self.addon, name), "rb") as b:
+                self.assertTrue(a.read() == b.read(), name + " differs")
+        self.maxDiff = 5000
+        self.assertEqual(
+            comparable(self.stats(out), os.path.join(ref, "program.ngc")),
+            comparable(self.stats(self.addon),
+                       os.path.join(self.addon, "program.ngc")))
+
+    def test_local_swarfd_gives_the_same_surface(self):
+        """--swarfd: the add-on starts swarfd on a free port and runs on it;
+        the surface is the embedded server's, bit for bit."""
+        out = os.path.join(self.work, "swarfd")
+        r = self.simulate_job("job.FCStd", "--out", out, "--swarfd",
+                              ARGS.swarfd)
+        self.assertEqual(r.returncode, 0, r.stderr.decode()[-3000:])
+        self.assertIn("simulating on 127.0.0.1:", r.stderr.decode())
+        with open(os.path.join(out, "surface.stl"), "rb") as a, \
+                open(os.path.join(self.addon, "surface.stl"), "rb") as b:
+            self.assertTrue(a.read() == b.read())
+
+    def test_heights(self):
+        """Analytic heights in the surface: the faced top at z 12 (the
+        model's top), the pocket floor at 8, the drill's point at z 6 at
+        the hole's centre (32, 15) and its flank 1 mm out, the stock's top
+        where nothing cut, the bull nose's corner beside the profile."""
+        tris = read_stl(os.path.join(self.addon, "surface.stl"))
+        self.assertAlmostEqual(height_at(tris, 20, 5), 12.0, places=6)
+        self.assertAlmostEqual(height_at(tris, 14, 15), 8.0, places=6)
+        self.assertAlmostEqual(height_at(tris, 32, 15), 6.0, places=6)
+        # The hole's rim: the cone's flank, 119 degrees included.
+        flank = 6 + 1.0 / math.tan(math.radians(119 / 2))
+        self.assertAlmostEqual(height_at(tris, 33, 15), flank, places=2)
+        verts = {v for t in tris for v in t}
+        self.assertEqual(max(v[2] for v in verts), 13.0)  # the stock top
+        # The profile's last pass: the bull nose (corner 1.5, flat radius
+        # 1.5) centred at x -3, tip at z -1; 2.5 mm from its axis the
+        # torus: z = -1 + 1.5 - sqrt(1.5^2 - 1^2). The mesh is within its
+        # 0.005 mm tolerance of the grid.
+        torus = -1 + 1.5 - math.sqrt(1.5 ** 2 - 1.0 ** 2)
+        self.assertAlmostEqual(height_at(tris, -0.5, 15), torus, delta=0.006)
+
+    def test_design_is_the_model(self):
+        """design.stl is the Job's model: its volume within the
+        tessellation's error (the 2.5 mm hole's chords, 0.01 mm)."""
+        tris = read_stl(os.path.join(self.addon, "design.stl"))
+        v = volume(tris)
+        exact = 40 * 30 * 12 - 16 * 10 * 4 - math.pi * 2.5 ** 2 * 6
+        self.assertAlmostEqual(self.facts["model_volume"], exact, places=6)
+        self.assertLess(abs(v - exact), 2 * math.pi * 2.5 * 6 * 0.01)
+        self.assertIn("deviation", self.stats(self.addon))
+
+    def test_line_map(self):
+        """Every motion line of the program maps to the operation whose
+        block it is in, and the command printed is that line's."""
+        with open(os.path.join(self.addon, "lines.json")) as f:
+            lines = json.load(f)
+        with open(os.path.join(self.addon, "program.ngc")) as f:
+            program = f.read().splitlines()
+        block = None
+        moves = 0
+        for n, text in enumerate(program, 1):
+            if text.startswith("(begin operation: "):
+                block = text[len("(begin operation: "):-1]
+            word = text.split()[0] if text.split() else ""
+            if word in ("G0", "G1", "G2", "G3", "G81", "M6"):
+                moves += 1
+                self.assertIn(str(n), lines, "line %d: %s" % (n, text))
+                op, index, command = lines[str(n)]
+                self.assertEqual(op, block, "line %d" % n)
+                self.assertEqual(command.split()[0], word)
+                for w in text.split()[1:]:
+                    if w[0] in "XYZ":
+                        self.assertIn(w[0], command)
+        self.assertGreater(moves, 100)
+        ops = {v[0] for v in lines.values()}
+        for op in self.facts["ops"]:
+            self.assertIn(op, ops)
+
+    def test_report(self):
+        with open(os.path.join(self.addon, "report.txt")) as f:
+            report = f.read()
+        self.assertEqual(report, self.run_addon.stdout.decode())
+        self.assertIn("verdict: OUT OF TOLERANCE", report)
+        self.assertRegex(report, r"line \d+ \((Facing|Pocket|Profile), "
+                                 r"command \d+: G[0-3] ")
+        self.assertIn("safety: no rapid cuts", report)
+
+    def test_mesh_object_is_watertight(self):
+        """The saved document holds the surface as a Mesh feature:
+        watertight, the triangles of surface.stl, a colour per vertex."""
+        check = os.path.join(self.work, "check.py")
+        result = os.path.join(self.work, "check.json")
+        with open(check, "w") as f:
+            f.write(
+                "def main():\n"
+                "    import FreeCAD, json\n"
+                "    doc = FreeCAD.openDocument(%r)\n"
+                "    m = [o for o in doc.Objects if o.TypeId == "
+                "'Mesh::Feature']\n"
+                "    o = m[0]\n"
+                "    json.dump({'n': len(m), 'solid': o.Mesh.isSolid(),\n"
+                "      'nonmanifold': o.Mesh.hasNonManifolds(),\n"
+                "      'facets': o.Mesh.CountFacets,\n"
+                "      'points': o.Mesh.CountPoints,\n"
+                "      'colors': len(o.VertexColors),\n"
+                "      'coloring': o.SwarfColoring, 'job': o.SwarfJob,\n"
+                "      'volume': o.Mesh.Volume}, open(%r, 'w'))\n"
+                "main()\n" % (os.path.join(self.work, "simulated.FCStd"),
+                              result))
+        freecadcmd(check, {})
+        with open(result) as f:
+            m = json.load(f)
+        self.assertEqual(m["n"], 1)
+        self.assertTrue(m["solid"])
+        self.assertFalse(m["nonmanifold"])
+        self.assertEqual(m["facets"], self.stats(self.addon)["mesh"]["triangles"])
+        self.assertEqual(m["colors"], m["points"])
+        self.assertEqual(m["coloring"], "deviation")
+        self.assertEqual(m["job"], "Job")
+        self.assertGreater(m["volume"], 0)
+
+    def test_unknown_toolbit_shape_is_a_clear_error(self):
+        out = os.path.join(self.work, "bad")
+        r = self.simulate_job("bad.FCStd", "--out", out, "--embedded")
+        self.assertEqual(r.returncode, 1)
+        err = r.stderr.decode()
+        self.assertIn('simulate-job: error: ToolBit "Slitting Saw" (tool '
+                      'controller "TC: Drill", T3): shape "slittingsaw" has '
+                      "no swarf tool", err)
+        self.assertFalse(os.path.exists(os.path.join(out, "stats.json")))
+
+    def test_missing_swarf_is_a_clear_error(self):
+        r = subprocess.run(
+            [sys.executable, SIMULATE_JOB,
+             os.path.join(self.work, "job.FCStd"), "--out",
+             os.path.join(self.work, "noswarf"), "--swarf", "no-such-swarf"],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, timeout=120)
+        self.assertEqual(r.returncode, 1)
+        self.assertIn("the swarf CLI 'no-such-swarf' is not on PATH",
+                      r.stderr.decode())
+
+
+def main():
+    global ARGS
+    p = argparse.ArgumentParser()
+    p.add_argument("--swarf", required=True)
+    p.add_argument("--swarfd", required=True)
+    p.add_argument("--work")
+    ARGS, rest = p.parse_known_args()
+    ARGS.swarf = os.path.abspath(ARGS.swarf)
+    ARGS.swarfd = os.path.abspath(ARGS.swarfd)
+    if shutil.which("freecadcmd") is None:
+        print("SKIP: freecadcmd is not installed (make test-freecad "
+              "installs Debian's freecad and runs this)")
+        return 77
+    prog = unittest.main(argv=[sys.argv[0]] + rest, exit=False, verbosity=2)
+    return 0 if prog.result.wasSuccessful() else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
