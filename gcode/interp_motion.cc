@@ -262,31 +262,11 @@ absl::Status Interpreter::Arc(const Block& b) {
     cx = arc_absolute_ ? i + Offset(p0) : x0 + i;
     cy = arc_absolute_ ? j + Offset(p1) : y0 + j;
   }
-  const double r0 = std::hypot(x0 - cx, y0 - cy);
-  const double r1 = std::hypot(x1 - cx, y1 - cy);
-  if (!(r0 >= kRadiusTolerance && r1 >= kRadiusTolerance)) {
-    return Err(absl::StrCat(gname, " arc has a zero radius (", r0,
-                            " mm at the start, ", r1, " mm at the end)"));
-  }
-  const double err = std::fabs(r1 - r0);
-  if (err > kSpiralAbsMax ||
-      (err > kSpiralAbsFloor && err > kSpiralRel * std::max(r0, r1))) {
-    return Err(absl::StrCat(gname, " arc: the radius to the end (", r1,
-                            " mm) differs from the radius to the start (", r0,
-                            " mm) by ", err, " mm"));
-  }
-  const double a0 = std::atan2(y0 - cy, x0 - cx);
-  const double a1 = std::atan2(y1 - cy, x1 - cx);
-  // Signed sweep: G2 clockwise (negative), G3 counterclockwise; equal
-  // angles (start == end) make a full circle; P adds whole turns.
-  double sweep = a1 - a0;
-  if (cw) {
-    if (sweep >= 0) sweep -= 2 * kPi;
-    sweep -= 2 * kPi * static_cast<double>(turns - 1);
-  } else {
-    if (sweep <= 0) sweep += 2 * kPi;
-    sweep += 2 * kPi * static_cast<double>(turns - 1);
-  }
+  auto made = CentreArc({pos_[0], pos_[1], pos_[2]}, {end[0], end[1], end[2]},
+                        cx, cy, plane_, cw, turns, gname);
+  if (!made.ok()) return Err(std::string(made.status().message()));
+  const double r0 = made->r0, r1 = made->r1, a0 = made->a0;
+  const double sweep = made->sweep;
   if (comp_side_ != 0) {
     CompSeg seg;
     seg.arc = true;
@@ -523,3 +503,60 @@ absl::Status Interpreter::Cycle(const Block& b, uint32_t* used) {
 }
 
 }  // namespace swarf::gcode::interp
+
+namespace swarf::gcode {
+
+absl::StatusOr<CanonArc> CentreArc(const Vec3& start, const Vec3& end,
+                                   double cx, double cy, int plane, bool cw,
+                                   int64_t turns, std::string_view name) {
+  using interp::kPi;
+  int p0 = 0, p1 = 1, p2 = 2;
+  if (plane == 18) {
+    p0 = 2, p1 = 0, p2 = 1;
+  } else if (plane == 19) {
+    p0 = 1, p1 = 2, p2 = 0;
+  }
+  const double s[3] = {start.x, start.y, start.z};
+  const double e[3] = {end.x, end.y, end.z};
+  const double x0 = s[p0], y0 = s[p1];
+  const double x1 = e[p0], y1 = e[p1];
+  const std::string gname(name);
+  const double r0 = std::hypot(x0 - cx, y0 - cy);
+  const double r1 = std::hypot(x1 - cx, y1 - cy);
+  if (!(r0 >= interp::kRadiusTolerance && r1 >= interp::kRadiusTolerance)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(gname, " arc has a zero radius (", r0,
+                     " mm at the start, ", r1, " mm at the end)"));
+  }
+  const double err = std::fabs(r1 - r0);
+  if (err > interp::kSpiralAbsMax ||
+      (err > interp::kSpiralAbsFloor &&
+       err > interp::kSpiralRel * std::max(r0, r1))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        gname, " arc: the radius to the end (", r1,
+        " mm) differs from the radius to the start (", r0, " mm) by ", err,
+        " mm"));
+  }
+  const double a0 = std::atan2(y0 - cy, x0 - cx);
+  const double a1 = std::atan2(y1 - cy, x1 - cx);
+  // Signed sweep: G2 clockwise (negative), G3 counterclockwise; equal
+  // angles (start == end) make a full circle; P adds whole turns.
+  double sweep = a1 - a0;
+  if (cw) {
+    if (sweep >= 0) sweep -= 2 * kPi;
+    sweep -= 2 * kPi * static_cast<double>(turns - 1);
+  } else {
+    if (sweep <= 0) sweep += 2 * kPi;
+    sweep += 2 * kPi * static_cast<double>(turns - 1);
+  }
+  CanonArc arc;
+  arc.end = end;
+  arc.p0 = p0, arc.p1 = p1, arc.p2 = p2;
+  arc.cx = cx, arc.cy = cy;
+  arc.r0 = r0, arc.r1 = r1;
+  arc.a0 = a0, arc.sweep = sweep;
+  arc.z0 = s[p2];
+  return arc;
+}
+
+}  // namespace swarf::gcode

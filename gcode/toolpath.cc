@@ -98,6 +98,26 @@ absl::Status ToolpathBuilder::ArcFeed(const CanonArc& a) {
   return Straight(m);
 }
 
+absl::StatusOr<std::vector<Vec3>> ChordArc(const Vec3& start,
+                                           const CanonArc& arc,
+                                           double arc_tolerance,
+                                           int64_t max_points) {
+  // Through the builder itself, from the start, so that the chords (and
+  // the dropping of a repeated point) are the CLI's to the bit.
+  Toolpath path;
+  ToolpathPoint first;
+  first.position = start;
+  path.Append(first);
+  ToolpathBuilder builder(&path, arc_tolerance, max_points + 1);
+  SWARF_RETURN_IF_ERROR(builder.ArcFeed(arc));
+  std::vector<Vec3> out;
+  out.reserve(path.points().size() - 1);
+  for (size_t k = 1; k < path.points().size(); ++k) {
+    out.push_back(path.points()[k].position);
+  }
+  return out;
+}
+
 void Toolpath::Append(const ToolpathPoint& p) { Append(p, -1); }
 
 void Toolpath::Append(const ToolpathPoint& p, float feed) {

@@ -257,6 +257,28 @@ class ToolpathBuilder final : public CanonSink {
   int64_t max_points_;
 };
 
+// An arc given by its centre, as G2/G3 with I/J/K give it: from `start` to
+// `end` about the centre (cx, cy) in the plane `plane` (17 XY, 18 XZ, 19
+// YZ, as G17/G18/G19: cx, cy are the plane's first and second axes, X/Y,
+// Z/X, Y/Z), clockwise (G2) or not, `turns` >= 1 (P). The interpreter's
+// checks: a radius under 0.00127 mm is a zero-radius arc, and the radii to
+// start and end may differ only as the interpreter accepts (then it is a
+// spiral). Errors are InvalidArgument with a plain message that names the
+// arc as `name` (the interpreter passes "G2"/"G3"); the caller adds where.
+// The one construction of a centre arc: the interpreter's I/J/K arcs and
+// the API's arcs (server/session.cc) both use it.
+absl::StatusOr<CanonArc> CentreArc(const Vec3& start, const Vec3& end,
+                                   double cx, double cy, int plane, bool cw,
+                                   int64_t turns, std::string_view name);
+
+// The chords of an arc from `start` exactly as ToolpathBuilder makes them
+// (the points after the start, the last the arc's end bit for bit); more
+// than max_points is InvalidArgument.
+absl::StatusOr<std::vector<Vec3>> ChordArc(const Vec3& start,
+                                           const CanonArc& arc,
+                                           double arc_tolerance,
+                                           int64_t max_points);
+
 // Parses a G-code program (rules above). Tool numbers: the T of the last
 // M6, or, before any M6, the last T word (programs that select tools with T
 // alone); 0 when none; T above 65535 is an error. InvalidArgument

@@ -169,6 +169,41 @@ void ToolToProto(const ToolSpec& t, pb::Tool* out) {
   }
 }
 
+absl::StatusOr<std::vector<ArcSpec>> ArcsFromProto(const pb::MoveBatch& b) {
+  std::vector<ArcSpec> arcs;
+  arcs.reserve(b.arcs_size());
+  for (int k = 0; k < b.arcs_size(); ++k) {
+    const pb::Arc& a = b.arcs(k);
+    if (!a.has_centre()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("moves.arcs[", k, "].centre is required"));
+    }
+    ArcSpec s;
+    s.end_index = a.end_index();
+    s.centre = {a.centre().x(), a.centre().y(), a.centre().z()};
+    switch (a.plane()) {
+      case pb::ARC_PLANE_UNSPECIFIED:
+      case pb::ARC_PLANE_XY:
+        s.plane = 17;
+        break;
+      case pb::ARC_PLANE_XZ:
+        s.plane = 18;
+        break;
+      case pb::ARC_PLANE_YZ:
+        s.plane = 19;
+        break;
+      default:
+        return absl::InvalidArgumentError(absl::StrCat(
+            "moves.arcs[", k, "].plane ", a.plane(),
+            " is not an ArcPlane (1 XY, 2 XZ, 3 YZ)"));
+    }
+    s.clockwise = a.clockwise();
+    s.turns = a.turns();
+    arcs.push_back(s);
+  }
+  return arcs;
+}
+
 absl::StatusOr<SessionSpec> SpecFromRequest(
     const pb::CreateSessionRequest& req) {
   SessionSpec spec;
@@ -203,6 +238,15 @@ absl::StatusOr<SessionSpec> SpecFromRequest(
   auto scheme = SchemeFromProto(req.scheme(), "scheme");
   if (!scheme.ok()) return scheme.status();
   spec.scheme = *scheme;
+  if (req.has_arc_tolerance()) {
+    spec.arc_tolerance = req.arc_tolerance().value();
+    if (!(spec.arc_tolerance >= kMinArcTolerance &&
+          spec.arc_tolerance <= kMaxArcTolerance)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "arc_tolerance must be in [", kMinArcTolerance, ", ",
+          kMaxArcTolerance, "] mm, got ", spec.arc_tolerance));
+    }
+  }
   for (int k = 0; k < req.tools_size(); ++k) {
     auto tool = ToolFromProto(req.tools(k), k);
     if (!tool.ok()) return tool.status();
@@ -244,6 +288,7 @@ void FillSession(const Session& s, const std::string& replica,
   out->set_replica(replica);
   out->set_recovery(s.recovery());
   out->set_snapshot_seq(state.snapshot_seq);
+  out->set_arc_tolerance(spec.arc_tolerance);
 }
 
 absl::StatusOr<Rect> RectFromProto(const pb::Rect& r,

@@ -39,6 +39,11 @@ absl::StatusOr<ToolSpec> ToolFromProto(const pb::Tool& t, int k);
 // is written exactly as before cutters had kinds, so old journals restore).
 void ToolToProto(const ToolSpec& t, pb::Tool* out);
 
+// A batch's arcs (MoveBatch.arcs): InvalidArgument naming
+// "moves.arcs[k].<field>" for a missing centre or an unknown plane (the
+// rest is checked by ChordBatch, which knows the points).
+absl::StatusOr<std::vector<ArcSpec>> ArcsFromProto(const pb::MoveBatch& b);
+
 absl::StatusOr<SessionSpec> SpecFromRequest(
     const pb::CreateSessionRequest& req);
 void FillSession(const Session& s, const std::string& replica,

@@ -745,6 +745,9 @@ class SimulateReactor
     options.reposition = b.reposition();
     options.rapid = b.rapid();
     options.report_cuts = b.report_cuts();
+    auto arcs = ArcsFromProto(b);
+    if (!arcs.ok()) return Error(b.seq(), arcs.status(), out);
+    options.arcs = *arcs;
     auto r = session_->ApplyBatch(
         b.seq(), b.tool_id(), std::span<const double>(b.xyz().data(), b.xyz_size()),
         registry_->limits().max_batch_points, options);

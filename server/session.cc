@@ -4,6 +4,7 @@
 #include <set>
 
 #include "absl/strings/str_cat.h"
+#include "gcode/toolpath.h"
 #include "server/convert.h"
 #include "design/design_mesh.h"
 #include "server/snapshot.h"
@@ -11,8 +12,93 @@
 
 namespace swarf::server {
 
+absl::StatusOr<std::vector<double>> ChordBatch(std::span<const double> xyz,
+                                               std::span<const ArcSpec> arcs,
+                                               double arc_tolerance,
+                                               int64_t max_points) {
+  const int64_t points = static_cast<int64_t>(xyz.size() / 3);
+  auto point = [&](int64_t p) {
+    return Vec3{xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]};
+  };
+  // Checked whole before anything is chorded: the error names the first bad
+  // arc, whatever the chords of the others would cost.
+  for (size_t k = 0; k < arcs.size(); ++k) {
+    const ArcSpec& a = arcs[k];
+    const std::string field = absl::StrCat("moves.arcs[", k, "]");
+    if (a.end_index < 1 || a.end_index >= points) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          field, ".end_index ", a.end_index, " is out of range: an arc starts "
+          "at the batch's previous point, so it ends at a point in [1, ",
+          points - 1, "]"));
+    }
+    if (k > 0 && a.end_index <= arcs[k - 1].end_index) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          field, ".end_index ", a.end_index, " is not after moves.arcs[",
+          k - 1, "].end_index ", arcs[k - 1].end_index,
+          ": arcs ascend, one per point"));
+    }
+    if (!(std::fabs(a.centre.x) <= kMaxCoordinate &&
+          std::fabs(a.centre.y) <= kMaxCoordinate &&
+          std::fabs(a.centre.z) <= kMaxCoordinate)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          field, ".centre must be finite and within +-", kMaxCoordinate,
+          " mm, got (", a.centre.x, ", ", a.centre.y, ", ", a.centre.z, ")"));
+    }
+    if (a.turns < 1 || a.turns > 10000) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          field, ".turns must be in [1, 10000] (1: less than a full turn), "
+          "got ", a.turns));
+    }
+  }
+  std::vector<double> out;
+  out.reserve(xyz.size() + 3 * 64 * arcs.size());
+  int64_t next = 0;  // the first point not copied yet
+  for (size_t k = 0; k < arcs.size(); ++k) {
+    const ArcSpec& a = arcs[k];
+    const std::string field = absl::StrCat("moves.arcs[", k, "]");
+    out.insert(out.end(), xyz.begin() + 3 * next,
+               xyz.begin() + 3 * a.end_index);
+    const double c[3] = {a.centre.x, a.centre.y, a.centre.z};
+    const int p0 = a.plane == 18 ? 2 : a.plane == 19 ? 1 : 0;
+    const int p1 = a.plane == 18 ? 0 : a.plane == 19 ? 2 : 1;
+    auto arc = gcode::CentreArc(point(a.end_index - 1), point(a.end_index),
+                                c[p0], c[p1], a.plane, a.clockwise, a.turns,
+                                a.clockwise ? "a clockwise" : "a counterclockwise");
+    if (!arc.ok()) {
+      return absl::InvalidArgumentError(
+          absl::StrCat(field, ".centre: ", arc.status().message()));
+    }
+    const int64_t room =
+        max_points - static_cast<int64_t>(out.size() / 3) -
+        (points - a.end_index - 1);
+    auto chords = gcode::ChordArc(point(a.end_index - 1), *arc, arc_tolerance,
+                                  std::max<int64_t>(room, 0));
+    if (!chords.ok()) {
+      // The chord count, or the arc bulging past +-1e9 mm.
+      return absl::InvalidArgumentError(absl::StrCat(
+          field, ": ", chords.status().message(), " (chorded within ",
+          arc_tolerance, " mm, the batch may hold ", max_points,
+          " points, chords included)"));
+    }
+    for (const Vec3& v : *chords) {
+      out.push_back(v.x);
+      out.push_back(v.y);
+      out.push_back(v.z);
+    }
+    next = a.end_index + 1;
+  }
+  out.insert(out.end(), xyz.begin() + 3 * next, xyz.end());
+  return out;
+}
+
 absl::Status Session::ValidateSpec(const SessionSpec& spec) {
   if (absl::Status s = ValidateStock(spec.stock); !s.ok()) return s;
+  if (!(spec.arc_tolerance >= kMinArcTolerance &&
+        spec.arc_tolerance <= kMaxArcTolerance)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "arc_tolerance must be in [", kMinArcTolerance, ", ",
+        kMaxArcTolerance, "] mm, got ", spec.arc_tolerance));
+  }
   if (spec.tools.empty()) {
     return absl::InvalidArgumentError("tools: at least one tool is needed");
   }
@@ -57,6 +143,10 @@ std::string Session::Definition(const SessionSpec& spec) {
   r.set_ny(spec.stock.ny);
   r.set_scheme(SchemeToProto(spec.scheme));
   for (const ToolSpec& t : spec.tools) ToolToProto(t, r.add_tools());
+  // Only when not the default: older servers' definitions stay as they were.
+  if (spec.arc_tolerance != kDefaultArcTolerance) {
+    r.mutable_arc_tolerance()->set_value(spec.arc_tolerance);
+  }
   return r.SerializeAsString();
 }
 
@@ -402,6 +492,15 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
           ") must be finite and within +-", kMaxCoordinate, " mm, got ",
           xyz[k]));
     }
+  }
+  // Arcs become their chords here, outside the lock: from then on the batch
+  // is a polyline like any other (journal, digest, replay).
+  std::vector<double> chorded;
+  if (!options.arcs.empty()) {
+    auto c = ChordBatch(xyz, options.arcs, spec_.arc_tolerance, max_points);
+    if (!c.ok()) return c.status();
+    chorded = *std::move(c);
+    xyz = chorded;
   }
 
   Touch();

@@ -29,6 +29,21 @@
 
 namespace swarf::server {
 
+inline constexpr double kDefaultArcTolerance = 0.001;
+inline constexpr double kMinArcTolerance = 1e-6;
+inline constexpr double kMaxArcTolerance = 10;
+
+// An arc of a batch (the proto's Arc): the move ending at point end_index
+// (>= 1) is an arc from point end_index - 1 about the centre's in-plane
+// coordinates.
+struct ArcSpec {
+  int64_t end_index = 0;
+  Vec3 centre;
+  int plane = 17;  // 17 XY, 18 XZ, 19 YZ
+  bool clockwise = false;
+  int64_t turns = 1;
+};
+
 struct ToolSpec {
   int32_t id = 0;
   Cutter cutter;  // valid per ValidateTool (server/convert.h)
@@ -42,6 +57,9 @@ struct SessionSpec {
   StockSpec stock;
   SchemeKind scheme = SchemeKind::kGuarded;
   std::vector<ToolSpec> tools;
+  // Chord tolerance of the batches' arcs (mm), in [kMinArcTolerance,
+  // kMaxArcTolerance]; `swarf run`'s default.
+  double arc_tolerance = kDefaultArcTolerance;
 };
 
 // What a batch's move did that can crash or break the tool (Ack.safety).
@@ -59,7 +77,20 @@ struct BatchOptions {
   bool reposition = false;  // the first point only places the tool
   bool rapid = false;       // rapids: any material removed is reported
   bool report_cuts = false;  // BatchResult::removed_mm3
+  // Arcs of the batch, chorded within the session's arc tolerance before
+  // anything else (ChordBatch): the batch is then its chorded polyline.
+  std::span<const ArcSpec> arcs;
 };
+
+// The batch's polyline with its arcs chorded (gcode::CentreArc and
+// gcode::ChordArc, as `swarf run` chords a program's arcs): xyz with the
+// chords of each arc inserted before its end point. InvalidArgument naming
+// "moves.arcs[k]" and the field for a bad arc, or more than max_points
+// points after chording.
+absl::StatusOr<std::vector<double>> ChordBatch(std::span<const double> xyz,
+                                               std::span<const ArcSpec> arcs,
+                                               double arc_tolerance,
+                                               int64_t max_points);
 
 // What a batch did, for its Ack.
 struct BatchResult {
@@ -181,6 +212,7 @@ class Session {
   absl::StatusOr<DesignUploadState> AddDesignChunk(const DesignChunk& chunk);
   // The current design (null: none). Thread-safe.
   std::shared_ptr<const design::PlacedDesign> design() const;
+
 
   // Runs fn(const Workpiece&) under the shared lock and returns its result
   // (reloading an evicted session first).

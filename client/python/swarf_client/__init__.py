@@ -12,11 +12,12 @@
 Tools: a number is a ball-end radius; Ball, Flat, BullNose, Cone and
 TaperedBall describe every cutter (radii and half angles, as the API).
 The part as designed: s.set_design("part.stl") then s.deviation()
-(gouge and excess, the moves that gouge). Millimetres and degrees throughout; moves are tool-TIP positions. Errors
+(gouge and excess, the moves that gouge). Arcs: s.send(tips,
+arcs=[Arc(end, centre, clockwise=True)]), chorded by the server. Millimetres and degrees throughout; moves are tool-TIP positions. Errors
 are SwarfError carrying the gRPC status code.
 """
 
-from .client import (TILE_SIZE, Ball, BullNose, Client, Cone, Cutter,
+from .client import (TILE_SIZE, Arc, Ball, BullNose, Client, Cone, Cutter,
                      DesignInfo, Deviation, DeviationMove, ErrorStats, Flat,
                      Heights, Jets, Mark, ProbeResult, SendResult, Session,
                      SwarfError, TaperedBall)
@@ -24,4 +25,4 @@ from .client import (TILE_SIZE, Ball, BullNose, Client, Cone, Cutter,
 __all__ = ["Client", "Session", "SwarfError", "SendResult", "Heights",
            "Jets", "ErrorStats", "Mark", "ProbeResult", "TILE_SIZE", "Ball",
            "Flat", "BullNose", "Cone", "TaperedBall", "Cutter", "DesignInfo",
-           "Deviation", "DeviationMove"]
+           "Deviation", "DeviationMove", "Arc"]

@@ -27,7 +27,7 @@ from ._proto import swarf_pb2_grpc as pb_grpc
 __all__ = [
     "Client", "Session", "SwarfError", "SendResult", "Heights", "Jets",
     "ErrorStats", "Mark", "ProbeResult", "TILE_SIZE", "Ball", "Flat",
-    "BullNose", "Cone", "TaperedBall", "Cutter",
+    "BullNose", "Cone", "TaperedBall", "Cutter", "Arc",
 ]
 
 TILE_SIZE = 64  # nodes per tile side (Session.tile_size)
@@ -170,6 +170,41 @@ def _from_request_error(e: Any) -> SwarfError:
     kind = pb.RequestKind.Name(e.kind).replace("REQUEST_KIND_", "").lower()
     return SwarfError(_CODES.get(e.code, grpc.StatusCode.UNKNOWN), e.message,
                       e.request_id, None if kind == "unspecified" else kind)
+
+
+_PLANES = {"xy": pb.ARC_PLANE_XY, "xz": pb.ARC_PLANE_XZ,
+           "yz": pb.ARC_PLANE_YZ}
+
+
+@dataclasses.dataclass(frozen=True)
+class Arc:
+    """An arc of Session.send: the move ending at tips[end] turns about
+    `centre` instead of going straight (G2/G3 with their centre).
+
+    end: index of the tip the arc ends at (>= 1: it starts at tips[end - 1]).
+    centre: (x, y, z) mm; the coordinate along the plane's axis is unused.
+    clockwise: G2 (seen from the axis' positive side); False: G3.
+    plane: "xy" (G17, about z), "xz" (G18, about y) or "yz" (G19, about x).
+    turns: turns begun (G2/G3's P), >= 1; a helix when the axis coordinate
+      of the end differs from the start's.
+    The server chords it within the session's arc_tolerance exactly as
+    `swarf run` chords a program's arcs; the chords are the moves counted.
+    """
+    end: int
+    centre: Tuple[float, float, float]
+    clockwise: bool = False
+    plane: str = "xy"
+    turns: int = 1
+
+    def _proto(self, end_index: int) -> Any:
+        if self.plane not in _PLANES:
+            raise SwarfError(grpc.StatusCode.INVALID_ARGUMENT,
+                             f"arc plane must be one of {sorted(_PLANES)}, "
+                             f"got {self.plane!r}")
+        x, y, z = (float(v) for v in self.centre)
+        return pb.Arc(end_index=end_index, centre=pb.Point3(x=x, y=y, z=z),
+                      plane=_PLANES[self.plane], clockwise=self.clockwise,
+                      turns=int(self.turns))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -416,6 +451,7 @@ class Client:
                        tools: Union[Mapping[int, Union[float, Cutter]],
                                     float, Cutter] = 1.0,
                        session_id: str = "",
+                       arc_tolerance: Optional[float] = None,
                        delete_on_exit: bool = False) -> "Session":
         """Creates a session.
 
@@ -429,6 +465,8 @@ class Client:
             Ball, Flat, BullNose, Cone or TaperedBall, or a number: a
             ball-end radius (mm).
           session_id: 1-64 of [A-Za-z0-9_-]; generated when empty.
+          arc_tolerance: chord tolerance of arcs (mm, [1e-6, 10]; default
+            0.001, as `swarf run`).
           delete_on_exit: the session's `with` block deletes it.
         Raises SwarfError (INVALID_ARGUMENT naming the field,
         ALREADY_EXISTS, RESOURCE_EXHAUSTED).
@@ -445,6 +483,8 @@ class Client:
             req.spacing = float(spacing)
         if nx is not None or ny is not None:
             req.nx, req.ny = int(nx or 0), int(ny or 0)
+        if arc_tolerance is not None:
+            req.arc_tolerance.value = float(arc_tolerance)
         if not isinstance(tools, Mapping):
             tools = {1: tools}
         for tool_id, cutter in tools.items():
@@ -485,10 +525,10 @@ class _Batch:
 
 
 def _batch(seq: int, tool_id: int, xyz: FloatArray, rapid: bool,
-           reposition: bool) -> _Batch:
+           reposition: bool, arcs: Sequence[bytes] = ()) -> _Batch:
     """A SimulateRequest of one MoveBatch, serialized straight from the
     array (the same bytes protobuf writes; about 10x faster for large
-    batches, and no Python objects per point)."""
+    batches, and no Python objects per point). `arcs`: serialized Arcs."""
     points = np.ascontiguousarray(xyz, dtype="<f8").tobytes()
     body = b"".join([
         b"\x08", _varint(seq),                          # seq = 1
@@ -496,7 +536,7 @@ def _batch(seq: int, tool_id: int, xyz: FloatArray, rapid: bool,
         b"\x1a", _varint(len(points)), points,           # xyz = 3, packed
         b"\x20\x01" if rapid else b"",                   # rapid = 4
         b"\x28\x01" if reposition else b"",              # reposition = 5
-    ])
+    ] + [b"\x3a" + _varint(len(a)) + a for a in arcs])  # arcs = 7
     return _Batch(seq, b"\x0a" + _varint(len(body)) + body)  # moves = 1
 
 
@@ -617,6 +657,7 @@ class Session:
 
     def send(self, tips: ArrayLike, *, tool: Optional[int] = None,
              reposition: bool = False, rapid: bool = False,
+             arcs: Sequence[Arc] = (),
              batch_points: int = DEFAULT_BATCH_POINTS) -> SendResult:
         """Simulates a polyline of tool-tip positions.
 
@@ -627,6 +668,9 @@ class Session:
           tool: the tool id (default: the session's first tool).
           reposition: the first point only places the tool (no move to it).
           rapid: the moves are rapids (G0); simulated alike.
+          arcs: Arc(end, centre, ...) per move that is an arc (end >= 1,
+            ascending): the server chords them, and the chords count as
+            moves (moves_applied, owners). Batches never start with an arc.
           batch_points: points per MoveBatch (the server's limit is
             --max_batch_points; the default keeps messages under 1 MB).
         Returns when every batch is acknowledged (applied, and durable on a
@@ -647,10 +691,32 @@ class Session:
         if batch_points < 1:
             raise ValueError("batch_points must be at least 1")
         tool_id = tool if tool is not None else self._info.tools[0].id
+        by_end = {}
+        for a in arcs:
+            if not 1 <= a.end < len(xyz) or a.end in by_end:
+                raise SwarfError(grpc.StatusCode.INVALID_ARGUMENT,
+                                 f"arc end {a.end} must be a tip index in "
+                                 f"[1, {len(xyz) - 1}], one arc per tip")
+            by_end[a.end] = a
+        # Batch boundaries, moved back off a tip an arc ends at (an arc
+        # starts at its batch's previous point).
+        starts = [0]
+        while starts[-1] + batch_points < len(xyz):
+            b = starts[-1] + batch_points
+            while b in by_end and b > starts[-1] + 1:
+                b -= 1
+            while b in by_end:
+                b += 1
+            if b >= len(xyz):
+                break
+            starts.append(b)
+        ends = starts[1:] + [len(xyz)]
         batches = [
-            _batch(self._next_seq + k, tool_id, xyz[start:start + batch_points],
-                   rapid, reposition and start == 0)
-            for k, start in enumerate(range(0, len(xyz), batch_points))]
+            _batch(self._next_seq + k, tool_id, xyz[lo:hi], rapid,
+                   reposition and lo == 0,
+                   [by_end[i]._proto(i - lo).SerializeToString()
+                    for i in sorted(by_end) if lo <= i < hi])
+            for k, (lo, hi) in enumerate(zip(starts, ends))]
         return self._send_batches(batches)
 
     def _open(self) -> _Stream:
