@@ -93,3 +93,18 @@ test-linuxcnc: $(BUILD)/build.ninja
 	scripts/linuxcnc-diff --swarf $(BUILD)/bin/swarf \
 	  --expect tests/linuxcnc/expected.txt \
 	  /usr/share/linuxcnc/ncfiles/*.ngc tests/linuxcnc/*.ngc
+
+# The FreeCAD add-on (client/freecad) headless: FreeCAD builds a Job, the
+# add-on simulates it, checked against `swarf run` bit for bit
+# (tests/freecad; the ctest label "freecad", also run by `make test` where
+# freecadcmd is installed). Installs Debian's freecad when freecadcmd is
+# missing (large: not in scripts/install-deps).
+.PHONY: test-freecad
+test-freecad: $(BUILD)/build.ninja
+	@command -v freecadcmd >/dev/null || { \
+	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO apt-get update && \
+	  DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y \
+	    --no-install-recommends freecad; }
+	cmake --build $(BUILD) -j $(JOBS) --target swarf swarfd
+	cd $(BUILD) && ctest --output-on-failure -L '^freecad$$'
