@@ -37,24 +37,35 @@ def height_colors(points):
             _ramp((z - lo) / span if span > 0 else 1.0) for z in zs]
 
 
-def deviation_values(points, design):
+def deviation_values(points, design, spacing, tolerance):
     """z - z_design for each point (None where no design is above it or at
     the mesh's floor), z_design the design mesh's top envelope (its first
-    face on a downward ray)."""
+    face on a downward ray). On a wall the vertical figure is meaningless
+    (the wall's foot lies under the design's top): a point that would be a
+    gouge takes the smallest deviation found one grid spacing around it,
+    0 where the design ends there (the wall stands where it should)."""
     zs = [p.z for p in points]
     base = min(zs) if zs else 0.0
     top = design.BoundBox.ZMax + 1.0
+
+    def dz(x, y, z):
+        hit = design.nearestFacetOnRay((x, y, top), (0.0, 0.0, -1.0))
+        return z - max(v[2] for v in hit.values()) if hit else None
+
     out = []
     for p in points:
         if p.z <= base + _BASE_EPS:
             out.append(None)
             continue
-        hit = design.nearestFacetOnRay((p.x, p.y, top), (0.0, 0.0, -1.0))
-        if not hit:
-            out.append(None)
-            continue
-        zd = max(v[2] for v in hit.values())
-        out.append(p.z - zd)
+        v = dz(p.x, p.y, p.z)
+        if v is not None and v < -tolerance:
+            for ox, oy in ((spacing, 0), (-spacing, 0), (0, spacing),
+                           (0, -spacing)):
+                w = dz(p.x + ox, p.y + oy, p.z)
+                w = 0.0 if w is None else w
+                if abs(w) < abs(v):
+                    v = w
+        out.append(v)
     return out
 
 

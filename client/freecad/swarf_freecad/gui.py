@@ -105,11 +105,12 @@ class SimulateCommand:
         vo = getattr(result.mesh, "ViewObject", None)
         if vo is not None and hasattr(vo, "Coloring"):
             vo.Coloring = True
-        if getattr(job, "ViewObject", None) is not None:
-            # The surface is easier to read without the Job's stock over it.
-            stock = getattr(job, "Stock", None)
-            if stock is not None and stock.ViewObject is not None:
-                stock.ViewObject.Visibility = False
+        # The surface is hidden under the Job's stock and model: hide them
+        # (the Job's own objects, not the user's bodies).
+        stock = getattr(job, "Stock", None)
+        for obj in [stock] + list(getattr(job.Model, "Group", [])):
+            if obj is not None and getattr(obj, "ViewObject", None):
+                obj.ViewObject.Visibility = False
         report = result.report + "swarf's files: %s\n" % out
         if result.stats.get("deviation", {}).get("ok") is False or \
                 not result.stats.get("safety", {}).get("ok", True):

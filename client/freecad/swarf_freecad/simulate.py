@@ -163,9 +163,9 @@ def prepare(job, out_dir, options):
     return program, table, design, lines
 
 
-# Deviation colouring casts a ray per vertex (about 65 us each on 0.20);
-# bigger meshes are coloured by height.
-MAX_DEVIATION_POINTS = 300000
+# Deviation colouring casts a ray per vertex (about 65 us each on 0.20, five
+# where it finds a gouge); bigger meshes are coloured by height.
+MAX_DEVIATION_POINTS = 200000
 
 
 def color_mesh(obj, out_dir, stats, color_by):
@@ -179,8 +179,12 @@ def color_mesh(obj, out_dir, stats, color_by):
     how = "height"
     if (color_by == "deviation" and dev and os.path.exists(design) and
             len(points) <= MAX_DEVIATION_POINTS):
-        values = colors.deviation_values(points, Mesh.Mesh(design))
-        cols = colors.deviation_colors(values, dev.get("tolerance", 0.01),
+        st = stats["stock"]
+        spacing = (st["x1"] - st["x0"]) / st["nx"]
+        tolerance = dev.get("tolerance", 0.01)
+        values = colors.deviation_values(points, Mesh.Mesh(design), spacing,
+                                         tolerance)
+        cols = colors.deviation_colors(values, tolerance,
                                        dev.get("allowance", 0.0))
         how = "deviation"
     else:
