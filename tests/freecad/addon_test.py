@@ -16,6 +16,7 @@ import struct
 import subprocess
 import sys
 import tempfile
+import time
 import unittest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -300,6 +301,61 @@ class AddonTest(unittest.TestCase):
         self.assertEqual(r.returncode, 1)
         self.assertIn("the swarf CLI 'no-such-swarf' is not on PATH",
                       r.stderr.decode())
+
+
+class RunnerTest(unittest.TestCase):
+    """swarf_freecad.runner without FreeCAD: progress and cancel."""
+
+    @classmethod
+    def setUpClass(cls):
+        sys.path.insert(0, os.path.join(ROOT, "client", "freecad"))
+        from swarf_freecad import runner
+        cls.runner = runner
+        cls.work = tempfile.mkdtemp(prefix="swarf-runner-")
+
+    def test_progress_on_a_terminal(self):
+        """With a pty swarf draws its bar; the percentages rise to 100."""
+        seen = []
+        rc, out = self.runner.run(
+            [ARGS.swarf, "run", os.path.join(ROOT, "examples", "relief.nc"),
+             "--tool", "ball:d=2", "--stock", "0,0,60,60,0", "--spacing",
+             "0.5", "--batch", "2000", "--out",
+             os.path.join(self.work, "relief")],
+            progress=seen.append, use_pty=True)
+        self.assertEqual(rc, 0, out)
+        self.assertEqual(seen[-1], 100)
+        self.assertLess(seen[0], 100)
+        self.assertEqual(seen, sorted(seen))
+        self.assertIn("ETA", out)  # the terminal's bar, not quarter lines
+        self.assertIn("moves simulated", out)
+
+    def test_cancel_kills_the_process_group(self):
+        pids = os.path.join(self.work, "pids")
+        fake = os.path.join(self.work, "slow")
+        with open(fake, "w") as f:
+            f.write("#!/bin/sh\nsleep 60 &\necho $$ $! > %s\n"
+                    "echo 'swarf: 25%% (1 of 4 moves, 0.00M moves/s)'\n"
+                    "wait\n" % pids)
+        os.chmod(fake, 0o755)
+        seen = []
+        with self.assertRaises(self.runner.Cancelled):
+            self.runner.run([fake], progress=seen.append,
+                            cancelled=lambda: seen == [25])
+        self.assertEqual(seen, [25])
+        with open(pids) as f:
+            for pid in f.read().split():
+                # SIGKILL is asynchronous: the grandchild (not waited for)
+                # dies within moments.
+                for _ in range(100):
+                    try:
+                        with open("/proc/%s/stat" % pid) as st:
+                            state = st.read().rsplit(")", 1)[1].split()[0]
+                    except FileNotFoundError:
+                        state = "gone"
+                    if state in ("gone", "Z"):
+                        break
+                    time.sleep(0.05)
+                self.assertIn(state, ("gone", "Z"), "process %s" % pid)
 
 
 def main():
