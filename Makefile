@@ -97,14 +97,14 @@ test-linuxcnc: $(BUILD)/build.ninja
 # The FreeCAD add-on (client/freecad) headless: FreeCAD builds a Job, the
 # add-on simulates it, checked against `swarf run` bit for bit
 # (tests/freecad; the ctest label "freecad", also run by `make test` where
-# freecadcmd is installed). Installs Debian's freecad when freecadcmd is
-# missing (large: not in scripts/install-deps).
+# freecadcmd is installed; the GUI test under Xvfb). Installs Debian's
+# freecad and xvfb when missing (large: not in scripts/install-deps).
 .PHONY: test-freecad
 test-freecad: $(BUILD)/build.ninja
-	@command -v freecadcmd >/dev/null || { \
+	@command -v freecadcmd >/dev/null && command -v xvfb-run >/dev/null || { \
 	  SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 	  $$SUDO apt-get update && \
 	  DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y \
-	    --no-install-recommends freecad; }
+	    --no-install-recommends freecad xvfb xauth; }
 	cmake --build $(BUILD) -j $(JOBS) --target swarf swarfd
 	cd $(BUILD) && ctest --output-on-failure -L '^freecad$$'
