@@ -67,7 +67,8 @@ fuzz: deps
 
 # The whole test suite built with ASan + UBSan (-O1, no recovery: any report
 # fails its test), but the headless-Chromium viewer tests: Chromium is not our
-# code and is slow under load; viewer_api_test covers the relay. Run by .ci/run after `make test`.
+# code and is slow under load; viewer_api_test covers the relay. Nor the
+# FreeCAD add-on's (Python in FreeCAD; `make test` runs them). Run by .ci/run after `make test`.
 $(ASAN_BUILD)/build.ninja:
 	cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
 	  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1" -DSWARF_SANITIZE=ON
@@ -76,7 +77,7 @@ test-sanitize: deps $(ASAN_BUILD)/build.ninja
 	cmake --build $(ASAN_BUILD) -j $(JOBS)
 	cd $(ASAN_BUILD) && UBSAN_OPTIONS=print_stacktrace=1 \
 	  LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp \
-	  ctest --output-on-failure --timeout 900 -j $(JOBS) -E '^ViewerBrowserTest'
+	  ctest --output-on-failure --timeout 900 -j $(JOBS) -E '^ViewerBrowserTest|^freecad_'
 
 # The differential test against LinuxCNC's own interpreter (issue 27):
 # rs274 (Debian's linuxcnc-uspace, installed here when missing: it is large,
