@@ -282,6 +282,82 @@ class AddonTest(unittest.TestCase):
         self.assertEqual(m["job"], "Job")
         self.assertGreater(m["volume"], 0)
 
+    def test_every_library_toolbit(self):
+        """Each ToolBit of FreeCAD's library as a table line (or the error
+        naming it), and swarf takes the table: a program cutting with every
+        tool reports each as the shape the catalogue describes."""
+        script = os.path.join(self.work, "bits.py")
+        result = os.path.join(self.work, "bits.json")
+        with open(script, "w") as f:
+            f.write(
+                "def main():\n"
+                "    import FreeCAD, glob, json, os, sys\n"
+                "    sys.path.insert(0, %r)\n"
+                "    from swarf_freecad import tools\n"
+                "    from PathScripts import PathToolBit, PathToolController\n"
+                "    FreeCAD.newDocument('bits')\n"
+                "    out = {}\n"
+                "    bits = os.path.join(FreeCAD.getResourceDir(), 'Mod',\n"
+                "                        'Path', 'Tools', 'Bit', '*.fctb')\n"
+                "    for n, path in enumerate(sorted(glob.glob(bits)), 1):\n"
+                "        bit = PathToolBit.Factory.CreateFrom(path, 'B%%d' %% n)\n"
+                "        tc = PathToolController.Create('TC%%d' %% n, bit, n)\n"
+                "        try:\n"
+                "            out[os.path.basename(path)] = tools.table_line(\n"
+                "                n, *tools.swarf_tool(tc))\n"
+                "        except tools.SwarfError as e:\n"
+                "            out[os.path.basename(path)] = 'error: %%s' %% e\n"
+                "    json.dump(out, open(%r, 'w'), indent=1)\n"
+                "main()\n" % (os.path.join(ROOT, "client", "freecad"),
+                               result))
+        freecadcmd(script, {})
+        with open(result) as f:
+            lines = json.load(f)
+        self.assertEqual(lines, {
+            "45degree_chamfer.fctb":
+                "T1 P1 D12.3323 ;vbit angle=45 tip=5 flute=6.35 shank=6.35",
+            "5mm-thread-cutter.fctb":
+                'error: ToolBit "5mm-thread-cutter" (tool controller "TC2", '
+                'T2): shape "thread-mill" has no swarf tool (swarf simulates '
+                "endmill, ballend, bullnose, chamfer, v-bit, drill)",
+            "5mm_Drill.fctb": "T3 P3 D5 ;vbit angle=119",
+            "5mm_Endmill.fctb": "T4 P4 D5 ;flat flute=30 shank=3",
+            "60degree_Vbit.fctb":
+                "T5 P5 D10 ;vbit angle=60 tip=1 flute=1 shank=5",
+            "6mm_Ball_End.fctb": "T6 P6 D6 ;ball flute=40 shank=3",
+            "6mm_Bullnose.fctb": "T7 P7 D6 ;bull r=1.5 flute=40 shank=3",
+            "probe.fctb":
+                'error: ToolBit "Probe" (tool controller "TC8", T8): shape '
+                '"probe" has no swarf tool (swarf simulates endmill, ballend, '
+                "bullnose, chamfer, v-bit, drill)",
+            "slittingsaw.fctb":
+                'error: ToolBit "Slitting Saw" (tool controller "TC9", T9): '
+                'shape "slittingsaw" has no swarf tool (swarf simulates '
+                "endmill, ballend, bullnose, chamfer, v-bit, drill)",
+        })
+        table = os.path.join(self.work, "library.tbl")
+        program = os.path.join(self.work, "library.ngc")
+        used = [l for l in lines.values() if not l.startswith("error")]
+        with open(table, "w") as f:
+            f.write("".join(l + "\n" for l in used))
+        with open(program, "w") as f:
+            f.write("G21 G90\n")
+            for i, l in enumerate(used):
+                n = int(l.split()[0][1:])
+                f.write("T%d M6\nG0 X%d Y5 Z1\nG1 Z-0.5 F100\nG1 Y15\n"
+                        "G0 Z5\n" % (n, 15 * i + 8))
+            f.write("M2\n")
+        r = subprocess.run(
+            [ARGS.swarf, "run", program, "--tools", table, "--stock",
+             "0,0,%d,20,0" % (15 * len(used) + 10), "--spacing", "0.5",
+             "--json"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+            timeout=60)
+        self.assertEqual(r.returncode, 0, r.stderr.decode())
+        self.assertEqual(json.loads(r.stdout)["tools"], {
+            "1": "vbit d=12.3323 angle=45 tip=5", "3": "vbit d=5 angle=119",
+            "4": "flat d=5", "5": "vbit d=10 angle=60 tip=1",
+            "6": "ball d=6", "7": "bull d=6 r=1.5"})
+
     def test_unknown_toolbit_shape_is_a_clear_error(self):
         out = os.path.join(self.work, "bad")
         r = self.simulate_job("bad.FCStd", "--out", out, "--embedded")

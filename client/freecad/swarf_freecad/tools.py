@@ -34,7 +34,8 @@ def shape_name(bit):
     name = getattr(bit, "ShapeName", "") or ""
     if not name:
         name = os.path.splitext(os.path.basename(getattr(bit, "BitShape", "") or ""))[0]
-    return name.lower()
+    # 0.20's ShapeName is the file's name with "_" for "-" (v_bit).
+    return name.lower().replace("_", "-")
 
 
 def _describe(tc, bit):
