@@ -47,6 +47,7 @@ test-fresh:
 
 bench: deps build
 	$(BUILD)/bin/swarf_bench
+	scripts/bench-plate $(BUILD) 100
 
 clean:
 	rm -rf $(BUILD)

@@ -66,6 +66,9 @@ absl::StatusOr<std::unique_ptr<Connection>> Connection::Open(
     server::ServerOptions opt;
     opt.listen = "";  // in-process only
     opt.replica = "embedded";
+    if (options.embedded_limits.has_value()) {
+      opt.limits = *options.embedded_limits;
+    }
     auto srv = server::SwarfServer::Start(opt);
     if (!srv.ok()) return srv.status();
     c->embedded_ = *std::move(srv);

@@ -8,6 +8,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -31,6 +32,8 @@ struct ConnectionOptions {
   std::string tls_ca;    // PEM CA of the server's certificate: use TLS
   std::string tls_cert;  // PEM client certificate (with tls_key)
   std::string tls_key;
+  // The embedded server's limits (no --server); its defaults when unset.
+  std::optional<server::Limits> embedded_limits;
 };
 
 // The options of the CLI flags --token (or $SWARF_TOKEN), --tls-ca,

@@ -29,6 +29,7 @@
 #include "client/toolpath_flags.h"
 #include "gcode/toolpath.h"
 #include "server/convert.h"
+#include "server/session.h"
 #include "client/viewer/viewer.h"
 
 namespace swarf::cli {
@@ -65,9 +66,14 @@ const std::string kUsage =
     "                               workpiece, else the toolpath's XY\n"
     "                               bounds plus the tool radius, top 0\n"
     "  --spacing S | --mesh N       grid spacing (mm), or N elements along the\n"
-    "                               longer side; default 0.1 mm (coarser if\n"
-    "                               the grid would pass 16M nodes)\n"
-    "  --scheme guarded|taylor|zmap default guarded (README, \"The model\")\n"
+    "                               longer side, kept at any size when the\n"
+    "                               memory is there; default 0.1 mm (coarser\n"
+    "                               if the grid would pass 16M nodes)\n"
+    "  --max-memory MB              memory the run may take (MiB; default:\n"
+    "                               the machine's available memory); a grid\n"
+    "                               that cannot fit is refused at once\n"
+    "  --scheme guarded|exact|taylor|zmap\n"
+    "                               default guarded (README, \"The model\")\n"
     "  --arc-tolerance T            chord tolerance for arcs, default 0.001\n"
     "  --server HOST:PORT           a running swarfd (default: embedded)\n"
     "  --token T                    its bearer token (or $SWARF_TOKEN)\n"
@@ -198,6 +204,66 @@ absl::StatusOr<StockSpec> ChooseStock(const Args& args, const Toolpath& path,
   return s;
 }
 
+// Memory this machine can give a run (bytes): /proc/meminfo's MemAvailable
+// (free memory plus what the kernel can reclaim), else the free pages.
+int64_t AvailableMemoryBytes() {
+  std::ifstream in("/proc/meminfo");
+  std::string line;
+  while (std::getline(in, line)) {
+    long long kb = 0;
+    if (std::sscanf(line.c_str(), "MemAvailable: %lld kB", &kb) == 1) {
+      return int64_t{kb} * 1024;
+    }
+  }
+  return static_cast<int64_t>(sysconf(_SC_AVPHYS_PAGES)) *
+         sysconf(_SC_PAGESIZE);
+}
+
+// What a run on the embedded server needs at least (bytes): the session's
+// grid with every tile cut (as swarfd admits it: the scheme's bytes per
+// node and each tile's bookkeeping) and the moves it keeps (the scheme
+// rebuilds a node's surface from the move that cut it last).
+int64_t RunMemoryBytes(const StockSpec& stock, SchemeKind scheme,
+                       int64_t moves) {
+  return server::Session::EstimateMemoryBytes(stock, scheme) +
+         moves * static_cast<int64_t>(sizeof(Move));
+}
+
+// The memory a run may take (--max-memory MiB, else what is available);
+// InvalidArgument naming both when the grid and the moves cannot fit, so
+// that a job too large is refused before anything runs.
+absl::StatusOr<int64_t> CheckRunMemory(const Args& args,
+                                       const StockSpec& stock,
+                                       SchemeKind scheme, int64_t moves) {
+  int64_t allowed = 0;
+  std::string source;
+  if (args.Has("max-memory")) {
+    auto mb = args.GetInt("max-memory");
+    if (!mb.ok()) return mb.status();
+    if (**mb < 1) {
+      return absl::InvalidArgumentError("--max-memory must be >= 1 (MiB)");
+    }
+    allowed = int64_t{**mb} << 20;
+    source = absl::StrCat("--max-memory allows ", allowed >> 20, " MiB");
+  } else {
+    allowed = AvailableMemoryBytes();
+    source = absl::StrCat("this machine has ", allowed >> 20,
+                          " MiB available");
+  }
+  const int64_t needed = RunMemoryBytes(stock, scheme, moves);
+  if (needed > allowed) {
+    const int64_t nodes = (int64_t{stock.nx} + 1) * (stock.ny + 1);
+    return absl::ResourceExhaustedError(absl::StrFormat(
+        "the grid of %d x %d elements (%d nodes, %.4g mm) and %d moves need "
+        "at least %d MiB (%d bytes: every tile at %d bytes a node, and %d "
+        "bytes a move); %s; give a coarser --spacing or --mesh",
+        stock.nx, stock.ny, nodes, (stock.x1 - stock.x0) / stock.nx, moves,
+        (needed + (1 << 20) - 1) >> 20, needed,
+        GetScheme(scheme).bytes_per_node(), sizeof(Move), source));
+  }
+  return allowed;
+}
+
 // Runs of points with one tool and one kind of feed (the protocol's batches
 // carry one of each); a tool change starts a repositioning run.
 std::vector<PathRun> Runs(const Toolpath& path,
@@ -287,7 +353,7 @@ int RunCommand(const std::vector<std::string>& argv) {
                                    "stock",         "spacing",
                                    "mesh",   "scheme",        "arc-tolerance",
                                    "server", "out",           "subdivide",
-                                   "batch"};
+                                   "batch",  "max-memory", "interpret"};
   valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
   valued.insert(std::begin(kToolpathFlags), std::end(kToolpathFlags));
   valued.insert(std::begin(kOutputFlags), std::end(kOutputFlags));
@@ -473,6 +539,15 @@ int RunCommand(const std::vector<std::string>& argv) {
   // Session.
   auto copt = ConnectionOptionsFrom(*args);
   if (!copt.ok()) return fail(copt.status(), 2);
+  if (!args->Has("server")) {
+    // The embedded server holds this session only: no node cap, its memory
+    // what the machine (or --max-memory) gives.
+    auto allowed = CheckRunMemory(*args, *stock, scheme, path->move_count());
+    if (!allowed.ok()) return fail(allowed.status(), 2);
+    server::Limits limits;
+    limits.max_total_memory_bytes = *allowed;
+    copt->embedded_limits = limits;
+  }
   auto conn = Connection::Open(args->Get("server").value_or(""), *copt);
   if (!conn.ok()) return fail(conn.status(), 1);
   const std::string id = NewSessionId();

@@ -17,10 +17,15 @@ ABSL_FLAG(std::string, listen, "127.0.0.1:50051",
 ABSL_FLAG(int, worker_threads, 0,
           "threads running simulation work (0: one per hardware thread)");
 ABSL_FLAG(int, max_sessions, 256, "sessions this server holds at most");
-ABSL_FLAG(int64_t, max_nodes_per_session, int64_t{64} << 20,
-          "grid nodes per session at most");
+ABSL_FLAG(int64_t, max_session_memory_mb, 0,
+          "worst-case memory of one session, every tile of its grid cut "
+          "(MiB; 12 bytes a node; 0: only --max_total_memory_mb applies)");
 ABSL_FLAG(int64_t, max_total_memory_mb, 8192,
-          "worst-case memory of all sessions together (MiB)");
+          "worst-case memory of all sessions together (MiB; 12 bytes a "
+          "node of each session's grid)");
+// Replaced by the byte limits above: given, swarfd refuses to start.
+ABSL_FLAG(int64_t, max_nodes_per_session, 0,
+          "removed: use --max_session_memory_mb (12 bytes a node)");
 ABSL_FLAG(int64_t, max_batch_points, int64_t{1} << 20,
           "points (moves) per move batch at most");
 ABSL_FLAG(int, max_message_mb, 64, "largest gRPC message (MiB)");
@@ -96,10 +101,33 @@ int main(int argc, char** argv) {
   options.listen = absl::GetFlag(FLAGS_listen);
   options.worker_threads = absl::GetFlag(FLAGS_worker_threads);
   options.limits.max_sessions = absl::GetFlag(FLAGS_max_sessions);
-  options.limits.max_nodes_per_session =
-      absl::GetFlag(FLAGS_max_nodes_per_session);
-  options.limits.max_total_memory_bytes =
-      absl::GetFlag(FLAGS_max_total_memory_mb) << 20;
+  // The node cap is gone; a deployment still passing it is told what to use
+  // rather than silently getting another limit.
+  if (const int64_t nodes = absl::GetFlag(FLAGS_max_nodes_per_session);
+      nodes != 0) {
+    spdlog::error(
+        "--max_nodes_per_session was removed: limits are in bytes now; use "
+        "--max_session_memory_mb (12 bytes a node: {} nodes is about {} "
+        "MiB) and --max_total_memory_mb",
+        nodes, (nodes * 12 + (1 << 20) - 1) >> 20);
+    return 2;
+  }
+  const int64_t session_mb = absl::GetFlag(FLAGS_max_session_memory_mb);
+  const int64_t total_mb = absl::GetFlag(FLAGS_max_total_memory_mb);
+  // Past 2^43 MiB the bytes overflow int64.
+  constexpr int64_t kMaxMb = int64_t{1} << 43;
+  if (session_mb < 0 || session_mb > kMaxMb) {
+    spdlog::error("--max_session_memory_mb must be in [0, {}], got {}",
+                  kMaxMb, session_mb);
+    return 2;
+  }
+  if (total_mb < 1 || total_mb > kMaxMb) {
+    spdlog::error("--max_total_memory_mb must be in [1, {}], got {}", kMaxMb,
+                  total_mb);
+    return 2;
+  }
+  options.limits.max_session_memory_bytes = session_mb << 20;
+  options.limits.max_total_memory_bytes = total_mb << 20;
   options.limits.max_batch_points = absl::GetFlag(FLAGS_max_batch_points);
   options.limits.max_message_bytes = absl::GetFlag(FLAGS_max_message_mb) << 20;
   options.limits.max_design_bytes = absl::GetFlag(FLAGS_max_design_mb) << 20;

@@ -5,6 +5,7 @@
 #include <random>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "spdlog/spdlog.h"
 
 namespace swarf::server {
@@ -16,6 +17,11 @@ std::string NewId() {
   std::string id = "s-";
   for (int k = 0; k < 16; ++k) id += kChars[rng() % 36];
   return id;
+}
+
+// Bytes as MiB with one decimal, for messages.
+std::string MiB(int64_t bytes) {
+  return absl::StrFormat("%.1f", static_cast<double>(bytes) / (1 << 20));
 }
 
 }  // namespace
@@ -43,23 +49,32 @@ absl::StatusOr<std::shared_ptr<Session>> Registry::Create(SessionSpec spec) {
     return s;
   }
   // Bad input is reported as such even on a full server. A grid over the
-  // node limit is RESOURCE_EXHAUSTED even where it is also over the core's
-  // (which ValidateSpec calls bad input): the rest is validated first, with
-  // each element count that is valid on its own taken as 1.
+  // byte limits is RESOURCE_EXHAUSTED even where it is also over the core's
+  // node limit (which ValidateSpec calls bad input): the rest is validated
+  // first, with each element count that is valid on its own taken as 1.
   SessionSpec shape = spec;
   for (int32_t* n : {&shape.stock.nx, &shape.stock.ny}) {
     if (*n >= 1 && *n <= kMaxElementsPerAxis) *n = 1;
   }
   if (absl::Status s = Session::ValidateSpec(shape); !s.ok()) return s;
-  const int64_t nodes =
-      (int64_t{spec.stock.nx} + 1) * (int64_t{spec.stock.ny} + 1);
-  if (nodes > limits_.max_nodes_per_session) {
-    return absl::ResourceExhaustedError(
-        absl::StrCat("the grid has ", nodes, " nodes, more than this server's ",
-                     limits_.max_nodes_per_session, " per session"));
+  // Both counts are within kMaxElementsPerAxis here: no overflow.
+  const int64_t bytes = Session::EstimateMemoryBytes(spec.stock, spec.scheme);
+  if (limits_.max_session_memory_bytes > 0 &&
+      bytes > limits_.max_session_memory_bytes) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "the session needs ", bytes, " bytes (", MiB(bytes), " MiB for ",
+        spec.stock.nx, " x ", spec.stock.ny,
+        " elements, every tile cut); this server allows ",
+        limits_.max_session_memory_bytes, " bytes (",
+        MiB(limits_.max_session_memory_bytes),
+        " MiB) per session (--max_session_memory_mb)"));
+  }
+  if (bytes > limits_.max_total_memory_bytes) {
+    // Never fits: named as such even past the core's node limit.
+    absl::MutexLock l(&mu_);
+    return FitsTotalLocked(bytes);
   }
   if (absl::Status s = Session::ValidateSpec(spec); !s.ok()) return s;
-  const int64_t bytes = Session::EstimateMemoryBytes(spec.stock, spec.scheme);
   {
     absl::MutexLock l(&mu_);
     if (absl::Status s = AdmitLocked(spec.id, bytes); !s.ok()) return s;
@@ -98,16 +113,22 @@ absl::Status Registry::AdmitLocked(const std::string& id, int64_t bytes) {
     return absl::ResourceExhaustedError(absl::StrCat(
         "this server holds its limit of ", limits_.max_sessions, " sessions"));
   }
-  if (reserved_bytes_ + bytes > limits_.max_total_memory_bytes) {
-    return absl::ResourceExhaustedError(absl::StrCat(
-        "the session may need ", bytes, " bytes; this server has ",
-        limits_.max_total_memory_bytes - reserved_bytes_, " of ",
-        limits_.max_total_memory_bytes, " left"));
-  }
+  if (absl::Status s = FitsTotalLocked(bytes); !s.ok()) return s;
   reserved_bytes_ += bytes;
   // The id is taken while the session is created.
   sessions_[id] = nullptr;
   return absl::OkStatus();
+}
+
+absl::Status Registry::FitsTotalLocked(int64_t bytes) const {
+  const int64_t left = limits_.max_total_memory_bytes - reserved_bytes_;
+  if (bytes <= left) return absl::OkStatus();
+  return absl::ResourceExhaustedError(absl::StrCat(
+      "the session needs ", bytes, " bytes (", MiB(bytes),
+      " MiB, every tile cut); this server has ", left, " bytes (", MiB(left),
+      " MiB) left of the ", limits_.max_total_memory_bytes, " bytes (",
+      MiB(limits_.max_total_memory_bytes),
+      " MiB) all its sessions may take (--max_total_memory_mb)"));
 }
 
 std::string Registry::JournalPath(const std::string& id) const {

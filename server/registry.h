@@ -16,8 +16,13 @@ namespace swarf::server {
 
 struct Limits {
   int32_t max_sessions = 256;
-  int64_t max_nodes_per_session = int64_t{64} << 20;  // 64 Mi nodes
-  // Sum over sessions of their worst-case memory (every tile cut).
+  // Limits in bytes of a session's worst-case memory, every tile of its
+  // grid cut (Session::EstimateMemoryBytes: the scheme's bytes per node,
+  // 12 for every scheme now, plus a tile's bookkeeping). There is no node
+  // cap: a grid of any size is admitted when its bytes fit.
+  // One session at most (0: only the total applies).
+  int64_t max_session_memory_bytes = 0;
+  // All sessions together.
   int64_t max_total_memory_bytes = int64_t{8} << 30;
   int64_t max_batch_points = int64_t{1} << 20;
   // Open Simulate streams per client (per token, or per address without
@@ -51,8 +56,10 @@ class Registry {
   absl::StatusOr<int> RestoreAll();
 
   // Validates the id (1-64 of [A-Za-z0-9_-]; generated when empty) and the
-  // limits, then creates. ALREADY_EXISTS, RESOURCE_EXHAUSTED,
-  // INVALID_ARGUMENT.
+  // limits, then creates. ALREADY_EXISTS, RESOURCE_EXHAUSTED (over
+  // max_sessions, max_session_memory_bytes or max_total_memory_bytes, the
+  // message naming the bytes needed and allowed), INVALID_ARGUMENT. A
+  // session needing exactly the bytes left is admitted.
   absl::StatusOr<std::shared_ptr<Session>> Create(SessionSpec spec);
   // NOT_FOUND when absent, or when it belongs to another principal (so
   // that its existence is not revealed).
@@ -86,6 +93,10 @@ class Registry {
   SnapshotPolicy Snapshots(const std::string& id) const;
   // Removes a session's journal and snapshot files.
   void DeleteFiles(const std::string& id) const;
+  // RESOURCE_EXHAUSTED unless `bytes` fit what the sessions have left of
+  // max_total_memory_bytes, naming both.
+  absl::Status FitsTotalLocked(int64_t bytes) const
+      ABSL_SHARED_LOCKS_REQUIRED(mu_);
   // Admission of a session of `bytes` under mu_; reserves them.
   absl::Status AdmitLocked(const std::string& id, int64_t bytes)
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);

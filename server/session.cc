@@ -4,6 +4,7 @@
 #include <set>
 
 #include "absl/strings/str_cat.h"
+#include "core/tile_arena.h"
 #include "gcode/toolpath.h"
 #include "server/convert.h"
 #include "design/design_mesh.h"
@@ -440,9 +441,20 @@ int64_t Session::EstimateMemoryBytes(const StockSpec& stock,
                                      SchemeKind scheme) {
   const int64_t tiles_x = (int64_t{stock.nx} + kTileSize) / kTileSize;
   const int64_t tiles_y = (int64_t{stock.ny} + kTileSize) / kTileSize;
-  const int64_t per_tile =
-      int64_t{kTileNodes} * GetScheme(scheme).bytes_per_node() + 64;
-  return tiles_x * tiles_y * per_tile;
+  const int64_t tiles = tiles_x * tiles_y;
+  // A cut tile's nodes are a block of the workpiece's TileArena, carved
+  // from 2 MiB chunks that hold a whole number of blocks: what the process
+  // takes is the chunks (measured: tests/session_memory_test.cc).
+  const int64_t block =
+      int64_t{kTileNodes} * GetScheme(scheme).bytes_per_node();
+  const int64_t per_chunk =
+      static_cast<int64_t>(TileArena::kChunkBytes) / block;
+  const int64_t chunks = (tiles + per_chunk - 1) / per_chunk;
+  // Per tile of the grid its pointer, version and derivative cache slot
+  // (32 bytes), and per cut tile its Tile (48 bytes with malloc's header).
+  constexpr int64_t kTileBookkeepingBytes = 32 + 48;
+  return chunks * static_cast<int64_t>(TileArena::kChunkBytes) +
+         tiles * kTileBookkeepingBytes;
 }
 
 absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,

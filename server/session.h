@@ -175,7 +175,9 @@ class Session {
   const SessionSpec& spec() const { return spec_; }
   const std::string& id() const { return spec_.id; }
 
-  // Worst-case memory of the session (every tile cut), for admission.
+  // Worst-case memory of the session's grid (every tile cut: the tile
+  // arena's 2 MiB chunks, 12 bytes a node in them, and each tile's
+  // bookkeeping), for admission. The moves (sizeof(Move) each) come on top.
   static int64_t EstimateMemoryBytes(const StockSpec& stock,
                                      SchemeKind scheme);
 

@@ -31,6 +31,7 @@
 #include "grpcpp/grpcpp.h"
 #include "gtest/gtest.h"
 #include "server/server.h"
+#include "server/session.h"
 #include "spdlog/spdlog.h"
 #include "swarf/v1/swarf.grpc.pb.h"
 #include "tests/server_test_util.h"
@@ -450,7 +451,9 @@ TEST_P(ApiTest, RequestsAtEveryDocumentedMaximum) {
   Limits limits;
   limits.max_message_bytes = 1 << 20;
   limits.max_batch_points = 40000;
-  limits.max_nodes_per_session = 21 * 21;
+  // Exactly one tile of a taylor grid (SmallRequest's 20 x 20 elements).
+  limits.max_session_memory_bytes =
+      Session::EstimateMemoryBytes({0, 0, 10, 10, 0, 20, 20}, SchemeKind::kTaylor);
   limits.max_streams_per_client = 3;
   // Refused: a full batch would not fit the message limit.
   {
@@ -464,13 +467,18 @@ TEST_P(ApiTest, RequestsAtEveryDocumentedMaximum) {
     EXPECT_TRUE(Has(s.status().message(), "max_batch_points"));
   }
   ASSERT_NO_FATAL_FAILURE(StartServer(limits));
-  // Session ids of exactly 64 characters; grids of exactly the node limit.
+  // Session ids of exactly 64 characters; grids of exactly the byte limit
+  // (a tile's nodes: 64 x 64), and one element more (a second tile).
   const std::string id(64, 'a');
   ASSERT_TRUE(Create(SmallRequest(id)).ok());
   EXPECT_EQ(Create(SmallRequest(std::string(65, 'b'))).error_code(),
             grpc::StatusCode::INVALID_ARGUMENT);
   pb::CreateSessionRequest big = SmallRequest("big");
-  big.set_nx(21);
+  big.set_nx(63);
+  big.set_ny(63);
+  ASSERT_TRUE(Create(big).ok());
+  big.set_session_id("bigger");
+  big.set_nx(64);
   EXPECT_EQ(Create(big).error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
 
   SimStream sim(stub_.get(), id);

@@ -1518,37 +1518,76 @@ TEST_F(ServerTest, ResourceExhaustedAtEachLimit) {
     ASSERT_TRUE(Delete("a").ok());
     EXPECT_TRUE(Create(SmallRequest("c")).ok());
   }
-  // Nodes per session.
+  // Bytes, not nodes (issue 28): a taylor tile is 64 x 64 nodes of 12 bytes
+  // in the tile arena's 2 MiB chunks (42 tiles each), plus 80 bytes of
+  // bookkeeping: one tile takes a chunk.
+  const StockSpec small{0, 0, 10, 10, 0, 10, 10};
+  const int64_t one = Session::EstimateMemoryBytes(small, SchemeKind::kTaylor);
+  ASSERT_EQ(one, (2 << 20) + 80);
+  // Bytes per session: a session of exactly the limit is admitted, one
+  // element more (a second tile) is refused, naming both.
   {
     Limits limits;
-    limits.max_nodes_per_session = 100 * 100;
+    limits.max_session_memory_bytes = one;
     ASSERT_NO_FATAL_FAILURE(StartServer(limits));
     pb::CreateSessionRequest req = SmallRequest("fits");
-    req.set_nx(99);
-    req.set_ny(99);
+    req.set_nx(63);
+    req.set_ny(63);
     EXPECT_TRUE(Create(req).ok());
-    req.set_session_id("too-many-nodes");
-    req.set_nx(100);
+    req.set_session_id("too-big");
+    req.set_nx(64);
     const grpc::Status st = Create(req);
     EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
-    EXPECT_TRUE(Has(st.error_message(), "nodes")) << st.error_message();
+    EXPECT_EQ(st.error_message(),
+              "the session needs 2097312 bytes (2.0 MiB for 64 x 63 elements, "
+              "every tile cut); this server allows 2097232 bytes (2.0 MiB) "
+              "per session (--max_session_memory_mb)");
   }
-  // Total memory: room for two one-tile taylor sessions.
+  // Total memory: room for exactly two one-tile taylor sessions.
   {
-    const StockSpec small{0, 0, 10, 10, 0, 10, 10};
-    const int64_t one =
-        Session::EstimateMemoryBytes(small, SchemeKind::kTaylor);
     Limits limits;
-    limits.max_total_memory_bytes = 2 * one + one / 2;
+    limits.max_total_memory_bytes = 2 * one;
     ASSERT_NO_FATAL_FAILURE(StartServer(limits));
     ASSERT_TRUE(Create(SmallRequest("m1")).ok());
-    ASSERT_TRUE(Create(SmallRequest("m2")).ok());
+    ASSERT_TRUE(Create(SmallRequest("m2")).ok());  // right at the limit
     const grpc::Status st = Create(SmallRequest("m3"));
     EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
-    EXPECT_TRUE(Has(st.error_message(), "bytes")) << st.error_message();
+    EXPECT_EQ(st.error_message(),
+              "the session needs 2097232 bytes (2.0 MiB, every tile cut); "
+              "this server has 0 bytes (0.0 MiB) left of the 4194464 bytes "
+              "(4.0 MiB) all its sessions may take (--max_total_memory_mb)");
     // Deleting returns the reservation.
     ASSERT_TRUE(Delete("m1").ok());
     EXPECT_TRUE(Create(SmallRequest("m3")).ok());
+  }
+  // No node cap: with the default limits, a grid past the old cap of 64 Mi
+  // nodes (8193 x 8193 nodes, 129 x 129 tiles: 834 MB) is admitted (its
+  // tiles are allocated only when cut), and one whose bytes exceed the
+  // total is RESOURCE_EXHAUSTED, even past the core's node limit (which
+  // alone would be INVALID_ARGUMENT).
+  {
+    ASSERT_NO_FATAL_FAILURE(StartServer(Limits{}));
+    pb::CreateSessionRequest req = SmallRequest("past-old-cap");
+    req.set_nx(8192);
+    req.set_ny(8192);
+    EXPECT_TRUE(Create(req).ok());
+    pb::Session state;
+    ASSERT_TRUE(GetSession("past-old-cap", &state).ok());
+    EXPECT_EQ(state.memory_bytes(), 0);
+    req.set_session_id("huge");
+    req.set_nx(kMaxElementsPerAxis);
+    req.set_ny(kMaxElementsPerAxis);
+    const grpc::Status st = Create(req);
+    EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+    const int64_t side = (int64_t{kMaxElementsPerAxis} + 64) / 64;
+    const int64_t tiles = side * side;
+    const int64_t chunks = (tiles + 41) / 42;
+    EXPECT_TRUE(Has(st.error_message(),
+                    absl::StrCat("the session needs ",
+                                 chunks * (2 << 20) + tiles * 80, " bytes")))
+        << st.error_message();
+    EXPECT_TRUE(Has(st.error_message(), "left of the 8589934592 bytes"))
+        << st.error_message();
   }
   // gRPC message size: a batch message over max_message_bytes fails the
   // stream before it reaches the session.

@@ -43,12 +43,13 @@ namespace {
 
 namespace pb = ::swarf::v1;
 
-// Limits of the fuzzed registry: sessions up to 1 Mi nodes are created (an
-// empty workpiece is cheap); larger ones must be refused before.
+// Limits of the fuzzed registry: sessions up to 1 Mi nodes (every tile cut:
+// 7 chunks of 2 MiB) are created (an empty workpiece is cheap); larger ones
+// must be refused before.
 Limits FuzzLimits() {
   Limits l;
   l.max_sessions = 4;
-  l.max_nodes_per_session = int64_t{1} << 20;
+  l.max_session_memory_bytes = int64_t{16} << 20;
   l.max_total_memory_bytes = int64_t{64} << 20;
   l.max_batch_points = 256;
   return l;
@@ -163,9 +164,9 @@ void FuzzCreate(const pb::CreateSessionRequest& req) {
   const SessionSpec& got = (*session)->spec();
   const int64_t nodes =
       (int64_t{got.stock.nx} + 1) * (int64_t{got.stock.ny} + 1);
-  FUZZ_CHECK(nodes <= FuzzLimits().max_nodes_per_session);
+  FUZZ_CHECK(nodes <= kMaxNodes);
   FUZZ_CHECK(Session::EstimateMemoryBytes(got.stock, got.scheme) <=
-             FuzzLimits().max_total_memory_bytes);
+             FuzzLimits().max_session_memory_bytes);
   FUZZ_CHECK(registry.Get(got.id).ok());
 
   // What the server reports describes the same session: as a request it
