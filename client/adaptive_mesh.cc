@@ -36,15 +36,13 @@ struct P {
 
 class Lattice {
  public:
-  Lattice(const TriangleMesh& full)
-      : nx_(full.lattice_nx), ny_(full.lattice_ny), full_(full) {}
+  explicit Lattice(const LatticeHeights& heights)
+      : nx_(heights.nx), ny_(heights.ny), z_(heights.z.data()) {}
 
   int64_t nx() const { return nx_; }
   int64_t ny() const { return ny_; }
   int64_t Index(int64_t i, int64_t j) const { return j * (nx_ + 1) + i; }
-  double Z(int64_t i, int64_t j) const {
-    return full_.vertices[Index(i, j)].z;
-  }
+  double Z(int64_t i, int64_t j) const { return z_[Index(i, j)]; }
   // The full-resolution cell's split, as BuildSurfaceMesh chooses it.
   bool MainDiagonal(int64_t i, int64_t j) const {
     return std::fabs(Z(i, j) - Z(i + 1, j + 1)) <=
@@ -139,7 +137,7 @@ class Lattice {
 
  private:
   const int64_t nx_, ny_;
-  const TriangleMesh& full_;
+  const double* z_;
 };
 
 struct Leaf {
@@ -266,13 +264,45 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
         "the mesh tolerance must be a finite number >= 0 (mm), got %g",
         tolerance));
   }
-  const Lattice l(full);
-  const int64_t nx = l.nx(), ny = l.ny();
+  const int64_t nx = full.lattice_nx, ny = full.lattice_ny;
   if (nx < 1 || ny < 1 ||
       full.top_vertices != (nx + 1) * (ny + 1) ||
       static_cast<int64_t>(full.vertices.size()) < full.top_vertices) {
     return absl::InvalidArgumentError("not a full-resolution lattice mesh");
   }
+  // Its lattice's heights and coordinates (the same doubles).
+  LatticeHeights h;
+  h.nx = nx;
+  h.ny = ny;
+  h.xs.resize(nx + 1);
+  h.ys.resize(ny + 1);
+  for (int64_t i = 0; i <= nx; ++i) h.xs[i] = full.vertices[i].x;
+  for (int64_t j = 0; j <= ny; ++j) h.ys[j] = full.vertices[j * (nx + 1)].y;
+  h.z.resize(full.top_vertices);
+  for (int64_t v = 0; v < full.top_vertices; ++v) h.z[v] = full.vertices[v].z;
+  return SimplifyLattice(h, full.z_bottom, tolerance);
+}
+
+absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& heights,
+                                             double z_bottom,
+                                             double tolerance) {
+  if (!(tolerance >= 0) || !std::isfinite(tolerance)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the mesh tolerance must be a finite number >= 0 (mm), got %g",
+        tolerance));
+  }
+  const Lattice l(heights);
+  const int64_t nx = l.nx(), ny = l.ny();
+  if (nx < 1 || ny < 1 ||
+      static_cast<int64_t>(heights.z.size()) != (nx + 1) * (ny + 1) ||
+      static_cast<int64_t>(heights.xs.size()) != nx + 1 ||
+      static_cast<int64_t>(heights.ys.size()) != ny + 1) {
+    return absl::InvalidArgumentError("not a full-resolution lattice");
+  }
+  auto vertex = [&](int64_t v) {
+    return Vec3{heights.xs[v % (nx + 1)], heights.ys[v / (nx + 1)],
+                heights.z[v]};
+  };
   ThreadPool& pool = ThreadPool::Default();
 
   // Top down: roots of kRoot cells; a block leaving the lattice or whose
@@ -451,14 +481,14 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
 
   // The used lattice vertices, row-major, are the new top vertices.
   TriangleMesh mesh;
-  mesh.lattice_nx = full.lattice_nx;
-  mesh.lattice_ny = full.lattice_ny;
-  mesh.z_bottom = full.z_bottom;
+  mesh.lattice_nx = static_cast<int32_t>(nx);
+  mesh.lattice_ny = static_cast<int32_t>(ny);
+  mesh.z_bottom = z_bottom;
   std::vector<int32_t> remap(lattice_vertices, -1);
   for (int64_t v = 0; v < lattice_vertices; ++v) {
     if (!used[v]) continue;
     remap[v] = static_cast<int32_t>(mesh.vertices.size());
-    mesh.vertices.push_back(full.vertices[v]);
+    mesh.vertices.push_back(vertex(v));
   }
   mesh.top_vertices = static_cast<int64_t>(mesh.vertices.size());
   for (const int64_t k : final_leaves) {
@@ -483,14 +513,14 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
     if (!used[v]) continue;
     top_ring.push_back(remap[v]);
     bottom_ring.push_back(static_cast<int32_t>(mesh.vertices.size()));
-    const Vec3& p = full.vertices[v];
-    mesh.vertices.push_back({p.x, p.y, full.z_bottom});
+    const Vec3 p = vertex(v);
+    mesh.vertices.push_back({p.x, p.y, z_bottom});
   }
-  const Vec3& lo = full.vertices[0];
-  const Vec3& hi = full.vertices[lattice_vertices - 1];
+  const Vec3 lo = vertex(0);
+  const Vec3 hi = vertex(lattice_vertices - 1);
   const int32_t middle = static_cast<int32_t>(mesh.vertices.size());
   mesh.vertices.push_back({(lo.x + hi.x) / 2, (lo.y + hi.y) / 2,
-                           full.z_bottom});
+                           z_bottom});
   for (size_t q = 0; q < top_ring.size(); ++q) {
     const size_t r = (q + 1) % top_ring.size();
     const int32_t a = top_ring[q], b = top_ring[r];

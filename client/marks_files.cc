@@ -76,20 +76,28 @@ namespace {
 // Polylines per chunk formatted by one task.
 constexpr size_t kChunkPolylines = 1024;
 
-// format(k, &text) appends polyline k's text; the chunks of polylines are
-// formatted at once on ThreadPool::Default(), each chunk's text in order.
-std::vector<std::string> FormatChunks(
-    size_t n, const std::function<void(size_t, std::string*)>& format) {
+// Chunks formatted at once before they are written: the text held at a
+// time is this many chunks', whatever the number of marks.
+constexpr size_t kChunksAtOnce = 32;
+
+// format(k, &text) appends polyline k's text; windows of kChunksAtOnce
+// chunks of polylines are formatted at once on ThreadPool::Default(), then
+// put in order and dropped.
+void EmitChunks(size_t n,
+                const std::function<void(size_t, std::string*)>& format,
+                const std::function<void(std::string_view)>& put) {
   const size_t chunks = (n + kChunkPolylines - 1) / kChunkPolylines;
-  std::vector<std::string> out(chunks);
-  ThreadPool::Default().ParallelFor(
-      static_cast<int64_t>(chunks), [&](int64_t c) {
-        const size_t end = std::min(n, (c + 1) * kChunkPolylines);
-        for (size_t k = c * kChunkPolylines; k < end; ++k) {
-          format(k, &out[c]);
-        }
-      });
-  return out;
+  std::vector<std::string> out(std::min(chunks, kChunksAtOnce));
+  for (size_t c0 = 0; c0 < chunks; c0 += kChunksAtOnce) {
+    const size_t m = std::min(kChunksAtOnce, chunks - c0);
+    ThreadPool::Default().ParallelFor(static_cast<int64_t>(m), [&](int64_t w) {
+      const size_t c = c0 + static_cast<size_t>(w);
+      out[w].clear();
+      const size_t end = std::min(n, (c + 1) * kChunkPolylines);
+      for (size_t k = c * kChunkPolylines; k < end; ++k) format(k, &out[w]);
+    });
+    for (size_t w = 0; w < m; ++w) put(out[w]);
+  }
 }
 
 // One polyline object as JsonWriter writes it inside the array (its
@@ -122,18 +130,16 @@ void AppendMarkJson(const MarkPolyline& p, bool vertex_owners, bool first,
 constexpr std::string_view kMarksJsonHead = "{\"polylines\":[";
 constexpr std::string_view kMarksJsonTail = "]}";
 
-std::vector<std::string> MarksJsonChunks(const std::vector<MarkPolyline>& marks,
-                                         bool vertex_owners) {
-  return FormatChunks(marks.size(), [&](size_t k, std::string* out) {
-    AppendMarkJson(marks[k], vertex_owners, k == 0, out);
-  });
-}
-
 // The marks.json document piece by piece, in order, to put(piece).
 void EmitMarksJson(const std::vector<MarkPolyline>& marks, bool vertex_owners,
                    const std::function<void(std::string_view)>& put) {
   put(kMarksJsonHead);
-  for (const std::string& c : MarksJsonChunks(marks, vertex_owners)) put(c);
+  EmitChunks(
+      marks.size(),
+      [&](size_t k, std::string* out) {
+        AppendMarkJson(marks[k], vertex_owners, k == 0, out);
+      },
+      put);
   put(kMarksJsonTail);
 }
 
@@ -221,20 +227,16 @@ double SvgStroke(const StockSpec& stock) {
   return std::max(stock.x1 - stock.x0, stock.y1 - stock.y0) / 400;
 }
 
-std::vector<std::string> MarksSvgChunks(const std::vector<MarkPolyline>& marks,
-                                        double stroke) {
-  return FormatChunks(marks.size(), [&](size_t k, std::string* out) {
-    AppendMarkSvg(marks[k], stroke, out);
-  });
-}
-
 // The marks.svg document piece by piece, in order, to put(piece).
 void EmitMarksSvg(const StockSpec& stock,
                   const std::vector<MarkPolyline>& marks,
                   const std::function<void(std::string_view)>& put) {
   const double stroke = SvgStroke(stock);
   put(MarksSvgHead(stock, marks.size(), stroke));
-  for (const std::string& c : MarksSvgChunks(marks, stroke)) put(c);
+  EmitChunks(
+      marks.size(),
+      [&](size_t k, std::string* out) { AppendMarkSvg(marks[k], stroke, out); },
+      put);
   put(kMarksSvgTail);
 }
 

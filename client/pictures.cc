@@ -179,27 +179,41 @@ PixelFrame ReliefFrame(const StockSpec& spec, const ReliefOptions& options) {
   return f;
 }
 
-absl::StatusOr<Image> RenderRelief(const SurfaceGrid& grid,
-                                   const ReliefOptions& options) {
-  if (absl::Status st = grid.Validate(); !st.ok()) return st;
-  if (absl::Status st = CheckSides(options.min_side, options.max_side);
-      !st.ok()) {
-    return st;
+absl::Status CheckPictureSides(int min_side, int max_side) {
+  return CheckSides(min_side, max_side);
+}
+
+ReliefSampler::ReliefSampler(const StockSpec& spec, const PixelFrame& frame)
+    : spec_(spec), frame_(frame) {
+  const GridGeometry g(spec);
+  row_element_.resize(frame.height);
+  for (int py = 0; py < frame.height; ++py) {
+    // As SurfaceGrid::HeightAndGradient clamps and looks up.
+    row_element_[py] = g.ElementY(std::clamp(frame.Y(py), spec.y0, spec.y1));
   }
-  const PixelFrame f = ReliefFrame(grid.spec, options);
-  const double z_top = grid.spec.z_top;
-  // Sample first, colour second: the tint needs the lowest height.
-  const size_t n = static_cast<size_t>(f.width) * f.height;
-  std::vector<float> height(n), shade(n);
-  std::vector<double> row_min(f.height, z_top);
+  const size_t n = static_cast<size_t>(frame.width) * frame.height;
+  height_.assign(n, 0);
+  shade_.assign(n, 1);
+  row_min_.assign(frame.height, spec.z_top);
+}
+
+void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
+  const PixelFrame& f = frame_;
+  const double z_top = spec_.z_top;
+  std::vector<int> rows;
+  for (int py = 0; py < f.height; ++py) {
+    if (row_element_[py] >= e0 && row_element_[py] < e1) rows.push_back(py);
+  }
   // Blocks of rows, each with one sampler: neighbouring rows share nodes.
   constexpr int kBlockRows = 16;
-  const int blocks = (f.height + kBlockRows - 1) / kBlockRows;
+  const int64_t blocks =
+      (static_cast<int64_t>(rows.size()) + kBlockRows - 1) / kBlockRows;
   ThreadPool::Default().ParallelFor(blocks, [&](int64_t block) {
-    SurfaceSampler sampler(grid);
-    const int py0 = static_cast<int>(block) * kBlockRows;
-    const int py1 = std::min(f.height, py0 + kBlockRows);
-    for (int py = py0; py < py1; ++py) {
+    SurfaceSampler sampler(band);
+    const size_t r0 = static_cast<size_t>(block) * kBlockRows;
+    const size_t r1 = std::min(rows.size(), r0 + kBlockRows);
+    for (size_t r = r0; r < r1; ++r) {
+      const int py = rows[r];
       const double y = f.Y(py);
       double lo = z_top;
       for (int px = 0; px < f.width; ++px) {
@@ -210,29 +224,54 @@ absl::StatusOr<Image> RenderRelief(const SurfaceGrid& grid,
         const size_t k = static_cast<size_t>(py) * f.width + px;
         // Stored relative to the top in float: depth resolution ~1e-7 of
         // it.
-        height[k] = static_cast<float>(z - z_top);
-        shade[k] = static_cast<float>(
+        height_[k] = static_cast<float>(z - z_top);
+        shade_[k] = static_cast<float>(
             kAmbient + (1 - kAmbient) * std::max(dot, 0.0) / kLightZ);
         lo = std::min(lo, z);
       }
-      row_min[py] = lo;
+      row_min_[py] = lo;
     }
   });
-  const double depth = z_top - *std::min_element(row_min.begin(),
-                                                 row_min.end());
-  Image image(f.width, f.height, 3);
-  ThreadPool::Default().ParallelFor(f.height, [&](int64_t py) {
-    for (int px = 0; px < f.width; ++px) {
-      const size_t k = static_cast<size_t>(py) * f.width + px;
-      // Only what lies exactly at the top is untouched stock.
-      const Rgb base = height[k] < 0
-                           ? HeightTint(1 + height[k] / depth)
-                           : kStockColor;
-      const double s = std::isfinite(shade[k]) ? shade[k] : 1.0;
-      image.Set(px, static_cast<int>(py), Scale(base, s));
-    }
+}
+
+void ReliefSampler::ColorRow(int py, uint8_t* rgb) const {
+  if (depth_ < 0) {
+    // The tint needs the lowest height: known once every row is sampled.
+    depth_ = spec_.z_top - *std::min_element(row_min_.begin(), row_min_.end());
+  }
+  const double depth = depth_;
+  for (int px = 0; px < frame_.width; ++px) {
+    const size_t k = static_cast<size_t>(py) * frame_.width + px;
+    // Only what lies exactly at the top is untouched stock.
+    const Rgb base =
+        height_[k] < 0 ? HeightTint(1 + height_[k] / depth) : kStockColor;
+    const double s = std::isfinite(shade_[k]) ? shade_[k] : 1.0;
+    const Rgb c = Scale(base, s);
+    rgb[3 * px] = c.r;
+    rgb[3 * px + 1] = c.g;
+    rgb[3 * px + 2] = c.b;
+  }
+}
+
+Image ReliefSampler::ToImage() const {
+  Image image(frame_.width, frame_.height, 3);
+  ColorRow(0, image.row(0));  // sets depth_ before the threads read it
+  ThreadPool::Default().ParallelFor(frame_.height, [&](int64_t py) {
+    ColorRow(static_cast<int>(py), image.row(static_cast<int>(py)));
   });
   return image;
+}
+
+absl::StatusOr<Image> RenderRelief(const SurfaceGrid& grid,
+                                   const ReliefOptions& options) {
+  if (absl::Status st = grid.Validate(); !st.ok()) return st;
+  if (absl::Status st = CheckSides(options.min_side, options.max_side);
+      !st.ok()) {
+    return st;
+  }
+  ReliefSampler sampler(grid.spec, ReliefFrame(grid.spec, options));
+  sampler.AddBand(grid, 0, grid.spec.ny);
+  return sampler.ToImage();
 }
 
 Rgb ErrorColor(double error, double lo, double hi) {
@@ -431,16 +470,13 @@ void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
 
 }  // namespace
 
-absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
-                                const std::vector<MarkPolyline>& marks,
-                                const MarksPictureOptions& options) {
-  if (relief.width() != frame.width || relief.height() != frame.height ||
-      relief.channels() != 3) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "relief of %d x %d (%d channels) does not match the %d x %d RGB frame",
-        relief.width(), relief.height(), relief.channels(), frame.width,
-        frame.height));
-  }
+namespace {
+
+// DrawMarks with the relief's pixel rows from relief_row(y, rgb).
+absl::StatusOr<Image> DrawMarksOver(
+    const std::function<void(int, uint8_t*)>& relief_row,
+    const PixelFrame& frame, const std::vector<MarkPolyline>& marks,
+    const MarksPictureOptions& options) {
   if (!(options.line_width_px >= 0 && options.line_width_px <= 100)) {
     return absl::InvalidArgumentError("line_width_px must be in [0, 100]");
   }
@@ -486,9 +522,7 @@ absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
   Image image(legend_x0 + LegendWidth(legend, scale),
               std::max(frame.height, LegendMinHeight(legend, scale)), 3,
               kWhite);
-  for (int y = 0; y < frame.height; ++y) {
-    std::copy(relief.row(y), relief.row(y) + 3 * frame.width, image.row(y));
-  }
+  for (int y = 0; y < frame.height; ++y) relief_row(y, image.row(y));
   // All halos first, so that no halo covers an earlier line's colour. In
   // bands of rows at once, each band's segments in their order (a halo's
   // rows hold its line's).
@@ -517,6 +551,33 @@ absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
   DrawLegend(image, legend_x0, image.height(), legend, scale, nullptr,
              nullptr);
   return image;
+}
+
+}  // namespace
+
+absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
+                                const std::vector<MarkPolyline>& marks,
+                                const MarksPictureOptions& options) {
+  if (relief.width() != frame.width || relief.height() != frame.height ||
+      relief.channels() != 3) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "relief of %d x %d (%d channels) does not match the %d x %d RGB frame",
+        relief.width(), relief.height(), relief.channels(), frame.width,
+        frame.height));
+  }
+  return DrawMarksOver(
+      [&](int y, uint8_t* out) {
+        std::copy(relief.row(y), relief.row(y) + 3 * frame.width, out);
+      },
+      frame, marks, options);
+}
+
+absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
+                                const std::vector<MarkPolyline>& marks,
+                                const MarksPictureOptions& options) {
+  return DrawMarksOver(
+      [&](int y, uint8_t* out) { relief.ColorRow(y, out); }, relief.frame(),
+      marks, options);
 }
 
 absl::StatusOr<Image> RenderMarks(const SurfaceGrid& grid,

@@ -48,6 +48,36 @@ struct ReliefOptions {
 // The frame RenderRelief uses. Needs a valid spec and max_side >= 2.
 PixelFrame ReliefFrame(const StockSpec& spec, const ReliefOptions& options);
 
+// InvalidArgument unless 0 <= min_side <= max_side and 2 <= max_side <=
+// 32768.
+absl::Status CheckPictureSides(int min_side, int max_side);
+
+// RenderRelief's pixels sampled band by band (GridBands), then coloured:
+// pixel row py samples element row ElementY(clamped Y(py)), so each row is
+// sampled from the one band that lists it, as from the whole grid. Holds a
+// height and a shade (float) per pixel: memory bounded by the frame, not
+// the grid. AddBand runs its rows on ThreadPool::Default(); not otherwise
+// thread-safe.
+class ReliefSampler {
+ public:
+  ReliefSampler(const StockSpec& spec, const PixelFrame& frame);
+  const PixelFrame& frame() const { return frame_; }
+  // Samples the pixel rows of element rows [e0, e1) from `band`.
+  void AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1);
+  // After every band: pixel row py as RGB (3 * width bytes), as
+  // RenderRelief colours it.
+  void ColorRow(int py, uint8_t* rgb) const;
+  Image ToImage() const;
+
+ private:
+  StockSpec spec_;
+  PixelFrame frame_;
+  std::vector<int32_t> row_element_;  // per pixel row
+  std::vector<float> height_, shade_;
+  std::vector<double> row_min_;
+  mutable double depth_ = -1;  // computed on the first ColorRow
+};
+
 // Hill-shaded relief: the reconstruction's normal lit from the upper left
 // (azimuth north-west, 45 degrees up; a flat surface keeps its colour), times
 // a height tint from dark blue (lowest point) to pale cream (just below the
@@ -116,6 +146,12 @@ struct MarksPictureOptions {
 // legend to the right of the relief (relief at the image's top-left).
 // `relief` must have frame's size.
 absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
+                                const std::vector<MarkPolyline>& marks,
+                                const MarksPictureOptions& options = {});
+
+// The same over a relief sampled (every band added), coloured straight
+// into the picture (no copy of the relief).
+absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
                                 const std::vector<MarkPolyline>& marks,
                                 const MarksPictureOptions& options = {});
 

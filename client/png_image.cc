@@ -54,8 +54,10 @@ void OnPngWarning(png_structp, png_const_charp) {}
 
 // Everything between setjmp and the last libpng call lives in this function
 // with only trivially destructible locals, so a longjmp skips no destructor.
-bool WritePngFile(const Image& image, png_bytep* rows, std::FILE* f,
-                  PngError* err) {
+// `rows` null: `next` gives each row (into `buffer`) instead.
+bool WritePngFile(int width, int height, int channels, png_bytep* rows,
+                  const std::function<void(int, uint8_t*)>* next,
+                  png_bytep buffer, std::FILE* f, PngError* err) {
   png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, err,
                                             OnPngError, OnPngWarning);
   if (png == nullptr) {
@@ -71,8 +73,8 @@ bool WritePngFile(const Image& image, png_bytep* rows, std::FILE* f,
     return false;
   }
   png_init_io(png, f);
-  png_set_IHDR(png, info, image.width(), image.height(), 8,
-               image.channels() == 4 ? PNG_COLOR_TYPE_RGB_ALPHA
+  png_set_IHDR(png, info, width, height, 8,
+               channels == 4 ? PNG_COLOR_TYPE_RGB_ALPHA
                                      : PNG_COLOR_TYPE_RGB,
                PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
                PNG_FILTER_TYPE_DEFAULT);
@@ -84,7 +86,15 @@ bool WritePngFile(const Image& image, png_bytep* rows, std::FILE* f,
   png_set_compression_strategy(png, Z_RLE);
   png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_FILTER_PAETH);
   png_write_info(png, info);
-  png_write_image(png, rows);
+  if (rows != nullptr) {
+    png_write_image(png, rows);
+  } else {
+    // png_write_image writes row after row just so (no interlacing).
+    for (int y = 0; y < height; ++y) {
+      (*next)(y, buffer);
+      png_write_row(png, buffer);
+    }
+  }
   png_write_end(png, info);
   png_destroy_write_struct(&png, &info);
   return true;
@@ -111,7 +121,36 @@ absl::Status WritePng(const Image& image, const std::string& path) {
         absl::StrCat("cannot open ", path, ": ", std::strerror(errno)));
   }
   PngError err;
-  const bool ok = WritePngFile(image, rows.data(), f, &err);
+  const bool ok = WritePngFile(image.width(), image.height(),
+                               image.channels(), rows.data(), nullptr,
+                               nullptr, f, &err);
+  const bool io_error = std::ferror(f) != 0;
+  const bool close_failed = std::fclose(f) != 0;
+  if (!ok || io_error || close_failed) {
+    std::remove(path.c_str());
+    return absl::InternalError(absl::StrCat(
+        "writing ", path, " failed: ",
+        err.message[0] != '\0' ? err.message : "I/O error"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status WritePngRows(int width, int height,
+                          const std::function<void(int y, uint8_t* out)>& row,
+                          const std::string& path) {
+  if (width <= 0 || height <= 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("cannot write an empty image to ", path));
+  }
+  std::vector<uint8_t> buffer(static_cast<size_t>(width) * 3);
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (f == nullptr) {
+    return absl::PermissionDeniedError(
+        absl::StrCat("cannot open ", path, ": ", std::strerror(errno)));
+  }
+  PngError err;
+  const bool ok = WritePngFile(width, height, 3, nullptr, &row, buffer.data(),
+                               f, &err);
   const bool io_error = std::ferror(f) != 0;
   const bool close_failed = std::fclose(f) != 0;
   if (!ok || io_error || close_failed) {

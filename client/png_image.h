@@ -7,6 +7,8 @@
 #include <string>
 #include <vector>
 
+#include <functional>
+
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 
@@ -76,6 +78,14 @@ class Image {
 // size; PermissionDenied (cannot open) or Internal (libpng or I/O failure)
 // naming the path otherwise, and a partial file is removed.
 absl::Status WritePng(const Image& image, const std::string& path);
+
+// Writes a width x height 8-bit RGB PNG row by row (libpng's row writing):
+// `row(y, out)` fills the 3 * width bytes of row y (top first), called in
+// order from the calling thread. The same bytes as WritePng of the image
+// those rows make; errors as WritePng's. Holds one row, not the image.
+absl::Status WritePngRows(int width, int height,
+                          const std::function<void(int y, uint8_t* out)>& row,
+                          const std::string& path);
 
 // Reads any PNG libpng decodes, converted to 8-bit RGB (no alpha in the
 // file) or RGBA. For tests and tools.

@@ -3,6 +3,7 @@
 #include <chrono>
 #include <functional>
 #include <future>
+#include <optional>
 
 #include "absl/strings/str_cat.h"
 #include "client/marks_files.h"
@@ -22,12 +23,15 @@ double Since(Clock::time_point t0) {
 class Chain {
  public:
   explicit Chain(std::string base) : base_(std::move(base)) {}
+  // `earlier`: seconds already spent on this file (its share of the pass
+  // over the grid).
   void Then(const std::string& name,
-            const std::function<absl::Status(const std::string&)>& write) {
+            const std::function<absl::Status(const std::string&)>& write,
+            double earlier = 0) {
     if (!status_.ok()) return;
     const auto t0 = Clock::now();
     status_ = write(base_ + name);
-    if (status_.ok()) written_.push_back({base_ + name, Since(t0)});
+    if (status_.ok()) written_.push_back({base_ + name, earlier + Since(t0)});
   }
   absl::Status status() const { return status_; }
   const std::vector<WrittenFile>& written() const { return written_; }
@@ -44,20 +48,80 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     const std::string& dir, const SurfaceGrid& grid, const ErrorRaster* error,
     const std::vector<MarkPolyline>* marks, const RunOutputOptions& options,
     RunOutputSummary* summary) {
+  if (absl::Status st = grid.Validate(); !st.ok()) return st;
+  InMemoryBands bands(grid);
+  return WriteRunOutputs(dir, bands, error, marks, options, summary);
+}
+
+absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
+    const std::string& dir, GridBands& grid, const ErrorRaster* error,
+    const std::vector<MarkPolyline>* marks, const RunOutputOptions& options,
+    RunOutputSummary* summary) {
   const std::string base = dir.empty() || dir.back() == '/' ? dir : dir + "/";
+  const StockSpec spec = grid.spec();
+  if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
+  if (absl::Status st = CheckPictureSides(options.relief.min_side,
+                                          options.relief.max_side);
+      !st.ok()) {
+    return st;
+  }
+  if (marks != nullptr) {
+    if (absl::Status st = CheckPictureSides(options.marks.relief.min_side,
+                                            options.marks.relief.max_side);
+        !st.ok()) {
+      return st;
+    }
+  }
+  // What the pass over the bands fills: the relief's pixels, the marks
+  // picture's when its frame differs, the mesh lattice.
+  std::optional<ReliefSampler> relief;
+  relief.emplace(spec, ReliefFrame(spec, options.relief));
+  std::optional<ReliefSampler> marks_relief;
+  const PixelFrame marks_frame = ReliefFrame(spec, options.marks.relief);
+  if (marks != nullptr && !(marks_frame == relief->frame())) {
+    marks_relief.emplace(spec, marks_frame);
+  }
+  absl::StatusOr<LatticeHeights> lattice =
+      NewLattice(spec, options.mesh.subdivision);
+  if (!lattice.ok()) return lattice.status();
+  double relief_s = 0, marks_relief_s = 0, lattice_s = 0;
+  const auto pass0 = Clock::now();
+  absl::Status pass = grid.ForEach(
+      [&](const SurfaceGrid& band, int32_t e0, int32_t e1) {
+        auto t = Clock::now();
+        relief->AddBand(band, e0, e1);
+        relief_s += Since(t);
+        if (marks_relief) {
+          t = Clock::now();
+          marks_relief->AddBand(band, e0, e1);
+          marks_relief_s += Since(t);
+        }
+        t = Clock::now();
+        FillLatticeRows(band, e0, e1, &*lattice);
+        lattice_s += Since(t);
+        return absl::OkStatus();
+      });
+  if (!pass.ok()) return pass;
+  const double pass_s = Since(pass0);
+  if (summary != nullptr) {
+    summary->pass_seconds = pass_s;
+    summary->read_seconds =
+        std::max(0.0, pass_s - relief_s - marks_relief_s - lattice_s);
+  }
+
   // Three independent chains at once (most writers are serial): the
   // pictures, the marks files, the meshes.
   auto meshes = std::async(std::launch::async, [&] {
     Chain c(base);
     absl::StatusOr<TriangleMesh> mesh;
     c.Then("surface.stl", [&](const std::string& path) {
-      mesh = BuildSurfaceMesh(grid, options.mesh);
+      mesh = MeshFromLattice(*std::move(lattice), spec, options.mesh);
       if (!mesh.ok()) return mesh.status();
       return WriteStl(*mesh, path);
-    });
+    }, lattice_s);
     c.Then("surface.wrl", [&](const std::string& path) {
       const std::vector<Rgb> colors =
-          options.vrml_colors ? SurfaceColors(*mesh, grid.spec.z_top)
+          options.vrml_colors ? SurfaceColors(*mesh, spec.z_top)
                               : std::vector<Rgb>();
       return WriteVrml(*mesh, path, colors);
     });
@@ -74,7 +138,7 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     marks_files = std::async(std::launch::async, [&] {
       Chain c(base);
       c.Then("marks.svg", [&](const std::string& path) {
-        return WriteMarksSvg(grid.spec, *marks, path);
+        return WriteMarksSvg(spec, *marks, path);
       });
       c.Then("marks.json", [&](const std::string& path) {
         return WriteMarksJson(*marks, path);
@@ -84,12 +148,15 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
   }
 
   Chain pictures(base);
-  absl::StatusOr<Image> relief;
   pictures.Then("relief.png", [&](const std::string& path) {
-    relief = RenderRelief(grid, options.relief);
-    if (!relief.ok()) return relief.status();
-    return WritePng(*relief, path);
-  });
+    // Row by row: the RGB picture is never held.
+    absl::Status st = WritePngRows(
+        relief->frame().width, relief->frame().height,
+        [&](int y, uint8_t* out) { relief->ColorRow(y, out); }, path);
+    // Sampled again at another size, or no marks: not needed any more.
+    if (marks == nullptr || marks_relief) relief.reset();
+    return st;
+  }, relief_s);
   if (error != nullptr) {
     pictures.Then("error.png", [&](const std::string& path) {
       absl::StatusOr<Image> map = RenderErrorMap(*error, options.error);
@@ -99,12 +166,14 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
   }
   if (marks != nullptr) {
     pictures.Then("marks.png", [&](const std::string& path) {
-      // The relief already drawn serves when the frames agree.
-      absl::StatusOr<Image> picture =
-          RenderMarks(grid, *marks, options.marks, &*relief, options.relief);
+      // The relief already sampled serves when the frames agree.
+      absl::StatusOr<Image> picture = DrawMarks(
+          marks_relief ? *marks_relief : *relief, *marks, options.marks);
+      marks_relief.reset();
+      relief.reset();
       if (!picture.ok()) return picture.status();
       return WritePng(*picture, path);
-    });
+    }, marks_relief_s);
   }
 
   std::vector<Chain> chains;

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "client/grid_bands.h"
 #include "client/pictures.h"
 #include "client/surface_grid.h"
 #include "client/surface_mesh.h"
@@ -33,6 +34,10 @@ struct RunOutputSummary {
   int64_t mesh_triangles = 0;       // in surface.stl / surface.wrl
   int64_t full_mesh_triangles = 0;  // the full-resolution lattice's
   double mesh_deviation = 0;        // measured, mm (SimplifySurfaceMesh)
+  // The pass over the grid's bands: wall time (s), of which reading the
+  // bands (the rest is sampling: the pictures' pixels and the lattice,
+  // counted in the files' times).
+  double pass_seconds = 0, read_seconds = 0;
 };
 
 // Writes into the existing directory `dir`: relief.png; error.png when
@@ -42,6 +47,17 @@ struct RunOutputSummary {
 // its first error; the first error in that order is returned (naming the
 // file); files written stay. `summary`, if given, is filled when the meshes
 // were written.
+//
+// The grid is read once, band by band (GridBands): each band gives the
+// pictures' pixel rows over it and the mesh lattice's rows, then goes;
+// memory is the pictures' (bounded by their sides) and the lattice's
+// heights (8 bytes a lattice vertex), never a copy of the grid. The files
+// are the same, byte for byte, whatever the bands.
+absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
+    const std::string& dir, GridBands& grid, const ErrorRaster* error,
+    const std::vector<MarkPolyline>* marks,
+    const RunOutputOptions& options = {}, RunOutputSummary* summary = nullptr);
+// The same from a whole grid in memory (one band).
 absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     const std::string& dir, const SurfaceGrid& grid, const ErrorRaster* error,
     const std::vector<MarkPolyline>* marks,

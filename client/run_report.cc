@@ -20,8 +20,10 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
 #include "client/run_outputs.h"
+#include "client/grid_bands.h"
 #include "client/surface_grid.h"
 #include "core/cutting_marks.h"
+#include "core/workpiece.h"
 
 namespace swarf::cli {
 namespace {
@@ -124,6 +126,42 @@ absl::StatusOr<SurfaceGrid> FetchGrid(Connection& conn, const std::string& id,
   return grid;
 }
 
+// Sets tile rows [t0, t1) of `band` from the session's tiles (every tile
+// of those rows, asked by index).
+absl::Status FetchTileRows(Connection& conn, const std::string& id,
+                           int32_t t0, int32_t t1, SurfaceGrid* band) {
+  auto ctx = conn.Context(id, 3600);
+  pb::GetTilesRequest req;
+  req.set_session_id(id);
+  req.set_precision(pb::PRECISION_DOUBLE);
+  req.set_include_derivatives(GetScheme(band->scheme).stores_derivatives());
+  req.set_include_owners(true);
+  req.set_since_version(0);
+  const int32_t tiles_x = (band->nodes_x() + kTileSize - 1) / kTileSize;
+  for (int32_t ty = t0; ty < t1; ++ty) {
+    for (int32_t tx = 0; tx < tiles_x; ++tx) {
+      pb::TileIndex* t = req.mutable_selection()->add_tiles();
+      t->set_tx(tx);
+      t->set_ty(ty);
+    }
+  }
+  auto reader = conn.stub().GetTiles(ctx.get(), req);
+  pb::Tile t;
+  absl::Status status;
+  while (reader->Read(&t)) {
+    if (!status.ok()) continue;  // read to the end, then Finish
+    const float* d[5] = {t.wx().data(), t.wy().data(), t.wxx().data(),
+                         t.wxy().data(), t.wyy().data()};
+    status = band->SetNodes(t.i0(), t.j0(), t.nx(), t.ny(),
+                            t.heights_d().data(),
+                            req.include_derivatives() ? d : nullptr,
+                            t.owners().data());
+  }
+  grpc::Status st = reader->Finish();
+  if (!st.ok()) return FromGrpc(st);
+  return status;
+}
+
 // Runs `fetch` again while the server is unavailable (restarting): its
 // sessions come back from their journals. Gives up after two minutes.
 template <typename T>
@@ -154,6 +192,7 @@ std::string Rate(double per_s) {
 }  // namespace
 
 void ErrorMapSize(const StockSpec& s, int32_t* cols, int32_t* rows) {
+  // Cells, not pixels: a raster of more would not fit one message.
   constexpr int32_t kMaxSide = 1600;
   const double scale =
       std::min(1.0, static_cast<double>(kMaxSide) / std::max(s.nx, s.ny));
@@ -181,7 +220,21 @@ absl::Status ParseOutputFlags(const Args& args, OutputOptions* out) {
       !s.ok()) {
     return s;
   }
-  return number("marks-min-length", &out->marks_display.min_length);
+  if (absl::Status s =
+          number("marks-min-length", &out->marks_display.min_length);
+      !s.ok()) {
+    return s;
+  }
+  if (const auto text = args.Get("picture-size")) {
+    int v = 0;
+    if (!absl::SimpleAtoi(*text, &v) || v < 2 || v > 32768) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "--picture-size must be an integer in [2, 32768] (pixels), got \"",
+          *text, "\""));
+    }
+    out->picture_size = v;
+  }
+  return absl::OkStatus();
 }
 
 absl::StatusOr<std::optional<DesignInput>> ParseDesignFlags(const Args& args) {
@@ -303,7 +356,9 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   }
   std::future<std::pair<absl::StatusOr<SurfaceGrid>, double>> grid_fetch;
   const DesignInput* design = options.design;
-  if (files || design != nullptr) {
+  // The whole grid only for the design comparison; the files stream the
+  // session's tiles band by band.
+  if (design != nullptr) {
     grid_fetch = std::async(std::launch::async, [&] {
       const auto t0 = Clock::now();
       auto g = Retrying<SurfaceGrid>("the tiles", [&] {
@@ -351,8 +406,10 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   report->error = *std::move(stats);
   if (!marks_status.ok()) return marks_status;
   if (!files && design == nullptr) return absl::OkStatus();
-  if (!grid.ok()) return grid.status();
-  if (options.moves != nullptr) grid->SetMoves(*options.moves);
+  if (design != nullptr && !grid.ok()) return grid.status();
+  if (design != nullptr && options.moves != nullptr) {
+    grid->SetMoves(*options.moves);
+  }
   std::optional<Image> deviation_map;
   if (design != nullptr) {
     const auto td = Clock::now();
@@ -409,11 +466,38 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     marks = FilterMarks(marks, options.marks_display);
     report->marks_shown = Summarize(marks);
   }
-  auto written = WriteRunOutputs(options.dir, *grid,
+  out.relief.max_side = options.picture_size;
+  out.marks.relief.max_side = options.picture_size;
+  out.marks.relief.min_side =
+      std::min(out.marks.relief.min_side, options.picture_size);
+  out.error.max_side = options.picture_size;
+  out.error.min_side = std::min(out.error.min_side, options.picture_size);
+  std::optional<InMemoryBands> held;
+  std::optional<TileRowBands> streamed;
+  GridBands* bands;
+  if (design != nullptr) {
+    bands = &held.emplace(*grid);
+  } else {
+    bands = &streamed.emplace(
+        stock, report->scheme,
+        [&](SurfaceGrid* band, int32_t t0, int32_t t1) {
+          return Retrying<bool>("the tiles", [&]() -> absl::StatusOr<bool> {
+            absl::Status s = FetchTileRows(conn, id, t0, t1, band);
+            if (!s.ok()) return s;
+            return true;
+          }).status();
+        },
+        options.moves != nullptr ? *options.moves : std::vector<Move>());
+  }
+  auto written = WriteRunOutputs(options.dir, *bands,
                                  raster.cols > 0 ? &raster : nullptr,
                                  report->marks ? &marks : nullptr, out,
                                  &report->mesh);
   if (!written.ok()) return written.status();
+  if (design == nullptr) {
+    // Reading the session's tiles, band by band, during the pass.
+    report->output_steps.emplace_back("tiles", report->mesh.read_seconds);
+  }
   for (const WrittenFile& f : *written) {
     report->files.push_back(f.path);
     report->output_steps.emplace_back(

@@ -98,11 +98,16 @@ absl::Status LoadDesign(const StockSpec& stock, DesignInput* design);
 absl::Status UploadDesign(Connection& conn, const std::string& id,
                           const DesignInput& design);
 
+// --picture-size's default: pixels along a picture's longer side.
+inline constexpr int kDefaultPictureSize = 4096;
+
 struct OutputOptions {
   std::string dir;    // empty: no files, statistics only
   int subdivide = 1;  // STL: sub-elements per element side
   double mesh_tolerance = 0.005;  // mm; 0: the full lattice
   MarkDisplayFilter marks_display = kDefaultMarkDisplay;
+  // Pixels along the pictures' longer side at most (--picture-size).
+  int picture_size = kDefaultPictureSize;
   // The session's moves by id (SurfaceGrid::moves); not owned, may be null.
   const std::vector<Move>* moves = nullptr;
   // The design to compare with (LoadDesign done); not owned, may be null.
@@ -112,7 +117,7 @@ struct OutputOptions {
 // The valued options ParseOutputFlags reads (documented in `swarf run`'s
 // usage).
 inline constexpr const char* kOutputFlags[] = {
-    "mesh-tolerance", "marks-min-angle", "marks-min-length"};
+    "mesh-tolerance", "marks-min-angle", "marks-min-length", "picture-size"};
 
 // The error map swarf run asks for: one cell per element, at most 1600
 // along the longer side (cells then at least as large as elements).

@@ -28,6 +28,32 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::Uncut(const StockSpec& spec,
   return g;
 }
 
+absl::StatusOr<SurfaceGrid> SurfaceGrid::Band(const StockSpec& spec,
+                                              SchemeKind scheme, int32_t row0,
+                                              int32_t rows) {
+  if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
+  if (row0 < 0 || rows < 1 || row0 > spec.ny) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "band of %d node rows from row %d leaves the grid's %d rows", rows,
+        row0, spec.ny + 1));
+  }
+  SurfaceGrid g;
+  g.spec = spec;
+  g.scheme = scheme;
+  g.ResetBand(row0, rows);
+  return g;
+}
+
+void SurfaceGrid::ResetBand(int32_t first, int32_t rows) {
+  row0 = first;
+  rows = std::max(0, std::min(rows, nodes_y() - first));
+  const size_t n = static_cast<size_t>(nodes_x()) * rows;
+  SurfaceJet top;
+  top.w = spec.z_top;
+  jets.assign(n, top);
+  owners.assign(n, -1);
+}
+
 absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
   absl::StatusOr<SurfaceGrid> g = Uncut(wp.spec(), wp.scheme().kind());
   if (!g.ok()) return g.status();
@@ -91,7 +117,10 @@ absl::Status SurfaceGrid::SetNodes(int32_t i0, int32_t j0, int32_t nx,
   if (w == nullptr && (nx > 0 && ny > 0)) {
     return absl::InvalidArgumentError("node block without heights");
   }
-  for (int32_t j = 0; j < ny; ++j) {
+  // Only the rows this band holds.
+  const int32_t ja = std::max(0, row0 - j0);
+  const int32_t jb = std::min(ny, row0 + held_rows() - j0);
+  for (int32_t j = ja; j < jb; ++j) {
     for (int32_t i = 0; i < nx; ++i) {
       const int64_t in = int64_t{j} * nx + i;
       SurfaceJet& jet = jets[Index(i0 + i, j0 + j)];
@@ -115,10 +144,11 @@ absl::Status SurfaceGrid::Validate() const {
   if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
   const int64_t n = (int64_t{spec.nx} + 1) * (int64_t{spec.ny} + 1);
   if (static_cast<int64_t>(jets.size()) != n ||
-      static_cast<int64_t>(owners.size()) != n) {
+      static_cast<int64_t>(owners.size()) != n || row0 != 0) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "grid holds %d jets and %d owners, the spec needs %d nodes",
-        jets.size(), owners.size(), n));
+        "grid holds %d jets and %d owners from row %d, the spec needs %d "
+        "nodes",
+        jets.size(), owners.size(), row0, n));
   }
   return absl::OkStatus();
 }

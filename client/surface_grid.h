@@ -6,8 +6,12 @@
 // - Units: millimetres. Node (i, j) lies at GridGeometry(spec).NodeX(i),
 //   NodeY(j), exactly as in the core, so reconstructions are bit-identical to
 //   Workpiece::Reconstruct for the same nodes.
-// - jets and owners are row-major: index j * (nx + 1) + i. Untouched nodes
-//   are flat at z_top with owner -1. For zmap only jets[].w is used.
+// - jets and owners are row-major: index (j - row0) * (nx + 1) + i. Untouched
+//   nodes are flat at z_top with owner -1. For zmap only jets[].w is used.
+// - A band (Band) holds node rows [row0, row0 + held_rows()) only: the
+//   writers stream a session's grid band by band (client/grid_bands.h) and
+//   element (ei, ej) is readable where node rows ej and ej + 1 are held. A
+//   whole grid has row0 0 and every row.
 #ifndef SWARF_CLIENT_SURFACE_GRID_H_
 #define SWARF_CLIENT_SURFACE_GRID_H_
 
@@ -27,8 +31,9 @@ namespace swarf::cli {
 struct SurfaceGrid {
   StockSpec spec;
   SchemeKind scheme = SchemeKind::kGuarded;
-  std::vector<SurfaceJet> jets;  // (nx + 1) * (ny + 1), row-major
+  std::vector<SurfaceJet> jets;  // (nx + 1) * held rows, row-major
   std::vector<int32_t> owners;   // same size; -1: stock top
+  int32_t row0 = 0;              // first node row held
   // The session's moves by id, for the guarded scheme's reach of each
   // owner (ReachOf). Owners beyond it have an unbounded reach.
   std::vector<Move> moves;
@@ -48,6 +53,15 @@ struct SurfaceGrid {
   // for a spec ValidateStock rejects, or more than kMaxGridNodes nodes.
   static absl::StatusOr<SurfaceGrid> Uncut(const StockSpec& spec,
                                            SchemeKind scheme);
+  // Node rows [row0, row0 + rows) of untouched stock (rows clamped to the
+  // grid), for streaming; InvalidArgument as Uncut or for rows outside it.
+  static absl::StatusOr<SurfaceGrid> Band(const StockSpec& spec,
+                                          SchemeKind scheme, int32_t row0,
+                                          int32_t rows);
+  // Makes this band hold node rows [row0, row0 + rows) (clamped to the
+  // grid), untouched stock, keeping the moves and the storage's capacity.
+  void ResetBand(int32_t row0, int32_t rows);
+
   // A copy of every node of `wp` (derivatives widened from the core's
   // floats, as ReadTile gives them).
   static absl::StatusOr<SurfaceGrid> FromWorkpiece(const Workpiece& wp);
@@ -55,7 +69,8 @@ struct SurfaceGrid {
   // Copies a block of nx x ny nodes with first node (i0, j0), row-major
   // ((j - j0) * nx + (i - i0)), as in Workpiece::ReadTile and the service's
   // Tile message. `d` (wx, wy, wxx, wxy, wyy) and `owner` may be null: zero
-  // derivatives, owner -1. InvalidArgument if the block leaves the grid.
+  // derivatives, owner -1. InvalidArgument if the block leaves the grid;
+  // rows the band does not hold are skipped.
   absl::Status SetNodes(int32_t i0, int32_t j0, int32_t nx, int32_t ny,
                         const double* w, const float* const d[5],
                         const int32_t* owner);
@@ -66,8 +81,11 @@ struct SurfaceGrid {
   GridGeometry geometry() const { return GridGeometry(spec); }
   int32_t nodes_x() const { return spec.nx + 1; }
   int32_t nodes_y() const { return spec.ny + 1; }
+  int32_t held_rows() const {
+    return nodes_x() > 0 ? static_cast<int32_t>(jets.size() / nodes_x()) : 0;
+  }
   int64_t Index(int32_t i, int32_t j) const {
-    return int64_t{j} * nodes_x() + i;
+    return int64_t{j - row0} * nodes_x() + i;
   }
   const SurfaceJet& jet(int32_t i, int32_t j) const { return jets[Index(i, j)]; }
   int32_t owner(int32_t i, int32_t j) const { return owners[Index(i, j)]; }
@@ -83,7 +101,7 @@ struct SurfaceGrid {
   void Gradient(double x, double y, double* gx, double* gy) const;
   // Both at once (one element lookup).
   double HeightAndGradient(double x, double y, double* gx, double* gy) const;
-  // Lowest node height (z_top if uncut).
+  // Lowest node height held (z_top if uncut).
   double MinNodeHeight() const;
 };
 

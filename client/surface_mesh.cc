@@ -29,15 +29,13 @@ double DefaultZBottom(const StockSpec& spec, double z_min) {
   return z_min - std::max(0.1 * (spec.z_top - z_min), 0.02 * longer);
 }
 
-absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
-    const SurfaceGrid& grid, const SurfaceMeshOptions& options) {
-  if (absl::Status st = grid.Validate(); !st.ok()) return st;
-  const int s = options.subdivision;
+absl::StatusOr<LatticeHeights> NewLattice(const StockSpec& spec, int s) {
+  if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
   if (s < 1 || s > 4096) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "subdivision must be in [1, 4096], got %d", s));
   }
-  const int64_t nx = grid.spec.nx, ny = grid.spec.ny;
+  const int64_t nx = spec.nx, ny = spec.ny;
   const int64_t big_nx = nx * s, big_ny = ny * s;
   const int64_t top = (big_nx + 1) * (big_ny + 1);
   if (top > kMaxMeshTopVertices) {
@@ -46,28 +44,41 @@ absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
         "vertices",
         big_nx, big_ny, nx, ny, s, kMaxMeshTopVertices));
   }
-  const GridGeometry g = grid.geometry();
-  const Scheme& scheme = GetScheme(grid.scheme);
-  TriangleMesh mesh;
-  mesh.top_vertices = top;
-  mesh.lattice_nx = static_cast<int32_t>(big_nx);
-  mesh.lattice_ny = static_cast<int32_t>(big_ny);
-  mesh.vertices.resize(top + 2 * (big_nx + big_ny));
-
-  std::vector<double> xs(big_nx + 1), ys(big_ny + 1);
+  const GridGeometry g(spec);
+  LatticeHeights l;
+  l.nx = big_nx;
+  l.ny = big_ny;
+  l.s = s;
+  l.elements_y = spec.ny;
+  l.xs.resize(big_nx + 1);
+  l.ys.resize(big_ny + 1);
   for (int64_t i = 0; i <= big_nx; ++i) {
-    xs[i] = g.NodeX(static_cast<int32_t>(i / s)) + (i % s) * (g.dx() / s);
+    l.xs[i] = g.NodeX(static_cast<int32_t>(i / s)) + (i % s) * (g.dx() / s);
   }
   for (int64_t j = 0; j <= big_ny; ++j) {
-    ys[j] = g.NodeY(static_cast<int32_t>(j / s)) + (j % s) * (g.dy() / s);
+    l.ys[j] = g.NodeY(static_cast<int32_t>(j / s)) + (j % s) * (g.dy() / s);
   }
-  auto top_index = [big_nx](int64_t i, int64_t j) {
-    return static_cast<int32_t>(j * (big_nx + 1) + i);
-  };
-  std::vector<double> row_min(big_ny + 1);
-  ThreadPool::Default().ParallelFor(big_ny + 1, [&](int64_t j) {
+  l.z.resize(top);
+  l.row_min.assign(big_ny + 1, spec.z_top);
+  return l;
+}
+
+void FillLatticeRows(const SurfaceGrid& grid, int32_t e0, int32_t e1,
+                     LatticeHeights* lattice) {
+  LatticeHeights& l = *lattice;
+  const int s = l.s;
+  const int64_t nx = grid.spec.nx, ny = grid.spec.ny;
+  const int64_t big_nx = l.nx;
+  const Scheme& scheme = GetScheme(grid.scheme);
+  // Lattice rows of element rows [e0, e1): from e0 s to e1 s - 1, and the
+  // last row (J = NY) with the last element row.
+  const int64_t j0 = int64_t{e0} * s;
+  const int64_t j1 = e1 == ny ? l.ny + 1 : int64_t{e1} * s;
+  ThreadPool::Default().ParallelFor(j1 - j0, [&](int64_t r) {
+    const int64_t j = j0 + r;
     const int32_t ej = static_cast<int32_t>(std::min(j / s, ny - 1));
     double lo = grid.spec.z_top;
+    double* const row = &l.z[j * (big_nx + 1)];
     for (int32_t ei = 0; ei < nx; ++ei) {
       // Corners once per element for its s (s + 1 in the last) vertices,
       // and only where one lies between nodes (never at s = 1).
@@ -84,25 +95,60 @@ absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
                        grid.spec.z_top);
         } else {
           if (!e.has_value()) e = grid.Corners(ei, ej);
-          z = scheme.Reconstruct(*e, xs[i], ys[j]);
+          z = scheme.Reconstruct(*e, l.xs[i], l.ys[j]);
         }
-        mesh.vertices[top_index(i, j)] = {xs[i], ys[j], z};
+        row[i] = z;
         lo = std::min(lo, z);
       }
     }
-    row_min[j] = lo;
+    l.row_min[j] = lo;
   });
-  const double z_min = *std::min_element(row_min.begin(), row_min.end());
+}
+
+absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
+    const SurfaceGrid& grid, const SurfaceMeshOptions& options) {
+  if (absl::Status st = grid.Validate(); !st.ok()) return st;
+  auto lattice = NewLattice(grid.spec, options.subdivision);
+  if (!lattice.ok()) return lattice.status();
+  FillLatticeRows(grid, 0, grid.spec.ny, &*lattice);
+  return MeshFromLattice(*std::move(lattice), grid.spec, options);
+}
+
+absl::StatusOr<TriangleMesh> MeshFromLattice(
+    LatticeHeights lattice, const StockSpec& spec,
+    const SurfaceMeshOptions& options) {
+  const LatticeHeights& l = lattice;
+  const double z_min = *std::min_element(l.row_min.begin(), l.row_min.end());
   const double z_bottom =
-      options.z_bottom ? *options.z_bottom : DefaultZBottom(grid.spec, z_min);
+      options.z_bottom ? *options.z_bottom : DefaultZBottom(spec, z_min);
   if (!std::isfinite(z_bottom) || !(z_bottom < z_min)) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "z_bottom %g must be finite and below the lowest top vertex %g",
         z_bottom, z_min));
   }
-  mesh.z_bottom = z_bottom;
   // The adaptive mesh needs only the lattice's heights.
-  if (options.tolerance != 0) return SimplifySurfaceMesh(mesh, options.tolerance);
+  if (options.tolerance != 0) {
+    return SimplifyLattice(l, z_bottom, options.tolerance);
+  }
+  const int64_t big_nx = l.nx, big_ny = l.ny;
+  const int64_t top = (big_nx + 1) * (big_ny + 1);
+  const std::vector<double>& xs = l.xs;
+  const std::vector<double>& ys = l.ys;
+  TriangleMesh mesh;
+  mesh.top_vertices = top;
+  mesh.lattice_nx = static_cast<int32_t>(big_nx);
+  mesh.lattice_ny = static_cast<int32_t>(big_ny);
+  mesh.z_bottom = z_bottom;
+  mesh.vertices.resize(top + 2 * (big_nx + big_ny));
+  auto top_index = [big_nx](int64_t i, int64_t j) {
+    return static_cast<int32_t>(j * (big_nx + 1) + i);
+  };
+  ThreadPool::Default().ParallelFor(big_ny + 1, [&](int64_t j) {
+    for (int64_t i = 0; i <= big_nx; ++i) {
+      mesh.vertices[top_index(i, j)] = {xs[i], ys[j], l.Z(i, j)};
+    }
+  });
+  lattice.z = {};
 
   // Bottom vertices, one under each boundary vertex of the top: the south
   // and north rows (corners included), then the west and east columns.

@@ -67,6 +67,37 @@ inline constexpr int64_t kMaxMeshTopVertices = int64_t{1} << 28;
 // depth machined below the top, and at least 2% of the stock's longer side.
 double DefaultZBottom(const StockSpec& spec, double z_min);
 
+// The top lattice's heights, what both meshes are made from: filled band
+// by band (FillLatticeRows), 8 bytes a lattice vertex plus its coordinates
+// along x and y. Vertex (I, J) is (xs[I], ys[J], z[J (NX + 1) + I]), as
+// BuildSurfaceMesh places it.
+struct LatticeHeights {
+  int64_t nx = 0, ny = 0;  // NX, NY: lattice cells
+  int s = 1;               // the subdivision
+  int32_t elements_y = 0;  // the grid's ny
+  std::vector<double> xs, ys, z;
+  std::vector<double> row_min;  // per lattice row: min(z_top, its heights)
+  double Z(int64_t i, int64_t j) const { return z[j * (nx + 1) + i]; }
+};
+
+// An empty lattice for `spec` at subdivision `s`; InvalidArgument for an
+// invalid spec, s outside [1, 4096] or more than kMaxMeshTopVertices.
+absl::StatusOr<LatticeHeights> NewLattice(const StockSpec& spec, int s);
+// Sets the lattice rows J whose element row min(J / s, ny - 1) lies in
+// [e0, e1), from `band` (which holds those elements), in parallel.
+void FillLatticeRows(const SurfaceGrid& band, int32_t e0, int32_t e1,
+                     LatticeHeights* lattice);
+// The mesh BuildSurfaceMesh makes once every row is filled (`lattice` is
+// not kept; its heights are moved out where they serve as they are).
+absl::StatusOr<TriangleMesh> MeshFromLattice(LatticeHeights lattice,
+                                             const StockSpec& spec,
+                                             const SurfaceMeshOptions& options);
+// SimplifySurfaceMesh of the full mesh of `lattice` (with bottom z_bottom),
+// without building that mesh.
+absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& lattice,
+                                             double z_bottom,
+                                             double tolerance);
+
 // InvalidArgument for an invalid grid, subdivision < 1, too many vertices,
 // or a z_bottom that is not finite or not below every top vertex.
 absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
