@@ -11,6 +11,7 @@ import argparse
 import json
 import math
 import os
+import re
 import shutil
 import struct
 import subprocess
@@ -181,6 +182,48 @@ class AddonTest(unittest.TestCase):
                 open(os.path.join(self.addon, "surface.stl"), "rb") as b:
             self.assertTrue(a.read() == b.read())
 
+    def test_server_with_a_token(self):
+        """--server with --token: a swarfd that requires the token gives
+        the embedded server's surface; a wrong token is an error naming
+        the refusal, and nothing is written."""
+        tokens = os.path.join(self.work, "tokens")
+        with open(tokens, "w") as f:
+            f.write("s3cret-token\n")
+        server = subprocess.Popen(
+            [ARGS.swarfd, "--listen", "127.0.0.1:0", "--data_dir", "",
+             "--auth_tokens_file", tokens, "--drain_seconds", "1"],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+        try:
+            port = None
+            for line in server.stdout:
+                m = re.search(rb"\(port (\d+)\)", line)
+                if m:
+                    port = int(m.group(1))
+                    break
+            self.assertIsNotNone(port)
+            address = "127.0.0.1:%d" % port
+            out = os.path.join(self.work, "token")
+            r = self.simulate_job("job.FCStd", "--out", out, "--server",
+                                  address, "--token", "s3cret-token")
+            self.assertEqual(r.returncode, 0, r.stderr.decode()[-3000:])
+            self.assertIn("simulating on %s" % address, r.stderr.decode())
+            with open(os.path.join(out, "surface.stl"), "rb") as a, \
+                    open(os.path.join(self.addon, "surface.stl"), "rb") as b:
+                self.assertTrue(a.read() == b.read())
+            with open(os.path.join(out, "command.txt")) as f:
+                self.assertNotIn("s3cret", f.read())
+            bad = os.path.join(self.work, "badtoken")
+            r = self.simulate_job("job.FCStd", "--out", bad, "--server",
+                                  address, "--token", "wrong")
+            self.assertEqual(r.returncode, 1)
+            self.assertIn("simulate-job: error: swarf run failed",
+                          r.stderr.decode())
+            self.assertIn("token", r.stderr.decode())
+            self.assertFalse(os.path.exists(os.path.join(bad, "stats.json")))
+        finally:
+            server.terminate()
+            server.wait(timeout=10)
+
     def test_heights(self):
         """Analytic heights in the surface: the faced top at z 12 (the
         model's top), the pocket floor at 8, the drill's point at z 6 at
@@ -251,6 +294,23 @@ class AddonTest(unittest.TestCase):
     def test_mesh_object_is_watertight(self):
         """The saved document holds the surface as a Mesh feature:
         watertight, the triangles of surface.stl, a colour per vertex."""
+        self.check_mesh(os.path.join(self.work, "simulated.FCStd"),
+                        "deviation", self.addon)
+
+    def test_height_colours_without_design(self):
+        """--no-design --color-by height: no deviation in stats.json, and
+        the mesh coloured by height."""
+        out = os.path.join(self.work, "height")
+        saved = os.path.join(self.work, "height.FCStd")
+        r = self.simulate_job("job.FCStd", "--out", out, "--embedded",
+                              "--no-design", "--color-by", "height",
+                              "--save", saved)
+        self.assertEqual(r.returncode, 0, r.stderr.decode()[-3000:])
+        self.assertNotIn("deviation", self.stats(out))
+        self.assertIn("verdict: no design compared", r.stdout.decode())
+        self.check_mesh(saved, "height", out)
+
+    def check_mesh(self, fcstd, coloring, out):
         check = os.path.join(self.work, "check.py")
         result = os.path.join(self.work, "check.json")
         with open(check, "w") as f:
@@ -268,17 +328,16 @@ class AddonTest(unittest.TestCase):
                 "      'colors': len(o.VertexColors),\n"
                 "      'coloring': o.SwarfColoring, 'job': o.SwarfJob,\n"
                 "      'volume': o.Mesh.Volume}, open(%r, 'w'))\n"
-                "main()\n" % (os.path.join(self.work, "simulated.FCStd"),
-                              result))
+                "main()\n" % (fcstd, result))
         freecadcmd(check, {})
         with open(result) as f:
             m = json.load(f)
         self.assertEqual(m["n"], 1)
         self.assertTrue(m["solid"])
         self.assertFalse(m["nonmanifold"])
-        self.assertEqual(m["facets"], self.stats(self.addon)["mesh"]["triangles"])
+        self.assertEqual(m["facets"], self.stats(out)["mesh"]["triangles"])
         self.assertEqual(m["colors"], m["points"])
-        self.assertEqual(m["coloring"], "deviation")
+        self.assertEqual(m["coloring"], coloring)
         self.assertEqual(m["job"], "Job")
         self.assertGreater(m["volume"], 0)
 
@@ -377,6 +436,44 @@ class AddonTest(unittest.TestCase):
         self.assertEqual(r.returncode, 1)
         self.assertIn("the swarf CLI 'no-such-swarf' is not on PATH",
                       r.stderr.decode())
+
+
+class ReportTest(unittest.TestCase):
+    """swarf_freecad.report on hand-written stats: every line it cites is
+    followed by its operation and command."""
+
+    def test_lines_named(self):
+        sys.path.insert(0, os.path.join(ROOT, "client", "freecad"))
+        from swarf_freecad import report
+        lines = {26: ("Facing", 4, "G1 X37.5 Y2.5 Z12 F200"),
+                 72: ("Pocket", 5, "G1 X19.5 Y16.0355 Z8 F600")}
+        stats = {
+            "moves": 10, "source_lines": 80,
+            "stock": {"x0": 0, "y0": 0, "x1": 10, "y1": 10, "top": 5,
+                      "nx": 20, "ny": 20},
+            "tools": {"1": "flat d=5"},
+            "deviation": {
+                "ok": False, "tolerance": 0.01, "allowance": 0,
+                "normal": {"gouge_max": 0.5, "excess_max": 0},
+                "gouge": {"max": 0.5, "x": 1, "y": 2, "line": 72},
+                "excess": {"lines": []},
+                "out_of_tolerance": {"area_mm2": 3, "lines": [
+                    {"line": 72, "gouge_max": 0.5, "x": 1, "y": 2,
+                     "area_mm2": 3}]}},
+            "safety": {"counts": {"rapid_cuts": 1}, "rapid_cuts": [
+                {"line": 26, "x": 3, "y": 4, "z": 12, "depth": 1,
+                 "volume_mm3": 19.8}]},
+        }
+        text = report.report("Job", stats, lines)
+        self.assertIn("verdict: OUT OF TOLERANCE (tolerance 0.01 mm, "
+                      "allowance 0 mm): gouge 0.5 mm, excess 0 mm, 3 mm2 out "
+                      "of tolerance\n", text)
+        self.assertIn("  gouge 0.5 mm at (1, 2), 3 mm2: line 72 (Pocket, "
+                      "command 6: G1 X19.5 Y16.0355 Z8 F600)\n", text)
+        self.assertIn("safety: 1 rapid moves cutting material; the first:\n"
+                      "  1 mm deep at (3, 4, 12), 19.8 mm3: line 26 (Facing, "
+                      "command 5: G1 X37.5 Y2.5 Z12 F200)\n", text)
+        self.assertIn("line 99", report.where(99, lines))
 
 
 class RunnerTest(unittest.TestCase):

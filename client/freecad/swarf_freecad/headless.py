@@ -39,6 +39,9 @@ def parser():
     p.add_argument("--allowance", type=float, help="stock to leave (mm)")
     p.add_argument("--no-design", action="store_true",
                    help="do not compare with the Job's model")
+    p.add_argument("--color-by", choices=("deviation", "height"),
+                   help="the Mesh's vertex colours (default: preferences, "
+                   "else deviation)")
     p.add_argument("--recompute", action="store_true",
                    help="recompute the document before posting")
     p.add_argument("--save", metavar="FCSTD",
@@ -73,6 +76,8 @@ def options_from(args):
         o.allowance = args.allowance
     if args.no_design:
         o.design = False
+    if args.color_by:
+        o.color_by = args.color_by
     o.extra_args += args.swarf_arg
     # Paths given relative to where simulate-job was started.
     for name in ("swarf", "swarfd", "tls_ca", "tls_cert", "tls_key"):

@@ -268,5 +268,6 @@ def simulate(job, out_dir, options, progress=None, cancelled=None,
     text = report_mod.report(job.Label, stats, lines, rc)
     with open(os.path.join(out_dir, "report.txt"), "w") as f:
         f.write(text)
+    say("adding the surface to the document")
     mesh_obj = add_mesh(job.Document, job, out_dir, stats, options.color_by)
     return Result(job, out_dir, rc, output, stats, lines, text, mesh_obj)
