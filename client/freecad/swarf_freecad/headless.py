@@ -39,6 +39,9 @@ def parser():
     p.add_argument("--allowance", type=float, help="stock to leave (mm)")
     p.add_argument("--no-design", action="store_true",
                    help="do not compare with the Job's model")
+    p.add_argument("--deflection", type=float,
+                   help="the model's tessellation: largest chord error "
+                   "(mm, default 0.01)")
     p.add_argument("--color-by", choices=("deviation", "height"),
                    help="the Mesh's vertex colours (default: preferences, "
                    "else deviation)")
@@ -76,6 +79,8 @@ def options_from(args):
         o.allowance = args.allowance
     if args.no_design:
         o.design = False
+    if args.deflection is not None:
+        o.deflection = args.deflection
     if args.color_by:
         o.color_by = args.color_by
     o.extra_args += args.swarf_arg
@@ -89,8 +94,13 @@ def options_from(args):
 
 def main():
     argv = json.loads(os.environ.get("SWARF_FREECAD_ARGS", "[]"))
+    p = parser()
     try:
-        args = parser().parse_args(argv)
+        args = p.parse_args(argv)
+        for name in ("spacing", "deflection"):
+            value = getattr(args, name)
+            if value is not None and not value > 0:
+                p.error("--%s must be > 0 (got %g)" % (name, value))
     except SystemExit as e:
         sys.exit(2 if e.code else 0)
     import FreeCAD

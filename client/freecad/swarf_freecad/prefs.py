@@ -20,6 +20,8 @@ FIELDS = [
     ("Tolerance", "float", 0.0, "tolerance mm (0: swarf's default)"),
     ("Allowance", "float", 0.0, "allowance (stock to leave) mm"),
     ("CompareDesign", "bool", True, "compare with the Job's model"),
+    ("Deflection", "float", 0.01,
+     "the model's tessellation: largest chord error (mm)"),
     ("OutputDir", "str", "",
      "output folder (empty: a folder beside the document, or in /tmp)"),
     ("ColorBy", "str", "deviation", "colour the surface by: deviation or height"),
@@ -60,4 +62,5 @@ def options():
         tls_key=get("TlsKey"), swarfd=get("SwarfdPath"),
         spacing=get("Spacing") or None, design=get("CompareDesign"),
         tolerance=get("Tolerance") or None,
-        allowance=get("Allowance") or None, color_by=get("ColorBy"))
+        allowance=get("Allowance") or None, color_by=get("ColorBy"),
+        deflection=get("Deflection") or 0.01)
