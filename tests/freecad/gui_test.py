@@ -82,6 +82,17 @@ try:
     res["report"] = rv.toPlainText() if rv else ""
     FreeCADGui.activateWorkbench("PartWorkbench")
     res["toolbar_elsewhere"] = tb.isVisible()
+    # The preferences page: shows what is stored, stores what is edited.
+    from swarf_freecad import gui
+    page = gui.PreferencesPage()
+    page.loadSettings()
+    kind, w = page.widgets["Spacing"]
+    res["page_spacing"] = w.value()
+    w.setValue(0.5)
+    page.widgets["Server"][1].setText("example:1234")
+    page.saveSettings()
+    res["saved"] = [prefs.get("Spacing"), prefs.get("Server"),
+                    prefs.get("SwarfPath")]
 except Exception:
     res["error"] = traceback.format_exc()
 with open(%(result)r, "w") as f:
@@ -167,6 +178,10 @@ def main():
     check(res.get("toolbar") is True, "the swarf toolbar shows in Path")
     check(res.get("action") == ["Simulate with swarf"], "its action")
     check(res.get("toolbar_elsewhere") is False, "hidden in Part")
+    check(res.get("page_spacing") == 0.25, "the preferences page shows 0.25")
+    check(res.get("saved") == [0.5, "example:1234",
+                               os.path.abspath(args.swarf)],
+          "the preferences page saves: %s" % res.get("saved"))
     check(res.get("meshes_after_cancel") == 0, "cancel adds no mesh")
     with open(pids) as f:
         pid = int(f.read())
