@@ -2,7 +2,9 @@
 # version keeps them: FreeCAD 0.20 names the workbench "Path" and keeps its
 # Python in PathScripts; 0.21 and 1.0 (where it is "CAM") moved it into the
 # Path package (Path.Main.Job, Path.Post.Command, Path.Post.scripts). Nothing
-# here imports FreeCADGui, so it all runs under freecadcmd.
+# here imports FreeCADGui, so it all runs under freecadcmd. Only 0.20 was
+# tried (README, "FreeCAD CAM add-on"); the later locations are from
+# FreeCAD's sources.
 import importlib
 
 
@@ -10,26 +12,27 @@ class SwarfError(Exception):
     """An error the user can act on; the message names the object or file."""
 
 
-def _first_module(names):
-    errors = []
-    for name in names:
-        try:
-            return importlib.import_module(name)
-        except ImportError as e:  # the next version's location
-            errors.append("%s (%s)" % (name, e))
-    raise SwarfError("none of these FreeCAD modules could be imported: " +
-                     "; ".join(errors))
-
-
 def linuxcnc_post():
     """FreeCAD's LinuxCNC post processor module, freshly loaded: the post keeps
     its settings (and line counter) in module globals, so every posting starts
     from a reload, as FreeCAD's own PostProcessor.load does."""
-    mod = _first_module([
-        "PathScripts.post.linuxcnc_post",  # 0.20
-        "Path.Post.scripts.linuxcnc_post",  # 0.21, 1.0
-    ])
-    return importlib.reload(mod)
+    errors = []
+    for name in (
+            "PathScripts.post.linuxcnc_post",  # 0.20
+            "Path.Post.scripts.linuxcnc_post",  # 0.21, 1.0
+            # Later versions turned linuxcnc_post into a class and kept the
+            # export() script under this name.
+            "Path.Post.scripts.linuxcnc_legacy_post"):
+        try:
+            mod = importlib.import_module(name)
+        except ImportError as e:
+            errors.append("%s (%s)" % (name, e))
+            continue
+        if hasattr(mod, "export"):
+            return importlib.reload(mod)
+        errors.append("%s (no export())" % name)
+    raise SwarfError("FreeCAD's LinuxCNC post processor was not found: " +
+                     "; ".join(errors))
 
 
 def freecad_post_list(job):
@@ -44,7 +47,10 @@ def freecad_post_list(job):
         cmd = getattr(mod, "CommandPathPost", None)
         if cmd is None or not hasattr(cmd, "buildPostList"):
             continue
-        lists = cmd().buildPostList(job)
+        try:
+            lists = cmd().buildPostList(job)
+        except (TypeError, AttributeError):  # another version's signature
+            continue
         # 1.0 returns (name, objects) pairs; 0.20 and 0.21 lists of objects.
         flat = []
         for sub in lists:
