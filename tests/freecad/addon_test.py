@@ -341,6 +341,37 @@ class AddonTest(unittest.TestCase):
         self.assertEqual(m["job"], "Job")
         self.assertGreater(m["volume"], 0)
 
+    def test_own_post_list_is_freecads(self):
+        """The add-on's own post list (for FreeCADs whose buildPostList it
+        cannot call) gives the program FreeCAD's gives, in its default
+        order (Fixture)."""
+        script = os.path.join(self.work, "postlist.py")
+        result = os.path.join(self.work, "postlist.json")
+        with open(script, "w") as f:
+            f.write(
+                "def main():\n"
+                "    import FreeCAD, json, sys\n"
+                "    sys.path.insert(0, %r)\n"
+                "    from swarf_freecad import compat, post\n"
+                "    doc = FreeCAD.openDocument(%r)\n"
+                "    job = doc.getObject('Job')\n"
+                "    def text(objs):\n"
+                "        return [l for l in compat.linuxcnc_post().export(\n"
+                "            objs, '-', '--no-show-editor').splitlines()\n"
+                "            if not l.startswith('(Output Time')]\n"
+                "    json.dump({'order': job.OrderOutputBy,\n"
+                "        'freecad': text(compat.freecad_post_list(job)),\n"
+                "        'own': text(post._own_post_list(job))},\n"
+                "        open(%r, 'w'))\n"
+                "main()\n" % (os.path.join(ROOT, "client", "freecad"),
+                               os.path.join(self.work, "job.FCStd"), result))
+        freecadcmd(script, {})
+        with open(result) as f:
+            r = json.load(f)
+        self.assertEqual(r["order"], "Fixture")
+        self.assertGreater(len(r["freecad"]), 100)
+        self.assertEqual(r["own"], r["freecad"])
+
     def test_every_library_toolbit(self):
         """Each ToolBit of FreeCAD's library as a table line (or the error
         naming it), and swarf takes the table: a program cutting with every

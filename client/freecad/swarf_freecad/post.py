@@ -32,21 +32,21 @@ class _Fixture:
 
 
 def _own_post_list(job):
-    """Operation order (FreeCAD's default) where FreeCAD's buildPostList
-    could not be imported: per active operation its fixtures, and its tool
-    controller where the tool changes."""
+    """FreeCAD's default order (OrderOutputBy "Fixture") where FreeCAD's
+    buildPostList could not be used: per fixture, every active operation,
+    its tool controller first where the tool changes."""
     out = []
-    current = None
-    for op in job.Operations.Group:
-        if not _active(op):
-            continue
-        for f in job.Fixtures:
-            out.append(_Fixture(job, f))
-        tc = getattr(op, "ToolController", None)
-        if tc is not None and tc is not current:
-            out.append(tc)
-            current = tc
-        out.append(op)
+    for f in job.Fixtures:
+        out.append(_Fixture(job, f))
+        current = None
+        for op in job.Operations.Group:
+            if not _active(op):
+                continue
+            tc = getattr(op, "ToolController", None)
+            if tc is not None and tc is not current:
+                out.append(tc)
+                current = tc
+            out.append(op)
     return out
 
 
