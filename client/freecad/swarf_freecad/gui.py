@@ -100,6 +100,15 @@ class SimulateCommand:
             FreeCAD.Console.PrintError("swarf: %s\n" % e)
             QtGui.QMessageBox.critical(None, "Simulate with swarf", str(e))
             return
+        except Exception:  # FreeCAD's own, while posting: never leave the
+            dialog.close()  # modal dialog up
+            import traceback
+            FreeCAD.Console.PrintError("swarf: %s" % traceback.format_exc())
+            QtGui.QMessageBox.critical(
+                None, "Simulate with swarf",
+                "Simulating %s failed; the report view has the details."
+                % job.Label)
+            return
         dialog.setValue(100)
         dialog.close()
         vo = getattr(result.mesh, "ViewObject", None)
