@@ -27,8 +27,13 @@ SPACING = "0.25"
 ARGS = None
 
 
+# FreeCAD reads the user's preferences (the add-on's too) from $HOME: the
+# tests run with a scratch one, so nobody's settings change their results.
+HOME = tempfile.mkdtemp(prefix="swarf-freecad-home-")
+
+
 def freecadcmd(script, env_extra):
-    env = dict(os.environ, **env_extra)
+    env = dict(os.environ, HOME=HOME, **env_extra)
     p = subprocess.run(
         ["freecadcmd", "-c", "exec(open(%r).read())" % script], env=env,
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, timeout=120)
@@ -105,7 +110,7 @@ class AddonTest(unittest.TestCase):
             [sys.executable, SIMULATE_JOB, os.path.join(cls.work, args[0]),
              "--swarf", ARGS.swarf, "--spacing", SPACING] + list(args[1:]),
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, timeout=120,
-            cwd=cls.work)
+            cwd=cls.work, env=dict(os.environ, HOME=HOME))
 
     def stats(self, out):
         with open(os.path.join(out, "stats.json")) as f:
@@ -463,7 +468,8 @@ class AddonTest(unittest.TestCase):
             [sys.executable, SIMULATE_JOB,
              os.path.join(self.work, "job.FCStd"), "--out",
              os.path.join(self.work, "noswarf"), "--swarf", "no-such-swarf"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, timeout=120)
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, timeout=120,
+            env=dict(os.environ, HOME=HOME))
         self.assertEqual(r.returncode, 1)
         self.assertIn("the swarf CLI 'no-such-swarf' is not on PATH",
                       r.stderr.decode())
@@ -516,6 +522,10 @@ class RunnerTest(unittest.TestCase):
         from swarf_freecad import runner
         cls.runner = runner
         cls.work = tempfile.mkdtemp(prefix="swarf-runner-")
+
+    @classmethod
+    def tearDownClass(cls):
+        shutil.rmtree(cls.work, ignore_errors=True)
 
     def test_progress_on_a_terminal(self):
         """With a pty swarf draws its bar; the percentages rise to 100."""
@@ -572,10 +582,15 @@ def main():
     ARGS.swarf = os.path.abspath(ARGS.swarf)
     ARGS.swarfd = os.path.abspath(ARGS.swarfd)
     if shutil.which("freecadcmd") is None:
+        shutil.rmtree(HOME, ignore_errors=True)
         print("SKIP: freecadcmd is not installed (make test-freecad "
               "installs Debian's freecad and runs this)")
         return 77
-    prog = unittest.main(argv=[sys.argv[0]] + rest, exit=False, verbosity=2)
+    try:
+        prog = unittest.main(argv=[sys.argv[0]] + rest, exit=False,
+                             verbosity=2)
+    finally:
+        shutil.rmtree(HOME, ignore_errors=True)
     return 0 if prog.result.wasSuccessful() else 1
 
 
