@@ -112,6 +112,16 @@ class AddonTest(unittest.TestCase):
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, timeout=120,
             cwd=cls.work, env=dict(os.environ, HOME=HOME))
 
+    def ref_table(self):
+        """The Job's tools as the test knows them (FreeCAD's catalogue
+        figures), written in other words than the add-on's."""
+        table = os.path.join(self.work, "ref", "tools.tbl")
+        with open(table, "w") as f:
+            f.write("T1 P1 D5.0 ;endmill flute=30 shank=3\n"
+                    "T2 P2 D6.0 ;bullnose r=1.5 flute=40 shank=3\n"
+                    "T3 P3 D5.0 ;cone 119\n")
+        return table
+
     def stats(self, out):
         with open(os.path.join(out, "stats.json")) as f:
             return json.load(f)
@@ -150,11 +160,7 @@ class AddonTest(unittest.TestCase):
         Job's stock from FreeCAD: surface.stl byte for byte, stats.json
         figure for figure (deviation included)."""
         ref = os.path.join(self.work, "ref")
-        table = os.path.join(ref, "tools.tbl")
-        with open(table, "w") as f:
-            f.write("T1 P1 D5.0 ;endmill flute=30 shank=3\n"
-                    "T2 P2 D6.0 ;bullnose r=1.5 flute=40 shank=3\n"
-                    "T3 P3 D5.0 ;cone 119\n")
+        table = self.ref_table()
         stock = ",".join(repr(v) for v in self.facts["stock"])
         self.assertEqual(stock, "-1.0,-1.0,41.0,31.0,13.0")
         out = os.path.join(self.work, "direct")
@@ -174,6 +180,32 @@ class AddonTest(unittest.TestCase):
             comparable(self.stats(out), os.path.join(ref, "program.ngc")),
             comparable(self.stats(self.addon),
                        os.path.join(self.addon, "program.ngc")))
+
+    def test_every_node_height_equals_swarf_run(self):
+        """With --mesh-tolerance 0 the STL holds every node's height (two
+        triangles per element): the add-on's equal `swarf run`'s, byte for
+        byte."""
+        out = os.path.join(self.work, "full")
+        r = self.simulate_job("job.FCStd", "--out", out, "--embedded",
+                              "--no-design", "--swarf-arg=--mesh-tolerance",
+                              "--swarf-arg=0")
+        self.assertEqual(r.returncode, 0, r.stderr.decode()[-3000:])
+        direct = os.path.join(self.work, "full-direct")
+        r = subprocess.run(
+            [ARGS.swarf, "run",
+             os.path.join(self.work, "ref", "program.ngc"), "--tools",
+             self.ref_table(), "--stock",
+             "-1,-1,41,31,13", "--spacing", SPACING, "--mesh-tolerance",
+             "0", "--out", direct], stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, timeout=120)
+        self.assertEqual(r.returncode, 0, r.stdout.decode()[-2000:])
+        stats = self.stats(out)
+        nodes = (stats["stock"]["nx"] + 1) * (stats["stock"]["ny"] + 1)
+        tris = read_stl(os.path.join(out, "surface.stl"))
+        self.assertGreaterEqual(len({v for t in tris for v in t}), nodes)
+        with open(os.path.join(out, "surface.stl"), "rb") as a, \
+                open(os.path.join(direct, "surface.stl"), "rb") as b:
+            self.assertTrue(a.read() == b.read())
 
     def test_local_swarfd_gives_the_same_surface(self):
         """--swarfd: the add-on starts swarfd on a free port and runs on it;
