@@ -119,7 +119,9 @@ def describe(command):
         return command.Name
     words = [command.Name]
     params = command.Parameters
-    for k in sorted(params, key=lambda k: (_ORDER.find(k) % 99, k)):
+    def order(k):  # the post's order; unknown words last
+        return (_ORDER.index(k) if k in _ORDER else len(_ORDER), k)
+    for k in sorted(params, key=order):
         v = params[k] * 60 if k == "F" else params[k]
         text = ("%.4f" % v).rstrip("0").rstrip(".")
         words.append(k + ("0" if text in ("-0", "") else text))
@@ -127,8 +129,9 @@ def describe(command):
 
 
 def line_map(text, objects):
-    """{line number (1-based): (object label, command index, G-code of the
-    Path command)} for every posted line that a Path command made. Lines
+    """{line number (1-based): (object label, command index, the Path
+    command as describe() writes it)} for every posted line that a Path
+    command made. Lines
     are matched in order by their command word inside each object's
     "(begin operation: LABEL)" block, so extra lines the post adds (M5 before
     M6, G43 after it, coolant, preamble) stay unmapped; where comments are
