@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <random>
@@ -25,8 +26,10 @@
 #include "client/json_writer.h"
 #include "client/run_report.h"
 #include "client/safety_report.h"
+#include "client/server_program.h"
 #include "client/tool_table.h"
 #include "client/toolpath_flags.h"
+#include "gcode/text.h"
 #include "gcode/toolpath.h"
 #include "server/convert.h"
 #include "server/session.h"
@@ -85,6 +88,9 @@ const std::string kUsage =
     "  --subdivide N                STL: split each element N x N using the\n"
     "                               scheme's patches (default 1)\n"
     "  --batch N                    moves per batch sent (default 20000)\n"
+    "  --interpret client|server    who interprets the G-code: this client\n"
+    "                               sends the moves (default), or the server\n"
+    "                               is sent the program (the same result)\n"
     "  --mesh-tolerance T           STL/VRML: largest vertical distance to\n"
     "                               the full-resolution surface (mm,\n"
     "                               default 0.005; 0: every element)\n"
@@ -265,24 +271,22 @@ absl::StatusOr<int64_t> CheckRunMemory(const Args& args,
 }
 
 // Runs of points with one tool and one kind of feed (the protocol's batches
-// carry one of each); a tool change starts a repositioning run.
+// carry one of each); a tool change starts a repositioning run. Split by
+// gcode::SplitRuns, as swarfd splits a program it interprets.
 std::vector<PathRun> Runs(const Toolpath& path,
                           const std::map<int, int32_t>& tool_ids) {
   std::vector<PathRun> runs;
-  for (size_t k = 0; k < path.points().size(); ++k) {
-    const ToolpathPoint& p = path.points()[k];
-    const int32_t tool = tool_ids.at(p.tool);
-    // A feed of F0 moves as fast as the machine goes: checked as a rapid.
-    const bool rapid = p.rapid || path.feed(static_cast<int64_t>(k)) == 0;
-    if (runs.empty() || p.starts_run || runs.back().tool_id != tool ||
-        runs.back().rapid != rapid) {
-      PathRun r;
-      r.tool_id = tool;
-      r.rapid = rapid;
-      r.reposition = p.starts_run;
-      runs.push_back(std::move(r));
+  for (const gcode::ToolpathRun& r :
+       gcode::SplitRuns(path, [&](int t) { return tool_ids.at(t); })) {
+    PathRun run;
+    run.tool_id = r.tool_id;
+    run.rapid = r.rapid;
+    run.reposition = r.reposition;
+    run.points.reserve(r.end - r.begin);
+    for (int64_t k = r.begin; k < r.end; ++k) {
+      run.points.push_back(path.points()[k].position);
     }
-    runs.back().points.push_back(p.position);
+    runs.push_back(std::move(run));
   }
   return runs;
 }
@@ -336,6 +340,51 @@ class ProgressBar {
   int last_quarter_ = 0;
 };
 
+// --interpret client|server: whether the server is sent the program.
+absl::StatusOr<bool> InterpretOnServer(const Args& args) {
+  const std::string v = args.Get("interpret").value_or("client");
+  if (v != "client" && v != "server") {
+    return absl::InvalidArgumentError("--interpret must be client or server");
+  }
+  return v == "server";
+}
+
+// --interpret server: each program file sent to the session's server, which
+// interprets it with the same options and applies the batches StreamPath
+// would have sent (each file starting from an unknown position, as
+// Toolpath::AppendProgram joins them).
+absl::Status StreamPrograms(
+    Connection& conn, const std::string& session_id,
+    const std::vector<std::string>& files, const GcodeOptions& options,
+    bool strict, int64_t batch_points, int64_t moves_total,
+    const std::function<void(const StreamProgress&)>& progress,
+    const std::function<void(const pb::Ack&, int64_t)>& on_ack) {
+  StreamProgress p;
+  p.moves_total = moves_total;
+  uint64_t first_seq = 1;
+  for (const std::string& f : files) {
+    auto text = gcode::ReadWholeFile(f);
+    if (!text.ok()) {
+      return absl::Status(text.status().code(),
+                          absl::StrCat(f, ": ", text.status().message()));
+    }
+    if (gcode::DetectToolpathFormat(*text) != gcode::ToolpathFormat::kGcode) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          f, ": --interpret server needs G-code (this is x,y,z points)"));
+    }
+    pb::ProgramOptions o = ProgramOptionsFor(options, strict, batch_points, f);
+    o.set_first_seq(first_seq);
+    pb::ProgramDone done;
+    if (absl::Status s = StreamProgram(conn, session_id, *text, o, &p,
+                                       progress, on_ack, &done);
+        !s.ok()) {
+      return s;
+    }
+    first_seq = done.last_seq() + 1;
+  }
+  return absl::OkStatus();
+}
+
 double Since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0)
       .count();
@@ -354,6 +403,7 @@ int RunCommand(const std::vector<std::string>& argv) {
                                    "mesh",   "scheme",        "arc-tolerance",
                                    "server", "out",           "subdivide",
                                    "batch",  "max-memory", "interpret"};
+  valued.insert("interpret");
   valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
   valued.insert(std::begin(kToolpathFlags), std::end(kToolpathFlags));
   valued.insert(std::begin(kOutputFlags), std::end(kOutputFlags));
@@ -438,6 +488,8 @@ int RunCommand(const std::vector<std::string>& argv) {
     if (!k.ok()) return fail(k.status(), 2);
     scheme = *k;
   }
+  const absl::StatusOr<bool> interpret_server = InterpretOnServer(*args);
+  if (!interpret_server.ok()) return fail(interpret_server.status(), 2);
   auto batch = args->GetInt("batch");
   auto subdivide = args->GetInt("subdivide");
   if (!batch.ok()) return fail(batch.status(), 2);
@@ -621,31 +673,35 @@ int RunCommand(const std::vector<std::string>& argv) {
   StreamProgress last;
   SafetyCollector safety(*path, file_starts, files, assemblies, *safety_options);
   safety.Follow(viewer != nullptr);
-  absl::Status streamed = StreamPath(
-      **conn, id, runs, batch_points,
-      [&](const StreamProgress& p) {
-        last = p;
-        bar.Update(p);
-      },
-      [&](const pb::Ack& a, int64_t first) {
-        safety.OnAck(a, first);
-        if (viewer) {
-          // The page marks the findings and dashes the air moves as the
-          // batches are acknowledged.
-          SafetyCollector::NewFindings found = safety.TakeNew();
-          std::vector<ViewerMarker> markers;
-          for (const auto& [kind, it] : found.items) {
-            const auto& files = safety.files();
-            markers.push_back(
-                {{it.x, it.y, it.z}, SafetyCollector::kKindNames[kind],
-                 it.file >= 0 && it.file < static_cast<int32_t>(files.size())
-                     ? files[it.file]
-                     : std::string(),
-                 it.line, it.depth, it.volume_mm3});
-          }
-          viewer->AddSafety(std::move(markers), std::move(found.air));
-        }
-      });
+  const auto on_progress = [&](const StreamProgress& p) {
+    last = p;
+    bar.Update(p);
+  };
+  const auto on_ack = [&](const pb::Ack& a, int64_t first) {
+    safety.OnAck(a, first);
+    if (viewer) {
+      // The page marks the findings and dashes the air moves as the
+      // batches are acknowledged.
+      SafetyCollector::NewFindings found = safety.TakeNew();
+      std::vector<ViewerMarker> markers;
+      for (const auto& [kind, it] : found.items) {
+        const auto& files = safety.files();
+        markers.push_back(
+            {{it.x, it.y, it.z}, SafetyCollector::kKindNames[kind],
+             it.file >= 0 && it.file < static_cast<int32_t>(files.size())
+                 ? files[it.file]
+                 : std::string(),
+             it.line, it.depth, it.volume_mm3});
+      }
+      viewer->AddSafety(std::move(markers), std::move(found.air));
+    }
+  };
+  absl::Status streamed =
+      *interpret_server
+          ? StreamPrograms(**conn, id, files, gopt, tflags.strict,
+                           batch_points, path->move_count(), on_progress,
+                           on_ack)
+          : StreamPath(**conn, id, runs, batch_points, on_progress, on_ack);
   const double sim_s = Since(t_sim);
   if (viewer) viewer->MarkFinished();
   if (!streamed.ok()) return fail(streamed, 1);

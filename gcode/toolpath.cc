@@ -118,6 +118,28 @@ absl::StatusOr<std::vector<Vec3>> ChordArc(const Vec3& start,
   return out;
 }
 
+std::vector<ToolpathRun> SplitRuns(
+    const Toolpath& path, const std::function<int32_t(int tool)>& tool_id) {
+  std::vector<ToolpathRun> runs;
+  const std::vector<ToolpathPoint>& points = path.points();
+  for (size_t k = 0; k < points.size(); ++k) {
+    const ToolpathPoint& p = points[k];
+    const int32_t tool = tool_id(p.tool);
+    const bool rapid = p.rapid || path.feed(static_cast<int64_t>(k)) == 0;
+    if (runs.empty() || p.starts_run || runs.back().tool_id != tool ||
+        runs.back().rapid != rapid) {
+      ToolpathRun r;
+      r.begin = static_cast<int64_t>(k);
+      r.tool_id = tool;
+      r.rapid = rapid;
+      r.reposition = p.starts_run;
+      runs.push_back(r);
+    }
+    runs.back().end = static_cast<int64_t>(k) + 1;
+  }
+  return runs;
+}
+
 void Toolpath::Append(const ToolpathPoint& p) { Append(p, -1); }
 
 void Toolpath::Append(const ToolpathPoint& p, float feed) {

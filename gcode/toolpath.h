@@ -279,6 +279,22 @@ absl::StatusOr<std::vector<Vec3>> ChordArc(const Vec3& start,
                                            double arc_tolerance,
                                            int64_t max_points);
 
+// A run of a toolpath's points cut with one tool at one kind of move: what
+// `swarf run` streams as the batches of one MoveBatch kind (the CLI, and
+// swarfd interpreting a program, split the same way).
+struct ToolpathRun {
+  int64_t begin = 0, end = 0;  // points [begin, end)
+  int32_t tool_id = 0;         // tool_id(the points' tool number)
+  // G0, or a feed at F0 (it moves as fast as the machine goes: checked as
+  // a rapid).
+  bool rapid = false;
+  bool reposition = false;  // points[begin] starts a run: no move reaches it
+};
+// A new run starts where a point starts a run, or its tool's id or its kind
+// of move changes.
+std::vector<ToolpathRun> SplitRuns(
+    const Toolpath& path, const std::function<int32_t(int tool)>& tool_id);
+
 // Parses a G-code program (rules above). Tool numbers: the T of the last
 // M6, or, before any M6, the last T word (programs that select tools with T
 // alone); 0 when none; T above 65535 is an error. InvalidArgument

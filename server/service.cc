@@ -22,6 +22,7 @@
 #include "client/surface_grid.h"
 #include "core/valuation.h"
 #include "server/convert.h"
+#include "server/program.h"
 #include "server/status_util.h"
 #include "spdlog/spdlog.h"
 
@@ -195,6 +196,8 @@ pb::RequestKind KindOf(pb::SimulateRequest::RequestCase c) {
       return pb::REQUEST_KIND_SUBSCRIBE;
     case pb::SimulateRequest::kDeviation:
       return pb::REQUEST_KIND_DEVIATION;
+    case pb::SimulateRequest::kProgram:
+      return pb::REQUEST_KIND_PROGRAM;
     case pb::SimulateRequest::REQUEST_NOT_SET:
       break;
   }
@@ -219,6 +222,8 @@ std::pair<uint64_t, pb::RequestKind> RequestOf(const pb::SimulateResponse& r) {
       return {r.error().request_id(), r.error().kind()};
     case pb::SimulateResponse::kDeviation:
       return {r.deviation().request_id(), pb::REQUEST_KIND_DEVIATION};
+    case pb::SimulateResponse::kProgramDone:
+      return {r.program_done().request_id(), pb::REQUEST_KIND_PROGRAM};
     case pb::SimulateResponse::RESPONSE_NOT_SET:
       break;
   }
@@ -494,15 +499,26 @@ class SimulateReactor
     TileOptions options;
   };
 
+  // A program being applied: one batch per processing turn, each answered
+  // by its Ack, then a ProgramDone.
+  struct ProgramJob {
+    uint64_t request_id = 0;
+    std::shared_ptr<const InterpretedProgram> program;
+    uint64_t first_seq = 0;
+    bool report_cuts = false;
+    size_t next = 0;  // the next batch
+  };
+
   bool HasWorkLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
-    return !in_.empty() || job_.has_value() || !pending_push_.empty();
+    return !in_.empty() || job_.has_value() || program_.has_value() ||
+           !pending_push_.empty();
   }
   // Whether a processing turn would make progress: a tile job or pushes
   // need room in out_ (a request is handled regardless: it yields at most
   // one response, or becomes a job).
   bool CanProcessLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
     const bool room = out_.size() < kMaxOut;
-    if (job_.has_value()) return room;
+    if (job_.has_value() || program_.has_value()) return room;
     if (!in_.empty()) return true;
     return !pending_push_.empty() && room;
   }
@@ -581,10 +597,17 @@ class SimulateReactor
     int64_t job_count = 0;
     std::vector<int32_t> push_tiles;
     TileOptions job_options, push_options;
+    std::optional<ProgramJob> program_step;  // the batch `next` of it
     {
       absl::MutexLock l(&mu_);
       const size_t room = out_.size() < kMaxOut ? kMaxOut - out_.size() : 0;
-      if (job_.has_value()) {
+      if (program_.has_value()) {
+        // Its batches come before anything after it on the stream.
+        program_step = *program_;
+        if (++program_->next == program_->program->batches.size()) {
+          program_.reset();
+        }
+      } else if (job_.has_value()) {
         // Tiles of a request come before anything after it.
         const size_t n = std::min(room, job_->tiles.size() - job_->next);
         job_tiles.assign(job_->tiles.begin() + job_->next,
@@ -634,6 +657,7 @@ class SimulateReactor
       done->set_tiles(job_count);
     }
     if (req.has_value()) Handle(*req, &responses);
+    if (program_step.has_value()) ProgramStep(*program_step, &responses);
     // Never a message over the limit: the transport would end the stream.
     const int64_t limit = registry_->limits().max_message_bytes;
     for (pb::SimulateResponse& r : responses) {
@@ -724,6 +748,8 @@ class SimulateReactor
       }
       case pb::SimulateRequest::kSubscribe:
         return HandleSubscribe(req.subscribe(), out);
+      case pb::SimulateRequest::kProgram:
+        return HandleProgram(req.program(), out);
       case pb::SimulateRequest::kDeviation: {
         const pb::DeviationRequest& r = req.deviation();
         auto d = ComputeDeviation(*session_, r,
@@ -798,6 +824,147 @@ class SimulateReactor
     }
   }
 
+  // A chunk of a program: held until the last, which is interpreted (here,
+  // on the executor) and becomes the stream's ProgramJob.
+  void HandleProgram(const pb::ProgramChunk& c,
+                     std::vector<pb::SimulateResponse>* out) {
+    pb::ProgramChunk whole;
+    if (c.resume()) {
+      auto saved = session_->SavedProgram();
+      if (!saved.ok()) return Error(c.request_id(), saved.status(), out);
+      if (!saved->has_value() || !whole.ParseFromString(**saved)) {
+        return Error(c.request_id(),
+                     absl::FailedPreconditionError(
+                         "program.resume: the session has no journaled "
+                         "program (a memory-only server keeps none): send "
+                         "the program again"),
+                     out);
+      }
+      // Not an older program journaled before the one meant was.
+      const uint64_t want = c.options().first_seq();
+      if (want != 0 && want != whole.options().first_seq()) {
+        return Error(c.request_id(),
+                     absl::FailedPreconditionError(absl::StrCat(
+                         "program.resume: the journaled program starts at seq ",
+                         whole.options().first_seq(), ", not ", want,
+                         ": send the program again")),
+                     out);
+      }
+    } else {
+      if (c.offset() == 0) upload_.clear();
+      if (c.offset() != upload_.size()) {
+        return Error(c.request_id(),
+                     absl::FailedPreconditionError(absl::StrCat(
+                         "program upload: a chunk at offset ", c.offset(),
+                         "; this stream holds ", upload_.size(),
+                         " bytes of the upload (send from there, or from 0 "
+                         "to start again)")),
+                     out);
+      }
+      if (upload_.size() + c.data().size() >
+          static_cast<uint64_t>(kMaxProgramBytes)) {
+        upload_.clear();
+        upload_.shrink_to_fit();
+        return Error(c.request_id(),
+                     absl::ResourceExhaustedError(absl::StrCat(
+                         "program upload: more than ", kMaxProgramBytes,
+                         " bytes; the upload is dropped")),
+                     out);
+      }
+      upload_.append(c.data());
+      if (!c.last()) return;  // answered by the last chunk
+      whole.set_data(std::move(upload_));
+      upload_ = std::string();
+      *whole.mutable_options() = c.options();
+    }
+    const absl::Time start = absl::Now();
+    auto program = InterpretProgram(whole.data(), whole.options(),
+                                    session_->spec(),
+                                    registry_->limits().max_batch_points);
+    if (!program.ok()) return Error(c.request_id(), program.status(), out);
+    uint64_t first_seq = whole.options().first_seq();
+    if (first_seq == 0) first_seq = session_->State().last_seq + 1;
+    spdlog::info("session {}: program {} ({} bytes, {} moves in {} batches "
+                 "from seq {}) interpreted in {:.3f} s",
+                 session_->id(), program->name, whole.data().size(),
+                 program->moves, program->batches.size(), first_seq,
+                 absl::ToDoubleSeconds(absl::Now() - start));
+    if (!c.resume()) {
+      // Durable before its first batch: a restart can resume it.
+      whole.set_last(true);
+      whole.mutable_options()->set_first_seq(first_seq);
+      if (absl::Status s = session_->SaveProgram(whole.SerializeAsString());
+          !s.ok()) {
+        return Error(c.request_id(), s, out);
+      }
+    }
+    ProgramJob job;
+    job.request_id = c.request_id();
+    job.program =
+        std::make_shared<const InterpretedProgram>(*std::move(program));
+    job.first_seq = first_seq;
+    job.report_cuts = whole.options().report_cuts();
+    if (job.program->batches.empty()) return ProgramFinished(job, out);
+    absl::MutexLock l(&mu_);
+    program_ = std::move(job);
+  }
+
+  // Applies batch job.next of a program as a MoveBatch would be.
+  void ProgramStep(const ProgramJob& job,
+                   std::vector<pb::SimulateResponse>* out) {
+    const InterpretedProgram& p = *job.program;
+    const ProgramBatch& b = p.batches[job.next];
+    pb::MoveBatch batch;
+    batch.set_seq(job.first_seq + job.next);
+    batch.set_tool_id(b.tool_id);
+    batch.set_rapid(b.rapid);
+    batch.set_reposition(b.reposition);
+    batch.set_report_cuts(job.report_cuts);
+    batch.mutable_xyz()->Reserve(3 * (b.end - b.begin));
+    for (int64_t k = b.begin; k < b.end; ++k) {
+      const Vec3& v = p.path.points()[k].position;
+      batch.add_xyz(v.x);
+      batch.add_xyz(v.y);
+      batch.add_xyz(v.z);
+    }
+    const size_t first = out->size();
+    HandleMoves(batch, out);
+    bool failed = false;
+    for (size_t k = first; k < out->size(); ++k) {
+      if (!(*out)[k].has_error()) continue;
+      // The program's error: the rest of it is not applied.
+      pb::RequestError* e = (*out)[k].mutable_error();
+      e->set_message(absl::StrCat(p.name, ": batch ", batch.seq(), ": ",
+                                  e->message()));
+      e->set_request_id(job.request_id);
+      e->set_kind(pb::REQUEST_KIND_PROGRAM);
+      failed = true;
+    }
+    bool fatal;
+    {
+      absl::MutexLock l(&mu_);
+      fatal = fatal_.has_value();
+      if (failed || fatal) program_.reset();
+    }
+    if (!failed && !fatal && job.next + 1 == p.batches.size()) {
+      ProgramFinished(job, out);
+    }
+  }
+
+  static void ProgramFinished(const ProgramJob& job,
+                              std::vector<pb::SimulateResponse>* out) {
+    const InterpretedProgram& p = *job.program;
+    pb::ProgramDone* d = out->emplace_back().mutable_program_done();
+    d->set_request_id(job.request_id);
+    d->set_first_seq(job.first_seq);
+    d->set_last_seq(job.first_seq + p.batches.size() - 1);
+    d->set_moves(p.moves);
+    d->set_points(p.path.point_count());
+    d->set_source_lines(p.path.source_lines());
+    d->set_blocks_executed(p.path.blocks_executed());
+    for (const std::string& w : p.warnings) d->add_warnings(w);
+  }
+
   void HandleTiles(const pb::TileRequest& r,
                    std::vector<pb::SimulateResponse>* out) {
     auto job = session_->Read([&](const Workpiece& wp) -> absl::StatusOr<TileJob> {
@@ -867,6 +1034,10 @@ class SimulateReactor
   std::deque<pb::SimulateRequest> in_ ABSL_GUARDED_BY(mu_);
   std::deque<pb::SimulateResponse> out_ ABSL_GUARDED_BY(mu_);
   std::optional<TileJob> job_ ABSL_GUARDED_BY(mu_);
+  std::optional<ProgramJob> program_ ABSL_GUARDED_BY(mu_);
+  // A program upload in progress: only touched by the processing turn
+  // (processing_: one at a time), so not under mu_.
+  std::string upload_;
   std::optional<Subscription> sub_ ABSL_GUARDED_BY(mu_);
   // Subscribed tiles changed since last pushed: one entry per tile, read at
   // its latest version when pushed (coalescing).

@@ -426,6 +426,26 @@ absl::StatusOr<DesignUploadState> Session::AddDesignChunk(
   return DesignUploadState{received, *std::move(placed)};
 }
 
+absl::Status Session::SaveProgram(const std::string& bytes) {
+  absl::MutexLock l(&mu_);
+  if (deleted_) return absl::NotFoundError("the session was deleted");
+  if (journal_ == nullptr) return absl::OkStatus();
+  if (absl::Status s = journal_->PutBlob("program", bytes); !s.ok()) {
+    spdlog::error("session {}: cannot journal the program: {}", spec_.id,
+                  std::string(s.message()));
+    return absl::UnavailableError(
+        "the program could not be journaled (a storage error, logged on the "
+        "server); nothing was applied");
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::optional<std::string>> Session::SavedProgram() const {
+  absl::MutexLock l(&mu_);
+  if (journal_ == nullptr) return std::optional<std::string>();
+  return journal_->GetBlob("program");
+}
+
 std::shared_ptr<const design::PlacedDesign> Session::design() const {
   absl::MutexLock l(&design_mu_);
   return design_;

@@ -215,6 +215,14 @@ class Session {
   // The current design (null: none). Thread-safe.
   std::shared_ptr<const design::PlacedDesign> design() const;
 
+  // The program last run on the session (a serialized ProgramChunk holding
+  // the whole text and its options), journaled beside the definition so
+  // that a client can resume it after a restart without uploading it
+  // again. A memory-only session keeps nothing (Unavailable when the
+  // journal cannot be written). Thread-safe.
+  absl::Status SaveProgram(const std::string& bytes);
+  // nullopt when none was journaled; DataLoss when it is damaged.
+  absl::StatusOr<std::optional<std::string>> SavedProgram() const;
 
   // Runs fn(const Workpiece&) under the shared lock and returns its result
   // (reloading an evicted session first).

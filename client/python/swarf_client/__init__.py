@@ -13,16 +13,19 @@ Tools: a number is a ball-end radius; Ball, Flat, BullNose, Cone and
 TaperedBall describe every cutter (radii and half angles, as the API).
 The part as designed: s.set_design("part.stl") then s.deviation()
 (gouge and excess, the moves that gouge). Arcs: s.send(tips,
-arcs=[Arc(end, centre, clockwise=True)]), chorded by the server. Millimetres and degrees throughout; moves are tool-TIP positions. Errors
+arcs=[Arc(end, centre, clockwise=True)]), chorded by the server.
+Programs: s.run_program("job.nc", tools={1: 1}) has the server interpret
+the G-code (as `swarf run` does) and simulate it. Millimetres and degrees throughout; moves are tool-TIP positions. Errors
 are SwarfError carrying the gRPC status code.
 """
 
 from .client import (TILE_SIZE, Arc, Ball, BullNose, Client, Cone, Cutter,
                      DesignInfo, Deviation, DeviationMove, ErrorStats, Flat,
-                     Heights, Jets, Mark, ProbeResult, SendResult, Session,
+                     Heights, Jets, Mark, ProbeResult, ProgramResult,
+                     SendResult, Session,
                      SwarfError, TaperedBall)
 
 __all__ = ["Client", "Session", "SwarfError", "SendResult", "Heights",
            "Jets", "ErrorStats", "Mark", "ProbeResult", "TILE_SIZE", "Ball",
            "Flat", "BullNose", "Cone", "TaperedBall", "Cutter", "DesignInfo",
-           "Deviation", "DeviationMove", "Arc"]
+           "Deviation", "DeviationMove", "Arc", "ProgramResult"]

@@ -11,10 +11,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import queue
 import threading
 import time
-from typing import (Any, Dict, Iterable, Iterator, List, Mapping, Optional,
+from typing import (Any, Callable, Dict, Iterable, Iterator, List, Mapping,
+                    Optional,
                     Sequence, Tuple, Union)
 
 import grpc  # type: ignore[import]  # grpcio ships no type hints
@@ -27,7 +29,7 @@ from ._proto import swarf_pb2_grpc as pb_grpc
 __all__ = [
     "Client", "Session", "SwarfError", "SendResult", "Heights", "Jets",
     "ErrorStats", "Mark", "ProbeResult", "TILE_SIZE", "Ball", "Flat",
-    "BullNose", "Cone", "TaperedBall", "Cutter", "Arc",
+    "BullNose", "Cone", "TaperedBall", "Cutter", "Arc", "ProgramResult",
 ]
 
 TILE_SIZE = 64  # nodes per tile side (Session.tile_size)
@@ -205,6 +207,29 @@ class Arc:
         return pb.Arc(end_index=end_index, centre=pb.Point3(x=x, y=y, z=z),
                       plane=_PLANES[self.plane], clockwise=self.clockwise,
                       turns=int(self.turns))
+
+
+# Program uploads go in chunks of this many bytes (under gRPC's 4 MiB).
+PROGRAM_CHUNK_BYTES = 1 << 20
+_DIALECTS = {"linuxcnc": pb.DIALECT_LINUXCNC, "fanuc": pb.DIALECT_FANUC,
+             "grbl": pb.DIALECT_GRBL}
+
+
+@dataclasses.dataclass(frozen=True)
+class ProgramResult:
+    """What Session.run_program did (the server's ProgramDone)."""
+    first_seq: int       # seq of the program's first batch
+    last_seq: int        # and of its last
+    moves: int           # moves of the program (arcs as their chords)
+    points: int
+    source_lines: int
+    blocks_executed: int
+    # What `swarf run` prints before simulating, naming file and line:
+    # notes, ignored words, dropped moves, a cut leaving the stock.
+    warnings: List[str]
+    moves_applied: int   # in the session, in total, after the program
+    node_lowerings: int  # by the batches applied by this call
+    resumed: int         # times the program was resumed after a drop
 
 
 @dataclasses.dataclass(frozen=True)
@@ -718,6 +743,136 @@ class Session:
                     for i in sorted(by_end) if lo <= i < hi])
             for k, (lo, hi) in enumerate(zip(starts, ends))]
         return self._send_batches(batches)
+
+    def run_program(self, program: Union[str, bytes, "os.PathLike[str]"], *,
+                    tools: Optional[Mapping[int, int]] = None,
+                    dialect: str = "linuxcnc", name: Optional[str] = None,
+                    arc_tolerance: Optional[float] = None,
+                    start: Optional[Sequence[float]] = None,
+                    home: Optional[Sequence[float]] = None,
+                    tool_change_position: Optional[Sequence[float]] = None,
+                    m6_forgets_position: bool = False, max_blocks: int = 0,
+                    strict: bool = False, batch_points: int = 0,
+                    progress: Optional[Callable[[Any], None]] = None
+                    ) -> ProgramResult:
+        """Has the server interpret a G-code program and simulate it, as
+        `swarf run` does (the same interpreter, options and batches: the
+        same heights bit for bit).
+
+        Args:
+          program: a path to a G-code file, its text (str with a newline,
+            or bytes). Uploaded in chunks of PROGRAM_CHUNK_BYTES.
+          tools: {T number: session tool id}; a T number not listed is the
+            session tool of that id, or the session's only tool.
+          dialect: "linuxcnc" (default), "fanuc" or "grbl".
+          name: the file name in messages (default: the path's name, or
+            "program").
+          arc_tolerance: chord tolerance of its arcs (mm; default: the
+            session's).
+          start, home, tool_change_position: (x, y, z) machine mm, as
+            `swarf run --start/--home/--tool-change-position`.
+          m6_forgets_position, max_blocks, strict: as `swarf run`.
+          batch_points: points per batch (0: 20000, `swarf run`'s).
+          progress: called with each batch's Ack (seq, moves_applied,
+            node_lowerings, ...) as it is applied.
+        Durable as send(): if the stream drops or the server restarts, it
+        waits for it (`resume_timeout`) and resumes the program the server
+        journaled (batches it has are acknowledged, not applied again).
+        Raises SwarfError: INVALID_ARGUMENT "FILE: line N: ..." for an
+        error in the program (nothing applied), or naming a bad option.
+        """
+        if isinstance(program, bytes):
+            data, label = program, "program"
+        elif isinstance(program, str) and "\n" in program:
+            data, label = program.encode(), "program"
+        else:
+            path = os.fspath(program)
+            with open(path, "rb") as f:
+                data = f.read()
+            label = os.path.basename(path)
+        if dialect not in _DIALECTS:
+            raise SwarfError(grpc.StatusCode.INVALID_ARGUMENT,
+                             f"dialect must be one of {sorted(_DIALECTS)}, "
+                             f"got {dialect!r}")
+        opt = pb.ProgramOptions(
+            name=name or label, dialect=_DIALECTS[dialect],
+            m6_forgets_position=m6_forgets_position, max_blocks=max_blocks,
+            strict=strict, first_seq=self._next_seq, batch_points=batch_points)
+        for t, tool_id in (tools or {}).items():
+            opt.tools[int(t)] = int(tool_id)
+        if arc_tolerance is not None:
+            opt.arc_tolerance.value = float(arc_tolerance)
+        for field, p in (("start", start), ("home", home),
+                         ("tool_change_position", tool_change_position)):
+            if p is not None:
+                x, y, z = (float(v) for v in p)
+                getattr(opt, field).CopyFrom(pb.Point3(x=x, y=y, z=z))
+        upload = []
+        for off in range(0, max(len(data), 1), PROGRAM_CHUNK_BYTES):
+            last = off + PROGRAM_CHUNK_BYTES >= len(data)
+            chunk = pb.ProgramChunk(request_id=1, offset=off,
+                                    data=data[off:off + PROGRAM_CHUNK_BYTES],
+                                    last=last)
+            if last:
+                chunk.options.CopyFrom(opt)
+            upload.append(pb.SimulateRequest(program=chunk).SerializeToString())
+        resume = [pb.SimulateRequest(program=pb.ProgramChunk(
+            request_id=1, resume=True, last=True,
+            options=pb.ProgramOptions(first_seq=opt.first_seq))
+        ).SerializeToString()]
+        requests = upload
+        lowered = 0
+        resumed = 0
+        deadline: Optional[float] = None
+        while True:
+            try:
+                stream = self._open()
+                for r in requests:
+                    stream.send(r)
+                while True:
+                    resp = stream.recv()
+                    if resp.HasField("ack"):
+                        if not resp.ack.duplicate:
+                            lowered += resp.ack.node_lowerings
+                        if progress is not None:
+                            progress(resp.ack)
+                        continue
+                    break
+            except (grpc.RpcError, StopIteration) as e:
+                err = (_from_rpc(e) if isinstance(e, grpc.RpcError) else
+                       SwarfError(grpc.StatusCode.UNAVAILABLE,
+                                  "the stream ended"))
+                self._drop_stream()
+                now = time.monotonic()
+                deadline = deadline or now + self.resume_timeout
+                if err.code not in _RESUMABLE or now > deadline:
+                    self._resync()
+                    raise err from None
+                self._wait_for_server(deadline)
+                requests = resume
+                resumed += 1
+                continue
+            deadline = None
+            if resp.HasField("error"):
+                failure = resp.error
+                if (requests is resume and failure.code ==
+                        grpc.StatusCode.FAILED_PRECONDITION.value[0]):
+                    requests = upload  # nothing journaled: upload again
+                    continue
+                self._drop_stream()
+                self._resync()
+                raise _from_request_error(failure)
+            if resp.HasField("program_done"):
+                d = resp.program_done
+                self._next_seq = d.last_seq + 1
+                self.refresh()
+                return ProgramResult(
+                    first_seq=d.first_seq, last_seq=d.last_seq, moves=d.moves,
+                    points=d.points, source_lines=d.source_lines,
+                    blocks_executed=d.blocks_executed,
+                    warnings=list(d.warnings),
+                    moves_applied=self.moves_applied,
+                    node_lowerings=lowered, resumed=resumed)
 
     def _open(self) -> _Stream:
         if self._stream is None:
