@@ -36,13 +36,17 @@ struct P {
 
 class Lattice {
  public:
-  explicit Lattice(const LatticeHeights& heights)
-      : nx_(heights.nx), ny_(heights.ny), z_(heights.z.data()) {}
+  // Heights of rows [j_base, ...] at z (row-major, nx + 1 a row): only
+  // the rows a leaf's rectangle covers are read.
+  Lattice(int64_t nx, int64_t ny, const double* z, int64_t j_base)
+      : nx_(nx), ny_(ny), z_(z), j_base_(j_base) {}
 
   int64_t nx() const { return nx_; }
   int64_t ny() const { return ny_; }
   int64_t Index(int64_t i, int64_t j) const { return j * (nx_ + 1) + i; }
-  double Z(int64_t i, int64_t j) const { return z_[Index(i, j)]; }
+  double Z(int64_t i, int64_t j) const {
+    return z_[(j - j_base_) * (nx_ + 1) + i];
+  }
   // The full-resolution cell's split, as BuildSurfaceMesh chooses it.
   bool MainDiagonal(int64_t i, int64_t j) const {
     return std::fabs(Z(i, j) - Z(i + 1, j + 1)) <=
@@ -138,6 +142,7 @@ class Lattice {
  private:
   const int64_t nx_, ny_;
   const double* z_;
+  const int64_t j_base_;
 };
 
 struct Leaf {
@@ -283,6 +288,22 @@ absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
   return SimplifyLattice(h, full.z_bottom, tolerance);
 }
 
+namespace {
+
+// The rows of a lattice held in memory.
+class HeldRows : public LatticeWindows {
+ public:
+  explicit HeldRows(const LatticeHeights& h) : h_(h) {}
+  absl::StatusOr<const double*> Rows(int64_t j0, int64_t) override {
+    return h_.z.data() + j0 * (h_.nx + 1);
+  }
+
+ private:
+  const LatticeHeights& h_;
+};
+
+}  // namespace
+
 absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& heights,
                                              double z_bottom,
                                              double tolerance) {
@@ -291,66 +312,119 @@ absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& heights,
         "the mesh tolerance must be a finite number >= 0 (mm), got %g",
         tolerance));
   }
-  const Lattice l(heights);
-  const int64_t nx = l.nx(), ny = l.ny();
+  const int64_t nx = heights.nx, ny = heights.ny;
   if (nx < 1 || ny < 1 ||
       static_cast<int64_t>(heights.z.size()) != (nx + 1) * (ny + 1) ||
       static_cast<int64_t>(heights.xs.size()) != nx + 1 ||
       static_cast<int64_t>(heights.ys.size()) != ny + 1) {
     return absl::InvalidArgumentError("not a full-resolution lattice");
   }
-  auto vertex = [&](int64_t v) {
-    return Vec3{heights.xs[v % (nx + 1)], heights.ys[v / (nx + 1)],
-                heights.z[v]};
-  };
+  HeldRows rows(heights);
+  return SimplifyLatticeRows(rows, heights.xs, heights.ys, z_bottom,
+                             tolerance);
+}
+
+absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
+    LatticeWindows& rows, const std::vector<double>& xs,
+    const std::vector<double>& ys, double z_bottom, double tolerance) {
+  if (!(tolerance >= 0) || !std::isfinite(tolerance)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the mesh tolerance must be a finite number >= 0 (mm), got %g",
+        tolerance));
+  }
+  const int64_t nx = static_cast<int64_t>(xs.size()) - 1;
+  const int64_t ny = static_cast<int64_t>(ys.size()) - 1;
+  if (nx < 1 || ny < 1) {
+    return absl::InvalidArgumentError("not a full-resolution lattice");
+  }
   ThreadPool& pool = ThreadPool::Default();
 
-  // Top down: roots of kRoot cells; a block leaving the lattice or whose
-  // corner triangles miss the tolerance is split.
+  // Roots of kRoot x kRoot cells; every leaf lies in one root, so what a
+  // leaf reads (its closed rectangle, and a row above) lies in its root
+  // row's kRoot + 2 lattice rows: the heights are read a root row at a
+  // time.
   constexpr int64_t kRoot = 64;
-  std::vector<Leaf> pending, leaves;
+  const int64_t roots_x = (nx + kRoot - 1) / kRoot;
+  const int64_t roots_y = (ny + kRoot - 1) / kRoot;
+  // Fine() on a leaf's top side also reads the row above it (times 0), so
+  // a window has one row more.
+  auto window = [&](int64_t rr) -> absl::StatusOr<Lattice> {
+    const int64_t j0 = rr * kRoot, j1 = std::min(ny, j0 + kRoot + 1);
+    absl::StatusOr<const double*> z = rows.Rows(j0, j1);
+    if (!z.ok()) return z.status();
+    return Lattice(nx, ny, *z, j0);
+  };
+
+  // Top down: a block leaving the lattice or whose corner triangles miss
+  // the tolerance is split. Each root's tree is built where its rows are
+  // read; the leaves are then listed level by level across all roots, as
+  // splitting every root's blocks a level at a time lists them.
+  struct TreeNode {
+    Leaf f;
+    double dev = -1;  // as fit_dev below
+    int32_t kid[2] = {-1, -1};
+    int64_t leaf = -1;  // its index in `leaves`, when a leaf
+  };
+  std::vector<std::vector<TreeNode>> trees(roots_x * roots_y);
+  for (int64_t rr = 0; rr < roots_y; ++rr) {
+    absl::StatusOr<Lattice> l = window(rr);
+    if (!l.ok()) return l.status();
+    pool.ParallelFor(roots_x, [&](int64_t rx) {
+      std::vector<TreeNode>& t = trees[rr * roots_x + rx];
+      t.push_back({Leaf{rx * kRoot, rr * kRoot, kRoot, kRoot}});
+      for (size_t q = 0; q < t.size(); ++q) {
+        const Leaf f = t[q].f;
+        std::array<Leaf, 2> halves;
+        double dev = -1;
+        // Blocks leaving the lattice: halved across the side that leaves
+        // it.
+        if (f.i0 + f.w > nx) {
+          halves = {Leaf{f.i0, f.j0, f.w / 2, f.h},
+                    Leaf{f.i0 + f.w / 2, f.j0, f.w / 2, f.h}};
+        } else if (f.j0 + f.h > ny) {
+          halves = {Leaf{f.i0, f.j0, f.w, f.h / 2},
+                    Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
+        } else if (f.w * f.h > 1 && !CornersFit(*l, f, tolerance, &dev)) {
+          halves = Halves(*l, f);
+        } else {
+          t[q].dev = dev;
+          continue;
+        }
+        // The first half starts where the block does: always inside.
+        for (int c = 0; c < 2; ++c) {
+          if (halves[c].i0 < nx && halves[c].j0 < ny) {
+            t[q].kid[c] = static_cast<int32_t>(t.size());
+            t.push_back({halves[c]});
+          }
+        }
+      }
+    });
+  }
+  std::vector<Leaf> leaves;
   // Per leaf, its corner triangles' deviation where CornersFit measured it
   // (-1: not measured): a leaf whose sides gain no vertex keeps those
   // triangles, and the conforming pass takes the value instead of
   // measuring them again.
   std::vector<double> fit_dev;
-  for (int64_t j = 0; j < ny; j += kRoot) {
-    for (int64_t i = 0; i < nx; i += kRoot) {
-      pending.push_back({i, j, kRoot, kRoot});
+  {
+    std::vector<std::pair<int64_t, int32_t>> level, next;  // (tree, node)
+    for (int64_t b = 0; b < roots_x * roots_y; ++b) level.push_back({b, 0});
+    while (!level.empty()) {
+      next.clear();
+      for (const auto& [b, q] : level) {
+        TreeNode& n = trees[b][q];
+        if (n.kid[0] < 0) {
+          n.leaf = static_cast<int64_t>(leaves.size());
+          leaves.push_back(n.f);
+          fit_dev.push_back(n.dev);
+          continue;
+        }
+        for (int c = 0; c < 2; ++c) {
+          if (n.kid[c] >= 0) next.push_back({b, n.kid[c]});
+        }
+      }
+      std::swap(level, next);
     }
-  }
-  // Blocks leaving the lattice: halved across the side that leaves it.
-  while (!pending.empty()) {
-    std::vector<std::array<Leaf, 2>> halves(pending.size());
-    std::vector<char> split(pending.size());
-    std::vector<double> dev(pending.size(), -1);
-    pool.ParallelFor(static_cast<int64_t>(pending.size()), [&](int64_t k) {
-      const Leaf& f = pending[k];
-      if (f.i0 + f.w > nx) {
-        halves[k] = {Leaf{f.i0, f.j0, f.w / 2, f.h},
-                     Leaf{f.i0 + f.w / 2, f.j0, f.w / 2, f.h}};
-      } else if (f.j0 + f.h > ny) {
-        halves[k] = {Leaf{f.i0, f.j0, f.w, f.h / 2},
-                     Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
-      } else if (f.w * f.h > 1 && !CornersFit(l, f, tolerance, &dev[k])) {
-        halves[k] = Halves(l, f);
-      } else {
-        return;
-      }
-      split[k] = 1;
-    });
-    std::vector<Leaf> next;
-    for (size_t k = 0; k < pending.size(); ++k) {
-      if (!split[k]) {
-        leaves.push_back(pending[k]);
-        fit_dev.push_back(dev[k]);
-        continue;
-      }
-      for (const Leaf& c : halves[k]) {
-        if (c.i0 < nx && c.j0 < ny) next.push_back(c);
-      }
-    }
-    pending = std::move(next);
   }
 
   // Conforming triangulation, measured; leaves over the tolerance are
@@ -359,84 +433,114 @@ absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& heights,
   // stays in `leaves` with its halves appended (kids[k], kids[k] + 1): the
   // mesh lists the final leaves depth first, which is the order of
   // replacing each split leaf by its halves in place. Late passes split a
-  // handful of leaves: only those and their neighbours are visited.
+  // handful of leaves: only those and their neighbours are visited, a root
+  // row's heights read once a pass.
   const int64_t lattice_vertices = (nx + 1) * (ny + 1);
   const int64_t roots = static_cast<int64_t>(leaves.size());
   std::vector<int64_t> kids(leaves.size(), -1);
   std::vector<std::vector<P>> tris(leaves.size());
   std::vector<double> leaf_dev(leaves.size());
-  // Which leaf holds each cell, and which lattice vertices are leaf
-  // corners (splits only add corners: a leaf's corners are its halves').
-  std::vector<int32_t> cell_leaf(static_cast<size_t>(nx * ny));
+  // Which lattice vertices are leaf corners (splits only add corners: a
+  // leaf's corners are its halves').
   std::vector<uint8_t> used(lattice_vertices, 0);
-  auto place = [&](int64_t k) {
-    const Leaf& f = leaves[k];
-    for (int64_t j = f.j0; j < f.j0 + f.h; ++j) {
-      std::fill_n(cell_leaf.begin() + j * nx + f.i0, f.w,
-                  static_cast<int32_t>(k));
+  auto index = [nx](int64_t i, int64_t j) { return j * (nx + 1) + i; };
+  // The leaf that holds cell (ci, cj) now: down its root's tree, then the
+  // splits.
+  auto leaf_at = [&](int64_t ci, int64_t cj) {
+    auto inside = [&](const Leaf& a) {
+      return ci >= a.i0 && ci < a.i0 + a.w && cj >= a.j0 && cj < a.j0 + a.h;
+    };
+    const std::vector<TreeNode>& t = trees[(cj / kRoot) * roots_x + ci / kRoot];
+    int32_t q = 0;
+    while (t[q].kid[0] >= 0) {
+      q = inside(t[t[q].kid[0]].f) ? t[q].kid[0] : t[q].kid[1];
     }
+    int64_t k = t[q].leaf;
+    while (kids[k] >= 0) k = inside(leaves[kids[k]]) ? kids[k] : kids[k] + 1;
+    return k;
   };
   std::vector<int64_t> corners_added;
   auto add_corners = [&](const Leaf& f) {
     for (const P& p : {P{f.i0, f.j0}, P{f.i0 + f.w, f.j0}, P{f.i0, f.j0 + f.h},
                        P{f.i0 + f.w, f.j0 + f.h}}) {
-      uint8_t& u = used[l.Index(p.i, p.j)];
-      if (!u) corners_added.push_back(l.Index(p.i, p.j));
+      uint8_t& u = used[index(p.i, p.j)];
+      if (!u) corners_added.push_back(index(p.i, p.j));
       u = 1;
     }
   };
   std::vector<int64_t> work(leaves.size());
   for (int64_t k = 0; k < roots; ++k) {
-    place(k);
     add_corners(leaves[k]);
     work[k] = k;
   }
   std::vector<uint8_t> queued;
+  std::vector<std::vector<int64_t>> by_row(roots_y);
   for (bool first_pass = true;; first_pass = false) {
-    pool.ParallelFor(static_cast<int64_t>(work.size()), [&](int64_t w) {
-      const int64_t k = work[w];
-      const Leaf& f = leaves[k];
-      // The sides' lattice vertices that are corners, counter-clockwise
-      // from (i0, j0).
-      std::vector<P> ring;
-      auto side_vertex = [&](int64_t i, int64_t j) {
-        if (used[l.Index(i, j)]) ring.push_back({i, j});
-      };
-      for (int64_t d = 0; d < f.w; ++d) side_vertex(f.i0 + d, f.j0);
-      for (int64_t d = 0; d < f.h; ++d) side_vertex(f.i0 + f.w, f.j0 + d);
-      for (int64_t d = f.w; d > 0; --d) side_vertex(f.i0 + d, f.j0 + f.h);
-      for (int64_t d = f.h; d > 0; --d) side_vertex(f.i0, f.j0 + d);
-      std::vector<P>& t = tris[k];
-      t.clear();
-      if (ring.size() == 4) {
-        CornerTriangles(l, f, &t);
-        if (first_pass && fit_dev[k] >= 0) {
-          leaf_dev[k] = fit_dev[k];
-          return;
+    // Each work leaf triangulated and measured where its root row's
+    // heights are read; the halves of one over the tolerance too.
+    std::vector<std::array<Leaf, 2>> split_halves(work.size());
+    for (auto& r : by_row) r.clear();
+    for (size_t w = 0; w < work.size(); ++w) {
+      by_row[leaves[work[w]].j0 / kRoot].push_back(static_cast<int64_t>(w));
+    }
+    for (int64_t rr = 0; rr < roots_y; ++rr) {
+      if (by_row[rr].empty()) continue;
+      absl::StatusOr<Lattice> window_rows = window(rr);
+      if (!window_rows.ok()) return window_rows.status();
+      const Lattice& l = *window_rows;
+      const std::vector<int64_t>& row_work = by_row[rr];
+      pool.ParallelFor(static_cast<int64_t>(row_work.size()), [&](int64_t x) {
+        const int64_t w = row_work[x];
+        const int64_t k = work[w];
+        const Leaf& f = leaves[k];
+        auto measure = [&] {
+          // The sides' lattice vertices that are corners, counter-clockwise
+          // from (i0, j0).
+          std::vector<P> ring;
+          auto side_vertex = [&](int64_t i, int64_t j) {
+            if (used[index(i, j)]) ring.push_back({i, j});
+          };
+          for (int64_t d = 0; d < f.w; ++d) side_vertex(f.i0 + d, f.j0);
+          for (int64_t d = 0; d < f.h; ++d) side_vertex(f.i0 + f.w, f.j0 + d);
+          for (int64_t d = f.w; d > 0; --d) side_vertex(f.i0 + d, f.j0 + f.h);
+          for (int64_t d = f.h; d > 0; --d) side_vertex(f.i0, f.j0 + d);
+          std::vector<P>& t = tris[k];
+          t.clear();
+          if (ring.size() == 4) {
+            CornerTriangles(l, f, &t);
+            if (first_pass && fit_dev[k] >= 0) {
+              leaf_dev[k] = fit_dev[k];
+              return;
+            }
+          } else {
+            ClipEars(std::move(ring), &t);
+          }
+          double dev = 0;
+          for (size_t q = 0; q + 2 < t.size(); q += 3) {
+            dev = std::max(dev, l.TriangleDeviation(t[q], t[q + 1], t[q + 2]));
+          }
+          leaf_dev[k] = dev;
+        };
+        measure();
+        if (!(leaf_dev[k] <= tolerance) && f.w * f.h != 1) {
+          split_halves[w] = Halves(l, f);
         }
-      } else {
-        ClipEars(std::move(ring), &t);
-      }
-      double dev = 0;
-      for (size_t q = 0; q + 2 < t.size(); q += 3) {
-        dev = std::max(dev, l.TriangleDeviation(t[q], t[q + 1], t[q + 2]));
-      }
-      leaf_dev[k] = dev;
-    });
+      });
+    }
     corners_added.clear();
     std::vector<int64_t> halves;
-    for (const int64_t k : work) {
+    for (size_t w = 0; w < work.size(); ++w) {
+      const int64_t k = work[w];
       const Leaf f = leaves[k];  // a copy: `leaves` grows below
       if (leaf_dev[k] <= tolerance || f.w * f.h == 1) continue;
       kids[k] = static_cast<int64_t>(leaves.size());
       std::vector<P>().swap(tris[k]);
-      for (const Leaf& half : Halves(l, f)) {
+      for (const Leaf& half : split_halves[w]) {
         halves.push_back(static_cast<int64_t>(leaves.size()));
         leaves.push_back(half);
         kids.push_back(-1);
         tris.emplace_back();
         leaf_dev.push_back(INFINITY);
-        place(halves.back());
         add_corners(half);
       }
     }
@@ -452,7 +556,7 @@ absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& heights,
            ++cj) {
         for (int64_t ci = std::max<int64_t>(i - 1, 0);
              ci <= std::min(i, nx - 1); ++ci) {
-          const int32_t k = cell_leaf[cj * nx + ci];
+          const int64_t k = leaf_at(ci, cj);
           if (!queued[k]) {
             queued[k] = 1;
             work.push_back(k);
@@ -462,6 +566,7 @@ absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& heights,
     }
     for (const int64_t k : work) queued[k] = 0;
   }
+  trees = {};
 
   // The final leaves, depth first from the roots.
   std::vector<int64_t> final_leaves, stack;
@@ -479,24 +584,41 @@ absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& heights,
     }
   }
 
-  // The used lattice vertices, row-major, are the new top vertices.
+  // The used lattice vertices, row-major, are the new top vertices: their
+  // heights read a root row at a time. A vertex's new index is the number
+  // of used ones before it (counted from each block of 64's).
   TriangleMesh mesh;
   mesh.lattice_nx = static_cast<int32_t>(nx);
   mesh.lattice_ny = static_cast<int32_t>(ny);
   mesh.z_bottom = z_bottom;
-  std::vector<int32_t> remap(lattice_vertices, -1);
-  for (int64_t v = 0; v < lattice_vertices; ++v) {
-    if (!used[v]) continue;
-    remap[v] = static_cast<int32_t>(mesh.vertices.size());
-    mesh.vertices.push_back(vertex(v));
+  for (int64_t rr = 0; rr < roots_y; ++rr) {
+    absl::StatusOr<Lattice> l = window(rr);
+    if (!l.ok()) return l.status();
+    const int64_t j_end = rr + 1 == roots_y ? ny : rr * kRoot + kRoot - 1;
+    for (int64_t j = rr * kRoot; j <= j_end; ++j) {
+      for (int64_t i = 0; i <= nx; ++i) {
+        if (used[index(i, j)]) mesh.vertices.push_back({xs[i], ys[j], l->Z(i, j)});
+      }
+    }
   }
   mesh.top_vertices = static_cast<int64_t>(mesh.vertices.size());
+  std::vector<uint32_t> block_rank((lattice_vertices + 63) / 64);
+  uint32_t counted = 0;
+  for (int64_t v = 0; v < lattice_vertices; ++v) {
+    if (v % 64 == 0) block_rank[v / 64] = counted;
+    counted += used[v];
+  }
+  auto remap = [&](int64_t v) {
+    uint32_t r = block_rank[v / 64];
+    for (int64_t u = v - v % 64; u < v; ++u) r += used[u];
+    return static_cast<int32_t>(r);
+  };
   for (const int64_t k : final_leaves) {
     const std::vector<P>& t = tris[k];
     for (size_t q = 0; q + 2 < t.size(); q += 3) {
-      mesh.triangles.push_back({remap[l.Index(t[q].i, t[q].j)],
-                                remap[l.Index(t[q + 1].i, t[q + 1].j)],
-                                remap[l.Index(t[q + 2].i, t[q + 2].j)]});
+      mesh.triangles.push_back({remap(index(t[q].i, t[q].j)),
+                                remap(index(t[q + 1].i, t[q + 1].j)),
+                                remap(index(t[q + 2].i, t[q + 2].j))});
     }
     mesh.max_deviation = std::max(mesh.max_deviation, leaf_dev[k]);
   }
@@ -504,22 +626,19 @@ absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& heights,
   // Walls under the top's boundary edges (counter-clockwise seen from
   // above), and a bottom fanned from a vertex under the middle.
   std::vector<int64_t> boundary;  // lattice indices, counter-clockwise
-  for (int64_t i = 0; i < nx; ++i) boundary.push_back(l.Index(i, 0));
-  for (int64_t j = 0; j < ny; ++j) boundary.push_back(l.Index(nx, j));
-  for (int64_t i = nx; i > 0; --i) boundary.push_back(l.Index(i, ny));
-  for (int64_t j = ny; j > 0; --j) boundary.push_back(l.Index(0, j));
+  for (int64_t i = 0; i < nx; ++i) boundary.push_back(index(i, 0));
+  for (int64_t j = 0; j < ny; ++j) boundary.push_back(index(nx, j));
+  for (int64_t i = nx; i > 0; --i) boundary.push_back(index(i, ny));
+  for (int64_t j = ny; j > 0; --j) boundary.push_back(index(0, j));
   std::vector<int32_t> top_ring, bottom_ring;
   for (int64_t v : boundary) {
     if (!used[v]) continue;
-    top_ring.push_back(remap[v]);
+    top_ring.push_back(remap(v));
     bottom_ring.push_back(static_cast<int32_t>(mesh.vertices.size()));
-    const Vec3 p = vertex(v);
-    mesh.vertices.push_back({p.x, p.y, z_bottom});
+    mesh.vertices.push_back({xs[v % (nx + 1)], ys[v / (nx + 1)], z_bottom});
   }
-  const Vec3 lo = vertex(0);
-  const Vec3 hi = vertex(lattice_vertices - 1);
   const int32_t middle = static_cast<int32_t>(mesh.vertices.size());
-  mesh.vertices.push_back({(lo.x + hi.x) / 2, (lo.y + hi.y) / 2,
+  mesh.vertices.push_back({(xs[0] + xs[nx]) / 2, (ys[0] + ys[ny]) / 2,
                            z_bottom});
   for (size_t q = 0; q < top_ring.size(); ++q) {
     const size_t r = (q + 1) % top_ring.size();

@@ -31,6 +31,31 @@ absl::Status InMemoryBands::ForEach(const BandVisitor& visit) {
   return absl::OkStatus();
 }
 
+absl::Status InMemoryBands::ReadRows(int32_t j0, int32_t j1,
+                                     SurfaceGrid* band, bool) {
+  if (j0 < 0 || j1 < j0 || j1 > grid_.spec.ny) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "node rows [%d, %d] leave the grid's %d rows", j0, j1,
+        grid_.spec.ny + 1));
+  }
+  band->ResetBand(j0, j1 - j0 + 1);
+  std::copy_n(grid_.jets.begin() + grid_.Index(0, j0), band->jets.size(),
+              band->jets.begin());
+  std::copy_n(grid_.owners.begin() + grid_.Index(0, j0), band->owners.size(),
+              band->owners.begin());
+  return absl::OkStatus();
+}
+
+absl::Status TileRowBands::ReadRows(int32_t j0, int32_t j1,
+                                    SurfaceGrid* band, bool heights_only) {
+  if (j0 < 0 || j1 < j0 || j1 > spec_.ny) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "node rows [%d, %d] leave the grid's %d rows", j0, j1, spec_.ny + 1));
+  }
+  band->ResetBand(j0, j1 - j0 + 1);
+  return fill_(band, j0 / kTileSize, j1 / kTileSize + 1, heights_only);
+}
+
 TileRowBands::TileRowBands(const StockSpec& spec, SchemeKind scheme,
                            Fill fill, std::vector<Move> moves,
                            int64_t max_band_nodes)
@@ -66,7 +91,7 @@ absl::Status TileRowBands::ForEach(const BandVisitor& visit) {
       std::copy(carry_owners.begin(), carry_owners.end(),
                 band.owners.begin());
     }
-    status = fill_(&band, t0, t1);
+    status = fill_(&band, t0, t1, /*heights_only=*/false);
     if (!status.ok()) break;
     const int32_t e1 = t1 == tiles_y ? ny : last;
     if (e1 > e0) status = visit(band, e0, e1);

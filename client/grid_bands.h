@@ -35,6 +35,12 @@ class GridBands {
   virtual SchemeKind scheme() const = 0;
   // Stops at the first error (of the source or of `visit`) and returns it.
   virtual absl::Status ForEach(const BandVisitor& visit) = 0;
+  // Makes `band` (a SurfaceGrid::Band of this grid) hold node rows
+  // [j0, j1] with their nodes (moves not set), read again: for writers that
+  // come back to rows (the adaptive mesh). With `heights_only` the
+  // derivatives and owners may be left out (zero, -1).
+  virtual absl::Status ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
+                                bool heights_only = false) = 0;
 };
 
 // An in-memory whole grid: one band (band_rows 0), or bands of `band_rows`
@@ -47,6 +53,8 @@ class InMemoryBands : public GridBands {
   const StockSpec& spec() const override { return grid_.spec; }
   SchemeKind scheme() const override { return grid_.scheme; }
   absl::Status ForEach(const BandVisitor& visit) override;
+  absl::Status ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
+                        bool heights_only = false) override;
 
  private:
   const SurfaceGrid& grid_;
@@ -54,20 +62,24 @@ class InMemoryBands : public GridBands {
 };
 
 // Bands of whole tile rows (kTileSize node rows), filled by `fill(band, t0,
-// t1)`, which must set every node of tile rows [t0, t1) that the band holds
-// (SurfaceGrid::SetNodes; nodes it leaves are untouched stock). Each band
+// t1, heights_only)`, which must set every node of tile rows [t0, t1) that
+// the band holds (SurfaceGrid::SetNodes; nodes it leaves are untouched
+// stock), the heights only where `heights_only` says so. Each band
 // holds the last node row of the previous one (carried over, not fetched
 // again) and at most about `max_band_nodes` nodes (at least one tile row).
 // The band's moves are set once from `moves` (SurfaceGrid::SetMoves).
 class TileRowBands : public GridBands {
  public:
-  using Fill =
-      std::function<absl::Status(SurfaceGrid* band, int32_t t0, int32_t t1)>;
+  using Fill = std::function<absl::Status(SurfaceGrid* band, int32_t t0,
+                                          int32_t t1, bool heights_only)>;
   TileRowBands(const StockSpec& spec, SchemeKind scheme, Fill fill,
                std::vector<Move> moves, int64_t max_band_nodes = 1 << 20);
   const StockSpec& spec() const override { return spec_; }
   SchemeKind scheme() const override { return scheme_; }
   absl::Status ForEach(const BandVisitor& visit) override;
+  // The tile rows over [j0, j1], filled.
+  absl::Status ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
+                        bool heights_only = false) override;
 
  private:
   StockSpec spec_;

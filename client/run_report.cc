@@ -129,13 +129,15 @@ absl::StatusOr<SurfaceGrid> FetchGrid(Connection& conn, const std::string& id,
 // Sets tile rows [t0, t1) of `band` from the session's tiles (every tile
 // of those rows, asked by index).
 absl::Status FetchTileRows(Connection& conn, const std::string& id,
-                           int32_t t0, int32_t t1, SurfaceGrid* band) {
+                           int32_t t0, int32_t t1, bool heights_only,
+                           SurfaceGrid* band) {
   auto ctx = conn.Context(id, 3600);
   pb::GetTilesRequest req;
   req.set_session_id(id);
   req.set_precision(pb::PRECISION_DOUBLE);
-  req.set_include_derivatives(GetScheme(band->scheme).stores_derivatives());
-  req.set_include_owners(true);
+  req.set_include_derivatives(!heights_only &&
+                              GetScheme(band->scheme).stores_derivatives());
+  req.set_include_owners(!heights_only);
   req.set_since_version(0);
   const int32_t tiles_x = (band->nodes_x() + kTileSize - 1) / kTileSize;
   for (int32_t ty = t0; ty < t1; ++ty) {
@@ -155,7 +157,7 @@ absl::Status FetchTileRows(Connection& conn, const std::string& id,
     status = band->SetNodes(t.i0(), t.j0(), t.nx(), t.ny(),
                             t.heights_d().data(),
                             req.include_derivatives() ? d : nullptr,
-                            t.owners().data());
+                            req.include_owners() ? t.owners().data() : nullptr);
   }
   grpc::Status st = reader->Finish();
   if (!st.ok()) return FromGrpc(st);
@@ -480,9 +482,10 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   } else {
     bands = &streamed.emplace(
         stock, report->scheme,
-        [&](SurfaceGrid* band, int32_t t0, int32_t t1) {
+        [&](SurfaceGrid* band, int32_t t0, int32_t t1, bool heights_only) {
           return Retrying<bool>("the tiles", [&]() -> absl::StatusOr<bool> {
-            absl::Status s = FetchTileRows(conn, id, t0, t1, band);
+            absl::Status s =
+                FetchTileRows(conn, id, t0, t1, heights_only, band);
             if (!s.ok()) return s;
             return true;
           }).status();

@@ -29,7 +29,8 @@ double DefaultZBottom(const StockSpec& spec, double z_min) {
   return z_min - std::max(0.1 * (spec.z_top - z_min), 0.02 * longer);
 }
 
-absl::StatusOr<LatticeHeights> NewLattice(const StockSpec& spec, int s) {
+absl::StatusOr<LatticeHeights> NewLattice(const StockSpec& spec, int s,
+                                          bool heights) {
   if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
   if (s < 1 || s > 4096) {
     return absl::InvalidArgumentError(absl::StrFormat(
@@ -58,7 +59,7 @@ absl::StatusOr<LatticeHeights> NewLattice(const StockSpec& spec, int s) {
   for (int64_t j = 0; j <= big_ny; ++j) {
     l.ys[j] = g.NodeY(static_cast<int32_t>(j / s)) + (j % s) * (g.dy() / s);
   }
-  l.z.resize(top);
+  if (heights) l.z.resize(top);
   l.row_min.assign(big_ny + 1, spec.z_top);
   return l;
 }
@@ -78,7 +79,7 @@ void FillLatticeRows(const SurfaceGrid& grid, int32_t e0, int32_t e1,
     const int64_t j = j0 + r;
     const int32_t ej = static_cast<int32_t>(std::min(j / s, ny - 1));
     double lo = grid.spec.z_top;
-    double* const row = &l.z[j * (big_nx + 1)];
+    double* const row = l.z.empty() ? nullptr : &l.z[j * (big_nx + 1)];
     for (int32_t ei = 0; ei < nx; ++ei) {
       // Corners once per element for its s (s + 1 in the last) vertices,
       // and only where one lies between nodes (never at s = 1).
@@ -97,7 +98,7 @@ void FillLatticeRows(const SurfaceGrid& grid, int32_t e0, int32_t e1,
           if (!e.has_value()) e = grid.Corners(ei, ej);
           z = scheme.Reconstruct(*e, l.xs[i], l.ys[j]);
         }
-        row[i] = z;
+        if (row != nullptr) row[i] = z;
         lo = std::min(lo, z);
       }
     }
@@ -116,7 +117,7 @@ absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
 
 absl::StatusOr<TriangleMesh> MeshFromLattice(
     LatticeHeights lattice, const StockSpec& spec,
-    const SurfaceMeshOptions& options) {
+    const SurfaceMeshOptions& options, LatticeWindows* rows) {
   const LatticeHeights& l = lattice;
   const double z_min = *std::min_element(l.row_min.begin(), l.row_min.end());
   const double z_bottom =
@@ -126,8 +127,17 @@ absl::StatusOr<TriangleMesh> MeshFromLattice(
         "z_bottom %g must be finite and below the lowest top vertex %g",
         z_bottom, z_min));
   }
+  if (l.z.empty() && (rows == nullptr || options.tolerance == 0)) {
+    return absl::InvalidArgumentError(
+        "a lattice without heights needs them read again, for the adaptive "
+        "mesh only");
+  }
   // The adaptive mesh needs only the lattice's heights.
   if (options.tolerance != 0) {
+    if (l.z.empty()) {
+      return SimplifyLatticeRows(*rows, l.xs, l.ys, z_bottom,
+                                 options.tolerance);
+    }
     return SimplifyLattice(l, z_bottom, options.tolerance);
   }
   const int64_t big_nx = l.nx, big_ny = l.ny;

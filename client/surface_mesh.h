@@ -70,7 +70,8 @@ double DefaultZBottom(const StockSpec& spec, double z_min);
 // The top lattice's heights, what both meshes are made from: filled band
 // by band (FillLatticeRows), 8 bytes a lattice vertex plus its coordinates
 // along x and y. Vertex (I, J) is (xs[I], ys[J], z[J (NX + 1) + I]), as
-// BuildSurfaceMesh places it.
+// BuildSurfaceMesh places it. Without heights (z empty) only row_min is
+// kept: the adaptive mesh then reads them again (LatticeWindows).
 struct LatticeHeights {
   int64_t nx = 0, ny = 0;  // NX, NY: lattice cells
   int s = 1;               // the subdivision
@@ -80,18 +81,43 @@ struct LatticeHeights {
   double Z(int64_t i, int64_t j) const { return z[j * (nx + 1) + i]; }
 };
 
-// An empty lattice for `spec` at subdivision `s`; InvalidArgument for an
-// invalid spec, s outside [1, 4096] or more than kMaxMeshTopVertices.
-absl::StatusOr<LatticeHeights> NewLattice(const StockSpec& spec, int s);
+// An empty lattice for `spec` at subdivision `s` (heights held unless
+// `heights` is false); InvalidArgument for an invalid spec, s outside
+// [1, 4096] or more than kMaxMeshTopVertices.
+absl::StatusOr<LatticeHeights> NewLattice(const StockSpec& spec, int s,
+                                          bool heights = true);
 // Sets the lattice rows J whose element row min(J / s, ny - 1) lies in
 // [e0, e1), from `band` (which holds those elements), in parallel.
 void FillLatticeRows(const SurfaceGrid& band, int32_t e0, int32_t e1,
                      LatticeHeights* lattice);
+class LatticeWindows;
+
 // The mesh BuildSurfaceMesh makes once every row is filled (`lattice` is
-// not kept; its heights are moved out where they serve as they are).
+// not kept). A lattice without heights needs `rows` (its heights, read
+// again) and a tolerance > 0 (the adaptive mesh); else InvalidArgument.
 absl::StatusOr<TriangleMesh> MeshFromLattice(LatticeHeights lattice,
                                              const StockSpec& spec,
-                                             const SurfaceMeshOptions& options);
+                                             const SurfaceMeshOptions& options,
+                                             LatticeWindows* rows = nullptr);
+// A lattice's heights a window of rows at a time, for SimplifyLatticeRows.
+class LatticeWindows {
+ public:
+  virtual ~LatticeWindows() = default;
+  // Rows [j0, j1] (inclusive), row-major, NX + 1 heights a row, exactly
+  // LatticeHeights::z's; valid until the next call. Errors are returned by
+  // SimplifyLatticeRows.
+  virtual absl::StatusOr<const double*> Rows(int64_t j0, int64_t j1) = 0;
+};
+
+// SimplifyLattice with the heights read a window of 66 rows at a time
+// (each root row of 64 x 64 cells, several times: once for the tree, once
+// each conforming pass that has work there, once for the vertices) instead
+// of held: memory is 1 byte a lattice vertex plus the leaves'. The same
+// mesh, bit for bit. `xs` and `ys` as LatticeHeights'.
+absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
+    LatticeWindows& rows, const std::vector<double>& xs,
+    const std::vector<double>& ys, double z_bottom, double tolerance);
+
 // SimplifySurfaceMesh of the full mesh of `lattice` (with bottom z_bottom),
 // without building that mesh.
 absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& lattice,

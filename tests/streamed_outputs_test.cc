@@ -103,7 +103,8 @@ void ExpectSame(const Written& a, const Written& b, const std::string& what) {
 // Tile rows of the workpiece, as the session's GetTiles gives them
 // (Workpiece::ReadTile of every tile of those rows).
 TileRowBands::Fill FillFrom(const Workpiece& wp) {
-  return [&wp](SurfaceGrid* band, int32_t t0, int32_t t1) -> absl::Status {
+  return [&wp](SurfaceGrid* band, int32_t t0, int32_t t1,
+               bool) -> absl::Status {
     std::vector<double> w(kTileNodes);
     std::vector<float> dbuf(5 * kTileNodes);
     std::vector<int32_t> owner(kTileNodes);
