@@ -601,9 +601,14 @@ class SimulateReactor
     {
       absl::MutexLock l(&mu_);
       const size_t room = out_.size() < kMaxOut ? kMaxOut - out_.size() : 0;
-      if (program_.has_value()) {
+      // While a program runs, its batches and the pushes they cause take
+      // turns (as streamed batches and pushes would).
+      const bool push_now = program_.has_value() && push_turn_ &&
+                            !pending_push_.empty() && sub_.has_value();
+      if (program_.has_value() && !push_now) {
         // Its batches come before anything after it on the stream.
         program_step = *program_;
+        push_turn_ = true;
         if (++program_->next == program_->program->batches.size()) {
           program_.reset();
         }
@@ -619,10 +624,11 @@ class SimulateReactor
           job_count = static_cast<int64_t>(job_->tiles.size());
           job_.reset();
         }
-      } else if (!in_.empty()) {
+      } else if (!push_now && !in_.empty()) {
         req = std::move(in_.front());
         in_.pop_front();
       } else if (!pending_push_.empty() && sub_.has_value()) {
+        push_turn_ = false;
         for (auto it = pending_push_.begin();
              it != pending_push_.end() && push_tiles.size() < room;) {
           push_tiles.push_back(*it);
@@ -1035,6 +1041,7 @@ class SimulateReactor
   std::deque<pb::SimulateResponse> out_ ABSL_GUARDED_BY(mu_);
   std::optional<TileJob> job_ ABSL_GUARDED_BY(mu_);
   std::optional<ProgramJob> program_ ABSL_GUARDED_BY(mu_);
+  bool push_turn_ ABSL_GUARDED_BY(mu_) = false;  // see Process
   // A program upload in progress: only touched by the processing turn
   // (processing_: one at a time), so not under mu_.
   std::string upload_;

@@ -328,6 +328,52 @@ TEST(ProgramApiTest, ErrorsNameTheFileAndLine) {
   EXPECT_EQ(Get(stub, "e").moves_applied(), 3);
 }
 
+// A Subscribe on the stream gets the tiles a program's batches change while
+// the program runs (pushes and batches take turns), and a request after
+// the program sees all of it.
+TEST(ProgramApiTest, SubscribedTilesArePushedWhileTheProgramRuns) {
+  const Job job{kExamples + "pocket.nc",
+                {{1, Cutter::Flat(3)}, {2, Cutter::Flat(1.5)},
+                 {3, Cutter::Flat(0.5)}},
+                0.5};
+  auto conn = *cli::Connection::Open("");
+  pb::Swarf::Stub* stub = &conn->stub();
+  Create(stub, SessionOver(job, 0, 0, 100, 80, "sub"));
+  SimStream s(stub, "sub");
+  pb::SimulateRequest sub;
+  sub.mutable_subscribe()->set_request_id(5);
+  ASSERT_TRUE(s.Write(sub));
+  pb::ProgramOptions o;
+  o.set_batch_points(500);
+  const std::string text = ReadFileText(job.file);
+  WriteProgram(&s, &text, o, 1 << 20);
+  pb::SimulateRequest stats;
+  stats.mutable_stats()->set_request_id(6);
+  ASSERT_TRUE(s.Write(stats));
+  ASSERT_TRUE(s.WaitFor([](const SimStream::Responses& rs) {
+    return !rs.empty() && rs.back().has_stats();
+  }));
+  EXPECT_TRUE(s.Finish().ok());
+  const auto rs = s.responses();
+  int64_t acks = 0, pushes_before_done = 0;
+  bool done = false;
+  for (const auto& r : rs) {
+    if (r.has_ack()) ++acks;
+    if (r.has_tile() && !done) ++pushes_before_done;
+    if (r.has_program_done()) {
+      done = true;
+      EXPECT_EQ(static_cast<int64_t>(r.program_done().last_seq()), acks);
+    }
+    // Nothing of the program comes after the stats that follow it.
+    if (r.has_stats()) {
+      EXPECT_TRUE(done);
+    }
+  }
+  EXPECT_TRUE(done);
+  EXPECT_GT(acks, 30);
+  EXPECT_GT(pushes_before_done, 0);
+}
+
 // A real swarfd killed with SIGKILL while it applies a program: restarted,
 // it has every batch it acknowledged; the program resumed (no upload: the
 // journaled one) ends as the uninterrupted run, bit for bit.

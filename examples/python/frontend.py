@@ -1,4 +1,4 @@
-"""A CAM frontend in 30 lines: a G-code program interpreted and simulated by
+"""A CAM frontend in under 40 lines: a G-code program interpreted and simulated by
 swarfd (Session.run_program: the server's interpreter, as `swarf run`), then
 the heights as a .npy and the cutting marks as a plot (if matplotlib is
 there).
