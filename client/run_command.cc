@@ -405,7 +405,7 @@ int RunCommand(const std::vector<std::string>& argv) {
                                    "stock",         "spacing",
                                    "mesh",   "scheme",        "arc-tolerance",
                                    "server", "out",           "subdivide",
-                                   "batch",  "max-memory", "interpret"};
+                                   "batch",  "max-memory"};
   valued.insert("interpret");
   valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
   valued.insert(std::begin(kToolpathFlags), std::end(kToolpathFlags));
