@@ -29,6 +29,8 @@
 #include "client/server_program.h"
 #include "client/tool_table.h"
 #include "client/toolpath_flags.h"
+#include "core/cutter/sweep.h"
+#include "core/move_index.h"
 #include "gcode/text.h"
 #include "gcode/toolpath.h"
 #include "server/convert.h"
@@ -228,22 +230,51 @@ int64_t AvailableMemoryBytes() {
          sysconf(_SC_PAGESIZE);
 }
 
-// What a run on the embedded server needs at least (bytes): the session's
-// grid with every tile cut (as swarfd admits it: the scheme's bytes per
-// node and each tile's bookkeeping) and the moves it keeps (the scheme
-// rebuilds a node's surface from the move that cut it last).
-int64_t RunMemoryBytes(const StockSpec& stock, SchemeKind scheme,
-                       int64_t moves) {
-  return server::Session::EstimateMemoryBytes(stock, scheme) +
-         moves * static_cast<int64_t>(sizeof(Move));
+// What the moves of a run take at least (bytes): the server keeps each Move
+// and lists it in every bin (16 x 16 elements) of its move index that the
+// move's footprint below the top reaches, 4 bytes each; the client keeps
+// the parsed point and its feed, its run's point and, for the outputs, its
+// own Move. Sets *index_bytes to the index's part.
+int64_t MovesMemoryBytes(const Toolpath& path,
+                         const std::map<int, Cutter>& tools,
+                         const StockSpec& stock, int64_t* index_bytes) {
+  constexpr int32_t kBin = MoveIndex::kBinElements;
+  const double bin_x = (stock.x1 - stock.x0) / stock.nx * kBin;
+  const double bin_y = (stock.y1 - stock.y0) / stock.ny * kBin;
+  const int64_t bins_x = (int64_t{stock.nx} + kBin - 1) / kBin;
+  const int64_t bins_y = (int64_t{stock.ny} + kBin - 1) / kBin;
+  // Bins [lo, hi] along one axis that [a, b] covers, as MoveIndex::Add.
+  auto count = [](double a, double b, double origin, double bin,
+                  int64_t bins) -> int64_t {
+    const double lo = std::max(0.0, std::floor((a - origin) / bin));
+    const double hi = std::min(bins - 1.0, std::floor((b - origin) / bin));
+    return hi >= lo ? static_cast<int64_t>(hi - lo) + 1 : 0;
+  };
+  const auto& points = path.points();
+  int64_t entries = 0;
+  for (size_t k = 1; k < points.size(); ++k) {
+    if (points[k].starts_run) continue;
+    const std::optional<Rect> b =
+        FootprintBounds(points[k - 1].position, points[k].position,
+                        tools.at(points[k].tool), stock.z_top);
+    if (!b.has_value()) continue;
+    entries += count(b->x0, b->x1, stock.x0, bin_x, bins_x) *
+               count(b->y0, b->y1, stock.y0, bin_y, bins_y);
+  }
+  *index_bytes = entries * static_cast<int64_t>(sizeof(uint32_t));
+  constexpr int64_t kPerMove = 2 * sizeof(Move) + sizeof(ToolpathPoint) +
+                               sizeof(float) + sizeof(Vec3);
+  return path.move_count() * kPerMove + *index_bytes;
 }
 
 // The memory a run may take (--max-memory MiB, else what is available);
-// InvalidArgument naming both when the grid and the moves cannot fit, so
-// that a job too large is refused before anything runs.
+// ResourceExhausted naming both when the session's grid (every tile cut,
+// as swarfd admits it) and the moves cannot fit, so that a job too large
+// is refused before anything runs.
 absl::StatusOr<int64_t> CheckRunMemory(const Args& args,
                                        const StockSpec& stock,
-                                       SchemeKind scheme, int64_t moves) {
+                                       SchemeKind scheme, const Toolpath& path,
+                                       const std::map<int, Cutter>& tools) {
   int64_t allowed = 0;
   std::string source;
   if (args.Has("max-memory")) {
@@ -259,16 +290,20 @@ absl::StatusOr<int64_t> CheckRunMemory(const Args& args,
     source = absl::StrCat("this machine has ", allowed >> 20,
                           " MiB available");
   }
-  const int64_t needed = RunMemoryBytes(stock, scheme, moves);
+  const int64_t grid = server::Session::EstimateMemoryBytes(stock, scheme);
+  int64_t index = 0;
+  const int64_t moves = MovesMemoryBytes(path, tools, stock, &index);
+  const int64_t needed = grid + moves;
   if (needed > allowed) {
     const int64_t nodes = (int64_t{stock.nx} + 1) * (stock.ny + 1);
     return absl::ResourceExhaustedError(absl::StrFormat(
         "the grid of %d x %d elements (%d nodes, %.4g mm) and %d moves need "
-        "at least %d MiB (%d bytes: every tile at %d bytes a node, and %d "
-        "bytes a move); %s; give a coarser --spacing or --mesh",
-        stock.nx, stock.ny, nodes, (stock.x1 - stock.x0) / stock.nx, moves,
-        (needed + (1 << 20) - 1) >> 20, needed,
-        GetScheme(scheme).bytes_per_node(), sizeof(Move), source));
+        "at least %d MiB (%d bytes: %d for the grid, every tile at %d bytes "
+        "a node, and %d for the moves, of which %d their index); %s; give a "
+        "coarser --spacing or --mesh",
+        stock.nx, stock.ny, nodes, (stock.x1 - stock.x0) / stock.nx,
+        path.move_count(), (needed + (1 << 20) - 1) >> 20, needed, grid,
+        GetScheme(scheme).bytes_per_node(), moves, index, source));
   }
   return allowed;
 }
@@ -597,7 +632,7 @@ int RunCommand(const std::vector<std::string>& argv) {
   if (!args->Has("server")) {
     // The embedded server holds this session only: no node cap, its memory
     // what the machine (or --max-memory) gives.
-    auto allowed = CheckRunMemory(*args, *stock, scheme, path->move_count());
+    auto allowed = CheckRunMemory(*args, *stock, scheme, *path, *tools);
     if (!allowed.ok()) return fail(allowed.status(), 2);
     server::Limits limits;
     limits.max_total_memory_bytes = *allowed;

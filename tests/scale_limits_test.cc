@@ -99,7 +99,13 @@ TEST(RunHelpTest, HelpListsEveryScheme) {
 
 // A grid that cannot fit is refused at once (exit 2), naming what it needs
 // and what is allowed. 1000 x 1000 elements: 16 x 16 tiles, in 7 chunks of
-// 2 MiB and 80 bytes each, 14700544 bytes; 200 moves of 88 bytes: 14718144
+// 2 MiB and 80 bytes each: 14700544 bytes. 200 moves of 236 bytes (the
+// server's and the client's Move, 88 each, the parsed point, 32, its feed,
+// 4, and its run's point, 24): 47200 bytes, and their index entries: the
+// 2 mm ball at z = -0.5 cuts within 0.866 mm of its path, in bins of 0.16
+// mm: 12 bins across y; along x, 12 for the move to x = 1, 18 for each to
+// x = 2..9, 62 for the return from 9 to 0, 218 a cycle of 10 moves; 20
+// cycles of 218 x 12 entries of 4 bytes: 209280 bytes. In all 14957024
 // bytes, 15 MiB.
 TEST(RunMemoryTest, AJobThatCannotFitIsRefusedNamingTheBytes) {
   const fs::path dir = TempDir("run");
@@ -117,9 +123,10 @@ TEST(RunMemoryTest, AJobThatCannotFitIsRefusedNamingTheBytes) {
   EXPECT_TRUE(absl::StrContains(
       refused.output,
       "swarf run: the grid of 1000 x 1000 elements (1002001 nodes, 0.01 mm) "
-      "and 200 moves need at least 15 MiB (14718144 bytes: every tile at 12 "
-      "bytes a node, and 88 bytes a move); --max-memory allows 14 MiB; give "
-      "a coarser --spacing or --mesh"))
+      "and 200 moves need at least 15 MiB (14957024 bytes: 14700544 for the "
+      "grid, every tile at 12 bytes a node, and 256480 for the moves, of "
+      "which 209280 their index); --max-memory allows 14 MiB; give a "
+      "coarser --spacing or --mesh"))
       << refused.output;
   // At 15 MiB it fits, and the spacing asked for is kept.
   const Ran ran = Shell(job + " --max-memory 15 --json --quiet");
