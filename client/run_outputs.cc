@@ -1,6 +1,8 @@
 #include "client/run_outputs.h"
 
 #include <chrono>
+#include <cmath>
+#include <memory>
 #include <functional>
 #include <future>
 #include <algorithm>
@@ -9,6 +11,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "client/marks_files.h"
 #include "client/png_image.h"
 #include "core/workpiece.h"
@@ -144,10 +147,10 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
   if (marks != nullptr && !(marks_frame == relief->frame())) {
     marks_relief.emplace(spec, marks_frame);
   }
-  // The adaptive mesh on the nodes reads their heights again from the grid
-  // (a root row at a time) instead of holding them: 8 bytes a node less.
-  const bool reread = options.mesh.subdivision == 1 &&
-                      options.mesh.tolerance != 0;
+  // On the nodes (subdivision 1) the meshes read the lattice's heights
+  // again from the grid (a root row, or 64 rows, at a time) instead of
+  // holding them: 8 bytes a node less.
+  const bool reread = options.mesh.subdivision == 1;
   absl::StatusOr<LatticeHeights> lattice =
       NewLattice(spec, options.mesh.subdivision, /*heights=*/!reread);
   if (!lattice.ok()) return lattice.status();
@@ -186,6 +189,40 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
   // pictures, the marks files, the meshes.
   auto meshes = std::async(std::launch::async, [&] {
     Chain c(base);
+    if (options.mesh.tolerance == 0) {
+      // The full lattice: written from its rows, never built (48 bytes a
+      // node and more as a TriangleMesh).
+      const LatticeHeights& l = *lattice;
+      std::unique_ptr<LatticeWindows> held;
+      LatticeWindows* source = rows ? &*rows : nullptr;
+      if (source == nullptr) {
+        held = HeldLatticeRows(l);
+        source = held.get();
+      }
+      const double z_min =
+          *std::min_element(l.row_min.begin(), l.row_min.end());
+      const double z_bottom = options.mesh.z_bottom
+                                  ? *options.mesh.z_bottom
+                                  : DefaultZBottom(spec, z_min);
+      c.Then("surface.stl", [&](const std::string& path) {
+        if (!std::isfinite(z_bottom) || !(z_bottom < z_min)) {
+          return absl::InvalidArgumentError(absl::StrFormat(
+              "z_bottom %g must be finite and below the lowest top vertex %g",
+              z_bottom, z_min));
+        }
+        return WriteLatticeStl(*source, l, z_bottom, path);
+      }, lattice_s);
+      c.Then("surface.wrl", [&](const std::string& path) {
+        return WriteLatticeVrml(*source, l, z_bottom, spec.z_top,
+                                options.vrml_colors, path);
+      });
+      if (c.status().ok() && summary != nullptr) {
+        summary->full_mesh_triangles = FullMeshTriangles(l.nx, l.ny);
+        summary->mesh_triangles = summary->full_mesh_triangles;
+        summary->mesh_deviation = 0;
+      }
+      return c;
+    }
     absl::StatusOr<TriangleMesh> mesh;
     c.Then("surface.stl", [&](const std::string& path) {
       mesh = MeshFromLattice(*std::move(lattice), spec, options.mesh,

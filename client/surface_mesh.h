@@ -22,6 +22,7 @@
 #define SWARF_CLIENT_SURFACE_MESH_H_
 
 #include <array>
+#include <memory>
 #include <cstdint>
 #include <optional>
 #include <span>
@@ -117,6 +118,30 @@ class LatticeWindows {
 absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
     LatticeWindows& rows, const std::vector<double>& xs,
     const std::vector<double>& ys, double z_bottom, double tolerance);
+
+// The rows of a lattice whose heights are held (LatticeHeights::z); not
+// owned, must outlive the result.
+std::unique_ptr<LatticeWindows> HeldLatticeRows(const LatticeHeights& lattice);
+
+// The full-resolution mesh (BuildSurfaceMesh with tolerance 0: the same
+// vertices and triangles in the same order) written straight from the
+// lattice's rows, read a window of 65 at a time (STL once, VRML three
+// times: points, colours, faces), never built: WriteStl and WriteVrml (with
+// SurfaceColors when `colors`) of that mesh, byte for byte. `lattice`
+// gives xs, ys and row_min (its heights, if held, are not read: `rows`
+// gives them). z_bottom must lie below every top vertex (MeshFromLattice's
+// check). Errors as WriteStl's and WriteVrml's.
+absl::Status WriteLatticeStl(LatticeWindows& rows,
+                             const LatticeHeights& lattice, double z_bottom,
+                             const std::string& path);
+absl::Status WriteLatticeVrml(LatticeWindows& rows,
+                              const LatticeHeights& lattice, double z_bottom,
+                              double z_top, bool colors,
+                              const std::string& path);
+// Triangles of the full-resolution mesh of an NX x NY lattice.
+inline int64_t FullMeshTriangles(int64_t nx, int64_t ny) {
+  return 2 * nx * ny + 6 * (nx + ny) - 2;
+}
 
 // SimplifySurfaceMesh of the full mesh of `lattice` (with bottom z_bottom),
 // without building that mesh.

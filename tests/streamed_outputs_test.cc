@@ -25,6 +25,7 @@
 #include "client/pictures.h"
 #include "client/run_outputs.h"
 #include "client/surface_grid.h"
+#include "client/surface_mesh.h"
 #include "core/cutting_marks.h"
 #include "core/valuation.h"
 #include "core/workpiece.h"
@@ -172,6 +173,50 @@ TEST(StreamedOutputsTest, BandsWriteTheWholeGridsFilesByteForByte) {
         TileRowBands tiles(Stock(), scheme, FillFrom(**wp), moves, nodes);
         ExpectSame(Write(tiles, &raster, mp, options), want,
                    absl::StrCat(name, " tile rows, ", nodes, " nodes"));
+      }
+    }
+  }
+}
+
+// The meshes written from the lattice's rows (the full lattice never
+// built; the adaptive one from heights read again) against the mesh built
+// whole (BuildSurfaceMesh) and written (WriteStl, WriteVrml with
+// SurfaceColors): the same bytes, for both tolerances and subdivisions.
+TEST(StreamedOutputsTest, MeshesFromRowsAreTheBuiltMeshesFiles) {
+  for (SchemeKind scheme : {SchemeKind::kTaylor, SchemeKind::kGuarded}) {
+    auto wp = Workpiece::Create(Stock(), scheme);
+    ASSERT_TRUE(wp.ok());
+    ASSERT_TRUE((*wp)->Apply(Moves()).ok());
+    auto grid = SurfaceGrid::FromWorkpiece(**wp);
+    ASSERT_TRUE(grid.ok());
+    for (int s : {1, 2}) {
+      for (double tolerance : {0.0, 0.005}) {
+        const std::string what =
+            absl::StrCat(std::string(GetScheme(scheme).name()), " s ", s, " tol ",
+                         tolerance);
+        SurfaceMeshOptions mopt;
+        mopt.subdivision = s;
+        mopt.tolerance = tolerance;
+        auto mesh = BuildSurfaceMesh(*grid, mopt);
+        ASSERT_TRUE(mesh.ok()) << mesh.status();
+        TempDir built;
+        ASSERT_TRUE(WriteStl(*mesh, built.path + "/surface.stl").ok());
+        ASSERT_TRUE(WriteVrml(*mesh, built.path + "/surface.wrl",
+                              SurfaceColors(*mesh, Stock().z_top))
+                        .ok());
+        RunOutputOptions options;
+        options.mesh = mopt;
+        InMemoryBands bands(*grid, 9);
+        const Written w = Write(bands, nullptr, nullptr, options);
+        ASSERT_EQ(w.names.size(), 3u) << what;
+        EXPECT_TRUE(w.bytes[1] == ReadAll(built.path + "/surface.stl"))
+            << what;
+        EXPECT_TRUE(w.bytes[2] == ReadAll(built.path + "/surface.wrl"))
+            << what;
+        EXPECT_EQ(w.summary.mesh_triangles,
+                  static_cast<int64_t>(mesh->triangles.size()))
+            << what;
+        EXPECT_EQ(w.summary.mesh_deviation, mesh->max_deviation) << what;
       }
     }
   }
