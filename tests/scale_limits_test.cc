@@ -89,6 +89,31 @@ TEST(LoadCommandTest, FailedSessionsCountNoMoves) {
   fs::remove_all(dir);
 }
 
+// Sessions created whose streams then fail (every batch of 50 points over
+// the server's 10) applied nothing: they count no moves either (before,
+// such a session counted all the moves it meant to send).
+TEST(LoadCommandTest, FailedStreamsCountNoMoves) {
+  const fs::path dir = TempDir("load_stream");
+  testing::SwarfdProcess swarfd("", (dir / "swarfd.log").string(),
+                                {"--max_batch_points=10", "--data_dir="});
+  ASSERT_GT(swarfd.port(), 0) << swarfd.Log();
+  const Ran r = Shell(absl::StrCat(
+      SWARF_CLI, " load --server 127.0.0.1:", swarfd.port(),
+      " --sessions 2 --moves 100 --batch 50 --mesh 64"));
+  EXPECT_EQ(r.code, 1) << r.output;
+  EXPECT_TRUE(absl::StrContains(
+      r.output, "(0 moves of the 0 sessions that succeeded, in"))
+      << r.output;
+  EXPECT_TRUE(absl::StrContains(r.output, "errors      2 of 2 sessions failed"))
+      << r.output;
+  EXPECT_TRUE(absl::StrContains(
+      r.output,
+      "swarf load: batch: moves.xyz has 50 points, more than the limit 10 "
+      "per batch"))
+      << r.output;
+  fs::remove_all(dir);
+}
+
 TEST(RunHelpTest, HelpListsEveryScheme) {
   const Ran r = Shell(absl::StrCat(SWARF_CLI, " run --help"));
   EXPECT_EQ(r.code, 0);
