@@ -123,15 +123,15 @@ TEST(RunHelpTest, HelpListsEveryScheme) {
 }
 
 // A grid that cannot fit is refused at once (exit 2), naming what it needs
-// and what is allowed. 1000 x 1000 elements: 16 x 16 tiles, in 7 chunks of
-// 2 MiB and 80 bytes each: 14700544 bytes. 200 moves of 236 bytes (the
+// and what is allowed. 200 x 200 elements: 4 x 4 tiles, in one chunk of 2
+// MiB, and 80 bytes each: 2098432 bytes. 200 moves of 236 bytes (the
 // server's and the client's Move, 88 each, the parsed point, 32, its feed,
 // 4, and its run's point, 24): 47200 bytes, and their index entries: the
-// 2 mm ball at z = -0.5 cuts within 0.866 mm of its path, in bins of 0.16
-// mm: 12 bins across y; along x, 12 for the move to x = 1, 18 for each to
-// x = 2..9, 62 for the return from 9 to 0, 218 a cycle of 10 moves; 20
-// cycles of 218 x 12 entries of 4 bytes: 209280 bytes. In all 14957024
-// bytes, 15 MiB.
+// 2 mm ball at z = -0.5 cuts within 0.866 mm of its path, in bins of 0.8
+// mm: 3 bins across y; along x, for the moves to x = 1..9, 3, 4, 4, 5, 5,
+// 4, 4, 5, 5 bins, and 13 for the return from 9 to 0: 52 a cycle of 10
+// moves; 20 cycles of 52 x 3 entries of 4 bytes: 12480 bytes. In all
+// 2158112 bytes, 3 MiB.
 TEST(RunMemoryTest, AJobThatCannotFitIsRefusedNamingTheBytes) {
   const fs::path dir = TempDir("run");
   {
@@ -142,21 +142,22 @@ TEST(RunMemoryTest, AJobThatCannotFitIsRefusedNamingTheBytes) {
   }
   const std::string job = absl::StrCat(
       SWARF_CLI, " run ", (dir / "line.xyz").string(),
-      " --tool ball:d=2 --stock 0,0,10,10,0 --spacing 0.01 --scheme taylor");
-  const Ran refused = Shell(job + " --max-memory 14");
+      " --tool ball:d=2 --stock 0,0,10,10,0 --spacing 0.05 --scheme taylor");
+  const Ran refused = Shell(job + " --max-memory 2");
   EXPECT_EQ(refused.code, 2) << refused.output;
   EXPECT_TRUE(absl::StrContains(
       refused.output,
-      "swarf run: the grid of 1000 x 1000 elements (1002001 nodes, 0.01 mm) "
-      "and 200 moves need at least 15 MiB (14957024 bytes: 14700544 for the "
-      "grid, every tile at 12 bytes a node, and 256480 for the moves, of "
-      "which 209280 their index); --max-memory allows 14 MiB; give a "
-      "coarser --spacing or --mesh"))
+      "swarf run: the grid of 200 x 200 elements (40401 nodes, 0.05 mm) "
+      "and 200 moves need at least 3 MiB (2158112 bytes: 2098432 for the "
+      "grid, every tile at 12 bytes a node, and 59680 for the moves, of "
+      "which 12480 their index); --max-memory allows 2 MiB; give a coarser "
+      "--spacing or --mesh"))
       << refused.output;
-  // At 15 MiB it fits, and the spacing asked for is kept.
-  const Ran ran = Shell(job + " --max-memory 15 --json --quiet");
+  // At 3 MiB it fits, and the spacing asked for is kept (the default is
+  // 0.1 mm).
+  const Ran ran = Shell(job + " --max-memory 3 --json --quiet");
   EXPECT_EQ(ran.code, 0) << ran.output;
-  EXPECT_TRUE(absl::StrContains(ran.output, "\"nx\":1000,\"ny\":1000"))
+  EXPECT_TRUE(absl::StrContains(ran.output, "\"nx\":200,\"ny\":200"))
       << ran.output;
   EXPECT_EQ(Shell(job + " --max-memory 0").code, 2);
   fs::remove_all(dir);
