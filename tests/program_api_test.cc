@@ -461,8 +461,8 @@ TEST(ProgramCliTest, InterpretServerGivesTheSameOutputs) {
   const std::string run =
       std::string(SWARF_CLI) + " run " + kExamples +
       "pocket.nc --tool T1=flat:d=6 --tool T2=flat:d=3 --tool T3=flat:d=1 "
-      "--stock 0,0,100,80,0 --spacing 0.5 --batch 4000 --quiet --server "
-      "127.0.0.1:" + std::to_string(p.port());
+      "--stock 0,0,100,80,0 --spacing 1 --picture-size 400 --batch 4000 "
+      "--quiet --server 127.0.0.1:" + std::to_string(p.port());
   ASSERT_EQ(std::system((run + " --out " + dir + "/client > /dev/null").c_str()),
             0);
   ASSERT_EQ(std::system((run + " --interpret server --out " + dir +
