@@ -171,7 +171,26 @@ absl::StatusOr<DeviationReport> MeasureDeviation(
     const std::vector<SourceLine>& move_lines,
     const DeviationOptions& options) {
   if (absl::Status s = grid.Validate(); !s.ok()) return s;
-  const GridGeometry g = grid.geometry();
+  InMemoryBands bands(grid);
+  std::vector<float> values(static_cast<size_t>(grid.geometry().node_count()),
+                            std::numeric_limits<float>::quiet_NaN());
+  auto r = MeasureDeviation(
+      bands, envelope, index, move_lines, options,
+      [&](int32_t j0, int32_t j1, const float* v) {
+        std::copy_n(v, static_cast<size_t>(j1 - j0) * grid.nodes_x(),
+                    values.begin() + grid.Index(0, j0));
+      });
+  if (r.ok()) r->node_deviation = std::move(values);
+  return r;
+}
+
+absl::StatusOr<DeviationReport> MeasureDeviation(
+    GridBands& grid, const design::TopEnvelope& envelope,
+    const design::ClosestPointIndex& index,
+    const std::vector<SourceLine>& move_lines, const DeviationOptions& options,
+    const std::function<void(int32_t, int32_t, const float*)>& node_rows) {
+  if (absl::Status s = ValidateStock(grid.spec()); !s.ok()) return s;
+  const GridGeometry g(grid.spec());
   if (envelope.grid().nodes_x() != g.nodes_x() ||
       envelope.grid().nodes_y() != g.nodes_y()) {
     return absl::InvalidArgumentError(
@@ -192,92 +211,108 @@ absl::StatusOr<DeviationReport> MeasureDeviation(
   r.allowance = options.allowance;
   r.tolerance = options.tolerance;
   const int32_t nxn = g.nodes_x(), nyn = g.nodes_y();
-  r.node_deviation.assign(static_cast<size_t>(g.node_count()),
-                          std::numeric_limits<float>::quiet_NaN());
-
-  // The nodes.
-  const int64_t bands = (nyn + kBandRows - 1) / kBandRows;
-  std::vector<Partial> node_parts(bands);
-  pool.ParallelFor(bands, [&](int64_t band) {
-    Partial& p = node_parts[band];
-    const int32_t j0 = static_cast<int32_t>(band * kBandRows);
-    const int32_t j1 = std::min(nyn, j0 + kBandRows);
-    for (int32_t j = j0; j < j1; ++j) {
-      const double wy = (j == 0 || j == nyn - 1) ? 0.5 : 1.0;
-      const double y = g.NodeY(j);
-      for (int32_t i = 0; i < nxn; ++i) {
-        const float zd = envelope.AtNode(i, j);
-        if (std::isnan(zd)) continue;
-        const double wx = (i == 0 || i == nxn - 1) ? 0.5 : 1.0;
-        const double v = cmp.Point(p, g.NodeX(i), y, grid.jet(i, j).w, zd,
-                                   grid.owner(i, j), wx * wy * g.dx() * g.dy());
-        r.node_deviation[grid.Index(i, j)] = static_cast<float>(v);
-      }
-    }
-  });
-
-  // The samples between nodes, element row by element row (the sampler
-  // keeps what neighbouring elements share).
   const int n = options.samples_per_edge;
-  std::vector<Partial> sample_parts;
-  if (n >= 2) {
-    sample_parts.resize(g.ny());
-    pool.ParallelFor(g.ny(), [&](int64_t ej) {
-      Partial& p = sample_parts[ej];
-      SurfaceSampler sampler(grid);
-      std::vector<int32_t> candidates;
-      std::vector<double> xs(n * n), ys(n * n), zds(n * n), zs(n * n);
-      const double y0 = g.NodeY(static_cast<int32_t>(ej));
-      const double y1 = g.NodeY(static_cast<int32_t>(ej) + 1);
-      for (int32_t ei = 0; ei < g.nx(); ++ei) {
-        const double x0 = g.NodeX(ei);
-        // The move that cut deepest in the element: its lowest corner's
-        // owner (the nearest corner's may be a move whose cut ends beside).
-        int32_t owner = -1;
-        double lowest = 0;
-        for (int c = 0; c < 4; ++c) {
-          const int32_t ci = ei + (c & 1);
-          const int32_t cj = static_cast<int32_t>(ej) + (c >> 1);
-          const double w = grid.jet(ci, cj).w;
-          if (c == 0 || w < lowest) {
-            lowest = w;
-            owner = grid.owner(ci, cj);
-          }
-        }
-        // The design's triangles over the element, for all its samples.
-        const double x1 = g.NodeX(ei + 1);
-        envelope.Candidates({x0, y0, x1, y1}, &candidates);
-        if (candidates.empty()) continue;
-        // The lattice, the design above it, then the points with design.
-        int32_t m = 0;
-        for (int t = 0; t < n; ++t) {
-          const double y = t == n - 1 ? y1 : y0 + t * g.dy() / (n - 1);
-          for (int s = 0; s < n; ++s) {
-            if ((s == 0 || s == n - 1) && (t == 0 || t == n - 1)) continue;
-            xs[m] = s == n - 1 ? x1 : x0 + s * g.dx() / (n - 1);
-            ys[m] = y;
-            ++m;
-          }
-        }
-        envelope.AtManyAmong(candidates, xs.data(), ys.data(), m, zds.data());
-        int32_t kept = 0;
-        for (int32_t q = 0; q < m; ++q) {
-          if (std::isnan(zds[q])) continue;
-          xs[kept] = xs[q];
-          ys[kept] = ys[q];
-          zds[kept] = zds[q];
-          ++kept;
-        }
-        m = kept;
-        if (m == 0) continue;
-        sampler.ReconstructInElement(ei, static_cast<int32_t>(ej), xs.data(),
-                                     ys.data(), m, zs.data());
-        for (int32_t q = 0; q < m; ++q) {
-          cmp.Point(p, xs[q], ys[q], zs[q], zds[q], owner, 0);
+  // The tasks: node rows kBandRows at a time, and element rows; a task cut
+  // by a band's edge goes on in the next band with the same partial, in
+  // the same order.
+  std::vector<Partial> node_parts((nyn + kBandRows - 1) / kBandRows);
+  std::vector<Partial> sample_parts(n >= 2 ? g.ny() : 0);
+  std::vector<float> values;
+  absl::Status pass = grid.ForEach([&](const SurfaceGrid& grid, int32_t e0,
+                                       int32_t e1) {
+    // This band's node rows: [e0, e1), and the last one in the last band.
+    const int32_t r0 = e0, r1 = e1 == g.ny() ? nyn : e1;
+    values.assign(static_cast<size_t>(r1 - r0) * nxn,
+                  std::numeric_limits<float>::quiet_NaN());
+    const int64_t c0 = r0 / kBandRows, c1 = (r1 - 1) / kBandRows;
+    pool.ParallelFor(c1 - c0 + 1, [&](int64_t x) {
+      const int64_t band = c0 + x;
+      Partial& p = node_parts[band];
+      const int32_t j0 = std::max(r0, static_cast<int32_t>(band * kBandRows));
+      const int32_t j1 =
+          std::min(r1, static_cast<int32_t>((band + 1) * kBandRows));
+      for (int32_t j = j0; j < j1; ++j) {
+        const double wy = (j == 0 || j == nyn - 1) ? 0.5 : 1.0;
+        const double y = g.NodeY(j);
+        for (int32_t i = 0; i < nxn; ++i) {
+          const float zd = envelope.AtNode(i, j);
+          if (std::isnan(zd)) continue;
+          const double wx = (i == 0 || i == nxn - 1) ? 0.5 : 1.0;
+          const double v =
+              cmp.Point(p, g.NodeX(i), y, grid.jet(i, j).w, zd,
+                        grid.owner(i, j), wx * wy * g.dx() * g.dy());
+          values[static_cast<size_t>(j - r0) * nxn + i] =
+              static_cast<float>(v);
         }
       }
     });
-  }
+
+    // The samples between nodes, element row by element row (the sampler
+    // keeps what neighbouring elements share).
+    if (n >= 2) {
+      pool.ParallelFor(e1 - e0, [&](int64_t x) {
+        const int64_t ej = e0 + x;
+        Partial& p = sample_parts[ej];
+        SurfaceSampler sampler(grid);
+        std::vector<int32_t> candidates;
+        std::vector<double> xs(n * n), ys(n * n), zds(n * n), zs(n * n);
+        const double y0 = g.NodeY(static_cast<int32_t>(ej));
+        const double y1 = g.NodeY(static_cast<int32_t>(ej) + 1);
+        for (int32_t ei = 0; ei < g.nx(); ++ei) {
+          const double x0 = g.NodeX(ei);
+          // The move that cut deepest in the element: its lowest corner's
+          // owner (the nearest corner's may be a move whose cut ends
+          // beside).
+          int32_t owner = -1;
+          double lowest = 0;
+          for (int c = 0; c < 4; ++c) {
+            const int32_t ci = ei + (c & 1);
+            const int32_t cj = static_cast<int32_t>(ej) + (c >> 1);
+            const double w = grid.jet(ci, cj).w;
+            if (c == 0 || w < lowest) {
+              lowest = w;
+              owner = grid.owner(ci, cj);
+            }
+          }
+          // The design's triangles over the element, for all its samples.
+          const double x1 = g.NodeX(ei + 1);
+          envelope.Candidates({x0, y0, x1, y1}, &candidates);
+          if (candidates.empty()) continue;
+          // The lattice, the design above it, then the points with design.
+          int32_t m = 0;
+          for (int t = 0; t < n; ++t) {
+            const double y = t == n - 1 ? y1 : y0 + t * g.dy() / (n - 1);
+            for (int s = 0; s < n; ++s) {
+              if ((s == 0 || s == n - 1) && (t == 0 || t == n - 1)) continue;
+              xs[m] = s == n - 1 ? x1 : x0 + s * g.dx() / (n - 1);
+              ys[m] = y;
+              ++m;
+            }
+          }
+          envelope.AtManyAmong(candidates, xs.data(), ys.data(), m,
+                               zds.data());
+          int32_t kept = 0;
+          for (int32_t q = 0; q < m; ++q) {
+            if (std::isnan(zds[q])) continue;
+            xs[kept] = xs[q];
+            ys[kept] = ys[q];
+            zds[kept] = zds[q];
+            ++kept;
+          }
+          m = kept;
+          if (m == 0) continue;
+          sampler.ReconstructInElement(ei, static_cast<int32_t>(ej),
+                                       xs.data(), ys.data(), m, zs.data());
+          for (int32_t q = 0; q < m; ++q) {
+            cmp.Point(p, xs[q], ys[q], zs[q], zds[q], owner, 0);
+          }
+        }
+      });
+    }
+    node_rows(r0, r1, values.data());
+    return absl::OkStatus();
+  });
+  if (!pass.ok()) return pass;
 
   Partial all;
   for (Partial& p : node_parts) Merge(all, p);
@@ -304,6 +339,33 @@ absl::StatusOr<DeviationReport> MeasureDeviation(
   return r;
 }
 
+DeviationPicture::DeviationPicture(int32_t nx, int32_t ny, int max_side)
+    : nodes_x(nx), nodes_y(ny) {
+  max_side = std::max(max_side, 16);
+  // Nodes per pixel (a block), the same along both axes.
+  block = std::max<int32_t>(1, (std::max(nx, ny) + max_side - 1) / max_side);
+  width = (nx + block - 1) / block;
+  height = (ny + block - 1) / block;
+  worst.assign(static_cast<size_t>(width) * height,
+               std::numeric_limits<float>::quiet_NaN());
+}
+
+void DeviationPicture::AddRows(int32_t j0, int32_t j1, const float* values) {
+  // Each pixel keeps the largest magnitude, the first of equal ones in
+  // row then column order (rows come in order).
+  for (int32_t j = j0; j < j1; ++j) {
+    float* out = &worst[static_cast<size_t>((nodes_y - 1 - j) / block) * width];
+    const float* row = values + static_cast<size_t>(j - j0) * nodes_x;
+    for (int32_t i = 0; i < nodes_x; ++i) {
+      const double v = row[i];
+      float& w = out[i / block];
+      if (!std::isnan(v) && !(std::fabs(double{w}) >= std::fabs(v))) {
+        w = static_cast<float>(v);
+      }
+    }
+  }
+}
+
 absl::StatusOr<Image> RenderDeviationMap(const SurfaceGrid& grid,
                                          const DeviationReport& r,
                                          int max_side) {
@@ -312,11 +374,17 @@ absl::StatusOr<Image> RenderDeviationMap(const SurfaceGrid& grid,
   if (r.node_deviation.size() != static_cast<size_t>(int64_t{nxn} * nyn)) {
     return absl::InvalidArgumentError("the deviation is for another grid");
   }
-  max_side = std::max(max_side, 16);
-  // Nodes per pixel (a block), the same along both axes.
-  const int32_t block = std::max<int32_t>(
-      1, (std::max(nxn, nyn) + max_side - 1) / max_side);
-  const int mw = (nxn + block - 1) / block, mh = (nyn + block - 1) / block;
+  DeviationPicture map(nxn, nyn, max_side);
+  map.AddRows(0, nyn, r.node_deviation.data());
+  return RenderDeviationMap(map, grid.spec, r);
+}
+
+absl::StatusOr<Image> RenderDeviationMap(const DeviationPicture& map,
+                                         const StockSpec& spec,
+                                         const DeviationReport& r) {
+  const int32_t nyn = map.nodes_y;
+  const int32_t block = map.block;
+  const int mw = map.width, mh = map.height;
   constexpr int kScale = 2;
   const int legend_w = 150;
   const int width = mw + legend_w, height = std::max(mh, 260);
@@ -348,22 +416,12 @@ absl::StatusOr<Image> RenderDeviationMap(const SurfaceGrid& grid,
   };
   for (int py = 0; py < mh; ++py) {
     // North up: image row 0 holds the largest y.
-    const int32_t j1 = nyn - 1 - py * block;
-    const int32_t j0 = std::max(0, j1 - block + 1);
     for (int px = 0; px < mw; ++px) {
-      const int32_t i0 = px * block, i1 = std::min(nxn - 1, i0 + block - 1);
-      double worst = kNaN;
-      for (int32_t j = j0; j <= j1; ++j) {
-        for (int32_t i = i0; i <= i1; ++i) {
-          const double v = r.node_deviation[grid.Index(i, j)];
-          if (!std::isnan(v) && !(std::fabs(worst) >= std::fabs(v))) worst = v;
-        }
-      }
-      img.Set(px, py, color(worst));
+      img.Set(px, py, color(map.worst[static_cast<size_t>(py) * mw + px]));
     }
   }
+  const GridGeometry g(spec);
   // The worst gouging lines, marked where they are deepest.
-  const GridGeometry g = grid.geometry();
   const Rgb kInk = {20, 20, 20};
   const int marks = std::min<int>(5, r.gouge_lines.size());
   for (int k = 0; k < marks; ++k) {

@@ -25,6 +25,9 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include <functional>
+
+#include "client/grid_bands.h"
 #include "client/png_image.h"
 #include "client/surface_grid.h"
 #include "core/thread_pool.h"
@@ -91,6 +94,34 @@ absl::StatusOr<DeviationReport> MeasureDeviation(
     const design::ClosestPointIndex& index,
     const std::vector<SourceLine>& move_lines,
     const DeviationOptions& options = {});
+
+// The same figures from a grid read band by band (GridBands; the report's
+// node_deviation stays empty): each band's node rows [j0, j1), their
+// values as node_deviation would hold them (row-major, NaN where no design
+// lies above), go to node_rows in order, once. Bit for bit the whole-grid
+// function's figures (the same tasks, merged in the same order).
+absl::StatusOr<DeviationReport> MeasureDeviation(
+    GridBands& grid, const design::TopEnvelope& envelope,
+    const design::ClosestPointIndex& index,
+    const std::vector<SourceLine>& move_lines, const DeviationOptions& options,
+    const std::function<void(int32_t j0, int32_t j1, const float* values)>&
+        node_rows);
+
+// deviation.png's map: the node deviations max-pooled by magnitude over
+// blocks of nodes (at most max_side pixels along the longer side), fed
+// node rows in order (AddRows), bounded by the picture's size.
+struct DeviationPicture {
+  DeviationPicture(int32_t nodes_x, int32_t nodes_y, int max_side = 1600);
+  void AddRows(int32_t j0, int32_t j1, const float* values);
+  int32_t nodes_x, nodes_y, block;
+  int width, height;  // the map's pixels
+  std::vector<float> worst;  // per pixel, row 0 north; NaN: none
+};
+
+// deviation.png from the pooled map.
+absl::StatusOr<Image> RenderDeviationMap(const DeviationPicture& map,
+                                         const StockSpec& spec,
+                                         const DeviationReport& report);
 
 // deviation.png: the node deviations (max-pooled by magnitude to at most
 // max_side pixels along the longer side), white within tolerance, gouge in

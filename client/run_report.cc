@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdio>
 #include <functional>
+#include <memory>
 #include <future>
 #include <utility>
 #include <thread>
@@ -97,33 +98,6 @@ absl::StatusOr<std::vector<MarkPolyline>> FetchMarks(Connection& conn,
     return absl::DataLossError("the marks request got no answer");
   }
   return marks;
-}
-
-absl::StatusOr<SurfaceGrid> FetchGrid(Connection& conn, const std::string& id,
-                                      const StockSpec& stock,
-                                      SchemeKind scheme) {
-  auto grid = SurfaceGrid::Uncut(stock, scheme);
-  if (!grid.ok()) return grid.status();
-  auto ctx = conn.Context(id, 3600);
-  pb::GetTilesRequest req;
-  req.set_session_id(id);
-  req.set_precision(pb::PRECISION_DOUBLE);
-  req.set_include_derivatives(GetScheme(scheme).stores_derivatives());
-  req.set_include_owners(true);
-  req.set_since_version(0);
-  auto reader = conn.stub().GetTiles(ctx.get(), req);
-  pb::Tile t;
-  while (reader->Read(&t)) {
-    const float* d[5] = {t.wx().data(), t.wy().data(), t.wxx().data(),
-                         t.wxy().data(), t.wyy().data()};
-    absl::Status s = grid->SetNodes(
-        t.i0(), t.j0(), t.nx(), t.ny(), t.heights_d().data(),
-        req.include_derivatives() ? d : nullptr, t.owners().data());
-    if (!s.ok()) return s;
-  }
-  grpc::Status st = reader->Finish();
-  if (!st.ok()) return FromGrpc(st);
-  return grid;
 }
 
 // Sets tile rows [t0, t1) of `band` from the session's tiles (every tile
@@ -356,19 +330,22 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
       return std::make_pair(std::move(m), seconds(t0));
     });
   }
-  std::future<std::pair<absl::StatusOr<SurfaceGrid>, double>> grid_fetch;
   const DesignInput* design = options.design;
-  // The whole grid only for the design comparison; the files stream the
-  // session's tiles band by band.
-  if (design != nullptr) {
-    grid_fetch = std::async(std::launch::async, [&] {
-      const auto t0 = Clock::now();
-      auto g = Retrying<SurfaceGrid>("the tiles", [&] {
-        return FetchGrid(conn, id, stock, report->scheme);
-      });
-      return std::make_pair(std::move(g), seconds(t0));
-    });
-  }
+  // The session's grid, read band by band (tile rows) for each pass over it
+  // (the deviation, the files): never a whole-grid copy.
+  auto session_bands = [&] {
+    return std::make_unique<TileRowBands>(
+        stock, report->scheme,
+        [&](SurfaceGrid* band, int32_t t0, int32_t t1, bool heights_only) {
+          return Retrying<bool>("the tiles", [&]() -> absl::StatusOr<bool> {
+            absl::Status s =
+                FetchTileRows(conn, id, t0, t1, heights_only, band);
+            if (!s.ok()) return s;
+            return true;
+          }).status();
+        },
+        options.moves != nullptr ? *options.moves : std::vector<Move>());
+  };
   const auto t0 = Clock::now();
   auto stats = Retrying<pb::ErrorStats>(
       "the error statistics", [&]() -> absl::StatusOr<pb::ErrorStats> {
@@ -398,26 +375,21 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     }
     marks_status = m.status();
   }
-  absl::StatusOr<SurfaceGrid> grid = absl::UnknownError("not fetched");
-  if (grid_fetch.valid()) {
-    auto [g, s] = grid_fetch.get();
-    report->output_steps.emplace_back("tiles", s);
-    grid = std::move(g);
-  }
   if (!stats.ok()) return stats.status();
   report->error = *std::move(stats);
   if (!marks_status.ok()) return marks_status;
   if (!files && design == nullptr) return absl::OkStatus();
-  if (design != nullptr && !grid.ok()) return grid.status();
-  if (design != nullptr && options.moves != nullptr) {
-    grid->SetMoves(*options.moves);
-  }
   std::optional<Image> deviation_map;
   if (design != nullptr) {
     const auto td = Clock::now();
     const design::PlacedDesign& placed = *design->placed;
-    auto dev = MeasureDeviation(*grid, placed.envelope(), placed.index(),
-                                design->move_lines, design->deviation);
+    std::unique_ptr<TileRowBands> bands = session_bands();
+    DeviationPicture map(stock.nx + 1, stock.ny + 1);
+    auto dev = MeasureDeviation(
+        *bands, placed.envelope(), placed.index(), design->move_lines,
+        design->deviation, [&](int32_t j0, int32_t j1, const float* v) {
+          if (files) map.AddRows(j0, j1, v);
+        });
     if (!dev.ok()) return dev.status();
     report->design = design->path;
     report->design_triangles =
@@ -426,11 +398,10 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     report->tolerance_gate = design->tolerance_given;
     report->output_steps.emplace_back("deviation", seconds(td));
     if (files) {
-      auto img = RenderDeviationMap(*grid, *dev);
+      auto img = RenderDeviationMap(map, stock, *dev);
       if (!img.ok()) return img.status();
       deviation_map = *std::move(img);
     }
-    dev->node_deviation = {};  // the picture has it
     if (dev->gouge_move >= 0 &&
         dev->gouge_move < static_cast<int32_t>(design->move_lines.size())) {
       report->gouge_source = design->move_lines[dev->gouge_move];
@@ -474,33 +445,14 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
       std::min(out.marks.relief.min_side, options.picture_size);
   out.error.max_side = options.picture_size;
   out.error.min_side = std::min(out.error.min_side, options.picture_size);
-  std::optional<InMemoryBands> held;
-  std::optional<TileRowBands> streamed;
-  GridBands* bands;
-  if (design != nullptr) {
-    bands = &held.emplace(*grid);
-  } else {
-    bands = &streamed.emplace(
-        stock, report->scheme,
-        [&](SurfaceGrid* band, int32_t t0, int32_t t1, bool heights_only) {
-          return Retrying<bool>("the tiles", [&]() -> absl::StatusOr<bool> {
-            absl::Status s =
-                FetchTileRows(conn, id, t0, t1, heights_only, band);
-            if (!s.ok()) return s;
-            return true;
-          }).status();
-        },
-        options.moves != nullptr ? *options.moves : std::vector<Move>());
-  }
+  std::unique_ptr<TileRowBands> bands = session_bands();
   auto written = WriteRunOutputs(options.dir, *bands,
                                  raster.cols > 0 ? &raster : nullptr,
                                  report->marks ? &marks : nullptr, out,
                                  &report->mesh);
   if (!written.ok()) return written.status();
-  if (design == nullptr) {
-    // Reading the session's tiles, band by band, during the pass.
-    report->output_steps.emplace_back("tiles", report->mesh.read_seconds);
-  }
+  // Reading the session's tiles, band by band, during the pass.
+  report->output_steps.emplace_back("tiles", report->mesh.read_seconds);
   for (const WrittenFile& f : *written) {
     report->files.push_back(f.path);
     report->output_steps.emplace_back(
