@@ -41,11 +41,11 @@ const ToolSpec* FindTool(const SessionSpec& spec, int32_t id) {
 
 absl::StatusOr<InterpretedProgram> InterpretProgram(
     std::string_view text, const pb::ProgramOptions& options,
-    const SessionSpec& spec, int64_t max_batch_points) {
+    const SessionSpec& spec, int64_t max_batch_points, int64_t max_points) {
   InterpretedProgram out;
   out.name = options.name().empty() ? "program" : options.name();
   gcode::GcodeOptions o;
-  o.max_points = kMaxProgramPoints;
+  o.max_points = max_points;
   switch (options.dialect()) {
     case pb::DIALECT_UNSPECIFIED:
     case pb::DIALECT_LINUXCNC:

@@ -55,9 +55,12 @@ struct InterpretedProgram {
 // naming "program.options.<field>", an interpreter error "NAME: line N:
 // ..." (as `swarf run` prints it), a T number without a session tool
 // naming it and the line that selects it, dropped moves under strict.
+// More than max_points points is InvalidArgument (the fuzz target bounds
+// its work with a smaller one).
 absl::StatusOr<InterpretedProgram> InterpretProgram(
     std::string_view text, const ::swarf::v1::ProgramOptions& options,
-    const SessionSpec& spec, int64_t max_batch_points);
+    const SessionSpec& spec, int64_t max_batch_points,
+    int64_t max_points = kMaxProgramPoints);
 
 }  // namespace swarf::server
 

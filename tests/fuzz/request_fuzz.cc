@@ -5,8 +5,8 @@
 //   0        CreateSessionRequest -> SpecFromRequest, Registry::Create
 //            (small limits), FillSession, a small batch
 //   1, 6, 7  SimulateRequests, each length-delimited, in order on a fresh
-//            session (moves -> ApplyBatch; tiles, stats, marks, subscribe
-//            as the Simulate stream handles them)
+//            session (moves with their arcs -> ApplyBatch; tiles, stats,
+//            marks, subscribe as the Simulate stream handles them)
 //   2        GetTilesRequest -> TileOptionsFrom, SelectTiles, FillTile
 //   3        GetErrorStatsRequest -> ComputeStats
 //   4        GetCuttingMarksRequest -> ComputeMarks
@@ -17,6 +17,7 @@
 // checked below. Work is bounded (grid sizes, points per batch, samples) so
 // that each input runs in milliseconds.
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -33,6 +34,7 @@
 #include "google/protobuf/stubs/logging.h"
 #include "google/protobuf/io/zero_copy_stream_impl_lite.h"
 #include "server/convert.h"
+#include "server/program.h"
 #include "server/registry.h"
 #include "server/session.h"
 #include "swarf/v1/swarf.pb.h"
@@ -217,18 +219,28 @@ void FuzzCreate(const pb::CreateSessionRequest& req) {
   });
 }
 
-// The moves a batch makes, as Session::ApplyBatch documents it.
-int64_t ExpectedMoves(const pb::MoveBatch& b, bool has_position) {
-  const int64_t points = b.xyz_size() / 3;
+// The moves a batch of `points` points (its arcs chorded) makes, as
+// Session::ApplyBatch documents it.
+int64_t ExpectedMoves(const pb::MoveBatch& b, int64_t points,
+                      bool has_position) {
   if (points == 0) return 0;
   return (b.reposition() || !has_position) ? points - 1 : points;
 }
 
 void FuzzBatch(Session& s, const pb::MoveBatch& b) {
   const SessionState before = s.State();
-  auto r = s.ApplyBatch(b.seq(), b.tool_id(),
-                        std::span<const double>(b.xyz().data(), b.xyz_size()),
-                        FuzzLimits().max_batch_points, b.reposition());
+  const std::span<const double> xyz(b.xyz().data(), b.xyz_size());
+  // Arcs as the service reads them (ArcsFromProto), chorded by the session.
+  auto arcs = ArcsFromProto(b);
+  if (!arcs.ok()) {
+    FUZZ_CHECK(arcs.status().code() == absl::StatusCode::kInvalidArgument);
+    return;
+  }
+  BatchOptions options;
+  options.reposition = b.reposition();
+  options.arcs = *arcs;
+  auto r = s.ApplyBatch(b.seq(), b.tool_id(), xyz,
+                        FuzzLimits().max_batch_points, options);
   const SessionState after = s.State();
   if (!r.ok()) {
     // Rejected whole: nothing applied.
@@ -257,9 +269,19 @@ void FuzzBatch(Session& s, const pb::MoveBatch& b) {
     return;
   }
   FUZZ_CHECK(b.seq() == before.last_seq + 1 && after.last_seq == b.seq());
+  int64_t points = b.xyz_size() / 3;
+  if (!arcs->empty()) {
+    // Accepted arcs chord within the batch limit, ending at their points.
+    auto chorded = ChordBatch(xyz, *arcs, s.spec().arc_tolerance,
+                              FuzzLimits().max_batch_points);
+    FUZZ_CHECK(chorded.ok() && chorded->size() % 3 == 0);
+    points = static_cast<int64_t>(chorded->size() / 3);
+    FUZZ_CHECK(points <= FuzzLimits().max_batch_points);
+    FUZZ_CHECK(std::equal(xyz.end() - 3, xyz.end(), chorded->end() - 3));
+  }
   FUZZ_CHECK(after.moves_applied ==
              before.moves_applied +
-                 ExpectedMoves(b, before.last_position.has_value()));
+                 ExpectedMoves(b, points, before.last_position.has_value()));
   FUZZ_CHECK(r->moves_applied == after.moves_applied);
   FUZZ_CHECK(r->version == after.version && after.version >= before.version);
   FUZZ_CHECK(r->node_lowerings >= 0);
@@ -398,10 +420,37 @@ void FuzzProbe(const Session& s, const pb::ProbeRequest& req) {
   }
 }
 
+// A program chunk as its last: the options read, the program interpreted
+// (work bounded: blocks and points) and cut into batches that cover its
+// points in order, each within the batch limit and with a session tool.
+void FuzzProgram(const Session& s, const pb::ProgramChunk& c) {
+  pb::ProgramOptions o = c.options();
+  if (o.max_blocks() <= 0 || o.max_blocks() > 20000) o.set_max_blocks(20000);
+  const int64_t max_batch = FuzzLimits().max_batch_points;
+  auto p = InterpretProgram(c.data(), o, s.spec(), max_batch, 4096);
+  if (!p.ok()) {
+    FUZZ_CHECK(p.status().code() == absl::StatusCode::kInvalidArgument);
+    return;
+  }
+  int64_t next = 0, moves = 0;
+  for (const ProgramBatch& b : p->batches) {
+    FUZZ_CHECK(b.begin == next && b.end > b.begin &&
+               b.end - b.begin <= std::max<int64_t>(o.batch_points(), 2));
+    FUZZ_CHECK(b.tool_id == 1 || b.tool_id == 2);
+    FUZZ_CHECK(b.moves == b.end - b.begin - (next == 0 || b.reposition));
+    next = b.end;
+    moves += b.moves;
+  }
+  FUZZ_CHECK(next == p->path.point_count());
+  FUZZ_CHECK(moves == p->moves && moves == p->path.move_count());
+}
+
 void FuzzSimulate(Session& s, const pb::SimulateRequest& req) {
   switch (req.request_case()) {
     case pb::SimulateRequest::kMoves:
       return FuzzBatch(s, req.moves());
+    case pb::SimulateRequest::kProgram:
+      return FuzzProgram(s, req.program());
     case pb::SimulateRequest::kTiles: {
       const pb::TileRequest& r = req.tiles();
       return FuzzTiles(s, r.request_id(),

@@ -179,6 +179,43 @@ int main(int argc, char** argv) {
                 Stream({Batch(1, 1, bad), Batch(1, 9, line), Batch(0, 1, line),
                         Batch(1, 1, {1, 2})}));
   }
+  {
+    // Arcs: a half circle and a helix about (5, 5), resent; then a radius
+    // mismatch, a turn count of 0 and an index past the end under seq 2.
+    pb::SimulateRequest a =
+        Batch(1, 1, {2, 5, 1, 2, 5, -1, 8, 5, -1, 8, 5, -2});
+    for (int k : {2, 3}) {
+      pb::Arc* arc = a.mutable_moves()->add_arcs();
+      arc->set_end_index(k);
+      arc->mutable_centre()->set_x(5);
+      arc->mutable_centre()->set_y(5);
+      arc->set_clockwise(k == 2);
+      arc->set_turns(1);
+    }
+    pb::SimulateRequest mismatch = a, turns = a, past = a;
+    for (pb::SimulateRequest* r : {&mismatch, &turns, &past}) {
+      r->mutable_moves()->set_seq(2);
+    }
+    mismatch.mutable_moves()->mutable_arcs(0)->mutable_centre()->set_x(4.5);
+    turns.mutable_moves()->mutable_arcs(1)->set_turns(0);
+    past.mutable_moves()->mutable_arcs(1)->set_end_index(4);
+    seeds.Write("stream_arcs", kStream, Stream({a, a, mismatch, turns, past}));
+  }
+  {
+    // Programs: one that runs (two tools, an arc, a canned cycle, batches of
+    // 8 points), one with an error on its line 3.
+    pb::SimulateRequest ok, bad;
+    pb::ProgramChunk* c = ok.mutable_program();
+    c->set_last(true);
+    c->set_data(
+        "G21 G90 T1 M6\nG0 X1 Y1 Z1\nG1 Z-0.5 F100\nG2 X9 Y1 I4 J0\n"
+        "T2 M6\nG81 X5 Y5 Z-1 R1\nG80\nG1 X2 Y8\nM2\n");
+    c->mutable_options()->set_batch_points(8);
+    c->mutable_options()->set_name("seed.nc");
+    *bad.mutable_program() = *c;
+    bad.mutable_program()->set_data("G21 G90\nG0 X1 Y1 Z1\nG1 X2 A1\n");
+    seeds.Write("stream_program", kStream, Stream({ok, bad}));
+  }
 
   // Unary reads on the prepared session.
   {
