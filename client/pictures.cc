@@ -480,8 +480,15 @@ absl::StatusOr<Image> DrawMarksOver(
   if (!(options.line_width_px >= 0 && options.line_width_px <= 100)) {
     return absl::InvalidArgumentError("line_width_px must be in [0, 100]");
   }
-  std::vector<PixelSegment> segments;
-  for (const MarkPolyline& p : marks) {
+  // Each segment as its polyline and first vertex (8 bytes, not the 48 of
+  // its pixel coordinates and angles: a detailed job has millions), its
+  // PixelSegment computed where it is drawn.
+  struct SegmentRef {
+    uint32_t polyline, k;
+  };
+  std::vector<SegmentRef> segments;
+  for (size_t q = 0; q < marks.size(); ++q) {
+    const MarkPolyline& p = marks[q];
     const size_t n = p.vertices.size();
     if (p.angle_deg.size() != n) {
       return absl::InvalidArgumentError(absl::StrFormat(
@@ -490,15 +497,22 @@ absl::StatusOr<Image> DrawMarksOver(
     }
     const size_t ends = p.closed && n > 2 ? n : (n > 0 ? n - 1 : 0);
     for (size_t k = 0; k < ends || (n == 1 && k == 0); ++k) {
-      const size_t a = k, b = n == 1 ? 0 : (k + 1) % n;
-      segments.push_back({frame.PixelX(p.vertices[a].x),
-                          frame.PixelY(p.vertices[a].y),
-                          frame.PixelX(p.vertices[b].x),
-                          frame.PixelY(p.vertices[b].y), p.angle_deg[a],
-                          p.angle_deg[b]});
+      segments.push_back(
+          {static_cast<uint32_t>(q), static_cast<uint32_t>(k)});
     }
   }
-  for (const PixelSegment& s : segments) {
+  auto segment = [&](const SegmentRef& r) {
+    const MarkPolyline& p = marks[r.polyline];
+    const size_t n = p.vertices.size();
+    const size_t a = r.k, b = n == 1 ? 0 : (r.k + 1) % n;
+    return PixelSegment{frame.PixelX(p.vertices[a].x),
+                        frame.PixelY(p.vertices[a].y),
+                        frame.PixelX(p.vertices[b].x),
+                        frame.PixelY(p.vertices[b].y), p.angle_deg[a],
+                        p.angle_deg[b]};
+  };
+  for (const SegmentRef& r : segments) {
+    const PixelSegment s = segment(r);
     if (!(std::isfinite(s.ax) && std::isfinite(s.ay) && std::isfinite(s.bx) &&
           std::isfinite(s.by))) {
       return absl::InvalidArgumentError("mark vertex is not finite");
@@ -531,7 +545,7 @@ absl::StatusOr<Image> DrawMarksOver(
   std::vector<std::vector<uint32_t>> band_segments(bands);
   for (size_t k = 0; k < segments.size(); ++k) {
     int y0, y1;
-    StrokeRows(segments[k], width + 2, frame.height, &y0, &y1);
+    StrokeRows(segment(segments[k]), width + 2, frame.height, &y0, &y1);
     for (int b = y0 / kBandRows; b <= y1 / kBandRows && b < bands; ++b) {
       band_segments[b].push_back(static_cast<uint32_t>(k));
     }
@@ -540,12 +554,12 @@ absl::StatusOr<Image> DrawMarksOver(
     const int row0 = static_cast<int>(b) * kBandRows;
     const int row1 = std::min(frame.height, row0 + kBandRows);
     for (uint32_t k : band_segments[b]) {
-      Stroke(image, frame.width, frame.height, segments[k], width + 2, true,
-             row0, row1);
+      Stroke(image, frame.width, frame.height, segment(segments[k]), width + 2,
+             true, row0, row1);
     }
     for (uint32_t k : band_segments[b]) {
-      Stroke(image, frame.width, frame.height, segments[k], width, false,
-             row0, row1);
+      Stroke(image, frame.width, frame.height, segment(segments[k]), width,
+             false, row0, row1);
     }
   });
   DrawLegend(image, legend_x0, image.height(), legend, scale, nullptr,
