@@ -222,6 +222,47 @@ TEST(StreamedOutputsTest, MeshesFromRowsAreTheBuiltMeshesFiles) {
   }
 }
 
+// Thin and tiny grids (one element across, fewer rows than a tile or a
+// root): the same files from the rows as from the built mesh.
+TEST(StreamedOutputsTest, ThinGridsFromRowsAreTheBuiltMeshesFiles) {
+  const StockSpec specs[] = {
+      {0, 0, 1, 40, 5, 1, 80},   {0, 0, 40, 1, 5, 80, 1},
+      {0, 0, 2, 2, 5, 1, 1},     {0, 0, 30, 20, 5, 2, 130},
+      {0, 0, 33, 9, 5, 130, 65},
+  };
+  for (const StockSpec& spec : specs) {
+    auto wp = Workpiece::Create(spec, SchemeKind::kTaylor);
+    ASSERT_TRUE(wp.ok()) << wp.status();
+    const std::vector<Move> moves = {
+        {{0.2, 0.2, 4.5}, {spec.x1 - 0.2, spec.y1 - 0.2, 4.2}, 0.8},
+        {{spec.x1 / 2, 0, 4.6}, {spec.x1 / 2, spec.y1, 4.6}, 0.5}};
+    ASSERT_TRUE((*wp)->Apply(moves).ok());
+    auto grid = SurfaceGrid::FromWorkpiece(**wp);
+    ASSERT_TRUE(grid.ok());
+    for (double tolerance : {0.0, 0.005}) {
+      const std::string what =
+          absl::StrCat(spec.nx, " x ", spec.ny, " tol ", tolerance);
+      SurfaceMeshOptions mopt;
+      mopt.tolerance = tolerance;
+      auto mesh = BuildSurfaceMesh(*grid, mopt);
+      ASSERT_TRUE(mesh.ok()) << mesh.status();
+      TempDir built;
+      ASSERT_TRUE(WriteStl(*mesh, built.path + "/surface.stl").ok());
+      ASSERT_TRUE(WriteVrml(*mesh, built.path + "/surface.wrl",
+                            SurfaceColors(*mesh, spec.z_top))
+                      .ok());
+      RunOutputOptions options;
+      options.mesh = mopt;
+      std::vector<Move> kept((*wp)->moves().begin(), (*wp)->moves().end());
+      TileRowBands bands(spec, SchemeKind::kTaylor, FillFrom(**wp), kept, 1);
+      const Written w = Write(bands, nullptr, nullptr, options);
+      ASSERT_EQ(w.names.size(), 3u) << what;
+      EXPECT_TRUE(w.bytes[1] == ReadAll(built.path + "/surface.stl")) << what;
+      EXPECT_TRUE(w.bytes[2] == ReadAll(built.path + "/surface.wrl")) << what;
+    }
+  }
+}
+
 TEST(StreamedOutputsTest, PictureSizeBoundsThePictures) {
   auto wp = Workpiece::Create(Stock(), SchemeKind::kTaylor);
   ASSERT_TRUE(wp.ok());
