@@ -28,8 +28,8 @@ std::string MiB(int64_t bytes) {
 
 absl::Status Registry::ValidateId(const std::string& id) {
   if (id.empty() || id.size() > 64) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "session_id must be 1-64 characters, got ", id.size()));
+    return absl::InvalidArgumentError(
+        absl::StrCat("session_id must be 1-64 characters, got ", id.size()));
   }
   for (char c : id) {
     const bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') ||
@@ -61,36 +61,36 @@ absl::StatusOr<std::shared_ptr<Session>> Registry::Create(SessionSpec spec) {
   const int64_t bytes = Session::EstimateMemoryBytes(spec.stock, spec.scheme);
   if (limits_.max_session_memory_bytes > 0 &&
       bytes > limits_.max_session_memory_bytes) {
-    return absl::ResourceExhaustedError(absl::StrCat(
-        "the session needs ", bytes, " bytes (", MiB(bytes), " MiB for ",
-        spec.stock.nx, " x ", spec.stock.ny,
-        " elements, every tile cut); this server allows ",
-        limits_.max_session_memory_bytes, " bytes (",
-        MiB(limits_.max_session_memory_bytes),
-        " MiB) per session (--max_session_memory_mb)"));
+    return absl::ResourceExhaustedError(
+        absl::StrCat("the session needs ", bytes, " bytes (", MiB(bytes),
+                     " MiB for ", spec.stock.nx, " x ", spec.stock.ny,
+                     " elements, every tile cut); this server allows ",
+                     limits_.max_session_memory_bytes, " bytes (",
+                     MiB(limits_.max_session_memory_bytes),
+                     " MiB) per session (--max_session_memory_mb)"));
   }
   if (bytes > limits_.max_total_memory_bytes) {
     // Never fits: named as such even past the core's node limit.
     absl::MutexLock l(&mu_);
-    return FitsTotalLocked(bytes);
+    return FitsTotalLocked(bytes, spec.stock);
   }
   if (absl::Status s = Session::ValidateSpec(spec); !s.ok()) return s;
   {
     absl::MutexLock l(&mu_);
-    if (absl::Status s = AdmitLocked(spec.id, bytes); !s.ok()) return s;
+    if (absl::Status s = AdmitLocked(spec.id, bytes, spec.stock); !s.ok())
+      return s;
   }
   const std::string id = spec.id;
   // The journal first: a session that cannot be made durable is refused.
-  absl::StatusOr<std::unique_ptr<Journal>> journal =
-      std::unique_ptr<Journal>();
+  absl::StatusOr<std::unique_ptr<Journal>> journal = std::unique_ptr<Journal>();
   if (!persistence_.data_dir.empty()) {
     journal = Journal::Create(JournalPath(id), Session::Definition(spec),
                               spec.owner, persistence_.sync);
   }
   absl::StatusOr<std::shared_ptr<Session>> session =
-      journal.ok() ? Session::Create(std::move(spec), *std::move(journal),
-                                     Snapshots(id))
-                   : absl::UnavailableError(journal.status().message());
+      journal.ok()
+          ? Session::Create(std::move(spec), *std::move(journal), Snapshots(id))
+          : absl::UnavailableError(journal.status().message());
   absl::MutexLock l(&mu_);
   if (!session.ok()) {
     sessions_.erase(id);
@@ -102,7 +102,8 @@ absl::StatusOr<std::shared_ptr<Session>> Registry::Create(SessionSpec spec) {
   return *session;
 }
 
-absl::Status Registry::AdmitLocked(const std::string& id, int64_t bytes) {
+absl::Status Registry::AdmitLocked(const std::string& id, int64_t bytes,
+                                   const StockSpec& stock) {
   if (auto it = sessions_.find(id); it != sessions_.end()) {
     return absl::AlreadyExistsError(
         it->second != nullptr
@@ -113,27 +114,28 @@ absl::Status Registry::AdmitLocked(const std::string& id, int64_t bytes) {
     return absl::ResourceExhaustedError(absl::StrCat(
         "this server holds its limit of ", limits_.max_sessions, " sessions"));
   }
-  if (absl::Status s = FitsTotalLocked(bytes); !s.ok()) return s;
+  if (absl::Status s = FitsTotalLocked(bytes, stock); !s.ok()) return s;
   reserved_bytes_ += bytes;
   // The id is taken while the session is created.
   sessions_[id] = nullptr;
   return absl::OkStatus();
 }
 
-absl::Status Registry::FitsTotalLocked(int64_t bytes) const {
+absl::Status Registry::FitsTotalLocked(int64_t bytes,
+                                       const StockSpec& stock) const {
   const int64_t left = limits_.max_total_memory_bytes - reserved_bytes_;
   if (bytes <= left) return absl::OkStatus();
   return absl::ResourceExhaustedError(absl::StrCat(
-      "the session needs ", bytes, " bytes (", MiB(bytes),
-      " MiB, every tile cut); this server has ", left, " bytes (", MiB(left),
-      " MiB) left of the ", limits_.max_total_memory_bytes, " bytes (",
+      "the session needs ", bytes, " bytes (", MiB(bytes), " MiB for ",
+      stock.nx, " x ", stock.ny, " elements, every tile cut); this server has ",
+      left, " bytes (", MiB(left), " MiB) left of the ",
+      limits_.max_total_memory_bytes, " bytes (",
       MiB(limits_.max_total_memory_bytes),
       " MiB) all its sessions may take (--max_total_memory_mb)"));
 }
 
 std::string Registry::JournalPath(const std::string& id) const {
-  return (std::filesystem::path(persistence_.data_dir) / (id + ".db"))
-      .string();
+  return (std::filesystem::path(persistence_.data_dir) / (id + ".db")).string();
 }
 
 SnapshotPolicy Registry::Snapshots(const std::string& id) const {
@@ -167,9 +169,9 @@ absl::StatusOr<int> Registry::RestoreAll() {
   std::error_code ec;
   std::filesystem::create_directories(persistence_.data_dir, ec);
   if (ec) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        "cannot create --data_dir ", persistence_.data_dir, ": ",
-        ec.message()));
+    return absl::FailedPreconditionError(
+        absl::StrCat("cannot create --data_dir ", persistence_.data_dir, ": ",
+                     ec.message()));
   }
   std::vector<std::filesystem::path> files;
   for (const auto& e :
@@ -191,7 +193,7 @@ absl::StatusOr<int> Registry::RestoreAll() {
     const SessionSpec& spec = (*session)->spec();
     absl::MutexLock l(&mu_);
     absl::Status admitted = AdmitLocked(
-        id, Session::EstimateMemoryBytes(spec.stock, spec.scheme));
+        id, Session::EstimateMemoryBytes(spec.stock, spec.scheme), spec.stock);
     if (!admitted.ok()) {
       spdlog::error("session {}: not restored: {}", id,
                     std::string(admitted.message()));

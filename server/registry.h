@@ -68,8 +68,7 @@ class Registry {
   // Deletes the session and its files, once its readers are done (a long
   // measurement); other sessions are served meanwhile. NOT_FOUND as Get.
   // The id is gone for Get at once, and free for Create when this returns.
-  absl::Status Delete(const std::string& id,
-                      const std::string& principal = "");
+  absl::Status Delete(const std::string& id, const std::string& principal = "");
   // Evicts journaled sessions unused for `idle_seconds` that no stream
   // holds. Returns how many were evicted.
   int EvictIdle(double idle_seconds);
@@ -94,11 +93,13 @@ class Registry {
   // Removes a session's journal and snapshot files.
   void DeleteFiles(const std::string& id) const;
   // RESOURCE_EXHAUSTED unless `bytes` fit what the sessions have left of
-  // max_total_memory_bytes, naming both.
-  absl::Status FitsTotalLocked(int64_t bytes) const
+  // max_total_memory_bytes, naming both and the grid of `stock`.
+  absl::Status FitsTotalLocked(int64_t bytes, const StockSpec& stock) const
       ABSL_SHARED_LOCKS_REQUIRED(mu_);
-  // Admission of a session of `bytes` under mu_; reserves them.
-  absl::Status AdmitLocked(const std::string& id, int64_t bytes)
+  // Admission of a session of `bytes` (its grid: `stock`) under mu_;
+  // reserves them.
+  absl::Status AdmitLocked(const std::string& id, int64_t bytes,
+                           const StockSpec& stock)
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
 
   const Limits limits_;

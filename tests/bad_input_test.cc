@@ -787,18 +787,18 @@ TEST_F(BadInputTest, TrillionNodesIsResourceExhaustedBeforeAllocating) {
   const int64_t rss = RssBytes();
   pb::CreateSessionRequest req =
       SessionRequest("huge", {0, 0, 1000, 1000, 0, 1000000, 1000000}, 1);
-  EXPECT_TRUE(
-      IsStatus(Create(req), grpc::StatusCode::RESOURCE_EXHAUSTED, "nodes"));
+  EXPECT_TRUE(IsStatus(Create(req), grpc::StatusCode::RESOURCE_EXHAUSTED,
+                       "for 1000000 x 1000000 elements"));
   // The same grid by spacing.
   req.set_nx(0);
   req.set_ny(0);
   req.set_spacing(1e-3);
-  EXPECT_TRUE(
-      IsStatus(Create(req), grpc::StatusCode::RESOURCE_EXHAUSTED, "nodes"));
+  EXPECT_TRUE(IsStatus(Create(req), grpc::StatusCode::RESOURCE_EXHAUSTED,
+                       "for 1000000 x 1000000 elements"));
   // The most the core accepts per axis, both ways.
   req = SessionRequest("huge", {0, 0, 10, 10, 0, 1 << 20, 1 << 20}, 1);
-  EXPECT_TRUE(
-      IsStatus(Create(req), grpc::StatusCode::RESOURCE_EXHAUSTED, "nodes"));
+  EXPECT_TRUE(IsStatus(Create(req), grpc::StatusCode::RESOURCE_EXHAUSTED,
+                       "for 1048576 x 1048576 elements"));
   // Nothing was allocated for them (a 10^12-node taylor grid would take
   // 32 TB; its tile table alone 2 GB).
   EXPECT_LT(RssBytes() - rss, int64_t{64} << 20);

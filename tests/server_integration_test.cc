@@ -1553,7 +1553,8 @@ TEST_F(ServerTest, ResourceExhaustedAtEachLimit) {
     const grpc::Status st = Create(SmallRequest("m3"));
     EXPECT_EQ(st.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
     EXPECT_EQ(st.error_message(),
-              "the session needs 2097232 bytes (2.0 MiB, every tile cut); "
+              "the session needs 2097232 bytes (2.0 MiB for 10 x 10 elements, "
+              "every tile cut); "
               "this server has 0 bytes (0.0 MiB) left of the 4194464 bytes "
               "(4.0 MiB) all its sessions may take (--max_total_memory_mb)");
     // Deleting returns the reservation.
