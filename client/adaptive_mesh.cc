@@ -222,6 +222,20 @@ std::array<Leaf, 2> Halves(const Lattice& l, const Leaf& f) {
   return along_x >= along_y ? across_x : across_y;
 }
 
+// Whether Halves(l, f) splits across x (else across y), and those halves
+// from that answer alone.
+bool SplitsAcrossX(const Lattice& l, const Leaf& f) {
+  return Halves(l, f)[0].w != f.w;
+}
+std::array<Leaf, 2> HalvesAcross(const Leaf& f, bool across_x) {
+  if (across_x) {
+    return {Leaf{f.i0, f.j0, f.w / 2, f.h},
+            Leaf{f.i0 + f.w / 2, f.j0, f.w / 2, f.h}};
+  }
+  return {Leaf{f.i0, f.j0, f.w, f.h / 2},
+          Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
+}
+
 int64_t Cross(P o, P a, P b) {
   return (a.i - o.i) * (b.j - o.j) - (a.j - o.j) * (b.i - o.i);
 }
@@ -398,6 +412,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
           }
         }
       }
+      t.shrink_to_fit();  // kept until the conforming passes end
     });
   }
   std::vector<Leaf> leaves;
@@ -477,8 +492,9 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   std::vector<std::vector<int64_t>> by_row(roots_y);
   for (bool first_pass = true;; first_pass = false) {
     // Each work leaf triangulated and measured where its root row's
-    // heights are read; the halves of one over the tolerance too.
-    std::vector<std::array<Leaf, 2>> split_halves(work.size());
+    // heights are read; how one over the tolerance is halved too (a byte a
+    // leaf: the first pass visits every leaf).
+    std::vector<uint8_t> split_x(work.size());
     for (auto& r : by_row) r.clear();
     for (size_t w = 0; w < work.size(); ++w) {
       by_row[leaves[work[w]].j0 / kRoot].push_back(static_cast<int64_t>(w));
@@ -523,7 +539,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
         };
         measure();
         if (!(leaf_dev[k] <= tolerance) && f.w * f.h != 1) {
-          split_halves[w] = Halves(l, f);
+          split_x[w] = SplitsAcrossX(l, f);
         }
       });
     }
@@ -535,7 +551,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
       if (leaf_dev[k] <= tolerance || f.w * f.h == 1) continue;
       kids[k] = static_cast<int64_t>(leaves.size());
       std::vector<P>().swap(tris[k]);
-      for (const Leaf& half : split_halves[w]) {
+      for (const Leaf& half : HalvesAcross(f, split_x[w])) {
         halves.push_back(static_cast<int64_t>(leaves.size()));
         leaves.push_back(half);
         kids.push_back(-1);

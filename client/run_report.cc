@@ -1,5 +1,7 @@
 #include "client/run_report.h"
 
+#include <malloc.h>
+
 #include <algorithm>
 #include <cmath>
 #include <chrono>
@@ -445,6 +447,10 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
       std::min(out.marks.relief.min_side, options.picture_size);
   out.error.max_side = options.picture_size;
   out.error.min_side = std::min(out.error.min_side, options.picture_size);
+  // The statistics' and the marks' transient memory (freed, on the
+  // threads' malloc arenas) goes back to the system before the outputs
+  // take theirs: freed pages would otherwise still count in the peak.
+  malloc_trim(0);
   std::unique_ptr<TileRowBands> bands = session_bands();
   auto written = WriteRunOutputs(options.dir, *bands,
                                  raster.cols > 0 ? &raster : nullptr,
