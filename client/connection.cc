@@ -117,6 +117,32 @@ std::vector<Move> RunMoves(const std::vector<PathRun>& runs,
   return moves;
 }
 
+absl::StatusOr<std::optional<pb::Session>> AfterBrokenStream(
+    Connection& conn, const std::string& session_id, const grpc::Status& st,
+    std::chrono::steady_clock::time_point deadline, int attempt) {
+  const bool transient = st.error_code() == grpc::StatusCode::UNAVAILABLE ||
+                         st.error_code() == grpc::StatusCode::ABORTED ||
+                         st.error_code() == grpc::StatusCode::CANCELLED ||
+                         st.ok();
+  if (!transient || std::chrono::steady_clock::now() > deadline) {
+    return FromGrpc(st.ok() ? grpc::Status(grpc::StatusCode::DATA_LOSS,
+                                           "the stream ended early")
+                            : st);
+  }
+  std::this_thread::sleep_for(
+      std::chrono::milliseconds(std::min(2000, 100 << std::min(attempt, 4))));
+  auto gctx = conn.Context(session_id, 5);
+  pb::GetSessionRequest get;
+  get.set_session_id(session_id);
+  pb::Session session;
+  grpc::Status gs = conn.stub().GetSession(gctx.get(), get, &session);
+  if (gs.ok()) return session;
+  // NOT_FOUND: gone for good. Else not back yet: the caller's resume window
+  // bounds the retries.
+  if (gs.error_code() == grpc::StatusCode::NOT_FOUND) return FromGrpc(gs);
+  return std::nullopt;
+}
+
 absl::Status StreamPath(
     Connection& conn, const std::string& session_id,
     const std::vector<PathRun>& runs, int64_t batch_points,
@@ -199,27 +225,12 @@ absl::Status StreamPath(
     grpc::Status st = stream->Finish();
     if (!batch_error.ok()) return batch_error;
     if (st.ok() && acked == reqs.size()) return absl::OkStatus();
-    const bool transient = st.error_code() == grpc::StatusCode::UNAVAILABLE ||
-                           st.error_code() == grpc::StatusCode::ABORTED ||
-                           st.error_code() == grpc::StatusCode::CANCELLED ||
-                           st.ok();
-    if (!transient || std::chrono::steady_clock::now() > deadline) {
-      return FromGrpc(st.ok() ? grpc::Status(grpc::StatusCode::DATA_LOSS,
-                                             "the stream ended early")
-                              : st);
-    }
     // Ask where the server is; it may still be restarting.
-    std::this_thread::sleep_for(std::chrono::milliseconds(
-        std::min(2000, 100 << std::min(attempt, 4))));
-    auto gctx = conn.Context(session_id, 5);
-    pb::GetSessionRequest get;
-    get.set_session_id(session_id);
-    pb::Session session;
-    grpc::Status gs = conn.stub().GetSession(gctx.get(), get, &session);
-    if (!gs.ok()) {
-      if (gs.error_code() == grpc::StatusCode::NOT_FOUND) return FromGrpc(gs);
-      continue;  // not back yet: the resume window bounds this
-    }
+    absl::StatusOr<std::optional<pb::Session>> back =
+        AfterBrokenStream(conn, session_id, st, deadline, attempt);
+    if (!back.ok()) return back.status();
+    if (!back->has_value()) continue;
+    const pb::Session& session = **back;
     from = session.last_seq() + 1;
     if (session.last_seq() > acked) {
       // Applied but the ack was lost with the connection.

@@ -4,6 +4,7 @@
 #ifndef SWARF_CLIENT_CONNECTION_H_
 #define SWARF_CLIENT_CONNECTION_H_
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -67,6 +68,16 @@ class Connection {
   std::unique_ptr<pb::Swarf::Stub> stub_;
   std::string target_;
 };
+
+// After a Simulate stream of `session_id` ended with `st` before its work
+// was done: the error to give up with when `st` is not one a resume
+// outlives (UNAVAILABLE, ABORTED, CANCELLED, or OK: the stream ended early)
+// or `deadline` has passed. Otherwise it waits (backing off with `attempt`)
+// and asks the server for the session: nullopt when the server is not back
+// yet (try again), else the session as the server has it.
+absl::StatusOr<std::optional<pb::Session>> AfterBrokenStream(
+    Connection& conn, const std::string& session_id, const grpc::Status& st,
+    std::chrono::steady_clock::time_point deadline, int attempt);
 
 // A run of tip positions cut with one tool at one kind of feed.
 struct PathRun {

@@ -74,8 +74,7 @@ bool WritePngFile(int width, int height, int channels, png_bytep* rows,
   }
   png_init_io(png, f);
   png_set_IHDR(png, info, width, height, 8,
-               channels == 4 ? PNG_COLOR_TYPE_RGB_ALPHA
-                                     : PNG_COLOR_TYPE_RGB,
+               channels == 4 ? PNG_COLOR_TYPE_RGB_ALPHA : PNG_COLOR_TYPE_RGB,
                PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT,
                PNG_FILTER_TYPE_DEFAULT);
   // Shaded reliefs compress poorly whatever the effort. Paeth rows coded as
@@ -100,6 +99,29 @@ bool WritePngFile(int width, int height, int channels, png_bytep* rows,
   return true;
 }
 
+// WritePngFile to `path`: a file that cannot be written whole is removed.
+absl::Status WritePngPath(int width, int height, int channels, png_bytep* rows,
+                          const std::function<void(int, uint8_t*)>* row,
+                          uint8_t* buffer, const std::string& path) {
+  std::FILE* f = std::fopen(path.c_str(), "wb");
+  if (f == nullptr) {
+    return absl::PermissionDeniedError(
+        absl::StrCat("cannot open ", path, ": ", std::strerror(errno)));
+  }
+  PngError err;
+  const bool ok =
+      WritePngFile(width, height, channels, rows, row, buffer, f, &err);
+  const bool io_error = std::ferror(f) != 0;
+  const bool close_failed = std::fclose(f) != 0;
+  if (!ok || io_error || close_failed) {
+    std::remove(path.c_str());
+    return absl::InternalError(absl::StrCat(
+        "writing ", path,
+        " failed: ", err.message[0] != '\0' ? err.message : "I/O error"));
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 absl::Status WritePng(const Image& image, const std::string& path) {
@@ -107,32 +129,16 @@ absl::Status WritePng(const Image& image, const std::string& path) {
     return absl::InvalidArgumentError(
         absl::StrCat("cannot write an empty image to ", path));
   }
-  if (image.pixels().size() != static_cast<size_t>(image.width()) *
-                                   image.height() * image.channels()) {
+  if (image.pixels().size() !=
+      static_cast<size_t>(image.width()) * image.height() * image.channels()) {
     return absl::InvalidArgumentError("image pixel buffer has the wrong size");
   }
   std::vector<png_bytep> rows(image.height());
   for (int y = 0; y < image.height(); ++y) {
     rows[y] = const_cast<png_bytep>(image.row(y));
   }
-  std::FILE* f = std::fopen(path.c_str(), "wb");
-  if (f == nullptr) {
-    return absl::PermissionDeniedError(
-        absl::StrCat("cannot open ", path, ": ", std::strerror(errno)));
-  }
-  PngError err;
-  const bool ok = WritePngFile(image.width(), image.height(),
-                               image.channels(), rows.data(), nullptr,
-                               nullptr, f, &err);
-  const bool io_error = std::ferror(f) != 0;
-  const bool close_failed = std::fclose(f) != 0;
-  if (!ok || io_error || close_failed) {
-    std::remove(path.c_str());
-    return absl::InternalError(absl::StrCat(
-        "writing ", path, " failed: ",
-        err.message[0] != '\0' ? err.message : "I/O error"));
-  }
-  return absl::OkStatus();
+  return WritePngPath(image.width(), image.height(), image.channels(),
+                      rows.data(), nullptr, nullptr, path);
 }
 
 absl::Status WritePngRows(int width, int height,
@@ -143,23 +149,7 @@ absl::Status WritePngRows(int width, int height,
         absl::StrCat("cannot write an empty image to ", path));
   }
   std::vector<uint8_t> buffer(static_cast<size_t>(width) * 3);
-  std::FILE* f = std::fopen(path.c_str(), "wb");
-  if (f == nullptr) {
-    return absl::PermissionDeniedError(
-        absl::StrCat("cannot open ", path, ": ", std::strerror(errno)));
-  }
-  PngError err;
-  const bool ok = WritePngFile(width, height, 3, nullptr, &row, buffer.data(),
-                               f, &err);
-  const bool io_error = std::ferror(f) != 0;
-  const bool close_failed = std::fclose(f) != 0;
-  if (!ok || io_error || close_failed) {
-    std::remove(path.c_str());
-    return absl::InternalError(absl::StrCat(
-        "writing ", path, " failed: ",
-        err.message[0] != '\0' ? err.message : "I/O error"));
-  }
-  return absl::OkStatus();
+  return WritePngPath(width, height, 3, nullptr, &row, buffer.data(), path);
 }
 
 absl::StatusOr<Image> ReadPng(const std::string& path) {

@@ -119,26 +119,11 @@ absl::Status StreamProgram(
       send = &upload;
       continue;
     }
-    const bool transient = st.error_code() == grpc::StatusCode::UNAVAILABLE ||
-                           st.error_code() == grpc::StatusCode::ABORTED ||
-                           st.error_code() == grpc::StatusCode::CANCELLED ||
-                           st.ok();
-    if (!transient || std::chrono::steady_clock::now() > deadline) {
-      return FromGrpc(st.ok() ? grpc::Status(grpc::StatusCode::DATA_LOSS,
-                                             "the stream ended early")
-                              : st);
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(
-        std::min(2000, 100 << std::min(attempt, 4))));
-    auto gctx = conn.Context(session_id, 5);
-    pb::GetSessionRequest get;
-    get.set_session_id(session_id);
-    pb::Session session;
-    grpc::Status gs = conn.stub().GetSession(gctx.get(), get, &session);
-    if (!gs.ok()) {
-      if (gs.error_code() == grpc::StatusCode::NOT_FOUND) return FromGrpc(gs);
-      continue;  // not back yet: the resume window bounds this
-    }
+    absl::StatusOr<std::optional<pb::Session>> back =
+        AfterBrokenStream(conn, session_id, st, deadline, attempt);
+    if (!back.ok()) return back.status();
+    if (!back->has_value()) continue;
+    const pb::Session& session = **back;
     acked = std::max<uint64_t>(acked, session.last_seq());
     p->moves_done = std::max(p->moves_done, session.moves_applied());
     std::fprintf(stderr,

@@ -29,8 +29,7 @@ void AppendStlRecord(const Vec3& p, const Vec3& q, const Vec3& r,
   char rec[50];
   const double ux = q.x - p.x, uy = q.y - p.y, uz = q.z - p.z;
   const double vx = r.x - p.x, vy = r.y - p.y, vz = r.z - p.z;
-  double nx = uy * vz - uz * vy, ny = uz * vx - ux * vz,
-         nz = ux * vy - uy * vx;
+  double nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
   const double len = std::sqrt(nx * nx + ny * ny + nz * nz);
   if (len > 0 && std::isfinite(len)) {
     nx /= len;
@@ -39,13 +38,12 @@ void AppendStlRecord(const Vec3& p, const Vec3& q, const Vec3& r,
   } else {
     nx = ny = nz = 0;
   }
-  const float f[12] = {
-      static_cast<float>(nx),  static_cast<float>(ny),
-      static_cast<float>(nz),  static_cast<float>(p.x),
-      static_cast<float>(p.y), static_cast<float>(p.z),
-      static_cast<float>(q.x), static_cast<float>(q.y),
-      static_cast<float>(q.z), static_cast<float>(r.x),
-      static_cast<float>(r.y), static_cast<float>(r.z)};
+  const float f[12] = {static_cast<float>(nx),  static_cast<float>(ny),
+                       static_cast<float>(nz),  static_cast<float>(p.x),
+                       static_cast<float>(p.y), static_cast<float>(p.z),
+                       static_cast<float>(q.x), static_cast<float>(q.y),
+                       static_cast<float>(q.z), static_cast<float>(r.x),
+                       static_cast<float>(r.y), static_cast<float>(r.z)};
   std::memcpy(rec, f, 48);
   rec[48] = rec[49] = 0;
   out.Write(std::string_view(rec, 50));
@@ -129,9 +127,8 @@ struct BoundaryHeights {
 };
 
 template <typename Emit>
-absl::Status EmitTopCells(LatticeWindows& rows, int64_t big_nx,
-                          int64_t big_ny, BoundaryHeights* boundary,
-                          Emit emit) {
+absl::Status EmitTopCells(LatticeWindows& rows, int64_t big_nx, int64_t big_ny,
+                          BoundaryHeights* boundary, Emit emit) {
   constexpr int64_t kRows = 64;
   boundary->west.resize(big_ny + 1);
   boundary->east.resize(big_ny + 1);
@@ -153,8 +150,8 @@ absl::Status EmitTopCells(LatticeWindows& rows, int64_t big_nx,
     }
     for (int64_t j = j0; j < j1; ++j) {
       for (int64_t i = 0; i < big_nx; ++i) {
-        const double z00 = at(i, j), z10 = at(i + 1, j),
-                     z11 = at(i + 1, j + 1), z01 = at(i, j + 1);
+        const double z00 = at(i, j), z10 = at(i + 1, j), z11 = at(i + 1, j + 1),
+                     z01 = at(i, j + 1);
         const MeshVertex v00{false, i, j}, v10{false, i + 1, j},
             v11{false, i + 1, j + 1}, v01{false, i, j + 1};
         // The diagonal along the smaller height change follows a crease or
@@ -194,8 +191,8 @@ absl::StatusOr<LatticeHeights> NewLattice(const StockSpec& spec, int s,
                                           bool heights) {
   if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
   if (s < 1 || s > 4096) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "subdivision must be in [1, 4096], got %d", s));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("subdivision must be in [1, 4096], got %d", s));
   }
   const int64_t nx = spec.nx, ny = spec.ny;
   const int64_t big_nx = nx * s, big_ny = ny * s;
@@ -252,9 +249,10 @@ void FillLatticeRows(const SurfaceGrid& grid, int32_t e0, int32_t e1,
         // element, undershoots. The patches fill in between nodes.
         double z;
         if (i % s == 0 && j % s == 0) {
-          z = std::min(grid.jet(static_cast<int32_t>(i / s),
-                                static_cast<int32_t>(j / s)).w,
-                       grid.spec.z_top);
+          z = std::min(
+              grid.jet(static_cast<int32_t>(i / s), static_cast<int32_t>(j / s))
+                  .w,
+              grid.spec.z_top);
         } else {
           if (!e.has_value()) e = grid.Corners(ei, ej);
           z = scheme.Reconstruct(*e, l.xs[i], l.ys[j]);
@@ -276,9 +274,10 @@ absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
   return MeshFromLattice(*std::move(lattice), grid.spec, options);
 }
 
-absl::StatusOr<TriangleMesh> MeshFromLattice(
-    LatticeHeights lattice, const StockSpec& spec,
-    const SurfaceMeshOptions& options, LatticeWindows* rows) {
+absl::StatusOr<TriangleMesh> MeshFromLattice(LatticeHeights lattice,
+                                             const StockSpec& spec,
+                                             const SurfaceMeshOptions& options,
+                                             LatticeWindows* rows) {
   const LatticeHeights& l = lattice;
   const double z_min = *std::min_element(l.row_min.begin(), l.row_min.end());
   const double z_bottom =
@@ -471,19 +470,9 @@ void AppendInt(std::string& out, int64_t v) {
   out.append(buf, r.ptr);
 }
 
-}  // namespace
-
-absl::Status WriteVrml(const TriangleMesh& mesh, const std::string& path,
-                       std::span<const Rgb> vertex_colors) {
-  if (!vertex_colors.empty() &&
-      vertex_colors.size() != mesh.vertices.size()) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "%d vertex colours for %d vertices", vertex_colors.size(),
-        mesh.vertices.size()));
-  }
-  FileWriter out(path);
-  if (!out.status().ok()) return out.status();
-  std::string s = absl::StrFormat(
+// The VRML file up to its first coordinate (WriteVrml, WriteLatticeVrml).
+std::string VrmlHeader(size_t vertices, size_t triangles) {
+  return absl::StrFormat(
       "#VRML V2.0 utf8\n"
       "# swarf machined surface (mm): %d vertices, %d triangles\n"
       "Shape {\n"
@@ -495,7 +484,21 @@ absl::Status WriteVrml(const TriangleMesh& mesh, const std::string& path,
       "    creaseAngle 0.5\n"
       "    coord Coordinate {\n"
       "      point [\n",
-      mesh.vertices.size(), mesh.triangles.size());
+      vertices, triangles);
+}
+
+}  // namespace
+
+absl::Status WriteVrml(const TriangleMesh& mesh, const std::string& path,
+                       std::span<const Rgb> vertex_colors) {
+  if (!vertex_colors.empty() && vertex_colors.size() != mesh.vertices.size()) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%d vertex colours for %d vertices",
+                        vertex_colors.size(), mesh.vertices.size()));
+  }
+  FileWriter out(path);
+  if (!out.status().ok()) return out.status();
+  std::string s = VrmlHeader(mesh.vertices.size(), mesh.triangles.size());
   constexpr size_t kChunk = size_t{1} << 20;
   for (const Vec3& v : mesh.vertices) {
     AppendFloat(s, v.x);
@@ -609,20 +612,9 @@ absl::Status WriteLatticeVrml(LatticeWindows& rows,
   const int64_t vertices = (big_nx + 1) * (big_ny + 1) + 2 * (big_nx + big_ny);
   FileWriter out(path);
   if (!out.status().ok()) return out.status();
-  std::string s = absl::StrFormat(
-      "#VRML V2.0 utf8\n"
-      "# swarf machined surface (mm): %d vertices, %d triangles\n"
-      "Shape {\n"
-      "  appearance Appearance { material Material { diffuseColor 0.8 0.8 "
-      "0.8 } }\n"
-      "  geometry IndexedFaceSet {\n"
-      "    solid TRUE\n"
-      "    ccw TRUE\n"
-      "    creaseAngle 0.5\n"
-      "    coord Coordinate {\n"
-      "      point [\n",
-      static_cast<size_t>(vertices),
-      static_cast<size_t>(FullMeshTriangles(big_nx, big_ny)));
+  std::string s =
+      VrmlHeader(static_cast<size_t>(vertices),
+                 static_cast<size_t>(FullMeshTriangles(big_nx, big_ny)));
   constexpr size_t kChunk = size_t{1} << 20;
   auto flush = [&] {
     if (s.size() >= kChunk) {
@@ -710,8 +702,9 @@ absl::Status WriteLatticeVrml(LatticeWindows& rows,
   };
   BoundaryHeights boundary;
   st = EmitTopCells(rows, big_nx, big_ny, &boundary,
-                    [&](MeshVertex a, MeshVertex b, MeshVertex c,
-                        const auto&) { put_face(a, b, c); });
+                    [&](MeshVertex a, MeshVertex b, MeshVertex c, const auto&) {
+                      put_face(a, b, c);
+                    });
   if (!st.ok()) return st;
   EmitWallsAndBottom(big_nx, big_ny, put_face);
   s += "    ]\n  }\n}\n";

@@ -839,15 +839,7 @@ class Session:
                         continue
                     break
             except (grpc.RpcError, StopIteration) as e:
-                err = (_from_rpc(e) if isinstance(e, grpc.RpcError) else
-                       SwarfError(grpc.StatusCode.UNAVAILABLE,
-                                  "the stream ended"))
-                self._drop_stream()
-                now = time.monotonic()
-                deadline = deadline or now + self.resume_timeout
-                if err.code not in _RESUMABLE or now > deadline:
-                    self._resync()
-                    raise err from None
+                deadline = self._stream_broke(e, deadline)
                 self._wait_for_server(deadline)
                 requests = resume
                 resumed += 1
@@ -900,18 +892,7 @@ class Session:
                     pending.append(batch)
                 resp = stream.recv()
             except (grpc.RpcError, StopIteration) as e:
-                err = (_from_rpc(e) if isinstance(e, grpc.RpcError) else
-                       SwarfError(grpc.StatusCode.UNAVAILABLE,
-                                  "the stream ended"))
-                self._drop_stream()
-                now = time.monotonic()
-                deadline = deadline or now + self.resume_timeout
-                if err.code not in _RESUMABLE or now > deadline:
-                    # A gap, another writer (ALREADY_EXISTS), a deleted
-                    # session...: the next send starts from the server's
-                    # state.
-                    self._resync()
-                    raise err from None
+                deadline = self._stream_broke(e, deadline)
                 last = self._wait_for_server(deadline)
                 # Applied before the drop: acknowledged by the server's state.
                 todo = [b for b in pending + todo if b.seq > last]
@@ -937,6 +918,23 @@ class Session:
             moves_applied=last_ack.moves_applied if last_ack else
             self.moves_applied, node_lowerings=lowered,
             version=last_ack.version if last_ack else 0, resumed=resumed)
+
+    def _stream_broke(self, e: Exception,
+                      deadline: Optional[float]) -> float:
+        """The stream failed with `e`: drops it, and raises the error unless
+        a resume outlives it before `deadline` (set now when None); returns
+        the deadline to resume within."""
+        err = (_from_rpc(e) if isinstance(e, grpc.RpcError) else
+               SwarfError(grpc.StatusCode.UNAVAILABLE, "the stream ended"))
+        self._drop_stream()
+        now = time.monotonic()
+        deadline = deadline or now + self.resume_timeout
+        if err.code not in _RESUMABLE or now > deadline:
+            # A gap, another writer (ALREADY_EXISTS), a deleted session...:
+            # the next send starts from the server's state.
+            self._resync()
+            raise err from None
+        return deadline
 
     def _resync(self) -> None:
         """The next batch follows the server's last applied one."""
