@@ -180,6 +180,17 @@ class HeldRowsOf : public LatticeWindows {
   const LatticeHeights& h_;
 };
 
+// The binary STL's 80-byte header and its triangle count (WriteStl,
+// WriteLatticeStl).
+void WriteStlHeader(uint32_t triangles, FileWriter& out) {
+  char header[80] = {};
+  std::snprintf(header, sizeof header,
+                "swarf machined surface, binary STL, mm, %zu triangles",
+                static_cast<size_t>(triangles));
+  out.Write(std::string_view(header, sizeof header));
+  out.Write(std::string_view(reinterpret_cast<const char*>(&triangles), 4));
+}
+
 }  // namespace
 
 double DefaultZBottom(const StockSpec& spec, double z_min) {
@@ -428,13 +439,7 @@ absl::Status WriteStl(const TriangleMesh& mesh, const std::string& path) {
   }
   FileWriter out(path);
   if (!out.status().ok()) return out.status();
-  char header[80] = {};
-  std::snprintf(header, sizeof header,
-                "swarf machined surface, binary STL, mm, %zu triangles",
-                mesh.triangles.size());
-  out.Write(std::string_view(header, sizeof header));
-  const uint32_t count = static_cast<uint32_t>(mesh.triangles.size());
-  out.Write(std::string_view(reinterpret_cast<const char*>(&count), 4));
+  WriteStlHeader(static_cast<uint32_t>(mesh.triangles.size()), out);
   for (const auto& t : mesh.triangles) {
     AppendStlRecord(mesh.vertices[t[0]], mesh.vertices[t[1]],
                     mesh.vertices[t[2]], out);
@@ -569,13 +574,7 @@ absl::Status WriteLatticeStl(LatticeWindows& rows,
   }
   FileWriter out(path);
   if (!out.status().ok()) return out.status();
-  char header[80] = {};
-  std::snprintf(header, sizeof header,
-                "swarf machined surface, binary STL, mm, %zu triangles",
-                static_cast<size_t>(count));
-  out.Write(std::string_view(header, sizeof header));
-  const uint32_t n = static_cast<uint32_t>(count);
-  out.Write(std::string_view(reinterpret_cast<const char*>(&n), 4));
+  WriteStlHeader(static_cast<uint32_t>(count), out);
   const std::vector<double>& xs = lattice.xs;
   const std::vector<double>& ys = lattice.ys;
   BoundaryHeights boundary;
