@@ -26,6 +26,8 @@ namespace {
 
 namespace pb = ::swarf::v1;
 using ::swarf::testing::MovesRequest;
+using ::swarf::testing::GetSessionOrFail;
+using ::swarf::testing::SerializedTiles;
 using ::swarf::testing::SetDeadline;
 using ::swarf::testing::SetStock;
 using ::swarf::testing::SimStream;
@@ -141,15 +143,6 @@ void Create(pb::Swarf::Stub* stub, const std::string& id,
   if (out != nullptr) *out = session;
 }
 
-pb::Session Get(pb::Swarf::Stub* stub, const std::string& id) {
-  pb::GetSessionRequest req;
-  req.set_session_id(id);
-  pb::Session s;
-  grpc::ClientContext ctx;
-  SetDeadline(&ctx);
-  EXPECT_TRUE(stub->GetSession(&ctx, req, &s).ok());
-  return s;
-}
 
 // Sends one request and returns its one answer.
 pb::SimulateResponse Send(pb::Swarf::Stub* stub, const std::string& id,
@@ -162,19 +155,6 @@ pb::SimulateResponse Send(pb::Swarf::Stub* stub, const std::string& id,
   return r.empty() ? pb::SimulateResponse() : r[0];
 }
 
-// Every tile, heights as doubles and owners, serialized in tile order.
-std::vector<std::string> Tiles(pb::Swarf::Stub* stub, const std::string& id) {
-  pb::GetTilesRequest req;
-  req.set_precision(pb::PRECISION_DOUBLE);
-  req.set_include_owners(true);
-  std::vector<pb::Tile> tiles;
-  grpc::ClientContext ctx;
-  EXPECT_TRUE(
-      ::swarf::testing::CollectTiles(stub, &ctx, id, req, &tiles).ok());
-  std::vector<std::string> out;
-  for (const pb::Tile& t : tiles) out.push_back(t.SerializeAsString());
-  return out;
-}
 
 class ArcsApiTest : public ::testing::Test {
  protected:
@@ -196,7 +176,7 @@ TEST_F(ArcsApiTest, ArcsGiveTheClisChordsBitForBit) {
     const std::string b = a + "-xyz";
     Create(stub_.get(), a, tol == 0.001 ? -1 : tol);  // default 0.001
     Create(stub_.get(), b, tol);
-    EXPECT_EQ(Get(stub_.get(), a).arc_tolerance(), tol);
+    EXPECT_EQ(GetSessionOrFail(stub_.get(), a).arc_tolerance(), tol);
     const pb::SimulateResponse ra = Send(stub_.get(), a, ArcBatch(1));
     ASSERT_TRUE(ra.has_ack()) << ra.error().message();
     const std::vector<double> chords = CliChords(tol);
@@ -210,8 +190,8 @@ TEST_F(ArcsApiTest, ArcsGiveTheClisChordsBitForBit) {
     EXPECT_EQ(ra.ack().moves_applied(), ack_b.ack().moves_applied());
     EXPECT_EQ(ra.ack().node_lowerings(), ack_b.ack().node_lowerings());
     EXPECT_GT(ra.ack().moves_applied(), 100);  // arcs, not 9 lines
-    EXPECT_EQ(Tiles(stub_.get(), a), Tiles(stub_.get(), b));
-    const pb::Session sa = Get(stub_.get(), a);
+    EXPECT_EQ(SerializedTiles(stub_.get(), a), SerializedTiles(stub_.get(), b));
+    const pb::Session sa = GetSessionOrFail(stub_.get(), a);
     EXPECT_EQ(sa.last_position().x(), 15);
     EXPECT_EQ(sa.last_position().y(), 15);
     EXPECT_EQ(sa.last_position().z(), -0.5);
@@ -288,7 +268,8 @@ TEST_F(ArcsApiTest, BadArcsAreRefusedNamingTheField) {
     const char* expect;
   };
   const Case cases[] = {
-      {"index 0", [](pb::MoveBatch* b) { b->mutable_arcs(0)->set_end_index(0); },
+      {"index 0",
+       [](pb::MoveBatch* b) { b->mutable_arcs(0)->set_end_index(0); },
        "moves.arcs[0].end_index 0 is out of range"},
       {"index past the end",
        [](pb::MoveBatch* b) { b->mutable_arcs(4)->set_end_index(11); },
@@ -297,7 +278,9 @@ TEST_F(ArcsApiTest, BadArcsAreRefusedNamingTheField) {
        [](pb::MoveBatch* b) { b->mutable_arcs(1)->set_end_index(2); },
        "moves.arcs[1].end_index 2 is not after moves.arcs[0]"},
       {"radius mismatch",
-       [](pb::MoveBatch* b) { b->mutable_arcs(1)->mutable_centre()->set_x(0.1); },
+       [](pb::MoveBatch* b) {
+         b->mutable_arcs(1)->mutable_centre()->set_x(0.1);
+       },
        "moves.arcs[1].centre: a counterclockwise arc: the radius to the end"},
       {"zero radius",
        [](pb::MoveBatch* b) {
@@ -338,14 +321,15 @@ TEST_F(ArcsApiTest, BadArcsAreRefusedNamingTheField) {
     ASSERT_TRUE(s.WaitForCount(++n));
     const pb::SimulateResponse resp = s.responses().back();
     ASSERT_TRUE(resp.has_error());
-    EXPECT_EQ(resp.error().code(), static_cast<int>(grpc::StatusCode::INVALID_ARGUMENT));
+    EXPECT_EQ(resp.error().code(),
+              static_cast<int>(grpc::StatusCode::INVALID_ARGUMENT));
     EXPECT_EQ(resp.error().kind(), pb::REQUEST_KIND_MOVES);
     EXPECT_EQ(resp.error().request_id(), 1u);
     EXPECT_NE(resp.error().message().find(c.expect), std::string::npos)
         << resp.error().message();
   }
-  EXPECT_EQ(Get(stub_.get(), "bad").last_seq(), 0u);
-  EXPECT_EQ(Get(stub_.get(), "bad").moves_applied(), 0);
+  EXPECT_EQ(GetSessionOrFail(stub_.get(), "bad").last_seq(), 0u);
+  EXPECT_EQ(GetSessionOrFail(stub_.get(), "bad").moves_applied(), 0);
   // The stream and the seq are still good.
   ASSERT_TRUE(s.Write(ArcBatch(1)));
   ASSERT_TRUE(s.WaitForCount(++n));
@@ -369,15 +353,15 @@ TEST(ArcsRestartTest, ReplayedArcSessionIsIdentical) {
     auto stub = pb::Swarf::NewStub(server->InProcessChannel());
     Create(stub.get(), "journaled", 0.01);
     ASSERT_TRUE(Send(stub.get(), "journaled", ArcBatch(1)).has_ack());
-    before = Tiles(stub.get(), "journaled");
+    before = SerializedTiles(stub.get(), "journaled");
     server->Shutdown(absl::Seconds(1));
   }
   auto server = *SwarfServer::Start(o);
   auto stub = pb::Swarf::NewStub(server->InProcessChannel());
-  const pb::Session s = Get(stub.get(), "journaled");
+  const pb::Session s = GetSessionOrFail(stub.get(), "journaled");
   EXPECT_EQ(s.last_seq(), 1u);
   EXPECT_EQ(s.arc_tolerance(), 0.01);
-  EXPECT_EQ(Tiles(stub.get(), "journaled"), before);
+  EXPECT_EQ(SerializedTiles(stub.get(), "journaled"), before);
   // The resent batch is recognised after the restart too.
   const pb::SimulateResponse again = Send(stub.get(), "journaled", ArcBatch(1));
   ASSERT_TRUE(again.has_ack()) << again.error().message();

@@ -34,6 +34,8 @@ namespace {
 
 namespace pb = ::swarf::v1;
 using ::swarf::testing::ReadFileText;
+using ::swarf::testing::GetSessionOrFail;
+using ::swarf::testing::SerializedTiles;
 using ::swarf::testing::SetDeadline;
 using ::swarf::testing::SimStream;
 
@@ -83,15 +85,6 @@ void Create(pb::Swarf::Stub* stub, const pb::CreateSessionRequest& r) {
   ASSERT_TRUE(st.ok()) << st.error_message();
 }
 
-pb::Session Get(pb::Swarf::Stub* stub, const std::string& id) {
-  pb::GetSessionRequest req;
-  req.set_session_id(id);
-  pb::Session s;
-  grpc::ClientContext ctx;
-  SetDeadline(&ctx);
-  EXPECT_TRUE(stub->GetSession(&ctx, req, &s).ok());
-  return s;
-}
 
 // Writes the program in chunks of `chunk` bytes (the options with the
 // last), or a resume when `text` is null.
@@ -136,19 +129,6 @@ SimStream::Responses RunProgram(pb::Swarf::Stub* stub, const std::string& id,
   return s.responses();
 }
 
-std::vector<std::string> Tiles(pb::Swarf::Stub* stub, const std::string& id) {
-  pb::GetTilesRequest req;
-  req.set_precision(pb::PRECISION_DOUBLE);
-  req.set_include_owners(true);
-  std::vector<pb::Tile> tiles;
-  grpc::ClientContext ctx;
-  grpc::Status st =
-      ::swarf::testing::CollectTiles(stub, &ctx, id, req, &tiles);
-  EXPECT_TRUE(st.ok()) << st.error_message();
-  std::vector<std::string> out;
-  for (const pb::Tile& t : tiles) out.push_back(t.SerializeAsString());
-  return out;
-}
 
 // The client-side reference: the file read and interpreted as `swarf run`
 // does it, its runs (gcode::SplitRuns, as run_command's Runs) streamed by
@@ -203,13 +183,15 @@ void ExpectSameAsClientSide(const Job& job, int64_t batch) {
     }
   }
   EXPECT_EQ(acks, done.last_seq());
-  const pb::Session client = Get(stub, "client"), server = Get(stub, "server");
+  const pb::Session client = GetSessionOrFail(stub, "client"),
+                    server = GetSessionOrFail(stub, "server");
   EXPECT_EQ(server.last_seq(), client.last_seq());
   EXPECT_EQ(server.moves_applied(), client.moves_applied());
   EXPECT_EQ(server.version(), client.version());
   EXPECT_GT(server.moves_applied(), 1000);
   // (Not EXPECT_EQ: a failure would print every tile.)
-  EXPECT_TRUE(Tiles(stub, "server") == Tiles(stub, "client"));
+  EXPECT_TRUE(SerializedTiles(stub, "server") ==
+              SerializedTiles(stub, "client"));
 }
 
 TEST(ProgramApiTest, ExamplesGiveTheClientSideTilesBitForBit) {
@@ -305,7 +287,7 @@ TEST(ProgramApiTest, ErrorsNameTheFileAndLine) {
   ASSERT_TRUE(s.WaitForCount(next()));
   expect_error(grpc::StatusCode::FAILED_PRECONDITION, "no journaled program",
                false);
-  EXPECT_EQ(Get(stub, "e").last_seq(), 0u);
+  EXPECT_EQ(GetSessionOrFail(stub, "e").last_seq(), 0u);
   // The stream goes on: a good program, with warnings naming the lines.
   const std::string warn =
       "G90\nT1 M6\nG0 X0 Y0 Z5\nG1 Z-1 F100\nG1 X3 S1000\nM6 T2\nG1 X4\n"
@@ -325,7 +307,7 @@ TEST(ProgramApiTest, ErrorsNameTheFileAndLine) {
   EXPECT_EQ(done.warnings(1).rfind("bad.nc: ignored ", 0), 0u)
       << done.warnings(1);
   EXPECT_TRUE(s.Finish().ok());
-  EXPECT_EQ(Get(stub, "e").moves_applied(), 3);
+  EXPECT_EQ(GetSessionOrFail(stub, "e").moves_applied(), 3);
 }
 
 // A Subscribe on the stream gets the tiles a program's batches change while
@@ -396,7 +378,7 @@ TEST(ProgramRestartTest, KilledMidProgramLosesNothingAcknowledged) {
     const auto rs = RunProgram(&conn->stub(), "ref", text, o);
     ASSERT_TRUE(rs.back().has_program_done());
     batches = rs.back().program_done().last_seq();
-    reference = Tiles(&conn->stub(), "ref");
+    reference = SerializedTiles(&conn->stub(), "ref");
   }
   ASSERT_GT(batches, 50u);
   std::string tmpl = (std::filesystem::temp_directory_path() /
@@ -429,7 +411,7 @@ TEST(ProgramRestartTest, KilledMidProgramLosesNothingAcknowledged) {
   auto stub = pb::Swarf::NewStub(
       grpc::CreateChannel("127.0.0.1:" + std::to_string(p.port()),
                           grpc::InsecureChannelCredentials()));
-  const pb::Session restored = Get(stub.get(), "k");
+  const pb::Session restored = GetSessionOrFail(stub.get(), "k");
   EXPECT_GE(restored.last_seq(), acked);
   EXPECT_LT(restored.last_seq(), batches);
   SimStream s(stub.get(), "k");
@@ -443,7 +425,7 @@ TEST(ProgramRestartTest, KilledMidProgramLosesNothingAcknowledged) {
   int64_t duplicates = 0;
   for (const auto& r : rs) duplicates += r.has_ack() && r.ack().duplicate();
   EXPECT_EQ(duplicates, static_cast<int64_t>(restored.last_seq()));
-  EXPECT_TRUE(Tiles(stub.get(), "k") == reference);
+  EXPECT_TRUE(SerializedTiles(stub.get(), "k") == reference);
   p.Stop();
   std::filesystem::remove_all(dir);
 }
@@ -463,8 +445,8 @@ TEST(ProgramCliTest, InterpretServerGivesTheSameOutputs) {
       "pocket.nc --tool T1=flat:d=6 --tool T2=flat:d=3 --tool T3=flat:d=1 "
       "--stock 0,0,100,80,0 --spacing 1 --picture-size 400 --batch 4000 "
       "--quiet --server 127.0.0.1:" + std::to_string(p.port());
-  ASSERT_EQ(std::system((run + " --out " + dir + "/client > /dev/null").c_str()),
-            0);
+  ASSERT_EQ(
+      std::system((run + " --out " + dir + "/client > /dev/null").c_str()), 0);
   ASSERT_EQ(std::system((run + " --interpret server --out " + dir +
                          "/server > /dev/null")
                             .c_str()),

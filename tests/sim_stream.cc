@@ -3,6 +3,7 @@
 #include <string>
 #include <utility>
 
+#include "gtest/gtest.h"
 #include "server/service.h"
 
 namespace swarf::testing {
@@ -35,6 +36,31 @@ grpc::Status CollectTiles(pb::Swarf::Stub* stub, grpc::ClientContext* ctx,
   pb::Tile t;
   while (reader->Read(&t)) out->push_back(t);
   return reader->Finish();
+}
+
+pb::Session GetSessionOrFail(pb::Swarf::Stub* stub, const std::string& id) {
+  pb::GetSessionRequest req;
+  req.set_session_id(id);
+  pb::Session s;
+  grpc::ClientContext ctx;
+  SetDeadline(&ctx);
+  const grpc::Status st = stub->GetSession(&ctx, req, &s);
+  EXPECT_TRUE(st.ok()) << st.error_message();
+  return s;
+}
+
+std::vector<std::string> SerializedTiles(pb::Swarf::Stub* stub,
+                                         const std::string& id) {
+  pb::GetTilesRequest req;
+  req.set_precision(pb::PRECISION_DOUBLE);
+  req.set_include_owners(true);
+  std::vector<pb::Tile> tiles;
+  grpc::ClientContext ctx;
+  const grpc::Status st = CollectTiles(stub, &ctx, id, req, &tiles);
+  EXPECT_TRUE(st.ok()) << st.error_message();
+  std::vector<std::string> out;
+  for (const pb::Tile& t : tiles) out.push_back(t.SerializeAsString());
+  return out;
 }
 
 SimStream::SimStream(pb::Swarf::Stub* stub, const std::string& session) {

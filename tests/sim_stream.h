@@ -42,6 +42,16 @@ grpc::Status CollectTiles(::swarf::v1::Swarf::Stub* stub,
                           ::swarf::v1::GetTilesRequest req,
                           std::vector<::swarf::v1::Tile>* out);
 
+// GetSession of `id`; a failure is a GoogleTest failure (and an empty
+// Session).
+::swarf::v1::Session GetSessionOrFail(::swarf::v1::Swarf::Stub* stub,
+                                      const std::string& id);
+
+// Every tile of session `id`, heights as doubles and owners, each
+// serialized, in the server's tile order: what bit-identity tests compare.
+std::vector<std::string> SerializedTiles(::swarf::v1::Swarf::Stub* stub,
+                                         const std::string& id);
+
 // A Simulate stream: requests are written from the caller's thread while a
 // reader thread collects every response, so that server backpressure never
 // deadlocks the test.
