@@ -1,5 +1,6 @@
 #include "client/connection.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstdlib>
 #include <fstream>
@@ -102,19 +103,36 @@ std::unique_ptr<grpc::ClientContext> Connection::Context(
   return ctx;
 }
 
-std::vector<Move> RunMoves(const std::vector<PathRun>& runs,
-                           const std::map<int32_t, Cutter>& cutter_by_tool) {
-  std::vector<Move> moves;
+RunMoveSource::RunMoveSource(std::vector<PathRun> runs,
+                             const std::map<int32_t, Cutter>& cutter_by_tool)
+    : runs_(std::move(runs)) {
+  // As Session::BatchMoves numbers them: a point makes a move from the last
+  // position, which a repositioning run forgets.
   std::optional<Vec3> pos;
-  for (const PathRun& run : runs) {
+  for (size_t r = 0; r < runs_.size(); ++r) {
+    const PathRun& run = runs_[r];
     if (run.reposition) pos.reset();
-    const Cutter& c = cutter_by_tool.at(run.tool_id);
-    for (const Vec3& p : run.points) {
-      if (pos.has_value()) moves.push_back({*pos, p, c});
-      pos = p;
+    if (run.size() == 0) continue;
+    const int32_t skip = pos.has_value() ? 0 : 1;
+    const int64_t moves = run.size() - skip;
+    if (moves > 0) {
+      parts_.push_back({size_, static_cast<int32_t>(r), skip,
+                        pos.value_or(Vec3{}), cutter_by_tool.at(run.tool_id)});
+      size_ += moves;
     }
+    pos = run.point(run.size() - 1);
   }
-  return moves;
+}
+
+Move RunMoveSource::Get(int64_t id) const {
+  const auto it = std::upper_bound(
+      parts_.begin(), parts_.end(), id,
+      [](int64_t v, const Part& p) { return v < p.first_move; });
+  const Part& part = *(it - 1);
+  const PathRun& run = runs_[part.run];
+  const int64_t k = id - part.first_move + part.skip;
+  return Move(k == 0 ? part.before : run.point(k - 1), run.point(k),
+              part.cutter);
 }
 
 absl::StatusOr<std::optional<pb::Session>> AfterBrokenStream(
@@ -148,38 +166,46 @@ absl::Status StreamPath(
     const std::vector<PathRun>& runs, int64_t batch_points,
     const std::function<void(const StreamProgress&)>& progress,
     const std::function<void(const pb::Ack&, int64_t first_move_id)>& on_ack) {
-  // Batches in order, and how many moves each one makes.
-  std::vector<pb::SimulateRequest> reqs;
-  std::vector<int64_t> moves_of;
-  std::vector<int64_t> first_of;  // each batch's first move id
+  // Batches in order: where each one's points are, and how many moves it
+  // makes. The requests are made from the runs as they are written (and
+  // again after a resume), not held: a program's points are not copied.
+  struct Batch {
+    size_t run;
+    int64_t k, end;  // its points, [k, end) of the run's
+    int64_t moves, first;  // moves it makes, the id of its first
+  };
+  std::vector<Batch> batches;
   StreamProgress p;
-  uint64_t seq = 0;
   bool started = false;
-  for (const PathRun& run : runs) {
-    for (size_t k = 0; k < run.points.size(); k += batch_points) {
-      const size_t end = std::min(run.points.size(), k + batch_points);
-      pb::MoveBatch* b = reqs.emplace_back().mutable_moves();
-      b->set_seq(++seq);
-      b->set_tool_id(run.tool_id);
-      b->set_rapid(run.rapid);
+  for (size_t r = 0; r < runs.size(); ++r) {
+    const PathRun& run = runs[r];
+    for (int64_t k = 0; k < run.size(); k += batch_points) {
+      const int64_t end = std::min(run.size(), k + batch_points);
       const bool places = run.reposition && k == 0;
-      b->set_reposition(places);
-      b->set_report_cuts(on_ack != nullptr);
-      b->mutable_xyz()->Reserve(3 * (end - k));
-      for (size_t i = k; i < end; ++i) {
-        b->add_xyz(run.points[i].x);
-        b->add_xyz(run.points[i].y);
-        b->add_xyz(run.points[i].z);
-      }
       // The very first point, and a repositioning one, only place the tool.
-      const int64_t moves =
-          static_cast<int64_t>(end - k) - (started && !places ? 0 : 1);
+      const int64_t moves = (end - k) - (started && !places ? 0 : 1);
       started = true;
-      moves_of.push_back(moves);
-      first_of.push_back(p.moves_total);
+      batches.push_back({r, k, end, moves, p.moves_total});
       p.moves_total += moves;
     }
   }
+  const auto request = [&](uint64_t seq, pb::SimulateRequest* req) {
+    const Batch& batch = batches[seq - 1];
+    const PathRun& run = runs[batch.run];
+    pb::MoveBatch* b = req->mutable_moves();
+    b->set_seq(seq);
+    b->set_tool_id(run.tool_id);
+    b->set_rapid(run.rapid);
+    b->set_reposition(run.reposition && batch.k == 0);
+    b->set_report_cuts(on_ack != nullptr);
+    b->mutable_xyz()->Reserve(3 * (batch.end - batch.k));
+    for (int64_t i = batch.k; i < batch.end; ++i) {
+      const Vec3& q = run.point(i);
+      b->add_xyz(q.x);
+      b->add_xyz(q.y);
+      b->add_xyz(q.z);
+    }
+  };
   // Stream from batch `from` (1-based); acks before it are counted already.
   // A stream that breaks (the server restarted, the network dropped) is
   // resumed: the server says which batch it has last, and the rest is sent
@@ -192,8 +218,11 @@ absl::Status StreamPath(
     auto ctx = conn.Context(session_id, 24 * 3600);
     auto stream = conn.stub().Simulate(ctx.get());
     std::thread writer([&] {
-      for (uint64_t k = from; k <= reqs.size(); ++k) {
-        if (!stream->Write(reqs[k - 1])) break;  // Finish says why
+      pb::SimulateRequest req;
+      for (uint64_t k = from; k <= batches.size(); ++k) {
+        req.Clear();
+        request(k, &req);
+        if (!stream->Write(req)) break;  // Finish says why
       }
       stream->WritesDone();
     });
@@ -204,10 +233,10 @@ absl::Status StreamPath(
         const pb::Ack& a = resp.ack();
         if (a.seq() > acked) {
           for (uint64_t k = acked + 1; k <= a.seq(); ++k) {
-            p.moves_done += moves_of[k - 1];
+            p.moves_done += batches[k - 1].moves;
           }
           if (on_ack && a.seq() == acked + 1 && !a.duplicate()) {
-            on_ack(a, first_of[a.seq() - 1]);
+            on_ack(a, batches[a.seq() - 1].first);
           }
           acked = a.seq();
           p.node_lowerings += a.node_lowerings();
@@ -224,7 +253,7 @@ absl::Status StreamPath(
     writer.join();
     grpc::Status st = stream->Finish();
     if (!batch_error.ok()) return batch_error;
-    if (st.ok() && acked == reqs.size()) return absl::OkStatus();
+    if (st.ok() && acked == batches.size()) return absl::OkStatus();
     // Ask where the server is; it may still be restarting.
     absl::StatusOr<std::optional<pb::Session>> back =
         AfterBrokenStream(conn, session_id, st, deadline, attempt);
@@ -235,7 +264,7 @@ absl::Status StreamPath(
     if (session.last_seq() > acked) {
       // Applied but the ack was lost with the connection.
       for (uint64_t k = acked + 1; k <= session.last_seq(); ++k) {
-        p.moves_done += moves_of[k - 1];
+        p.moves_done += batches[k - 1].moves;
       }
       acked = session.last_seq();
     }
@@ -243,9 +272,9 @@ absl::Status StreamPath(
                  "\nswarf: the stream to the server broke (%s); resuming at "
                  "batch %llu of %zu\n",
                  st.ok() ? "ended early" : st.error_message().c_str(),
-                 static_cast<unsigned long long>(from), reqs.size());
+                 static_cast<unsigned long long>(from), batches.size());
     deadline = std::chrono::steady_clock::now() + kResumeWindow;
-    if (from > reqs.size()) return absl::OkStatus();
+    if (from > batches.size()) return absl::OkStatus();
   }
 }
 

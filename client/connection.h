@@ -16,6 +16,7 @@
 #include "absl/status/statusor.h"
 #include "core/geometry.h"
 #include "core/workpiece.h"
+#include "gcode/toolpath.h"
 #include "grpcpp/grpcpp.h"
 #include "server/server.h"
 #include "swarf/v1/swarf.grpc.pb.h"
@@ -86,13 +87,46 @@ struct PathRun {
   // The first point only places the tool (the session's first run, or after
   // a tool change); otherwise it continues from the previous run's last.
   bool reposition = false;
+  // The positions: `points`, or where `path` is set, the toolpath's points
+  // [begin, end) (not owned: the toolpath must outlive the run), so that a
+  // program's runs hold no copy of its points.
   std::vector<Vec3> points;
+  const gcode::ToolpathPoint* path = nullptr;
+  int64_t begin = 0, end = 0;
+
+  int64_t size() const {
+    return path != nullptr ? end - begin
+                           : static_cast<int64_t>(points.size());
+  }
+  const Vec3& point(int64_t k) const {
+    return path != nullptr ? path[begin + k].position : points[k];
+  }
 };
 
-// The moves a session numbers from these runs, in id order (as
-// Session::BatchMoves does), with the cutter of each run's tool.
-std::vector<Move> RunMoves(const std::vector<PathRun>& runs,
-                           const std::map<int32_t, Cutter>& cutter_by_tool);
+// The moves a session numbers from `runs`, in id order (as
+// Session::BatchMoves does), with the cutter of each run's tool, read from
+// the runs' points when asked: no copy of each move. Keeps a copy of the
+// runs (views of a toolpath, which must outlive it). Thread-safe.
+class RunMoveSource final : public MoveSource {
+ public:
+  // NotFound-free: every run's tool_id must be in cutter_by_tool.
+  RunMoveSource(std::vector<PathRun> runs,
+                const std::map<int32_t, Cutter>& cutter_by_tool);
+  int64_t size() const override { return size_; }
+  Move Get(int64_t id) const override;
+
+ private:
+  struct Part {
+    int64_t first_move;  // id of the run's first move
+    int32_t run;
+    int32_t skip;  // 1: the run's first point only places the tool
+    Vec3 before;   // with skip 0: where the tool was before the run
+    Cutter cutter;
+  };
+  std::vector<PathRun> runs_;
+  std::vector<Part> parts_;  // runs with at least one move, in id order
+  int64_t size_ = 0;
+};
 
 struct StreamProgress {
   int64_t moves_done = 0;   // acknowledged

@@ -16,7 +16,6 @@ absl::Status InMemoryBands::ForEach(const BandVisitor& visit) {
   if (!band.ok()) return band.status();
   band->moves = grid_.moves;
   band->surfaces = grid_.surfaces;
-  band->reaches = grid_.reaches;
   const size_t nx = static_cast<size_t>(grid_.nodes_x());
   for (int32_t e0 = 0; e0 < ny; e0 += band_rows_) {
     const int32_t e1 = std::min(ny, e0 + band_rows_);
@@ -57,7 +56,8 @@ absl::Status TileRowBands::ReadRows(int32_t j0, int32_t j1,
 }
 
 TileRowBands::TileRowBands(const StockSpec& spec, SchemeKind scheme,
-                           Fill fill, std::vector<Move> moves,
+                           Fill fill,
+                           std::shared_ptr<const MoveSource> moves,
                            int64_t max_band_nodes)
     : spec_(spec),
       scheme_(scheme),
@@ -69,7 +69,7 @@ absl::Status TileRowBands::ForEach(const BandVisitor& visit) {
   auto made = SurfaceGrid::Band(spec_, scheme_, 0, 1);
   if (!made.ok()) return made.status();
   SurfaceGrid& band = *made;
-  band.SetMoves(std::move(moves_));
+  band.SetMoves(moves_);
   const int32_t ny = spec_.ny, nodes_x = spec_.nx + 1;
   const int32_t tiles_y = (ny + 1 + kTileSize - 1) / kTileSize;
   const int64_t tile_row_nodes = int64_t{kTileSize} * nodes_x;
@@ -102,8 +102,6 @@ absl::Status TileRowBands::ForEach(const BandVisitor& visit) {
     carry_owners.assign(band.owners.begin() + at,
                         band.owners.begin() + at + nodes_x);
   }
-  // The moves go back for a second pass.
-  moves_ = std::move(band.moves);
   if (status.ok() && e0 != ny) {
     return absl::InternalError(absl::StrFormat(
         "the bands ended at element row %d of %d", e0, ny));

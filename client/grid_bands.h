@@ -16,6 +16,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -73,7 +74,8 @@ class TileRowBands : public GridBands {
   using Fill = std::function<absl::Status(SurfaceGrid* band, int32_t t0,
                                           int32_t t1, bool heights_only)>;
   TileRowBands(const StockSpec& spec, SchemeKind scheme, Fill fill,
-               std::vector<Move> moves, int64_t max_band_nodes = 1 << 20);
+               std::shared_ptr<const MoveSource> moves,
+               int64_t max_band_nodes = 1 << 20);
   const StockSpec& spec() const override { return spec_; }
   SchemeKind scheme() const override { return scheme_; }
   absl::Status ForEach(const BandVisitor& visit) override;
@@ -85,7 +87,7 @@ class TileRowBands : public GridBands {
   StockSpec spec_;
   SchemeKind scheme_;
   Fill fill_;
-  std::vector<Move> moves_;
+  std::shared_ptr<const MoveSource> moves_;
   int64_t max_band_nodes_;
 };
 

@@ -230,40 +230,30 @@ int64_t AvailableMemoryBytes() {
          sysconf(_SC_PAGESIZE);
 }
 
-// What the moves of a run take at least (bytes): the server keeps each Move
-// and lists it in every bin (16 x 16 elements) of its move index that the
-// move's footprint below the top reaches, 4 bytes each; the client keeps
-// the parsed point and its feed, its run's point and, for the outputs, its
-// own Move. Sets *index_bytes to the index's part.
+// What the moves of a run take at least (bytes): the server keeps each in
+// its MoveList and lists it in the bins of its move index that the move's
+// footprint below the top reaches (the index is built here, as the server
+// builds it, and measured); the client keeps the parsed point and its feed
+// and, for the schemes that read the sweeps, an index of its own. Sets
+// *index_bytes to the indexes' part.
 int64_t MovesMemoryBytes(const Toolpath& path,
                          const std::map<int, Cutter>& tools,
-                         const StockSpec& stock, int64_t* index_bytes) {
-  constexpr int32_t kBin = MoveIndex::kBinElements;
-  const double bin_x = (stock.x1 - stock.x0) / stock.nx * kBin;
-  const double bin_y = (stock.y1 - stock.y0) / stock.ny * kBin;
-  const int64_t bins_x = (int64_t{stock.nx} + kBin - 1) / kBin;
-  const int64_t bins_y = (int64_t{stock.ny} + kBin - 1) / kBin;
-  // Bins [lo, hi] along one axis that [a, b] covers, as MoveIndex::Add.
-  auto count = [](double a, double b, double origin, double bin,
-                  int64_t bins) -> int64_t {
-    const double lo = std::max(0.0, std::floor((a - origin) / bin));
-    const double hi = std::min(bins - 1.0, std::floor((b - origin) / bin));
-    return hi >= lo ? static_cast<int64_t>(hi - lo) + 1 : 0;
-  };
+                         const StockSpec& stock, SchemeKind scheme,
+                         int64_t* index_bytes) {
+  MoveIndex index{GridGeometry(stock)};
   const auto& points = path.points();
-  int64_t entries = 0;
+  uint32_t id = 0;
   for (size_t k = 1; k < points.size(); ++k) {
     if (points[k].starts_run) continue;
-    const std::optional<Rect> b =
-        FootprintBounds(points[k - 1].position, points[k].position,
-                        tools.at(points[k].tool), stock.z_top);
-    if (!b.has_value()) continue;
-    entries += count(b->x0, b->x1, stock.x0, bin_x, bins_x) *
-               count(b->y0, b->y1, stock.y0, bin_y, bins_y);
+    IndexMove(id++, Move(points[k - 1].position, points[k].position,
+                         tools.at(points[k].tool)),
+              stock.z_top, &index);
   }
-  *index_bytes = entries * static_cast<int64_t>(sizeof(uint32_t));
-  constexpr int64_t kPerMove = 2 * sizeof(Move) + sizeof(ToolpathPoint) +
-                               sizeof(float) + sizeof(Vec3);
+  const Scheme& s = GetScheme(scheme);
+  *index_bytes = index.MemoryBytes() *
+                 (s.uses_reach() || s.uses_candidates() ? 2 : 1);
+  constexpr int64_t kPerMove =
+      MoveList::kBytesPerMove + sizeof(ToolpathPoint) + sizeof(float);
   return path.move_count() * kPerMove + *index_bytes;
 }
 
@@ -292,7 +282,7 @@ absl::StatusOr<int64_t> CheckRunMemory(const Args& args,
   }
   const int64_t grid = server::Session::EstimateMemoryBytes(stock, scheme);
   int64_t index = 0;
-  const int64_t moves = MovesMemoryBytes(path, tools, stock, &index);
+  const int64_t moves = MovesMemoryBytes(path, tools, stock, scheme, &index);
   const int64_t needed = grid + moves;
   if (needed > allowed) {
     const int64_t nodes = (int64_t{stock.nx} + 1) * (stock.ny + 1);
@@ -320,10 +310,9 @@ std::vector<PathRun> Runs(const Toolpath& path,
     run.tool_id = r.tool_id;
     run.rapid = r.rapid;
     run.reposition = r.reposition;
-    run.points.reserve(r.end - r.begin);
-    for (int64_t k = r.begin; k < r.end; ++k) {
-      run.points.push_back(path.points()[k].position);
-    }
+    run.path = path.points().data();
+    run.begin = r.begin;
+    run.end = r.end;
     runs.push_back(std::move(run));
   }
   return runs;
@@ -587,7 +576,7 @@ int RunCommand(const std::vector<std::string>& argv) {
     DesignInput& d = **design;
     if (absl::Status s = LoadDesign(*stock, &d); !s.ok()) return fail(s, 2);
     d.sources = files;
-    // Move ids as RunMoves numbers them: every point but a run's first.
+    // Move ids as RunMoveSource numbers them: every point but a run's first.
     const auto& points = path->points();
     d.move_lines.reserve(path->move_count());
     int32_t f = 0;
@@ -771,8 +760,7 @@ int RunCommand(const std::vector<std::string>& argv) {
     cutter_by_tool[tool_ids.at(t)] = c;
     report.tools.emplace_back(t, CutterSummary(c));
   }
-  const std::vector<Move> moves = RunMoves(runs, cutter_by_tool);
-  oopt.moves = &moves;
+  oopt.moves = std::make_shared<const RunMoveSource>(runs, cutter_by_tool);
   if (design->has_value()) oopt.design = &**design;
   absl::Status written = CollectAndWrite(**conn, id, oopt, &report);
   report.output_seconds = Since(t_out);

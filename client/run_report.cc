@@ -346,7 +346,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
             return true;
           }).status();
         },
-        options.moves != nullptr ? *options.moves : std::vector<Move>());
+        options.moves);
   };
   const auto t0 = Clock::now();
   auto stats = Retrying<pb::ErrorStats>(

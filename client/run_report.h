@@ -108,8 +108,8 @@ struct OutputOptions {
   MarkDisplayFilter marks_display = kDefaultMarkDisplay;
   // Pixels along the pictures' longer side at most (--picture-size).
   int picture_size = kDefaultPictureSize;
-  // The session's moves by id (SurfaceGrid::moves); not owned, may be null.
-  const std::vector<Move>* moves = nullptr;
+  // The session's moves by id (SurfaceGrid::moves); may be null.
+  std::shared_ptr<const MoveSource> moves;
   // The design to compare with (LoadDesign done); not owned, may be null.
   const DesignInput* design = nullptr;
 };

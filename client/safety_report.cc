@@ -60,19 +60,85 @@ SafetyCollector::SafetyCollector(const gcode::Toolpath& path,
       options_(options) {
   // Move ids as the session numbers them: every point but a run's first.
   const auto& points = path.points();
-  move_point_.reserve(path.move_count());
-  for (size_t k = 1; k < points.size(); ++k) {
-    if (!points[k].starts_run) move_point_.push_back(static_cast<int64_t>(k));
+  for (size_t k = 0; k < points.size(); ++k) {
+    if (k == 0 || points[k].starts_run) {
+      run_starts_.push_back(static_cast<int64_t>(k) -
+                            static_cast<int64_t>(run_starts_.size()));
+    } else {
+      ++move_count_;
+    }
   }
+  // The lines met again, and the program's time, in one pass over the moves.
+  line_seen_.resize(std::max<size_t>(1, files_.size()));
+  LineKey last{-1, -1};
+  for (int64_t m = 0; m < move_count_; ++m) {
+    const SafetyItem where = At(m);
+    const LineKey key{where.file, where.line};
+    load_total_ += Seconds(PointOf(m));
+    if (key == last || key.first < 0 || key.second < 0) continue;
+    last = key;
+    if (static_cast<size_t>(key.first) >= line_seen_.size()) {
+      line_seen_.resize(key.first + 1);
+    }
+    std::vector<uint8_t>& seen = line_seen_[key.first];
+    if (static_cast<size_t>(key.second) >= seen.size()) {
+      seen.resize(key.second + 1, 0);
+    }
+    seen[key.second] = std::min<uint8_t>(2, seen[key.second] + 1);
+  }
+  load_vol_.assign(kLoadPlotW, 0);
+}
+
+int64_t SafetyCollector::PointOf(int64_t move_id) const {
+  return move_id + (std::upper_bound(run_starts_.begin(), run_starts_.end(),
+                                     move_id) -
+                    run_starts_.begin());
+}
+
+double SafetyCollector::Seconds(int64_t p) const {
+  const auto& points = path_.points();
+  const Vec3& a = points[p - 1].position;
+  const Vec3& b = points[p].position;
+  const double len = std::sqrt((b.x - a.x) * (b.x - a.x) +
+                               (b.y - a.y) * (b.y - a.y) +
+                               (b.z - a.z) * (b.z - a.z));
+  const double feed = path_.feed(p);
+  if (points[p].rapid || feed == 0) return len / options_.rapid_rate * 60;
+  return feed > 0 ? len / feed * 60 : 0;
+}
+
+bool SafetyCollector::Repeated(const LineKey& key) const {
+  if (key.first < 0 || static_cast<size_t>(key.first) >= line_seen_.size()) {
+    return true;
+  }
+  const std::vector<uint8_t>& seen = line_seen_[key.first];
+  return key.second < 0 || static_cast<size_t>(key.second) >= seen.size() ||
+         seen[key.second] > 1;
+}
+
+void SafetyCollector::TopLines::Offer(const LineKey& key, const Amount& a) {
+  constexpr size_t kTop = 10;
+  const auto better = [&](const std::pair<LineKey, Amount>& x,
+                          const std::pair<LineKey, Amount>& y) {
+    if (x.second.*by != y.second.*by) return x.second.*by > y.second.*by;
+    return x.first < y.first;
+  };
+  const std::pair<LineKey, Amount> e{key, a};
+  if (best.size() == kTop && !better(e, best.back())) return;
+  best.insert(std::upper_bound(best.begin(), best.end(), e, better), e);
+  if (best.size() > kTop) best.pop_back();
+}
+
+void SafetyCollector::Flush(const Group& g, TopLines* lines, TopLines* air) {
+  if (g.has_line) lines->Offer(g.key, g.line);
+  if (g.has_air) air->Offer(g.key, g.air);
 }
 
 SafetyItem SafetyCollector::At(int64_t move_id) const {
   SafetyItem it;
   it.move_id = move_id;
-  if (move_id < 0 || move_id >= static_cast<int64_t>(move_point_.size())) {
-    return it;
-  }
-  const int64_t p = move_point_[move_id];
+  if (move_id < 0 || move_id >= move_count_) return it;
+  const int64_t p = PointOf(move_id);
   it.line = path_.points()[p].line;
   const auto f = std::upper_bound(file_starts_.begin(), file_starts_.end(), p);
   it.file = std::max<int32_t>(0, static_cast<int32_t>(f - file_starts_.begin()) - 1);
@@ -114,8 +180,8 @@ void SafetyCollector::OnAck(const pb::Ack& ack, int64_t first_move_id) {
   const auto& points = path_.points();
   for (int k = 0; k < ack.removed_mm3_size(); ++k) {
     const int64_t id = first_move_id + k;
-    if (id < 0 || id >= static_cast<int64_t>(move_point_.size())) break;
-    const int64_t p = move_point_[id];
+    if (id < 0 || id >= move_count_) break;
+    const int64_t p = PointOf(id);
     const gcode::ToolpathPoint& to = points[p];
     const Vec3& a = points[p - 1].position;
     const Vec3& b = to.position;
@@ -124,7 +190,15 @@ void SafetyCollector::OnAck(const pb::Ack& ack, int64_t first_move_id) {
                                  (b.z - a.z) * (b.z - a.z));
     const double v = ack.removed_mm3(k);
     const SafetyItem where = At(id);
-    const std::pair<int32_t, int32_t> key{where.file, where.line};
+    const LineKey key{where.file, where.line};
+    // A line's moves sum in order either way: in its group, or in the map
+    // for a line the program comes back to.
+    const bool repeated = Repeated(key);
+    if (!repeated && key != group_.key) {
+      Flush(group_, &top_lines_, &top_air_);
+      group_ = Group();
+      group_.key = key;
+    }
     removed_ += v;
     // The time at the programmed feed; rapids and feeds of F0 at the rapid
     // rate; none where the feed is not known (x,y,z files).
@@ -153,7 +227,8 @@ void SafetyCollector::OnAck(const pb::Ack& ack, int64_t first_move_id) {
         }
         air_mm_ += len;
         air_s_ += seconds;
-        Amount& a = air_by_line_[key];
+        Amount& a = repeated ? air_by_line_[key] : group_.air;
+        group_.has_air |= !repeated;
         a.mm += len;
         a.seconds += seconds;
       }
@@ -162,11 +237,28 @@ void SafetyCollector::OnAck(const pb::Ack& ack, int64_t first_move_id) {
     t.volume += v;
     t.seconds += seconds;
     if (v > 0 || seconds > 0) {
-      Amount& l = by_line_[key];
+      Amount& l = repeated ? by_line_[key] : group_.line;
+      group_.has_line |= !repeated;
       l.volume += v;
       l.seconds += seconds;
     }
-    load_.push_back({seconds, v, to.tool});
+    // load.png's columns, as the moves come.
+    if (load_moves_++ == 0) load_tool_ = to.tool;
+    if (to.tool != load_tool_) {
+      load_changes_.push_back({load_t_, to.tool});
+      load_tool_ = to.tool;
+    }
+    if (load_total_ > 0 && seconds > 0 && v > 0) {
+      const double dt = load_total_ / kLoadPlotW;
+      const double a = load_t_ / dt, b = (load_t_ + seconds) / dt;
+      for (int c = std::max(0, static_cast<int>(a));
+           c < kLoadPlotW && c < static_cast<int>(std::ceil(b)); ++c) {
+        const double overlap =
+            std::min<double>(b, c + 1) - std::max<double>(a, c);
+        if (overlap > 0) load_vol_[c] += v * overlap / (b - a);
+      }
+    }
+    load_t_ += seconds;
     if (options_.floor && std::min(a.z, b.z) < *options_.floor) {
       SafetyItem it = where;
       const Vec3& low = a.z < b.z ? a : b;
@@ -273,18 +365,17 @@ std::string SafetyCollector::SafetyJson() const {
 
 std::string SafetyCollector::ProcessJson() const {
   using Json = nlohmann::ordered_json;
-  // The ten largest by `by`, each with its volume, time and length.
-  auto top = [&](const std::map<std::pair<int32_t, int32_t>, Amount>& m,
-                 double Amount::*by, bool air) {
-    std::vector<std::pair<double, std::pair<int32_t, int32_t>>> v;
-    for (const auto& [key, x] : m) v.push_back({x.*by, key});
-    const size_t n = std::min<size_t>(10, v.size());
-    std::partial_sort(v.begin(), v.begin() + n, v.end(),
-                      [](const auto& a, const auto& b) { return a.first > b.first; });
+  // The ten largest by their amount (ties by file and line), each with its
+  // volume or length and its time: the lines complete so far, the one still
+  // open and those the program comes back to.
+  TopLines lines = top_lines_, air_lines = top_air_;
+  Flush(group_, &lines, &air_lines);
+  for (const auto& [key, x] : by_line_) lines.Offer(key, x);
+  for (const auto& [key, x] : air_by_line_) air_lines.Offer(key, x);
+  auto top = [&](const TopLines& t, bool air) {
     Json a = Json::array();
-    for (size_t k = 0; k < n; ++k) {
-      const auto [file, line] = v[k].second;
-      const Amount& x = m.at(v[k].second);
+    for (const auto& [key, x] : t.best) {
+      const auto [file, line] = key;
       Json e = {{"file", file < static_cast<int32_t>(files_.size())
                              ? files_[file]
                              : std::string()},
@@ -310,8 +401,8 @@ std::string SafetyCollector::ProcessJson() const {
       {"rapid_s", rapid_s_},
       {"removed_mm3", removed_},
       {"by_tool", by_tool},
-      {"lines", top(by_line_, &Amount::volume, false)},
-      {"air_lines", top(air_by_line_, &Amount::mm, true)},
+      {"lines", top(lines, false)},
+      {"air_lines", top(air_lines, true)},
       {"rapid_mm", rapid_mm_},
       {"rapid_rate_mm_min", options_.rapid_rate},
       {"f0_moves", f0_moves_},
@@ -325,36 +416,19 @@ std::string SafetyCollector::ProcessJson() const {
 }
 
 absl::Status SafetyCollector::WriteLoadPng(const std::string& path) const {
-  double total = 0;
-  for (const LoadStep& s : load_) total += s.seconds;
-  if (!(total > 0)) {
+  const double total = load_total_;
+  if (!(total > 0) || load_moves_ == 0) {
     return absl::FailedPreconditionError(
         "load.png: the program's time is not known (no feeds)");
   }
-  constexpr int kW = 1000, kH = 360, kLeft = 70, kRight = 20, kTop = 30,
+  constexpr int kW = kLoadW, kH = 360, kLeft = kLoadLeft, kTop = 30,
                 kBottom = 40;
-  const int plot_w = kW - kLeft - kRight, plot_h = kH - kTop - kBottom;
-  // Volume per column of equal time, spread over the moves' durations.
-  std::vector<double> vol(plot_w, 0);
+  const int plot_w = kLoadPlotW, plot_h = kH - kTop - kBottom;
+  // Volume per column of equal time, spread over the moves' durations
+  // (OnAck).
+  const std::vector<double>& vol = load_vol_;
   const double dt = total / plot_w;
-  double t = 0;
-  std::vector<std::pair<double, int>> changes;  // time, new tool
-  int tool = load_.empty() ? 0 : load_.front().tool;
-  for (const LoadStep& s : load_) {
-    if (s.tool != tool) {
-      changes.push_back({t, s.tool});
-      tool = s.tool;
-    }
-    if (s.seconds > 0 && s.volume > 0) {
-      const double a = t / dt, b = (t + s.seconds) / dt;
-      for (int c = std::max(0, static_cast<int>(a));
-           c < plot_w && c < static_cast<int>(std::ceil(b)); ++c) {
-        const double overlap = std::min<double>(b, c + 1) - std::max<double>(a, c);
-        if (overlap > 0) vol[c] += s.volume * overlap / (b - a);
-      }
-    }
-    t += s.seconds;
-  }
+  const std::vector<std::pair<double, int>>& changes = load_changes_;
   double peak = 0;
   for (double v : vol) peak = std::max(peak, v / dt * 60);  // mm^3/min
   Image img(kW, kH, 3, Rgb{255, 255, 255});

@@ -90,11 +90,41 @@ class SafetyCollector {
   const std::vector<std::string>& files() const { return files_; }
 
  private:
+  using LineKey = std::pair<int32_t, int32_t>;  // (file, line)
+  struct Amount {
+    double volume = 0, seconds = 0, mm = 0;
+  };
+  // The ten largest lines by an amount, kept as the moves come (largest
+  // first; ties by file and line).
+  struct TopLines {
+    double Amount::*by;
+    std::vector<std::pair<LineKey, Amount>> best;
+    void Offer(const LineKey& key, const Amount& a);
+  };
+  // A line's amounts while its moves come one after another: a line the
+  // program never comes back to is complete when the next line starts.
+  struct Group {
+    LineKey key{-1, -1};
+    Amount line, air;
+    bool has_line = false, has_air = false;
+  };
+
   void Add(int kind, const SafetyItem& item);
   SafetyItem At(int64_t move_id) const;
+  // The point that move `move_id` (< move_count_) ends at.
+  int64_t PointOf(int64_t move_id) const;
+  // The move's duration at its programmed feed (rapids and F0 at the rapid
+  // rate; 0 where the feed is not known).
+  double Seconds(int64_t point) const;
+  bool Repeated(const LineKey& key) const;
+  // Hands a complete group's amounts to the top lists.
+  static void Flush(const Group& g, TopLines* lines, TopLines* air);
 
   const gcode::Toolpath& path_;
-  std::vector<int64_t> move_point_;  // point index of each move id
+  int64_t move_count_ = 0;
+  // R[i] - i of the i-th point that starts a run (R[i]): move id m ends at
+  // point m + (how many of these are <= m). No table of every move's point.
+  std::vector<int64_t> run_starts_;
   std::vector<int64_t> file_starts_;
   std::vector<std::string> files_;
   std::map<int, ToolAssembly> assemblies_;
@@ -105,18 +135,25 @@ class SafetyCollector {
   double removed_ = 0, rapid_mm_ = 0, feed_mm_ = 0, air_mm_ = 0;
   double rapid_s_ = 0, cutting_s_ = 0, air_s_ = 0, unknown_feed_mm_ = 0;
   int64_t air_moves_ = 0, cutting_moves_ = 0, f0_moves_ = 0;
-  struct Amount {
-    double volume = 0, seconds = 0, mm = 0;
-  };
   std::map<int, Amount> by_tool_;
-  std::map<std::pair<int32_t, int32_t>, Amount> by_line_;  // (file, line)
-  std::map<std::pair<int32_t, int32_t>, Amount> air_by_line_;
-  // Per move in id order: its time, volume and tool (load.png).
-  struct LoadStep {
-    double seconds, volume;
-    int tool;
-  };
-  std::vector<LoadStep> load_;
+  // Lines the program comes back to (loops, subroutines, repeats), per
+  // file, a byte a line number: 0 not met, 1 met once, 2 met again. Their
+  // amounts are summed in maps; every other line's in groups.
+  std::vector<std::vector<uint8_t>> line_seen_;
+  std::map<LineKey, Amount> by_line_;  // repeated lines only
+  std::map<LineKey, Amount> air_by_line_;
+  Group group_;
+  TopLines top_lines_{&Amount::volume}, top_air_{&Amount::mm};
+  // load.png, drawn as the moves come: the removed volume per column of
+  // equal program time (the program's time is known from the path).
+  static constexpr int kLoadW = 1000, kLoadLeft = 70, kLoadRight = 20;
+  static constexpr int kLoadPlotW = kLoadW - kLoadLeft - kLoadRight;
+  double load_total_ = 0;  // seconds, every move's
+  double load_t_ = 0;      // seconds before the next move
+  int64_t load_moves_ = 0;
+  int load_tool_ = 0;
+  std::vector<double> load_vol_;
+  std::vector<std::pair<double, int>> load_changes_;  // time, new tool
   bool follow_ = false;
   NewFindings new_;
   size_t air_taken_ = 0;  // air segments handed out so far

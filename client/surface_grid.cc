@@ -57,7 +57,7 @@ void SurfaceGrid::ResetBand(int32_t first, int32_t rows) {
 absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
   absl::StatusOr<SurfaceGrid> g = Uncut(wp.spec(), wp.scheme().kind());
   if (!g.ok()) return g.status();
-  g->SetMoves(std::vector<Move>(wp.moves().begin(), wp.moves().end()));
+  g->SetMoves(wp.moves().ToVector());
   std::vector<double> w(kTileNodes);
   std::vector<float> dbuf(5 * kTileNodes);
   std::vector<int32_t> owner(kTileNodes);
@@ -88,20 +88,21 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
   return g;
 }
 
-void SurfaceGrid::SetMoves(std::vector<Move> list) {
+void SurfaceGrid::SetMoves(std::shared_ptr<const MoveSource> list) {
   moves = std::move(list);
-  surfaces = std::make_shared<const MoveSweeps>(moves, spec);
-  // Every element's corners need their owners' reach: once per move, in
-  // parallel, instead of once per corner (or per thread's cache miss).
-  auto r = std::make_shared<std::vector<CornerReach>>(moves.size());
-  constexpr int64_t kChunk = 1024;
-  const int64_t n = static_cast<int64_t>(moves.size());
-  ThreadPool::Default().ParallelFor((n + kChunk - 1) / kChunk, [&](int64_t c) {
-    for (int64_t id = c * kChunk; id < std::min(n, (c + 1) * kChunk); ++id) {
-      (*r)[id] = ReachOf(moves, id, spec.z_top);
-    }
-  });
-  reaches = std::move(r);
+  surfaces = nullptr;
+  if (moves == nullptr) return;
+  // Reaches are computed per corner from each thread's cache of owners (no
+  // table of every move's). Only the schemes that look at the sweeps need
+  // them, indexed by bin.
+  const Scheme& s = GetScheme(scheme);
+  if (s.uses_reach() || s.uses_candidates()) {
+    surfaces = std::make_shared<const MoveSweeps>(moves, spec);
+  }
+}
+
+void SurfaceGrid::SetMoves(std::span<const Move> list) {
+  SetMoves(std::make_shared<const MoveList>(list));
 }
 
 absl::Status SurfaceGrid::SetNodes(int32_t i0, int32_t j0, int32_t nx,
@@ -172,12 +173,8 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej,
     e.c[k] = jet(is[k], js[k]);
     const int32_t o = owner(is[k], js[k]);
     e.owner[k] = o;
-    if (o >= 0 && o < static_cast<int64_t>(moves.size()) &&
-        GetScheme(scheme).uses_reach()) {
-      e.reach[k] = reaches != nullptr && reaches->size() == moves.size()
-                       ? (*reaches)[o]
-                   : surfaces != nullptr ? surfaces->Reach(o, spec.z_top)
-                                         : ReachOf(moves, o, spec.z_top);
+    if (o >= 0 && o < move_count() && GetScheme(scheme).uses_reach()) {
+      e.reach[k] = surfaces->Reach(o, spec.z_top);
     }
   }
   if (GetScheme(scheme).uses_candidates() && surfaces != nullptr) {

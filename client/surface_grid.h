@@ -17,6 +17,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -34,20 +35,21 @@ struct SurfaceGrid {
   std::vector<SurfaceJet> jets;  // (nx + 1) * held rows, row-major
   std::vector<int32_t> owners;   // same size; -1: stock top
   int32_t row0 = 0;              // first node row held
-  // The session's moves by id, for the guarded scheme's reach of each
-  // owner (ReachOf). Owners beyond it have an unbounded reach.
-  std::vector<Move> moves;
-  // The same moves' exact surfaces, for the exact scheme (null: that
-  // scheme falls back to the patches). Immutable, shared by copies.
+  // The session's moves by id (null: none), for the guarded scheme's
+  // reach of each owner (ReachOf). Owners beyond them have an unbounded
+  // reach. Immutable, shared by copies: the client's program (cli::
+  // RunMoveSource) rather than a copy of each move.
+  std::shared_ptr<const MoveSource> moves;
+  // The same moves' sweeps, indexed by bin, for the schemes that use them
+  // (guarded: each owner's reach, kept per thread; exact): null for the
+  // others or without moves. Immutable, shared by copies.
   std::shared_ptr<const MoveSweeps> surfaces;
-  // ReachOf each of those moves, for the guarded scheme (null, or not one
-  // per move: computed for every corner, the same values). Immutable,
-  // shared by copies.
-  std::shared_ptr<const std::vector<CornerReach>> reaches;
 
-  // Sets moves, surfaces and reaches (reaches in parallel on
-  // ThreadPool::Default()).
-  void SetMoves(std::vector<Move> moves);
+  // Sets moves and surfaces.
+  void SetMoves(std::shared_ptr<const MoveSource> moves);
+  // The same over a MoveList of `moves`.
+  void SetMoves(std::span<const Move> moves);
+  int64_t move_count() const { return moves != nullptr ? moves->size() : 0; }
 
   // Untouched stock: every node at z_top, flat, owner -1. InvalidArgument
   // for a spec ValidateStock rejects, or more than kMaxGridNodes nodes.

@@ -1318,7 +1318,7 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
       for (size_t k = 0; k < p.vertices.size(); ++k) {
         for (int32_t id : p.vertex_owners[k]) {
           if (id < 0 || id >= wp.move_count()) continue;
-          const Move& m = wp.move(id);
+          const Move m = wp.move(id);
           p.vertices[k].z =
               std::max(p.vertices[k].z, std::min(m.from.z, m.to.z));
         }

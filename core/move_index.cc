@@ -23,7 +23,35 @@ MoveIndex::MoveIndex(const GridGeometry& grid)
     : grid_(grid),
       bins_x_((grid.nx() + kBinElements - 1) / kBinElements),
       bins_y_((grid.ny() + kBinElements - 1) / kBinElements),
-      bins_(static_cast<size_t>(bins_x_) * bins_y_) {}
+      bins_(static_cast<size_t>(bins_x_) * bins_y_),
+      bytes_(static_cast<int64_t>(bins_.size() *
+                                  sizeof(std::vector<uint32_t>))) {}
+
+void MoveIndex::AddToBin(std::vector<uint32_t>* bin, uint32_t id) {
+  std::vector<uint32_t>& v = *bin;
+  const size_t n = v.size();
+  const size_t capacity = v.capacity();
+  // The last entry is a range's end when the one before starts a range.
+  const bool last_ends_range = n >= 2 && (v[n - 2] & kRangeBit);
+  if (last_ends_range && v[n - 1] + 1 == id) {
+    v[n - 1] = id;  // the range grows
+    return;
+  }
+  // Two singletons just before: the three become a range.
+  if (!last_ends_range && n >= 2 && v[n - 1] + 1 == id &&
+      v[n - 2] + 2 == id && !(n >= 3 && (v[n - 3] & kRangeBit))) {
+    v[n - 2] |= kRangeBit;
+    v[n - 1] = id;
+    return;
+  }
+  v.push_back(id);
+  bytes_ += static_cast<int64_t>((v.capacity() - capacity) * sizeof(uint32_t));
+}
+
+void MoveIndex::BinIds(int32_t b, std::vector<uint32_t>* ids) const {
+  ids->clear();
+  for (const uint32_t id : Bin(b)) ids->push_back(id);
+}
 
 void MoveIndex::Add(uint32_t id, const Rect& b) {
   const auto [bx0, bx1] = BinRange(b.x0, b.x1, grid_.spec().x0,
@@ -32,7 +60,7 @@ void MoveIndex::Add(uint32_t id, const Rect& b) {
                                    grid_.dy() * kBinElements, bins_y_);
   for (int32_t by = by0; by <= by1; ++by) {
     for (int32_t bx = bx0; bx <= bx1; ++bx) {
-      bins_[static_cast<size_t>(by) * bins_x_ + bx].push_back(id);
+      AddToBin(&bins_[static_cast<size_t>(by) * bins_x_ + bx], id);
     }
   }
 }

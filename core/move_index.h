@@ -1,10 +1,15 @@
 // Spatial index of moves: uniform bins of elements, each listing the moves
 // whose footprint (where they cut below the stock top) overlaps the bin.
+//
+// A bin's ids are kept ascending, runs of three or more consecutive ids as
+// a range (two entries): a pass of a raster crosses a bin in tens of
+// consecutive moves, so a move costs a few bytes instead of 4 a bin.
 // Not thread-safe for Add; concurrent reads are safe.
 #ifndef SWARF_CORE_MOVE_INDEX_H_
 #define SWARF_CORE_MOVE_INDEX_H_
 
 #include <cstdint>
+#include <iterator>
 #include <vector>
 
 #include "core/cutter/ball_sweep.h"
@@ -20,7 +25,8 @@ class MoveIndex {
 
   explicit MoveIndex(const GridGeometry& grid);
 
-  // Records move `id` under every bin its footprint's bounding box
+  // Records move `id` (< 2^31, and above every id already added to the
+  // bins it reaches) under every bin its footprint's bounding box
   // (BallSweep::FootprintBounds) touches.
   void Add(uint32_t id, const Rect& bounds);
 
@@ -30,13 +36,80 @@ class MoveIndex {
   int32_t BinOfElement(int32_t ei, int32_t ej) const {
     return (ej / kBinElements) * bins_x_ + ei / kBinElements;
   }
-  // Move ids in the bin, ascending.
-  const std::vector<uint32_t>& Bin(int32_t b) const { return bins_[b]; }
+
+  // The move ids of a bin, ascending, for range-for. Valid until the next
+  // Add.
+  class BinView {
+   public:
+    class Iterator {
+     public:
+      using iterator_category = std::forward_iterator_tag;
+      using value_type = uint32_t;
+      using difference_type = std::ptrdiff_t;
+      using pointer = const uint32_t*;
+      using reference = uint32_t;
+      Iterator() = default;
+      Iterator(const uint32_t* p, const uint32_t* end) : p_(p), end_(end) {
+        Load();
+      }
+      uint32_t operator*() const { return id_; }
+      Iterator& operator++() {
+        if (id_ < last_) {
+          ++id_;
+        } else {
+          p_ += (*p_ & kRangeBit) ? 2 : 1;
+          Load();
+        }
+        return *this;
+      }
+      Iterator operator++(int) {
+        Iterator t = *this;
+        ++*this;
+        return t;
+      }
+      bool operator==(const Iterator& o) const {
+        return p_ == o.p_ && (p_ == end_ || id_ == o.id_);
+      }
+
+     private:
+      void Load() {
+        if (p_ == end_) return;
+        id_ = *p_ & ~kRangeBit;
+        last_ = (*p_ & kRangeBit) ? p_[1] : id_;
+      }
+      const uint32_t* p_ = nullptr;
+      const uint32_t* end_ = nullptr;
+      uint32_t id_ = 0, last_ = 0;
+    };
+    BinView(const uint32_t* begin, const uint32_t* end)
+        : begin_(begin), end_(end) {}
+    Iterator begin() const { return Iterator(begin_, end_); }
+    Iterator end() const { return Iterator(end_, end_); }
+    bool empty() const { return begin_ == end_; }
+
+   private:
+    const uint32_t* begin_;
+    const uint32_t* end_;
+  };
+  BinView Bin(int32_t b) const {
+    const std::vector<uint32_t>& v = bins_[b];
+    return BinView(v.data(), v.data() + v.size());
+  }
+  // The same ids into *ids (replacing its contents), for random access.
+  void BinIds(int32_t b, std::vector<uint32_t>* ids) const;
+
+  // Bytes the bins hold (their capacity, and the bins themselves).
+  int64_t MemoryBytes() const { return bytes_; }
 
  private:
+  // An entry with this bit starts a range; the next entry is its last id.
+  static constexpr uint32_t kRangeBit = uint32_t{1} << 31;
+  void AddToBin(std::vector<uint32_t>* bin, uint32_t id);
+
   const GridGeometry grid_;
   int32_t bins_x_, bins_y_;
   std::vector<std::vector<uint32_t>> bins_;
+  int64_t bytes_ = 0;
 };
 
 }  // namespace swarf

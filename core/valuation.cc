@@ -217,12 +217,13 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       FootprintGap gap;  // FootprintSurelyMisses, the move's parts taken
       int32_t k;         // into ids and sweeps
     };
-    const std::vector<uint32_t>& ids = index.Bin(static_cast<int32_t>(b));
+    std::vector<uint32_t> ids;
+    index.BinIds(static_cast<int32_t>(b), &ids);
     std::vector<Candidate> bin;
     std::vector<Sweep> sweeps;
     for (uint32_t id : ids) {
       const Sweep& s = sweeps.emplace_back(wp.MoveSweep(id));
-      const Move& m = wp.move(static_cast<int32_t>(id));
+      const Move m = wp.move(static_cast<int32_t>(id));
       bin.push_back({s.Footprint(z_top).Bounds(), s.lowest(),
                      FootprintGap::Of(m.from, m.to, m.cutter),
                      static_cast<int32_t>(bin.size())});
@@ -360,7 +361,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
               id == owners[3]) {
             continue;
           }
-          const Move& m = wp.move(id);
+          const Move m = wp.move(id);
           // Footprint(cap).Bounds(), without the capsule's direction.
           const std::optional<Rect> f =
               FootprintBounds(m.from, m.to, m.cutter, cap);

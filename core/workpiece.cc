@@ -338,7 +338,7 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
       }
     }
   }
-  moves_.insert(moves_.end(), moves.begin(), moves.end());
+  moves_.Append(moves);
 
   // Group by tile, keeping move order within a tile.
   std::stable_sort(pairs.begin(), pairs.end(),
@@ -521,13 +521,9 @@ void Workpiece::ComputeJets(int32_t t, const Tile& tile, int32_t stride,
   for (int32_t f0 = 1; f0 <= owners; f0 += JetScratch::kBlock) {
     const int32_t m = std::min(JetScratch::kBlock, owners + 1 - f0);
     for (int32_t q = 0; q < m; ++q) {
-      // Owners are scattered over the moves: fetch ahead (a move spans two
-      // cache lines).
-      const char* ahead = reinterpret_cast<const char*>(
-          &moves_[s.owner_of[std::min(f0 + q + 16, owners)]]);
-      __builtin_prefetch(ahead);
-      __builtin_prefetch(ahead + sizeof(Move) - 1);
-      const Move& move = moves_[s.owner_of[f0 + q]];
+      // Owners are scattered over the moves: fetch ahead.
+      moves_.Prefetch(s.owner_of[std::min(f0 + q + 16, owners)]);
+      const Move move = moves_.Get(s.owner_of[f0 + q]);
       s.from[q] = move.from;
       s.to[q] = move.to;
       s.radius[q] = move.cutter.radius;
@@ -796,10 +792,9 @@ void Workpiece::ReconstructGradient(double x, double y, double* gx,
                     gy);
 }
 
-CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
+CornerReach ReachOf(const Move& m, double z_top) {
   CornerReach r;
   r.bounded = true;
-  const Move& m = moves[id];
   r.z_low = std::min(m.from.z, m.to.z);
   // Where the sweep is below the top (beyond, the top is lower anyway).
   const Capsule c = FootprintCapsule(m.from, m.to, m.cutter, z_top);
@@ -815,23 +810,27 @@ CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top) {
   return r;
 }
 
-MoveSweeps::MoveSweeps(const std::vector<Move>* moves, const MoveIndex* index)
+MoveSweeps::MoveSweeps(const MoveSource* moves, const MoveIndex* index)
     : moves_(moves), index_(index), serial_(NextSerial()) {}
 
-MoveSweeps::MoveSweeps(std::vector<Move> moves, const StockSpec& spec)
+MoveSweeps::MoveSweeps(std::shared_ptr<const MoveSource> moves,
+                       const StockSpec& spec)
     : owned_(std::move(moves)),
-      moves_(&owned_),
+      moves_(owned_.get()),
       owned_index_(std::make_unique<MoveIndex>(GridGeometry(spec))),
       index_(owned_index_.get()),
       serial_(NextSerial()) {
-  for (size_t id = 0; id < owned_.size(); ++id) {
-    IndexMove(static_cast<uint32_t>(id), owned_[id], spec.z_top,
+  for (int64_t id = 0; id < owned_->size(); ++id) {
+    IndexMove(static_cast<uint32_t>(id), owned_->Get(id), spec.z_top,
               owned_index_.get());
   }
 }
 
+MoveSweeps::MoveSweeps(std::span<const Move> moves, const StockSpec& spec)
+    : MoveSweeps(std::make_shared<const MoveList>(moves), spec) {}
+
 const Sweep* MoveSweeps::SweepOf(int32_t id) const {
-  if (id < 0 || id >= static_cast<int64_t>(moves_->size())) return nullptr;
+  if (id < 0 || id >= moves_->size()) return nullptr;
   // An element's candidates come back for every sample of it and for its
   // neighbours; they are mostly consecutive ids, which a direct-mapped
   // cache keeps apart.
@@ -844,7 +843,7 @@ const Sweep* MoveSweeps::SweepOf(int32_t id) const {
   thread_local Entry cache[kEntries];
   Entry& e = cache[id & (kEntries - 1)];
   if (e.id == id && e.serial == serial_) return &*e.sweep;
-  const Move& m = (*moves_)[id];
+  const Move m = moves_->Get(id);
   e.sweep.emplace(m.from, m.to, m.cutter);
   e.id = id;
   e.serial = serial_;
@@ -862,7 +861,7 @@ CornerReach MoveSweeps::Reach(int32_t id, double z_top) const {
   thread_local Entry cache[kEntries];
   Entry& e = cache[id & (kEntries - 1)];
   if (e.id != id || e.serial != serial_ || e.z_top != z_top) {
-    e.reach = ReachOf(*moves_, id, z_top);
+    e.reach = ReachOf(moves_->Get(id), z_top);
     e.id = id;
     e.serial = serial_;
     e.z_top = z_top;
@@ -875,7 +874,7 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
   double w = cap;
   int32_t lowest = -1;
   for (const uint32_t k : index_->Bin(index_->BinOfElement(ei, ej))) {
-    const Move& m = (*moves_)[k];
+    const Move m = moves_->Get(k);
     if (!(std::min(m.from.z, m.to.z) < w)) continue;
     // Beyond its footprint below w a move is not below w.
     if (FootprintSurelyMisses(m.from, m.to, m.cutter, {x, y, x, y}, w)) {
@@ -903,7 +902,7 @@ void MoveSweeps::FillCandidates(ElementCorners* e) const {
   double cap = e->z_top;
   for (int k = 0; k < 4; ++k) {
     const int32_t o = corner_owner[k];
-    if (o < 0 || o >= static_cast<int64_t>(moves_->size())) continue;
+    if (o < 0 || o >= moves_->size()) continue;
     bool seen = false;
     for (int q = 0; q < k && !seen; ++q) seen = corner_owner[q] == o;
     if (seen) continue;
@@ -917,7 +916,7 @@ void MoveSweeps::FillCandidates(ElementCorners* e) const {
   const size_t owners = e->candidates.size();
   const Rect box{e->x0, e->y0, e->x1, e->y1};
   for (const uint32_t id : index_->Bin(index_->BinOfElement(ei, ej))) {
-    const Move& m = (*moves_)[id];
+    const Move m = moves_->Get(id);
     if (!(std::min(m.from.z, m.to.z) < cap)) continue;
     bool owner = false;
     for (size_t q = 0; q < owners && !owner; ++q) {
@@ -986,7 +985,7 @@ double Workpiece::Reconstruct(double x, double y) const {
 }
 
 Sweep Workpiece::MoveSweep(int64_t id) const {
-  const Move& m = moves_[id];
+  const Move m = moves_.Get(id);
   return Sweep(m.from, m.to, m.cutter);
 }
 
@@ -1015,9 +1014,12 @@ double Workpiece::ExactHeight(double x, double y) const {
     }
     return w;
   }
-  return ExactHeightOver(
-      index_.Bin(index_.BinOfElement(grid_.ElementX(x), grid_.ElementY(y))),
-      x, y);
+  double w = spec().z_top;
+  for (const uint32_t id : index_.Bin(
+           index_.BinOfElement(grid_.ElementX(x), grid_.ElementY(y)))) {
+    w = std::min(w, MoveHeight(id, x, y));
+  }
+  return w;
 }
 
 int64_t Workpiece::allocated_tiles() const {
@@ -1112,7 +1114,7 @@ absl::Status Workpiece::Record(std::span<const Move> moves) {
     IndexMove(static_cast<uint32_t>(move_count() + m), moves[m], spec().z_top,
               &index_);
   }
-  moves_.insert(moves_.end(), moves.begin(), moves.end());
+  moves_.Append(moves);
   return absl::OkStatus();
 }
 
@@ -1149,7 +1151,7 @@ absl::Status Workpiece::LoadState(
     return absl::DataLossError(
         "state: saved for another stock or scheme than this workpiece's");
   }
-  if (h.moves != moves_.size()) {
+  if (h.moves != static_cast<uint64_t>(moves_.size())) {
     return absl::DataLossError(
         absl::StrCat("state: saved after ", h.moves,
                      " moves, the workpiece has ", moves_.size()));

@@ -33,6 +33,7 @@
 #include "core/cutter/sweep.h"
 #include "core/geometry.h"
 #include "core/move_index.h"
+#include "core/move_list.h"
 #include "core/scheme.h"
 #include "core/stock.h"
 #include "core/thread_pool.h"
@@ -44,23 +45,10 @@ inline constexpr int32_t kTileBits = 6;
 inline constexpr int32_t kTileSize = 1 << kTileBits;  // nodes per tile side
 inline constexpr int32_t kTileNodes = kTileSize * kTileSize;
 
-// A straight move of a cutter between two tool-tip positions (mm).
-struct Move {
-  Move() = default;
-  Move(const Vec3& tip_from, const Vec3& tip_to, const Cutter& c)
-      : from(tip_from), to(tip_to), cutter(c) {}
-  // A ball-end move: the paper's cutter.
-  Move(const Vec3& tip_from, const Vec3& tip_to, double ball_radius)
-      : from(tip_from), to(tip_to), cutter(Cutter::Ball(ball_radius)) {}
-
-  Vec3 from, to;
-  Cutter cutter;
-};
-
-// Where the swept surface of moves[id] exists and how low it goes (for the
+// Where the swept surface of `move` exists and how low it goes (for the
 // guarded scheme): the XY capsule where it goes below z_top (the sweep's
 // Footprint, at the footprint's exact radius) and its lowest tip.
-CornerReach ReachOf(std::span<const Move> moves, int64_t id, double z_top);
+CornerReach ReachOf(const Move& move, double z_top);
 
 // The exact swept surfaces of a list of moves, by index, and where each
 // can reach: the exact scheme's MoveSurfaces. Thread-safe (each thread keeps
@@ -70,10 +58,12 @@ class MoveSweeps final : public MoveSurfaces {
  public:
   // `index` lists the moves by the bins their footprints reach (as
   // Workpiece indexes them).
-  MoveSweeps(const std::vector<Move>* moves, const MoveIndex* index);
-  // Owning its own copy of the moves, indexed over the grid of `spec`
-  // (validated) as a workpiece of that stock indexes them.
-  MoveSweeps(std::vector<Move> moves, const StockSpec& spec);
+  MoveSweeps(const MoveSource* moves, const MoveIndex* index);
+  // Sharing `moves` (immutable while shared), indexed over the grid of
+  // `spec` (validated) as a workpiece of that stock indexes them.
+  MoveSweeps(std::shared_ptr<const MoveSource> moves, const StockSpec& spec);
+  // The same over a MoveList of `moves`.
+  MoveSweeps(std::span<const Move> moves, const StockSpec& spec);
   MoveSweeps(const MoveSweeps&) = delete;
   MoveSweeps& operator=(const MoveSweeps&) = delete;
   // +inf (and a zero jet) for an id outside the list.
@@ -81,7 +71,7 @@ class MoveSweeps final : public MoveSurfaces {
   SurfaceJet Jet(int32_t id, double x, double y) const override;
   double LowestAt(int32_t ei, int32_t ej, double x, double y, double cap,
                   int32_t* id = nullptr) const override;
-  // ReachOf(moves, id, z_top), kept per thread for the owners met last (a
+  // ReachOf(move id, z_top), kept per thread for the owners met last (a
   // node is a corner of four elements, an owner of many nodes).
   CornerReach Reach(int32_t id, double z_top) const;
 
@@ -99,8 +89,8 @@ class MoveSweeps final : public MoveSurfaces {
 
  private:
   const Sweep* SweepOf(int32_t id) const;
-  std::vector<Move> owned_;
-  const std::vector<Move>* moves_;
+  std::shared_ptr<const MoveSource> owned_;
+  const MoveSource* moves_;
   std::unique_ptr<MoveIndex> owned_index_;
   const MoveIndex* index_;
   uint64_t serial_;  // tells this list's cached sweeps from others'
@@ -207,9 +197,15 @@ class Workpiece {
   const StockSpec& spec() const { return grid_.spec(); }
   const Scheme& scheme() const { return *scheme_; }
 
-  int64_t move_count() const { return static_cast<int64_t>(moves_.size()); }
-  const Move& move(int64_t id) const { return moves_[id]; }
-  std::span<const Move> moves() const { return moves_; }
+  int64_t move_count() const { return moves_.size(); }
+  // Move `id` (0 <= id < move_count()), by value: MoveList keeps moves
+  // compactly.
+  Move move(int64_t id) const { return moves_.Get(id); }
+  const MoveList& moves() const { return moves_; }
+  // Bytes the moves and their index hold.
+  int64_t move_bytes() const {
+    return moves_.MemoryBytes() + index_.MemoryBytes();
+  }
   uint64_t version() const { return version_; }
 
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
@@ -342,7 +338,7 @@ class Workpiece {
   std::vector<uint64_t> tile_version_;
   std::unique_ptr<TileArena> arena_;
   uint64_t version_ = 0;
-  std::vector<Move> moves_;
+  MoveList moves_;
   MoveIndex index_;
   uint64_t serial_;  // changes when LoadState replaces the nodes
   const bool derivatives_;  // scheme_->stores_derivatives()

@@ -137,7 +137,7 @@ absl::StatusOr<pb::Deviation> ComputeDeviation(const Session& session,
       [](const Workpiece& wp) { return cli::SurfaceGrid::FromWorkpiece(wp); });
   if (!grid.ok()) return grid.status();
   // The moves themselves are the "lines": the client maps them.
-  std::vector<cli::SourceLine> moves(grid->moves.size());
+  std::vector<cli::SourceLine> moves(grid->move_count());
   for (size_t k = 0; k < moves.size(); ++k) {
     moves[k] = {0, static_cast<int32_t>(k)};
   }

@@ -750,8 +750,7 @@ SessionState Session::State() const {
     s.moves_applied = wp_->move_count();
     s.version = wp_->version();
     s.allocated_tiles = wp_->allocated_tiles();
-    s.memory_bytes = wp_->allocated_node_bytes() +
-                     wp_->move_count() * static_cast<int64_t>(sizeof(Move));
+    s.memory_bytes = wp_->allocated_node_bytes() + wp_->move_bytes();
     s.last_position = last_position_;
   }
   absl::MutexLock l2(&snapshot_mu_);

@@ -177,7 +177,7 @@ class Session {
 
   // Worst-case memory of the session's grid (every tile cut: the tile
   // arena's 2 MiB chunks, 12 bytes a node in them, and each tile's
-  // bookkeeping), for admission. The moves (sizeof(Move) each) come on top.
+  // bookkeeping), for admission. The moves (Workpiece::move_bytes) come on top.
   static int64_t EstimateMemoryBytes(const StockSpec& stock,
                                      SchemeKind scheme);
 

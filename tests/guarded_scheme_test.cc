@@ -47,7 +47,7 @@ Dig Sampled(const Workpiece& wp, int n) {
       const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
       for (int k = 0; k < 4; ++k) {
         const int32_t o = wp.Node(is[k], js[k]).owner;
-        if (o >= 0) floor = std::min(floor, ReachOf(wp.moves(), o, e.z_top).z_low);
+        if (o >= 0) floor = std::min(floor, ReachOf(wp.move(o), e.z_top).z_low);
       }
       for (int b = 0; b <= n; ++b) {
         for (int a = 0; a <= n; ++a) {
@@ -236,18 +236,18 @@ TEST(CornerReachTest, FootprintOfAMove) {
                                   {{9, 9, 9}, {9, 9, -5}, 1},
                                   {{0, 0, 101}, {5, 0, 101}, 1}};
   EXPECT_TRUE(CornerReach().Contains(1e9, -1e9));  // unbounded
-  const CornerReach r = ReachOf(path, 1, 100);
+  const CornerReach r = ReachOf(path[1], 100);
   EXPECT_EQ(r.z_low, -1);  // its own tips only
   EXPECT_TRUE(r.Contains(1, 1));       // on the side, exactly at r
   EXPECT_FALSE(r.Contains(1, 1.001));
   EXPECT_FALSE(r.Contains(-2.5, 0.5));  // the move before: not its surface
   EXPECT_TRUE(r.Contains(3, 0));        // end cap
   EXPECT_FALSE(r.Contains(3.01, 0));
-  const CornerReach plunge = ReachOf(path, 3, 100);
+  const CornerReach plunge = ReachOf(path[3], 100);
   EXPECT_EQ(plunge.z_low, -5);
   EXPECT_TRUE(plunge.Contains(9.6, 9.79));
   EXPECT_FALSE(plunge.Contains(9.6, 9.81));
-  const CornerReach above = ReachOf(path, 4, 100);  // never below the top
+  const CornerReach above = ReachOf(path[4], 100);  // never below the top
   EXPECT_TRUE(above.empty);
   EXPECT_FALSE(above.Contains(2, 0));
 }

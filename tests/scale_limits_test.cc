@@ -124,14 +124,17 @@ TEST(RunHelpTest, HelpListsEveryScheme) {
 
 // A grid that cannot fit is refused at once (exit 2), naming what it needs
 // and what is allowed. 200 x 200 elements: 4 x 4 tiles, in one chunk of 2
-// MiB, and 80 bytes each: 2098432 bytes. 200 moves of 236 bytes (the
-// server's and the client's Move, 88 each, the parsed point, 32, its feed,
-// 4, and its run's point, 24): 47200 bytes, and their index entries: the
-// 2 mm ball at z = -0.5 cuts within 0.866 mm of its path, in bins of 0.8
-// mm: 3 bins across y; along x, for the moves to x = 1..9, 3, 4, 4, 5, 5,
-// 4, 4, 5, 5 bins, and 13 for the return from 9 to 0: 52 a cycle of 10
-// moves; 20 cycles of 52 x 3 entries of 4 bytes: 12480 bytes. In all
-// 2158112 bytes, 3 MiB.
+// MiB, and 80 bytes each: 2098432 bytes. 200 moves of 64 bytes (the
+// server's MoveList, 28, the parsed point, 32, its feed, 4): 12800 bytes,
+// and the server's index (taylor: the client keeps none): the 2 mm ball at
+// z = -0.5 cuts within 0.866 mm of its path, in bins of 0.8 mm: 3 bins
+// across y; along x, for the moves to x = 1..9, 3, 4, 4, 5, 5, 4, 4, 5, 5
+// bins, and 13 for the return from 9 to 0. A bin keeps its ids as single
+// ids and ranges of 3 or more (2 entries): 1869 entries in 39 bins, whose
+// vectors double from 1 to 2496 entries' capacity, 9984 bytes, and the 13
+// x 13 bins' vectors, 24 bytes each, 4056 bytes: 14040 bytes (counted with
+// a model of the encoding written apart, in Python). In all 2125272
+// bytes, 3 MiB.
 TEST(RunMemoryTest, AJobThatCannotFitIsRefusedNamingTheBytes) {
   const fs::path dir = TempDir("run");
   {
@@ -148,9 +151,9 @@ TEST(RunMemoryTest, AJobThatCannotFitIsRefusedNamingTheBytes) {
   EXPECT_TRUE(absl::StrContains(
       refused.output,
       "swarf run: the grid of 200 x 200 elements (40401 nodes, 0.05 mm) "
-      "and 200 moves need at least 3 MiB (2158112 bytes: 2098432 for the "
-      "grid, every tile at 12 bytes a node, and 59680 for the moves, of "
-      "which 12480 their index); --max-memory allows 2 MiB; give a coarser "
+      "and 200 moves need at least 3 MiB (2125272 bytes: 2098432 for the "
+      "grid, every tile at 12 bytes a node, and 26840 for the moves, of "
+      "which 14040 their index); --max-memory allows 2 MiB; give a coarser "
       "--spacing or --mesh"))
       << refused.output;
   // At 3 MiB it fits, and the spacing asked for is kept (the default is

@@ -169,8 +169,10 @@ TEST(StreamedOutputsTest, BandsWriteTheWholeGridsFilesByteForByte) {
       }
       // Tile rows with the carried row, one and two tile rows a band.
       for (int64_t nodes : {int64_t{1}, int64_t{2} * 64 * 161}) {
-        std::vector<Move> moves((*wp)->moves().begin(), (*wp)->moves().end());
-        TileRowBands tiles(Stock(), scheme, FillFrom(**wp), moves, nodes);
+        TileRowBands tiles(
+            Stock(), scheme, FillFrom(**wp),
+            std::make_shared<const MoveList>((*wp)->moves().ToVector()),
+            nodes);
         ExpectSame(Write(tiles, &raster, mp, options), want,
                    absl::StrCat(name, " tile rows, ", nodes, " nodes"));
       }
@@ -253,8 +255,9 @@ TEST(StreamedOutputsTest, ThinGridsFromRowsAreTheBuiltMeshesFiles) {
                       .ok());
       RunOutputOptions options;
       options.mesh = mopt;
-      std::vector<Move> kept((*wp)->moves().begin(), (*wp)->moves().end());
-      TileRowBands bands(spec, SchemeKind::kTaylor, FillFrom(**wp), kept, 1);
+      TileRowBands bands(
+          spec, SchemeKind::kTaylor, FillFrom(**wp),
+          std::make_shared<const MoveList>((*wp)->moves().ToVector()), 1);
       const Written w = Write(bands, nullptr, nullptr, options);
       ASSERT_EQ(w.names.size(), 3u) << what;
       EXPECT_TRUE(w.bytes[1] == ReadAll(built.path + "/surface.stl")) << what;

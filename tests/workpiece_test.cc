@@ -960,7 +960,7 @@ TEST(WorkpieceJetsTest, EveryNodeHasItsOwnersJet) {
     // A restored state: the same nodes, jets computed from its moves.
     SCOPED_TRACE("restored");
     auto restored = MakeWorkpiece(spec, SchemeKind::kTaylor, &pool);
-    ASSERT_TRUE(restored->Record(wp->moves()).ok());
+    ASSERT_TRUE(restored->Record(wp->moves().ToVector()).ok());
     ASSERT_TRUE(restored->LoadState(SavedState(*wp)).ok());
     ExpectJetsOfOwners(*restored);
   }

@@ -886,12 +886,12 @@ ViewerPath ViewerPathOf(const std::vector<PathRun>& runs) {
   int64_t moves = 0;
   bool started = false;
   for (const PathRun& run : runs) {
-    for (size_t k = 0; k < run.points.size(); ++k) {
+    for (int64_t k = 0; k < run.size(); ++k) {
       // As StreamPath counts: the first point, and a repositioning run's
       // first, only place the tool.
       if (started && !(run.reposition && k == 0)) ++moves;
       started = true;
-      p.points.push_back(run.points[k]);
+      p.points.push_back(run.point(k));
       p.moves_at.push_back(moves);
       p.tools.push_back(run.tool_id);
     }

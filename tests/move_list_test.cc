@@ -1,0 +1,174 @@
+// MoveList gives back every move bit for bit in about 28 bytes a move;
+// MoveIndex's ranges list exactly the ids a plain list would, ascending.
+#include "core/move_list.h"
+
+#include <cstring>
+#include <random>
+#include <vector>
+
+#include "core/move_index.h"
+#include "core/stock.h"
+#include "gtest/gtest.h"
+
+namespace swarf {
+namespace {
+
+bool SameBits(const Move& a, const Move& b) {
+  const auto same = [](const void* x, const void* y, size_t n) {
+    return std::memcmp(x, y, n) == 0;
+  };
+  return same(&a.from, &b.from, sizeof(Vec3)) &&
+         same(&a.to, &b.to, sizeof(Vec3)) && a.cutter.kind == b.cutter.kind &&
+         same(&a.cutter.radius, &b.cutter.radius, sizeof(double)) &&
+         same(&a.cutter.corner_radius, &b.cutter.corner_radius,
+              sizeof(double)) &&
+         same(&a.cutter.half_angle_deg, &b.cutter.half_angle_deg,
+              sizeof(double)) &&
+         same(&a.cutter.tip_radius, &b.cutter.tip_radius, sizeof(double));
+}
+
+// Chains with jumps, a tool change now and then, -0.0 against 0.0 in
+// positions and cutters, across several chunks.
+std::vector<Move> Program(int64_t n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-50, 50);
+  const Cutter cutters[] = {Cutter::Ball(1), Cutter::Flat(3),
+                            Cutter::BullNose(3, 1), Cutter::Cone(2, 30, 0),
+                            Cutter::Cone(2, 30, -0.0),
+                            Cutter::TaperedBall(3, 0.5, 10)};
+  std::vector<Move> moves;
+  Vec3 at{0, 0, 5};
+  int tool = 0;
+  for (int64_t k = 0; k < n; ++k) {
+    Vec3 from = at;
+    if (rng() % 97 == 0) from = {u(rng), u(rng), u(rng)};  // a jump
+    if (rng() % 211 == 0) from.x = from.x == 0 ? -0.0 : from.x;
+    if (rng() % 501 == 0) tool = static_cast<int>(rng() % 6);
+    Vec3 to{u(rng), u(rng), u(rng)};
+    if (k % 1000 == 7) to = {0.0, -0.0, 0.0};
+    if (k % 1000 == 8) from = {-0.0, -0.0, 0.0};  // not the last end's bits
+    moves.push_back({from, to, cutters[tool]});
+    at = to;
+  }
+  return moves;
+}
+
+TEST(MoveListTest, GivesBackEveryMoveBitForBit) {
+  for (const int64_t n : {int64_t{0}, int64_t{1}, MoveList::kChunkMoves - 1,
+                          MoveList::kChunkMoves, MoveList::kChunkMoves + 1,
+                          int64_t{3} * MoveList::kChunkMoves + 17}) {
+    const std::vector<Move> moves = Program(n, static_cast<uint32_t>(n));
+    MoveList list;
+    // Appended in batches of varied sizes, as sessions apply them.
+    for (size_t k = 0; k < moves.size();) {
+      const size_t b = std::min(moves.size() - k, 1 + k % 3001);
+      list.Append(std::span<const Move>(moves).subspan(k, b));
+      k += b;
+    }
+    ASSERT_EQ(list.size(), n);
+    for (int64_t id = 0; id < n; ++id) {
+      ASSERT_TRUE(SameBits(list.Get(id), moves[id])) << "move " << id;
+    }
+    const std::vector<Move> back = list.ToVector();
+    ASSERT_EQ(back.size(), moves.size());
+  }
+}
+
+TEST(MoveListTest, AChainTakesAbout28BytesAMove) {
+  MoveList list;
+  Vec3 at{0, 0, 0};
+  constexpr int64_t kMoves = 40 * MoveList::kChunkMoves;
+  for (int64_t k = 0; k < kMoves; ++k) {
+    const Vec3 to{at.x + 0.1, at.y, -1};
+    list.Append(Move(at, to, Cutter::Ball(2)));
+    at = to;
+  }
+  const double per_move = static_cast<double>(list.MemoryBytes()) / kMoves;
+  EXPECT_GE(per_move, 28.0);
+  EXPECT_LT(per_move, 28.5);
+  EXPECT_EQ(MoveList::kBytesPerMove, 28);
+}
+
+// The ids each bin lists, as a plain list of every id (the reference).
+TEST(MoveIndexTest, RangesListTheSameIdsAsAPlainList) {
+  StockSpec spec;
+  spec.x0 = 0;
+  spec.y0 = 0;
+  spec.x1 = 64;
+  spec.y1 = 64;
+  spec.nx = 64;
+  spec.ny = 64;
+  spec.z_top = 0;
+  const GridGeometry grid(spec);
+  MoveIndex index(grid);
+  std::vector<std::vector<uint32_t>> want(
+      static_cast<size_t>(index.bins_x()) * index.bins_y());
+  std::mt19937 rng(7);
+  // Runs of every length (1, 2, 3 and more consecutive ids in a bin),
+  // gaps of one, and boxes over several bins.
+  uint32_t id = 0;
+  for (int k = 0; k < 4000; ++k) {
+    const double x = static_cast<double>(rng() % 60);
+    const double y = static_cast<double>(rng() % 60);
+    const int run = 1 + static_cast<int>(rng() % 6);
+    for (int r = 0; r < run; ++r) {
+      const Rect b{x, y, x + (rng() % 3) * 9.0, y + (rng() % 2) * 17.0};
+      index.Add(id, b);
+      for (int32_t bj = 0; bj < index.bins_y(); ++bj) {
+        for (int32_t bi = 0; bi < index.bins_x(); ++bi) {
+          const double bx0 = bi * 16.0, by0 = bj * 16.0;
+          if (b.x1 >= bx0 && b.x0 < bx0 + 16 && b.y1 >= by0 &&
+              b.y0 < by0 + 16) {
+            want[bj * index.bins_x() + bi].push_back(id);
+          }
+        }
+      }
+      ++id;
+    }
+    id += rng() % 3;  // sometimes a gap of one or two ids
+  }
+  int64_t plain_bytes = 0;
+  std::vector<uint32_t> ids;
+  for (int32_t b = 0; b < index.bins_x() * index.bins_y(); ++b) {
+    std::vector<uint32_t> got;
+    for (const uint32_t v : index.Bin(b)) got.push_back(v);
+    EXPECT_EQ(got, want[b]) << "bin " << b;
+    index.BinIds(b, &ids);
+    EXPECT_EQ(ids, want[b]) << "bin " << b;
+    EXPECT_EQ(index.Bin(b).empty(), want[b].empty());
+    plain_bytes += static_cast<int64_t>(want[b].size() * sizeof(uint32_t));
+  }
+  EXPECT_GT(plain_bytes, 0);
+}
+
+// A raster's pass crosses a bin in many consecutive moves: a few bytes a
+// move instead of 4 a bin.
+TEST(MoveIndexTest, ARasterTakesAFewBytesAMove) {
+  StockSpec spec;
+  spec.x1 = 100;
+  spec.y1 = 100;
+  spec.nx = 2000;
+  spec.ny = 2000;
+  const GridGeometry grid(spec);
+  MoveIndex index(grid);
+  const double base = static_cast<double>(index.MemoryBytes());
+  uint32_t id = 0;
+  int64_t entries = 0;  // what a plain list would hold
+  for (double y = 0; y <= 100; y += 0.5) {
+    for (double x = 0; x < 100; x += 0.1) {
+      const Rect b{x - 2, y - 2, x + 0.1 + 2, y + 2};
+      index.Add(id++, b);
+      const int64_t bx = static_cast<int64_t>(std::min(99.9, x + 2.1) / 0.8) -
+                         static_cast<int64_t>(std::max(0.0, x - 2) / 0.8) + 1;
+      const int64_t by = static_cast<int64_t>(std::min(99.9, y + 2) / 0.8) -
+                         static_cast<int64_t>(std::max(0.0, y - 2) / 0.8) + 1;
+      entries += bx * by;
+    }
+  }
+  const double bytes = index.MemoryBytes() - base;
+  EXPECT_LT(bytes / id, 16.0) << "plain: " << 4.0 * entries / id;
+  EXPECT_GT(4.0 * entries / id, 100.0);
+}
+
+}  // namespace
+}  // namespace swarf
