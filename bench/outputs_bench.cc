@@ -15,12 +15,12 @@
 #include <string>
 #include <vector>
 
-#include "client/marks_files.h"
-#include "client/pictures.h"
-#include "client/png_image.h"
-#include "client/run_report.h"
-#include "client/surface_grid.h"
-#include "client/surface_mesh.h"
+#include "client/outputs/marks_files.h"
+#include "client/outputs/pictures.h"
+#include "client/outputs/png_image.h"
+#include "client/cli/run_report.h"
+#include "client/outputs/surface_grid.h"
+#include "client/outputs/surface_mesh.h"
 #include "core/cutting_marks.h"
 #include "core/valuation.h"
 #include "core/workpiece.h"

@@ -4,7 +4,7 @@
 // applied). The interpreter emits to one sink:
 // - ToolpathBuilder (gcode/toolpath.cc): the points of a Toolpath, arcs
 //   chorded within the arc tolerance (what `swarf run` simulates);
-// - `swarf moves` (client/moves_command.cc): prints each command.
+// - `swarf moves` (client/cli/moves_command.cc): prints each command.
 #ifndef SWARF_GCODE_CANON_H_
 #define SWARF_GCODE_CANON_H_
 

@@ -159,7 +159,7 @@ absl::StatusOr<InterpretedProgram> InterpretProgram(
     }
     ids[t] = tool->id;
   }
-  // What `swarf run` prints before it simulates (client/toolpath_flags.cc).
+  // What `swarf run` prints before it simulates (client/cli/toolpath_flags.cc).
   for (const std::string& note : p.notes()) {
     out.warnings.push_back(absl::StrCat(out.name, ": note: ", note));
   }

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "client/deviation.h"
-#include "client/surface_grid.h"
+#include "client/outputs/deviation.h"
+#include "client/outputs/surface_grid.h"
 #include "core/workpiece.h"
 #include "design/closest_point.h"
 #include "design/design_mesh.h"

@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "client/connection.h"
+#include "client/cli/connection.h"
 #include "nlohmann/json.hpp"
 #include "server/convert.h"
 #include "gcode/toolpath.h"

@@ -18,8 +18,8 @@
 
 #include <unistd.h>
 
-#include "client/commands.h"
-#include "client/png_image.h"
+#include "client/cli/commands.h"
+#include "client/outputs/png_image.h"
 #include "gcode/toolpath.h"
 #include "google/protobuf/struct.pb.h"
 #include "google/protobuf/util/json_util.h"

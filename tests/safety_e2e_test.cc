@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-#include "client/commands.h"
+#include "client/cli/commands.h"
 #include "gtest/gtest.h"
 #include "nlohmann/json.hpp"
 

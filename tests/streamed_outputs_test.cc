@@ -20,12 +20,12 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
-#include "client/grid_bands.h"
-#include "client/png_image.h"
-#include "client/pictures.h"
-#include "client/run_outputs.h"
-#include "client/surface_grid.h"
-#include "client/surface_mesh.h"
+#include "client/outputs/grid_bands.h"
+#include "client/outputs/png_image.h"
+#include "client/outputs/pictures.h"
+#include "client/outputs/run_outputs.h"
+#include "client/outputs/surface_grid.h"
+#include "client/outputs/surface_mesh.h"
 #include "core/cutting_marks.h"
 #include "core/valuation.h"
 #include "core/workpiece.h"

@@ -1,7 +1,8 @@
-// Tools as users give them (client/tool_table.h): the --tool syntax, LinuxCNC
-// tool tables, CAMotics projects and the choice of a tool per T number;
-// every error names the option and key, the file and line, or the tool.
-#include "client/tool_table.h"
+// Tools as users give them (client/cli/tool_table.h): the --tool syntax,
+// LinuxCNC tool tables, CAMotics projects and the choice of a tool per T
+// number; every error names the option and key, the file and line, or the
+// tool.
+#include "client/cli/tool_table.h"
 
 #include <cmath>
 #include <numbers>

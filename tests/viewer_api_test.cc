@@ -9,7 +9,7 @@
 #include <thread>
 #include <vector>
 
-#include "client/connection.h"
+#include "client/cli/connection.h"
 #include "client/viewer/viewer.h"
 #include "design/design_mesh.h"
 #include "google/protobuf/struct.pb.h"

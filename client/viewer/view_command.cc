@@ -2,9 +2,9 @@
 #include <iostream>
 #include <set>
 
-#include "client/args.h"
-#include "client/commands.h"
-#include "client/connection.h"
+#include "client/cli/args.h"
+#include "client/cli/commands.h"
+#include "client/cli/connection.h"
 #include "client/viewer/viewer.h"
 
 namespace swarf::cli {

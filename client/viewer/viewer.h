@@ -30,8 +30,8 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "client/connection.h"
-#include "client/deviation.h"
+#include "client/cli/connection.h"
+#include "client/outputs/deviation.h"
 #include "design/design_mesh.h"
 
 namespace swarf::cli {

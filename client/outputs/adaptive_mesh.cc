@@ -1,0 +1,670 @@
+// Error-bounded adaptive triangulation of the top lattice (see
+// SimplifySurfaceMesh in surface_mesh.h).
+//
+// Leaves are rectangles of 2^a x 2^b lattice cells found top down (a k-d
+// tree: ridges and scallops along a pass get long thin leaves): a block
+// whose two corner triangles stay within the tolerance of the
+// full-resolution surface is kept, else halved across x or y, whichever
+// fits better. Each leaf is then triangulated conformingly: with two
+// triangles when no smaller neighbour put a vertex on its sides, else by
+// clipping ears off the polygon of its corners and side vertices. Every
+// leaf's triangles are measured against the full-resolution surface (both
+// piecewise linear, so the largest vertical gap lies at a lattice vertex or
+// where a coarse edge crosses a fine one: all are checked); a leaf over the
+// tolerance is split, and its halves and neighbours are triangulated
+// again, until none is. Single cells are the full-resolution triangles, so
+// this ends.
+#include <algorithm>
+#include <array>
+#include <cstddef>
+#include <atomic>
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "absl/strings/str_format.h"
+#include "client/outputs/surface_mesh.h"
+#include "core/thread_pool.h"
+
+namespace swarf::cli {
+namespace {
+
+// Lattice vertex (i, j) in lattice units.
+struct P {
+  int64_t i, j;
+};
+
+class Lattice {
+ public:
+  // Heights of rows [j_base, ...] at z (row-major, nx + 1 a row): only
+  // the rows a leaf's rectangle covers are read.
+  Lattice(int64_t nx, int64_t ny, const double* z, int64_t j_base)
+      : nx_(nx), ny_(ny), z_(z), j_base_(j_base) {}
+
+  int64_t nx() const { return nx_; }
+  int64_t ny() const { return ny_; }
+  int64_t Index(int64_t i, int64_t j) const { return j * (nx_ + 1) + i; }
+  double Z(int64_t i, int64_t j) const {
+    return z_[(j - j_base_) * (nx_ + 1) + i];
+  }
+  // The full-resolution cell's split, as BuildSurfaceMesh chooses it.
+  bool MainDiagonal(int64_t i, int64_t j) const {
+    return std::fabs(Z(i, j) - Z(i + 1, j + 1)) <=
+           std::fabs(Z(i + 1, j) - Z(i, j + 1));
+  }
+  // The full-resolution surface at (x, y), lattice units.
+  double Fine(double x, double y) const {
+    int64_t i = std::clamp<int64_t>(static_cast<int64_t>(std::floor(x)), 0,
+                                    nx_ - 1);
+    int64_t j = std::clamp<int64_t>(static_cast<int64_t>(std::floor(y)), 0,
+                                    ny_ - 1);
+    const double u = x - i, v = y - j;
+    const double z00 = Z(i, j), z10 = Z(i + 1, j), z01 = Z(i, j + 1),
+                 z11 = Z(i + 1, j + 1);
+    if (MainDiagonal(i, j)) {
+      return u >= v ? z00 + u * (z10 - z00) + v * (z11 - z10)
+                    : z00 + u * (z11 - z01) + v * (z01 - z00);
+    }
+    return u + v <= 1 ? z00 + u * (z10 - z00) + v * (z01 - z00)
+                      : z11 + (1 - u) * (z01 - z11) + (1 - v) * (z10 - z11);
+  }
+
+  // Largest |fine - coarse| over triangle (a, b, c) (counter-clockwise),
+  // coarse being the plane through the three lattice vertices; once it
+  // passes `limit`, some value above it.
+  double TriangleDeviation(P a, P b, P c, double limit = INFINITY) const {
+    const double za = Z(a.i, a.j), zb = Z(b.i, b.j), zc = Z(c.i, c.j);
+    const int64_t area2 = (b.i - a.i) * (c.j - a.j) - (b.j - a.j) * (c.i - a.i);
+    if (area2 <= 0) return INFINITY;  // never built; refuse loudly
+    double dev = 0;
+    // Lattice vertices inside or on the triangle (exact integer tests).
+    const int64_t i0 = std::min({a.i, b.i, c.i}), i1 = std::max({a.i, b.i, c.i});
+    const int64_t j0 = std::min({a.j, b.j, c.j}), j1 = std::max({a.j, b.j, c.j});
+    auto edge = [](P p, P q, int64_t i, int64_t j) {
+      return (q.i - p.i) * (j - p.j) - (q.j - p.j) * (i - p.i);
+    };
+    for (int64_t j = j0; j <= j1; ++j) {
+      for (int64_t i = i0; i <= i1; ++i) {
+        const int64_t wa = edge(b, c, i, j), wb = edge(c, a, i, j),
+                      wc = edge(a, b, i, j);
+        if (wa < 0 || wb < 0 || wc < 0) continue;
+        const double coarse =
+            (wa * za + wb * zb + wc * zc) / static_cast<double>(area2);
+        dev = std::max(dev, std::fabs(Z(i, j) - coarse));
+      }
+      if (dev > limit) return dev;
+    }
+    dev = std::max(dev, EdgeDeviation(a, b));
+    if (dev > limit) return dev;
+    dev = std::max(dev, EdgeDeviation(b, c));
+    if (dev > limit) return dev;
+    return std::max(dev, EdgeDeviation(c, a));
+  }
+
+  // Largest gap along the coarse edge p -> q, at its crossings with every
+  // line a fine edge can lie on: x, y, x - y and x + y integer.
+  double EdgeDeviation(P p, P q) const {
+    const double zp = Z(p.i, p.j), zq = Z(q.i, q.j);
+    const int64_t di = q.i - p.i, dj = q.j - p.j;
+    double dev = 0;
+    auto at = [&](double t) {
+      if (!(t > 0 && t < 1)) return;
+      const double x = p.i + t * di, y = p.j + t * dj;
+      dev = std::max(dev, std::fabs(Fine(x, y) - (zp + t * (zq - zp))));
+    };
+    // Along direction d from s, the crossings of f(x, y) = integer, where f
+    // changes by df per unit t.
+    auto crossings = [&](int64_t s, int64_t df) {
+      if (df == 0) return;
+      const int64_t lo = std::min(s, s + df), hi = std::max(s, s + df);
+      for (int64_t k = lo + 1; k < hi; ++k) {
+        at(static_cast<double>(k - s) / static_cast<double>(df));
+      }
+    };
+    // Along an axis or a diagonal several families cross at the same t
+    // (the same doubles: m / d and (2m) / (2d), or the same quotient of
+    // negated integers): measuring them once gives the same maximum.
+    if (dj == 0 || di == 0) {
+      crossings(dj == 0 ? p.i : p.j, dj == 0 ? di : dj);
+    } else if (di == dj) {
+      crossings(p.i + p.j, di + dj);
+    } else if (di == -dj) {
+      crossings(p.i - p.j, di - dj);
+    } else {
+      crossings(p.i, di);
+      crossings(p.j, dj);
+      crossings(p.i - p.j, di - dj);
+      crossings(p.i + p.j, di + dj);
+    }
+    return dev;
+  }
+
+ private:
+  const int64_t nx_, ny_;
+  const double* z_;
+  const int64_t j_base_;
+};
+
+struct Leaf {
+  int64_t i0, j0, w, h;  // cells [i0, i0 + w) x [j0, j0 + h)
+};
+
+// The two corner triangles of a leaf, split along the diagonal whose ends
+// differ less in height (as the full-resolution cells are).
+void CornerTriangles(const Lattice& l, const Leaf& f, std::vector<P>* out) {
+  const P a{f.i0, f.j0}, b{f.i0 + f.w, f.j0}, c{f.i0 + f.w, f.j0 + f.h},
+      d{f.i0, f.j0 + f.h};
+  if (std::fabs(l.Z(a.i, a.j) - l.Z(c.i, c.j)) <=
+      std::fabs(l.Z(b.i, b.j) - l.Z(d.i, d.j))) {
+    out->insert(out->end(), {a, b, c, a, c, d});
+  } else {
+    out->insert(out->end(), {a, b, d, b, c, d});
+  }
+}
+
+// Largest distance of the lattice heights on the line from p to q (along a
+// row or a column) from the straight line between its ends.
+double LineDeviation(const Lattice& l, P p, P q) {
+  const int64_t n = std::max(std::abs(q.i - p.i), std::abs(q.j - p.j));
+  const int64_t si = (q.i - p.i) / std::max<int64_t>(n, 1);
+  const int64_t sj = (q.j - p.j) / std::max<int64_t>(n, 1);
+  const double z0 = l.Z(p.i, p.j), z1 = l.Z(q.i, q.j);
+  double dev = 0;
+  for (int64_t a = 1; a < n; ++a) {
+    dev = std::max(dev, std::fabs(l.Z(p.i + a * si, p.j + a * sj) -
+                                  (z0 + (z1 - z0) * a / n)));
+  }
+  return dev;
+}
+
+// Whether the corner triangles of a leaf are within `tolerance`. Its sides
+// are edges of those triangles: checked first, they reject most blocks
+// cheaply. When they fit, *dev is their deviation: what measuring the two
+// triangles without a limit gives (a measure stops early only above the
+// limit).
+bool CornersFit(const Lattice& l, const Leaf& f, double tolerance,
+                double* dev) {
+  const P a{f.i0, f.j0}, b{f.i0 + f.w, f.j0}, c{f.i0 + f.w, f.j0 + f.h},
+      d{f.i0, f.j0 + f.h};
+  if (LineDeviation(l, a, b) > tolerance || LineDeviation(l, d, c) > tolerance ||
+      LineDeviation(l, a, d) > tolerance || LineDeviation(l, b, c) > tolerance) {
+    return false;
+  }
+  thread_local std::vector<P> t;
+  t.clear();
+  CornerTriangles(l, f, &t);
+  const double d0 = l.TriangleDeviation(t[0], t[1], t[2], tolerance);
+  if (!(d0 <= tolerance)) return false;
+  const double d1 = l.TriangleDeviation(t[3], t[4], t[5], tolerance);
+  if (!(d1 <= tolerance)) return false;
+  *dev = std::max(std::max(0.0, d0), d1);
+  return true;
+}
+
+// The halves of a leaf across x or across y: across the direction in which
+// the surface is further from linear (a scallop along a pass is split
+// across the pass, not along it); a side of one cell is not split.
+std::array<Leaf, 2> Halves(const Lattice& l, const Leaf& f) {
+  const std::array<Leaf, 2> across_x = {
+      Leaf{f.i0, f.j0, f.w / 2, f.h}, Leaf{f.i0 + f.w / 2, f.j0, f.w / 2, f.h}};
+  const std::array<Leaf, 2> across_y = {
+      Leaf{f.i0, f.j0, f.w, f.h / 2}, Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
+  if (f.h == 1) return across_x;
+  if (f.w == 1) return across_y;
+  // The rows and columns at the sides and through the middle.
+  double along_x = 0, along_y = 0;
+  for (int64_t j : {f.j0, f.j0 + f.h / 2, f.j0 + f.h}) {
+    along_x = std::max(along_x, LineDeviation(l, {f.i0, j}, {f.i0 + f.w, j}));
+  }
+  for (int64_t i : {f.i0, f.i0 + f.w / 2, f.i0 + f.w}) {
+    along_y = std::max(along_y, LineDeviation(l, {i, f.j0}, {i, f.j0 + f.h}));
+  }
+  return along_x >= along_y ? across_x : across_y;
+}
+
+// Whether Halves(l, f) splits across x (else across y), and those halves
+// from that answer alone.
+bool SplitsAcrossX(const Lattice& l, const Leaf& f) {
+  return Halves(l, f)[0].w != f.w;
+}
+std::array<Leaf, 2> HalvesAcross(const Leaf& f, bool across_x) {
+  if (across_x) {
+    return {Leaf{f.i0, f.j0, f.w / 2, f.h},
+            Leaf{f.i0 + f.w / 2, f.j0, f.w / 2, f.h}};
+  }
+  return {Leaf{f.i0, f.j0, f.w, f.h / 2},
+          Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
+}
+
+int64_t Cross(P o, P a, P b) {
+  return (a.i - o.i) * (b.j - o.j) - (a.j - o.j) * (b.i - o.i);
+}
+
+// Triangulates a convex polygon (counter-clockwise, collinear vertices
+// allowed, positive area) without degenerate triangles: repeatedly cuts off
+// a corner whose triangle has area and leaves a polygon with area, the one
+// with the shortest cut.
+void ClipEars(std::vector<P> poly, std::vector<P>* out) {
+  while (poly.size() > 3) {
+    const size_t n = poly.size();
+    size_t best = n;
+    int64_t best_len = 0;
+    for (size_t k = 0; k < n; ++k) {
+      const P& prev = poly[(k + n - 1) % n];
+      const P& next = poly[(k + 1) % n];
+      if (Cross(prev, poly[k], next) <= 0) continue;  // not a corner
+      // The rest must not be all on the line prev-next.
+      bool area = false;
+      for (size_t q = 2; q + 1 < n && !area; ++q) {
+        area = Cross(prev, next, poly[(k + q) % n]) != 0;
+      }
+      if (!area) continue;
+      const int64_t di = next.i - prev.i, dj = next.j - prev.j;
+      const int64_t len = di * di + dj * dj;
+      if (best == n || len < best_len) {
+        best = k;
+        best_len = len;
+      }
+    }
+    if (best == n) return;  // cannot happen for a convex polygon with area
+    out->insert(out->end(),
+                {poly[(best + n - 1) % n], poly[best], poly[(best + 1) % n]});
+    poly.erase(poly.begin() + static_cast<std::ptrdiff_t>(best));
+  }
+  out->insert(out->end(), poly.begin(), poly.end());
+}
+
+}  // namespace
+
+absl::StatusOr<TriangleMesh> SimplifySurfaceMesh(const TriangleMesh& full,
+                                                 double tolerance) {
+  if (!(tolerance >= 0) || !std::isfinite(tolerance)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the mesh tolerance must be a finite number >= 0 (mm), got %g",
+        tolerance));
+  }
+  const int64_t nx = full.lattice_nx, ny = full.lattice_ny;
+  if (nx < 1 || ny < 1 ||
+      full.top_vertices != (nx + 1) * (ny + 1) ||
+      static_cast<int64_t>(full.vertices.size()) < full.top_vertices) {
+    return absl::InvalidArgumentError("not a full-resolution lattice mesh");
+  }
+  // Its lattice's heights and coordinates (the same doubles).
+  LatticeHeights h;
+  h.nx = nx;
+  h.ny = ny;
+  h.xs.resize(nx + 1);
+  h.ys.resize(ny + 1);
+  for (int64_t i = 0; i <= nx; ++i) h.xs[i] = full.vertices[i].x;
+  for (int64_t j = 0; j <= ny; ++j) h.ys[j] = full.vertices[j * (nx + 1)].y;
+  h.z.resize(full.top_vertices);
+  for (int64_t v = 0; v < full.top_vertices; ++v) h.z[v] = full.vertices[v].z;
+  return SimplifyLattice(h, full.z_bottom, tolerance);
+}
+
+namespace {
+
+// The rows of a lattice held in memory.
+class HeldRows : public LatticeWindows {
+ public:
+  explicit HeldRows(const LatticeHeights& h) : h_(h) {}
+  absl::StatusOr<const double*> Rows(int64_t j0, int64_t) override {
+    return h_.z.data() + j0 * (h_.nx + 1);
+  }
+
+ private:
+  const LatticeHeights& h_;
+};
+
+}  // namespace
+
+absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& heights,
+                                             double z_bottom,
+                                             double tolerance) {
+  if (!(tolerance >= 0) || !std::isfinite(tolerance)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the mesh tolerance must be a finite number >= 0 (mm), got %g",
+        tolerance));
+  }
+  const int64_t nx = heights.nx, ny = heights.ny;
+  if (nx < 1 || ny < 1 ||
+      static_cast<int64_t>(heights.z.size()) != (nx + 1) * (ny + 1) ||
+      static_cast<int64_t>(heights.xs.size()) != nx + 1 ||
+      static_cast<int64_t>(heights.ys.size()) != ny + 1) {
+    return absl::InvalidArgumentError("not a full-resolution lattice");
+  }
+  HeldRows rows(heights);
+  return SimplifyLatticeRows(rows, heights.xs, heights.ys, z_bottom,
+                             tolerance);
+}
+
+absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
+    LatticeWindows& rows, const std::vector<double>& xs,
+    const std::vector<double>& ys, double z_bottom, double tolerance) {
+  if (!(tolerance >= 0) || !std::isfinite(tolerance)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the mesh tolerance must be a finite number >= 0 (mm), got %g",
+        tolerance));
+  }
+  const int64_t nx = static_cast<int64_t>(xs.size()) - 1;
+  const int64_t ny = static_cast<int64_t>(ys.size()) - 1;
+  if (nx < 1 || ny < 1) {
+    return absl::InvalidArgumentError("not a full-resolution lattice");
+  }
+  ThreadPool& pool = ThreadPool::Default();
+
+  // Roots of kRoot x kRoot cells; every leaf lies in one root, so what a
+  // leaf reads (its closed rectangle, and a row above) lies in its root
+  // row's kRoot + 2 lattice rows: the heights are read a root row at a
+  // time.
+  constexpr int64_t kRoot = 64;
+  const int64_t roots_x = (nx + kRoot - 1) / kRoot;
+  const int64_t roots_y = (ny + kRoot - 1) / kRoot;
+  // Fine() on a leaf's top side also reads the row above it (times 0), so
+  // a window has one row more.
+  auto window = [&](int64_t rr) -> absl::StatusOr<Lattice> {
+    const int64_t j0 = rr * kRoot, j1 = std::min(ny, j0 + kRoot + 1);
+    absl::StatusOr<const double*> z = rows.Rows(j0, j1);
+    if (!z.ok()) return z.status();
+    return Lattice(nx, ny, *z, j0);
+  };
+
+  // Top down: a block leaving the lattice or whose corner triangles miss
+  // the tolerance is split. Each root's tree is built where its rows are
+  // read; the leaves are then listed level by level across all roots, as
+  // splitting every root's blocks a level at a time lists them.
+  struct TreeNode {
+    Leaf f;
+    double dev = -1;  // as fit_dev below
+    int32_t kid[2] = {-1, -1};
+    int64_t leaf = -1;  // its index in `leaves`, when a leaf
+  };
+  std::vector<std::vector<TreeNode>> trees(roots_x * roots_y);
+  for (int64_t rr = 0; rr < roots_y; ++rr) {
+    absl::StatusOr<Lattice> l = window(rr);
+    if (!l.ok()) return l.status();
+    pool.ParallelFor(roots_x, [&](int64_t rx) {
+      std::vector<TreeNode>& t = trees[rr * roots_x + rx];
+      t.push_back({Leaf{rx * kRoot, rr * kRoot, kRoot, kRoot}});
+      for (size_t q = 0; q < t.size(); ++q) {
+        const Leaf f = t[q].f;
+        std::array<Leaf, 2> halves;
+        double dev = -1;
+        // Blocks leaving the lattice: halved across the side that leaves
+        // it.
+        if (f.i0 + f.w > nx) {
+          halves = {Leaf{f.i0, f.j0, f.w / 2, f.h},
+                    Leaf{f.i0 + f.w / 2, f.j0, f.w / 2, f.h}};
+        } else if (f.j0 + f.h > ny) {
+          halves = {Leaf{f.i0, f.j0, f.w, f.h / 2},
+                    Leaf{f.i0, f.j0 + f.h / 2, f.w, f.h / 2}};
+        } else if (f.w * f.h > 1 && !CornersFit(*l, f, tolerance, &dev)) {
+          halves = Halves(*l, f);
+        } else {
+          t[q].dev = dev;
+          continue;
+        }
+        // The first half starts where the block does: always inside.
+        for (int c = 0; c < 2; ++c) {
+          if (halves[c].i0 < nx && halves[c].j0 < ny) {
+            t[q].kid[c] = static_cast<int32_t>(t.size());
+            t.push_back({halves[c]});
+          }
+        }
+      }
+      t.shrink_to_fit();  // kept until the conforming passes end
+    });
+  }
+  std::vector<Leaf> leaves;
+  // Per leaf, its corner triangles' deviation where CornersFit measured it
+  // (-1: not measured): a leaf whose sides gain no vertex keeps those
+  // triangles, and the conforming pass takes the value instead of
+  // measuring them again.
+  std::vector<double> fit_dev;
+  {
+    std::vector<std::pair<int64_t, int32_t>> level, next;  // (tree, node)
+    for (int64_t b = 0; b < roots_x * roots_y; ++b) level.push_back({b, 0});
+    while (!level.empty()) {
+      next.clear();
+      for (const auto& [b, q] : level) {
+        TreeNode& n = trees[b][q];
+        if (n.kid[0] < 0) {
+          n.leaf = static_cast<int64_t>(leaves.size());
+          leaves.push_back(n.f);
+          fit_dev.push_back(n.dev);
+          continue;
+        }
+        for (int c = 0; c < 2; ++c) {
+          if (n.kid[c] >= 0) next.push_back({b, n.kid[c]});
+        }
+      }
+      std::swap(level, next);
+    }
+  }
+
+  // Conforming triangulation, measured; leaves over the tolerance are
+  // split and the leaves they touch (their sides gain vertices) are
+  // triangulated and measured again, until none is over. A split leaf
+  // stays in `leaves` with its halves appended (kids[k], kids[k] + 1): the
+  // mesh lists the final leaves depth first, which is the order of
+  // replacing each split leaf by its halves in place. Late passes split a
+  // handful of leaves: only those and their neighbours are visited, a root
+  // row's heights read once a pass.
+  const int64_t lattice_vertices = (nx + 1) * (ny + 1);
+  const int64_t roots = static_cast<int64_t>(leaves.size());
+  std::vector<int64_t> kids(leaves.size(), -1);
+  std::vector<std::vector<P>> tris(leaves.size());
+  std::vector<double> leaf_dev(leaves.size());
+  // Which lattice vertices are leaf corners (splits only add corners: a
+  // leaf's corners are its halves').
+  std::vector<uint8_t> used(lattice_vertices, 0);
+  auto index = [nx](int64_t i, int64_t j) { return j * (nx + 1) + i; };
+  // The leaf that holds cell (ci, cj) now: down its root's tree, then the
+  // splits.
+  auto leaf_at = [&](int64_t ci, int64_t cj) {
+    auto inside = [&](const Leaf& a) {
+      return ci >= a.i0 && ci < a.i0 + a.w && cj >= a.j0 && cj < a.j0 + a.h;
+    };
+    const std::vector<TreeNode>& t = trees[(cj / kRoot) * roots_x + ci / kRoot];
+    int32_t q = 0;
+    while (t[q].kid[0] >= 0) {
+      q = inside(t[t[q].kid[0]].f) ? t[q].kid[0] : t[q].kid[1];
+    }
+    int64_t k = t[q].leaf;
+    while (kids[k] >= 0) k = inside(leaves[kids[k]]) ? kids[k] : kids[k] + 1;
+    return k;
+  };
+  std::vector<int64_t> corners_added;
+  auto add_corners = [&](const Leaf& f) {
+    for (const P& p : {P{f.i0, f.j0}, P{f.i0 + f.w, f.j0}, P{f.i0, f.j0 + f.h},
+                       P{f.i0 + f.w, f.j0 + f.h}}) {
+      uint8_t& u = used[index(p.i, p.j)];
+      if (!u) corners_added.push_back(index(p.i, p.j));
+      u = 1;
+    }
+  };
+  std::vector<int64_t> work(leaves.size());
+  for (int64_t k = 0; k < roots; ++k) {
+    add_corners(leaves[k]);
+    work[k] = k;
+  }
+  std::vector<uint8_t> queued;
+  std::vector<std::vector<int64_t>> by_row(roots_y);
+  for (bool first_pass = true;; first_pass = false) {
+    // Each work leaf triangulated and measured where its root row's
+    // heights are read; how one over the tolerance is halved too (a byte a
+    // leaf: the first pass visits every leaf).
+    std::vector<uint8_t> split_x(work.size());
+    for (auto& r : by_row) r.clear();
+    for (size_t w = 0; w < work.size(); ++w) {
+      by_row[leaves[work[w]].j0 / kRoot].push_back(static_cast<int64_t>(w));
+    }
+    for (int64_t rr = 0; rr < roots_y; ++rr) {
+      if (by_row[rr].empty()) continue;
+      absl::StatusOr<Lattice> window_rows = window(rr);
+      if (!window_rows.ok()) return window_rows.status();
+      const Lattice& l = *window_rows;
+      const std::vector<int64_t>& row_work = by_row[rr];
+      pool.ParallelFor(static_cast<int64_t>(row_work.size()), [&](int64_t x) {
+        const int64_t w = row_work[x];
+        const int64_t k = work[w];
+        const Leaf& f = leaves[k];
+        auto measure = [&] {
+          // The sides' lattice vertices that are corners, counter-clockwise
+          // from (i0, j0).
+          std::vector<P> ring;
+          auto side_vertex = [&](int64_t i, int64_t j) {
+            if (used[index(i, j)]) ring.push_back({i, j});
+          };
+          for (int64_t d = 0; d < f.w; ++d) side_vertex(f.i0 + d, f.j0);
+          for (int64_t d = 0; d < f.h; ++d) side_vertex(f.i0 + f.w, f.j0 + d);
+          for (int64_t d = f.w; d > 0; --d) side_vertex(f.i0 + d, f.j0 + f.h);
+          for (int64_t d = f.h; d > 0; --d) side_vertex(f.i0, f.j0 + d);
+          std::vector<P>& t = tris[k];
+          t.clear();
+          if (ring.size() == 4) {
+            CornerTriangles(l, f, &t);
+            if (first_pass && fit_dev[k] >= 0) {
+              leaf_dev[k] = fit_dev[k];
+              return;
+            }
+          } else {
+            ClipEars(std::move(ring), &t);
+          }
+          double dev = 0;
+          for (size_t q = 0; q + 2 < t.size(); q += 3) {
+            dev = std::max(dev, l.TriangleDeviation(t[q], t[q + 1], t[q + 2]));
+          }
+          leaf_dev[k] = dev;
+        };
+        measure();
+        if (!(leaf_dev[k] <= tolerance) && f.w * f.h != 1) {
+          split_x[w] = SplitsAcrossX(l, f);
+        }
+      });
+    }
+    corners_added.clear();
+    std::vector<int64_t> halves;
+    for (size_t w = 0; w < work.size(); ++w) {
+      const int64_t k = work[w];
+      const Leaf f = leaves[k];  // a copy: `leaves` grows below
+      if (leaf_dev[k] <= tolerance || f.w * f.h == 1) continue;
+      kids[k] = static_cast<int64_t>(leaves.size());
+      std::vector<P>().swap(tris[k]);
+      for (const Leaf& half : HalvesAcross(f, split_x[w])) {
+        halves.push_back(static_cast<int64_t>(leaves.size()));
+        leaves.push_back(half);
+        kids.push_back(-1);
+        tris.emplace_back();
+        leaf_dev.push_back(INFINITY);
+        add_corners(half);
+      }
+    }
+    if (halves.empty()) break;
+    // Next: the halves, and every leaf with a new corner on its sides (it
+    // holds one of the four cells around that corner).
+    queued.resize(leaves.size());
+    work = halves;
+    for (const int64_t k : halves) queued[k] = 1;
+    for (const int64_t v : corners_added) {
+      const int64_t i = v % (nx + 1), j = v / (nx + 1);
+      for (int64_t cj = std::max<int64_t>(j - 1, 0); cj <= std::min(j, ny - 1);
+           ++cj) {
+        for (int64_t ci = std::max<int64_t>(i - 1, 0);
+             ci <= std::min(i, nx - 1); ++ci) {
+          const int64_t k = leaf_at(ci, cj);
+          if (!queued[k]) {
+            queued[k] = 1;
+            work.push_back(k);
+          }
+        }
+      }
+    }
+    for (const int64_t k : work) queued[k] = 0;
+  }
+  trees = {};
+
+  // The final leaves, depth first from the roots.
+  std::vector<int64_t> final_leaves, stack;
+  for (int64_t r = 0; r < roots; ++r) {
+    stack.push_back(r);
+    while (!stack.empty()) {
+      const int64_t k = stack.back();
+      stack.pop_back();
+      if (kids[k] < 0) {
+        final_leaves.push_back(k);
+      } else {
+        stack.push_back(kids[k] + 1);
+        stack.push_back(kids[k]);
+      }
+    }
+  }
+
+  // The used lattice vertices, row-major, are the new top vertices: their
+  // heights read a root row at a time. A vertex's new index is the number
+  // of used ones before it (counted from each block of 64's).
+  TriangleMesh mesh;
+  mesh.lattice_nx = static_cast<int32_t>(nx);
+  mesh.lattice_ny = static_cast<int32_t>(ny);
+  mesh.z_bottom = z_bottom;
+  for (int64_t rr = 0; rr < roots_y; ++rr) {
+    absl::StatusOr<Lattice> l = window(rr);
+    if (!l.ok()) return l.status();
+    const int64_t j_end = rr + 1 == roots_y ? ny : rr * kRoot + kRoot - 1;
+    for (int64_t j = rr * kRoot; j <= j_end; ++j) {
+      for (int64_t i = 0; i <= nx; ++i) {
+        if (used[index(i, j)]) mesh.vertices.push_back({xs[i], ys[j], l->Z(i, j)});
+      }
+    }
+  }
+  mesh.top_vertices = static_cast<int64_t>(mesh.vertices.size());
+  std::vector<uint32_t> block_rank((lattice_vertices + 63) / 64);
+  uint32_t counted = 0;
+  for (int64_t v = 0; v < lattice_vertices; ++v) {
+    if (v % 64 == 0) block_rank[v / 64] = counted;
+    counted += used[v];
+  }
+  auto remap = [&](int64_t v) {
+    uint32_t r = block_rank[v / 64];
+    for (int64_t u = v - v % 64; u < v; ++u) r += used[u];
+    return static_cast<int32_t>(r);
+  };
+  for (const int64_t k : final_leaves) {
+    const std::vector<P>& t = tris[k];
+    for (size_t q = 0; q + 2 < t.size(); q += 3) {
+      mesh.triangles.push_back({remap(index(t[q].i, t[q].j)),
+                                remap(index(t[q + 1].i, t[q + 1].j)),
+                                remap(index(t[q + 2].i, t[q + 2].j))});
+    }
+    mesh.max_deviation = std::max(mesh.max_deviation, leaf_dev[k]);
+  }
+
+  // Walls under the top's boundary edges (counter-clockwise seen from
+  // above), and a bottom fanned from a vertex under the middle.
+  std::vector<int64_t> boundary;  // lattice indices, counter-clockwise
+  for (int64_t i = 0; i < nx; ++i) boundary.push_back(index(i, 0));
+  for (int64_t j = 0; j < ny; ++j) boundary.push_back(index(nx, j));
+  for (int64_t i = nx; i > 0; --i) boundary.push_back(index(i, ny));
+  for (int64_t j = ny; j > 0; --j) boundary.push_back(index(0, j));
+  std::vector<int32_t> top_ring, bottom_ring;
+  for (int64_t v : boundary) {
+    if (!used[v]) continue;
+    top_ring.push_back(remap(v));
+    bottom_ring.push_back(static_cast<int32_t>(mesh.vertices.size()));
+    mesh.vertices.push_back({xs[v % (nx + 1)], ys[v / (nx + 1)], z_bottom});
+  }
+  const int32_t middle = static_cast<int32_t>(mesh.vertices.size());
+  mesh.vertices.push_back({(xs[0] + xs[nx]) / 2, (ys[0] + ys[ny]) / 2,
+                           z_bottom});
+  for (size_t q = 0; q < top_ring.size(); ++q) {
+    const size_t r = (q + 1) % top_ring.size();
+    const int32_t a = top_ring[q], b = top_ring[r];
+    const int32_t ab = bottom_ring[q], bb = bottom_ring[r];
+    mesh.triangles.push_back({ab, bb, b});
+    mesh.triangles.push_back({ab, b, a});
+    mesh.triangles.push_back({middle, bb, ab});
+  }
+  return mesh;
+}
+
+}  // namespace swarf::cli

@@ -1,0 +1,262 @@
+#include "client/outputs/marks_files.h"
+
+#include <algorithm>
+#include <charconv>
+#include <functional>
+#include <string_view>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "client/outputs/colormap.h"
+#include "client/outputs/file_writer.h"
+#include "client/outputs/json_writer.h"
+#include "core/thread_pool.h"
+
+namespace swarf::cli {
+
+std::vector<MarkPolyline> FilterMarks(const std::vector<MarkPolyline>& marks,
+                                      const MarkDisplayFilter& filter) {
+  std::vector<MarkPolyline> out;
+  for (const MarkPolyline& p : marks) {
+    const size_t n = p.vertices.size();
+    const bool rim = p.owners[0] == kStockTopOwner;
+    auto keep = [&](size_t k) {
+      return rim || (k < p.angle_deg.size() &&
+                     p.angle_deg[k] >= filter.min_angle_deg);
+    };
+    auto emit = [&](MarkPolyline piece) {
+      if (piece.vertices.size() >= 2 &&
+          PolylineLength(piece) >= filter.min_length) {
+        out.push_back(std::move(piece));
+      }
+    };
+    // Start after a dropped vertex, so that a closed polyline's run over
+    // its first vertex stays whole.
+    size_t start = 0;
+    bool all = true;
+    for (size_t k = 0; k < n; ++k) {
+      if (!keep(k)) {
+        all = false;
+        start = p.closed ? k + 1 : 0;
+        break;
+      }
+    }
+    if (all) {
+      emit(p);
+      continue;
+    }
+    MarkPolyline piece;
+    auto flush = [&] {
+      if (!piece.vertices.empty()) emit(std::move(piece));
+      piece = MarkPolyline();
+    };
+    for (size_t q = 0; q < n; ++q) {
+      const size_t k = (start + q) % n;
+      if (!keep(k)) {
+        flush();
+        continue;
+      }
+      if (piece.vertices.empty()) {
+        piece.owners = k < p.vertex_owners.size() ? p.vertex_owners[k]
+                                                  : p.owners;
+      }
+      piece.vertices.push_back(p.vertices[k]);
+      if (k < p.angle_deg.size()) piece.angle_deg.push_back(p.angle_deg[k]);
+      if (k < p.vertex_owners.size()) {
+        piece.vertex_owners.push_back(p.vertex_owners[k]);
+      }
+    }
+    flush();
+  }
+  return out;
+}
+
+namespace {
+
+// Polylines per chunk formatted by one task.
+constexpr size_t kChunkPolylines = 1024;
+
+// Chunks formatted at once before they are written: the text held at a
+// time is this many chunks', whatever the number of marks.
+constexpr size_t kChunksAtOnce = 32;
+
+// format(k, &text) appends polyline k's text; windows of kChunksAtOnce
+// chunks of polylines are formatted at once on ThreadPool::Default(), then
+// put in order and dropped.
+void EmitChunks(size_t n,
+                const std::function<void(size_t, std::string*)>& format,
+                const std::function<void(std::string_view)>& put) {
+  const size_t chunks = (n + kChunkPolylines - 1) / kChunkPolylines;
+  std::vector<std::string> out(std::min(chunks, kChunksAtOnce));
+  for (size_t c0 = 0; c0 < chunks; c0 += kChunksAtOnce) {
+    const size_t m = std::min(kChunksAtOnce, chunks - c0);
+    ThreadPool::Default().ParallelFor(static_cast<int64_t>(m), [&](int64_t w) {
+      const size_t c = c0 + static_cast<size_t>(w);
+      out[w].clear();
+      const size_t end = std::min(n, (c + 1) * kChunkPolylines);
+      for (size_t k = c * kChunkPolylines; k < end; ++k) format(k, &out[w]);
+    });
+    for (size_t w = 0; w < m; ++w) put(out[w]);
+  }
+}
+
+// One polyline object as JsonWriter writes it inside the array (its
+// members do not depend on what comes before it), preceded by the array's
+// comma after the first.
+void AppendMarkJson(const MarkPolyline& p, bool vertex_owners, bool first,
+                    std::string* out) {
+  if (!first) *out += ',';
+  JsonWriter j;
+  j.BeginObject().Key("closed").Bool(p.closed);
+  j.Key("owners").BeginArray().Int(p.owners[0]).Int(p.owners[1]).EndArray();
+  j.Key("vertices").BeginArray();
+  for (const Vec3& v : p.vertices) {
+    j.BeginArray().Double(v.x).Double(v.y).Double(v.z).EndArray();
+  }
+  j.EndArray().Key("angle_deg").BeginArray();
+  for (double a : p.angle_deg) j.Double(a);
+  j.EndArray();
+  if (vertex_owners) {
+    j.Key("vertex_owners").BeginArray();
+    for (const auto& o : p.vertex_owners) {
+      j.BeginArray().Int(o[0]).Int(o[1]).EndArray();
+    }
+    j.EndArray();
+  }
+  j.EndObject();
+  *out += j.str();
+}
+
+constexpr std::string_view kMarksJsonHead = "{\"polylines\":[";
+constexpr std::string_view kMarksJsonTail = "]}";
+
+// The marks.json document piece by piece, in order, to put(piece).
+void EmitMarksJson(const std::vector<MarkPolyline>& marks, bool vertex_owners,
+                   const std::function<void(std::string_view)>& put) {
+  put(kMarksJsonHead);
+  EmitChunks(
+      marks.size(),
+      [&](size_t k, std::string* out) {
+        AppendMarkJson(marks[k], vertex_owners, k == 0, out);
+      },
+      put);
+  put(kMarksJsonTail);
+}
+
+}  // namespace
+
+std::string MarksJson(const std::vector<MarkPolyline>& marks,
+                      bool vertex_owners) {
+  std::string s;
+  EmitMarksJson(marks, vertex_owners, [&](std::string_view p) { s += p; });
+  return s;
+}
+
+absl::Status WriteMarksJson(const std::vector<MarkPolyline>& marks,
+                            const std::string& path) {
+  // Chunk by chunk: no copy of the whole document.
+  FileWriter f(path);
+  if (!f.status().ok()) return f.status();
+  EmitMarksJson(marks, false, [&](std::string_view p) { f.Write(p); });
+  f.Write("\n");
+  return f.Close();
+}
+
+namespace {
+
+// 7 significant digits: 1e-5 mm on a 100 mm stock, well below any grid.
+// printf's "%.7g" (std::to_chars with a precision converts as printf
+// does), appended without a string per number.
+void AppendNum(double v, std::string* s) {
+  char buf[32];
+  const std::to_chars_result r =
+      std::to_chars(buf, buf + sizeof buf, v, std::chars_format::general, 7);
+  s->append(buf, r.ptr);
+}
+
+std::string Num(double v) {
+  std::string s;
+  AppendNum(v, &s);
+  return s;
+}
+
+std::string MarksSvgHead(const StockSpec& stock, size_t polylines,
+                         double stroke) {
+  const double w = stock.x1 - stock.x0, h = stock.y1 - stock.y0;
+  return absl::StrCat(
+      "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+      "<svg xmlns=\"http://www.w3.org/2000/svg\" version=\"1.1\" width=\"",
+      Num(w), "mm\" height=\"", Num(h), "mm\" viewBox=\"", Num(stock.x0), " ",
+      Num(-stock.y1), " ", Num(w), " ", Num(h), "\">\n",
+      "<title>swarf cutting marks: ", polylines,
+      " polylines, mm, y up</title>\n",
+      "<g transform=\"scale(1,-1)\" fill=\"none\" stroke-linecap=\"round\" "
+      "stroke-linejoin=\"round\">\n",
+      "<rect x=\"", Num(stock.x0), "\" y=\"", Num(stock.y0), "\" width=\"",
+      Num(w), "\" height=\"", Num(h), "\" stroke=\"#000000\" stroke-width=\"",
+      Num(stroke * 0.6), "\"/>\n");
+}
+
+constexpr std::string_view kMarksSvgTail = "</g>\n</svg>\n";
+
+void AppendMarkSvg(const MarkPolyline& p, double stroke, std::string* s) {
+  double mean = 0;
+  for (double a : p.angle_deg) mean += a;
+  if (!p.angle_deg.empty()) mean /= p.angle_deg.size();
+  const Rgb c = AngleColor(mean);
+  absl::StrAppend(s, "<path stroke=\"",
+                  absl::StrFormat("#%02x%02x%02x", c.r, c.g, c.b),
+                  "\" stroke-width=\"", Num(stroke), "\" data-owners=\"",
+                  p.owners[0], " ", p.owners[1], "\" data-angle-deg=\"",
+                  Num(mean), "\" d=\"");
+  for (size_t k = 0; k < p.vertices.size(); ++k) {
+    s->append(k == 0 ? "M" : " L");
+    AppendNum(p.vertices[k].x, s);
+    s->push_back(' ');
+    AppendNum(p.vertices[k].y, s);
+  }
+  if (p.closed) *s += " Z";
+  absl::StrAppend(s, "\"><title>owners ", p.owners[0], " ", p.owners[1],
+                  ", mean angle ", absl::StrFormat("%.2f", mean),
+                  " deg</title></path>\n");
+}
+
+// Strokes scale with the stock so that the drawing looks the same at any
+// size: 1/400 of the longer side, the outline a little thinner.
+double SvgStroke(const StockSpec& stock) {
+  return std::max(stock.x1 - stock.x0, stock.y1 - stock.y0) / 400;
+}
+
+// The marks.svg document piece by piece, in order, to put(piece).
+void EmitMarksSvg(const StockSpec& stock,
+                  const std::vector<MarkPolyline>& marks,
+                  const std::function<void(std::string_view)>& put) {
+  const double stroke = SvgStroke(stock);
+  put(MarksSvgHead(stock, marks.size(), stroke));
+  EmitChunks(
+      marks.size(),
+      [&](size_t k, std::string* out) { AppendMarkSvg(marks[k], stroke, out); },
+      put);
+  put(kMarksSvgTail);
+}
+
+}  // namespace
+
+std::string MarksSvg(const StockSpec& stock,
+                     const std::vector<MarkPolyline>& marks) {
+  std::string s;
+  EmitMarksSvg(stock, marks, [&](std::string_view p) { s += p; });
+  return s;
+}
+
+absl::Status WriteMarksSvg(const StockSpec& stock,
+                           const std::vector<MarkPolyline>& marks,
+                           const std::string& path) {
+  // Chunk by chunk: no copy of the whole document.
+  FileWriter f(path);
+  if (!f.status().ok()) return f.status();
+  EmitMarksSvg(stock, marks, [&](std::string_view p) { f.Write(p); });
+  return f.Close();
+}
+
+}  // namespace swarf::cli

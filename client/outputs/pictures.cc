@@ -1,0 +1,611 @@
+#include "client/outputs/pictures.h"
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <string>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "client/outputs/text.h"
+#include "client/outputs/colormap.h"
+#include "core/thread_pool.h"
+
+namespace swarf::cli {
+namespace {
+
+constexpr Rgb kWhite = {255, 255, 255};
+constexpr Rgb kInk = {30, 30, 30};
+constexpr Rgb kHalo = {0, 0, 0};
+
+// Towards the light: azimuth north-west (upper left of the picture), 45
+// degrees above the horizon.
+constexpr double kLightX = -0.5, kLightY = 0.5, kLightZ = 0.70710678118654752;
+// Fraction of light a surface facing away from the light still gets, so
+// that shadowed walls keep their tint.
+constexpr double kAmbient = 0.25;
+
+// "3.21e-3" (three significant digits), "0" for zero.
+std::string FormatSci(double v) {
+  if (v == 0) return "0";
+  int e = static_cast<int>(std::floor(std::log10(std::fabs(v))));
+  double m = v / std::pow(10.0, e);
+  if (std::fabs(std::round(m * 100) / 100) >= 10) {
+    m /= 10;
+    ++e;
+  }
+  return absl::StrFormat("%.2fe%d", m, e);
+}
+
+std::string PowerOfTenLabel(int k) {
+  return k == 0 ? std::string("1") : absl::StrCat("1e", k);
+}
+
+struct Box {
+  int x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+};
+
+// A vertical colour bar with tick labels, a title and optionally a swatch
+// for a special value below it.
+struct Legend {
+  std::vector<std::string> title;
+  std::function<Rgb(double)> color;  // t in [0, 1], bottom to top
+  std::vector<std::pair<double, std::string>> ticks;  // t, label
+  bool swatch = false;
+  Rgb swatch_color;
+  std::string swatch_label;
+};
+
+struct LegendMetrics {
+  int s, pad, line_h, bar_w, tick_len, label_gap, swatch_h;
+  explicit LegendMetrics(int scale)
+      : s(scale),
+        pad(6 * scale),
+        line_h((kGlyphHeight + 2) * scale),
+        bar_w(10 * scale),
+        tick_len(3 * scale),
+        label_gap(3 * scale),
+        swatch_h(10 * scale) {}
+};
+
+int LegendWidth(const Legend& l, int scale) {
+  const LegendMetrics m(scale);
+  int labels = 0;
+  for (const auto& [t, label] : l.ticks) {
+    labels = std::max(labels, TextWidth(label, scale));
+  }
+  if (l.swatch) labels = std::max(labels, TextWidth(l.swatch_label, scale));
+  int w = m.bar_w + m.tick_len + m.label_gap + labels;
+  for (const std::string& line : l.title) {
+    w = std::max(w, TextWidth(line, scale));
+  }
+  return m.pad + w + m.pad;
+}
+
+int LegendMinHeight(const Legend& l, int scale) {
+  const LegendMetrics m(scale);
+  return m.pad + static_cast<int>(l.title.size()) * m.line_h + m.pad +
+         m.line_h + 60 * scale + (l.swatch ? m.pad + m.swatch_h : 0) + m.pad;
+}
+
+// Draws the legend in the column [x0, x0 + LegendWidth) of `image`, over
+// rows [0, height).
+void DrawLegend(Image& image, int x0, int height, const Legend& l, int scale,
+                Box* bar_out, Box* swatch_out) {
+  const LegendMetrics m(scale);
+  int y = m.pad;
+  for (const std::string& line : l.title) {
+    DrawText(image, x0 + m.pad, y, line, kInk, scale);
+    y += m.line_h;
+  }
+  // Half a label above the top tick and below the bottom one.
+  Box bar;
+  bar.x0 = x0 + m.pad;
+  bar.x1 = bar.x0 + m.bar_w;
+  bar.y0 = y + m.pad + m.line_h / 2;
+  bar.y1 = height - m.pad - m.line_h / 2 - (l.swatch ? m.pad + m.swatch_h : 0);
+  const int h = bar.y1 - bar.y0;
+  for (int py = bar.y0; py < bar.y1; ++py) {
+    const double t = h > 1 ? double(bar.y1 - 1 - py) / (h - 1) : 0.5;
+    image.FillRect(bar.x0, py, bar.x1, py + 1, l.color(t));
+  }
+  // Frame around the bar, outside it.
+  image.FillRect(bar.x0 - 1, bar.y0 - 1, bar.x1 + 1, bar.y0, kInk);
+  image.FillRect(bar.x0 - 1, bar.y1, bar.x1 + 1, bar.y1 + 1, kInk);
+  image.FillRect(bar.x0 - 1, bar.y0, bar.x0, bar.y1, kInk);
+  image.FillRect(bar.x1, bar.y0, bar.x1 + 1, bar.y1, kInk);
+  // Every tick gets a mark; labels are thinned so that they do not overlap.
+  int last_label_y = 1 << 30;
+  for (size_t k = 0; k < l.ticks.size(); ++k) {
+    const double t = l.ticks[k].first;
+    const int ty = bar.y1 - 1 - static_cast<int>(std::lround(t * (h - 1)));
+    image.FillRect(bar.x1, ty - scale / 2, bar.x1 + m.tick_len,
+                   ty - scale / 2 + scale, kInk);
+    if (last_label_y - ty < m.line_h) continue;
+    DrawText(image, bar.x1 + m.tick_len + m.label_gap,
+             ty - kGlyphAscent * scale / 2, l.ticks[k].second, kInk, scale);
+    last_label_y = ty;
+  }
+  Box sw;
+  if (l.swatch) {
+    sw.x0 = bar.x0;
+    sw.x1 = bar.x1;
+    sw.y0 = bar.y1 + m.pad + m.line_h / 2;
+    sw.y1 = sw.y0 + m.swatch_h;
+    image.FillRect(sw.x0 - 1, sw.y0 - 1, sw.x1 + 1, sw.y1 + 1, kInk);
+    image.FillRect(sw.x0, sw.y0, sw.x1, sw.y1, l.swatch_color);
+    DrawText(image, sw.x1 + m.tick_len + m.label_gap,
+             (sw.y0 + sw.y1) / 2 - kGlyphAscent * scale / 2, l.swatch_label,
+             kInk, scale);
+  }
+  if (bar_out != nullptr) *bar_out = bar;
+  if (swatch_out != nullptr) *swatch_out = sw;
+}
+
+// Font scale for a picture whose longer side is `side` pixels: labels stay
+// about 1-2% of the picture.
+int FontScale(int side) { return std::clamp((side + 300) / 600, 2, 5); }
+
+absl::Status CheckSides(int min_side, int max_side) {
+  if (max_side < 2 || max_side > (1 << 15) || min_side < 0 ||
+      min_side > max_side) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "image sides must satisfy 0 <= min_side <= max_side, 2 <= max_side "
+        "<= 32768; got min_side %d, max_side %d",
+        min_side, max_side));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+PixelFrame ReliefFrame(const StockSpec& spec, const ReliefOptions& options) {
+  const GridGeometry g(spec);
+  const double w = spec.x1 - spec.x0, h = spec.y1 - spec.y0;
+  const double longer = std::max(w, h);
+  // Square pixels of one node spacing (the finer one), then clamped so the
+  // longer side has between min_side and max_side pixels.
+  double p = std::min(g.dx(), g.dy());
+  if (options.min_side >= 2) p = std::min(p, longer / (options.min_side - 1));
+  p = std::max(p, longer / (std::max(options.max_side, 2) - 1));
+  PixelFrame f;
+  f.width = std::max(2, static_cast<int>(std::lround(w / p)) + 1);
+  f.height = std::max(2, static_cast<int>(std::lround(h / p)) + 1);
+  f.x0 = spec.x0;
+  f.y1 = spec.y1;
+  f.sx = w / (f.width - 1);
+  f.sy = h / (f.height - 1);
+  return f;
+}
+
+absl::Status CheckPictureSides(int min_side, int max_side) {
+  return CheckSides(min_side, max_side);
+}
+
+ReliefSampler::ReliefSampler(const StockSpec& spec, const PixelFrame& frame)
+    : spec_(spec), frame_(frame) {
+  const GridGeometry g(spec);
+  row_element_.resize(frame.height);
+  for (int py = 0; py < frame.height; ++py) {
+    // As SurfaceGrid::HeightAndGradient clamps and looks up.
+    row_element_[py] = g.ElementY(std::clamp(frame.Y(py), spec.y0, spec.y1));
+  }
+  const size_t n = static_cast<size_t>(frame.width) * frame.height;
+  height_.assign(n, 0);
+  shade_.assign(n, 1);
+  row_min_.assign(frame.height, spec.z_top);
+}
+
+void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
+  const PixelFrame& f = frame_;
+  const double z_top = spec_.z_top;
+  std::vector<int> rows;
+  for (int py = 0; py < f.height; ++py) {
+    if (row_element_[py] >= e0 && row_element_[py] < e1) rows.push_back(py);
+  }
+  // Blocks of rows, each with one sampler: neighbouring rows share nodes.
+  constexpr int kBlockRows = 16;
+  const int64_t blocks =
+      (static_cast<int64_t>(rows.size()) + kBlockRows - 1) / kBlockRows;
+  ThreadPool::Default().ParallelFor(blocks, [&](int64_t block) {
+    SurfaceSampler sampler(band);
+    const size_t r0 = static_cast<size_t>(block) * kBlockRows;
+    const size_t r1 = std::min(rows.size(), r0 + kBlockRows);
+    for (size_t r = r0; r < r1; ++r) {
+      const int py = rows[r];
+      const double y = f.Y(py);
+      double lo = z_top;
+      for (int px = 0; px < f.width; ++px) {
+        double gx, gy;
+        const double z = sampler.HeightAndGradient(f.X(px), y, &gx, &gy);
+        const double dot = (-gx * kLightX - gy * kLightY + kLightZ) /
+                           std::sqrt(gx * gx + gy * gy + 1);
+        const size_t k = static_cast<size_t>(py) * f.width + px;
+        // Stored relative to the top in float: depth resolution ~1e-7 of
+        // it.
+        height_[k] = static_cast<float>(z - z_top);
+        shade_[k] = static_cast<float>(
+            kAmbient + (1 - kAmbient) * std::max(dot, 0.0) / kLightZ);
+        lo = std::min(lo, z);
+      }
+      row_min_[py] = lo;
+    }
+  });
+}
+
+void ReliefSampler::ColorRow(int py, uint8_t* rgb) const {
+  if (depth_ < 0) {
+    // The tint needs the lowest height: known once every row is sampled.
+    depth_ = spec_.z_top - *std::min_element(row_min_.begin(), row_min_.end());
+  }
+  const double depth = depth_;
+  for (int px = 0; px < frame_.width; ++px) {
+    const size_t k = static_cast<size_t>(py) * frame_.width + px;
+    // Only what lies exactly at the top is untouched stock.
+    const Rgb base =
+        height_[k] < 0 ? HeightTint(1 + height_[k] / depth) : kStockColor;
+    const double s = std::isfinite(shade_[k]) ? shade_[k] : 1.0;
+    const Rgb c = Scale(base, s);
+    rgb[3 * px] = c.r;
+    rgb[3 * px + 1] = c.g;
+    rgb[3 * px + 2] = c.b;
+  }
+}
+
+Image ReliefSampler::ToImage() const {
+  Image image(frame_.width, frame_.height, 3);
+  ColorRow(0, image.row(0));  // sets depth_ before the threads read it
+  ThreadPool::Default().ParallelFor(frame_.height, [&](int64_t py) {
+    ColorRow(static_cast<int>(py), image.row(static_cast<int>(py)));
+  });
+  return image;
+}
+
+absl::StatusOr<Image> RenderRelief(const SurfaceGrid& grid,
+                                   const ReliefOptions& options) {
+  if (absl::Status st = grid.Validate(); !st.ok()) return st;
+  if (absl::Status st = CheckSides(options.min_side, options.max_side);
+      !st.ok()) {
+    return st;
+  }
+  ReliefSampler sampler(grid.spec, ReliefFrame(grid.spec, options));
+  sampler.AddBand(grid, 0, grid.spec.ny);
+  return sampler.ToImage();
+}
+
+Rgb ErrorColor(double error, double lo, double hi) {
+  if (!std::isfinite(error) || error < 0) return kInvalidErrorColor;
+  if (error == 0) return kZeroErrorColor;
+  return Viridis(std::log(error / lo) / std::log(hi / lo));
+}
+
+absl::StatusOr<Image> RenderErrorMap(const ErrorRaster& raster,
+                                     const ErrorMapOptions& options,
+                                     ErrorMapLayout* layout) {
+  const Rect& r = raster.region;
+  if (raster.cols <= 0 || raster.rows <= 0 ||
+      static_cast<int64_t>(raster.max_error.size()) !=
+          int64_t{raster.cols} * raster.rows) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "error raster of %d x %d cells holds %d values", raster.cols,
+        raster.rows, raster.max_error.size()));
+  }
+  if (!(std::isfinite(r.x0) && std::isfinite(r.x1) && std::isfinite(r.y0) &&
+        std::isfinite(r.y1) && r.x1 > r.x0 && r.y1 > r.y0)) {
+    return absl::InvalidArgumentError(
+        "error raster region must be finite and non-empty");
+  }
+  if (!(options.min_error > 0 && std::isfinite(options.min_error))) {
+    return absl::InvalidArgumentError("min_error must be finite and > 0");
+  }
+  if (absl::Status st = CheckSides(options.min_side, options.max_side);
+      !st.ok()) {
+    return st;
+  }
+  double max_error = 0;
+  for (float v : raster.max_error) {
+    if (std::isfinite(v)) max_error = std::max(max_error, double{v});
+  }
+  const double lo = options.min_error;
+  const double hi = std::max(max_error, 10 * lo);
+
+  // Map size: square pixels, the longer side's cell count clamped.
+  const double w = r.x1 - r.x0, h = r.y1 - r.y0;
+  const int cells_long = w >= h ? raster.cols : raster.rows;
+  const int n_long =
+      std::clamp(cells_long, std::max(options.min_side, 1), options.max_side);
+  const double p = std::max(w, h) / n_long;
+  const int mw = std::max(1, static_cast<int>(std::lround(w / p)));
+  const int mh = std::max(1, static_cast<int>(std::lround(h / p)));
+
+  Legend legend;
+  legend.title = {"error (mm)", "max " + FormatSci(max_error)};
+  legend.color = [](double t) { return Viridis(t); };
+  const double span = std::log(hi / lo);
+  // The tolerance keeps a decade whose bound is a float's rounding of it.
+  for (int k = static_cast<int>(std::ceil(std::log10(lo) - 1e-6));
+       k <= static_cast<int>(std::floor(std::log10(hi) + 1e-6)); ++k) {
+    const double t = std::clamp(std::log(std::pow(10.0, k) / lo) / span, 0.0,
+                                1.0);
+    legend.ticks.emplace_back(t, PowerOfTenLabel(k));
+  }
+  legend.swatch = true;
+  legend.swatch_color = kZeroErrorColor;
+  legend.swatch_label = "0";
+  const int scale = FontScale(std::max(mw, mh));
+  const int gap = 4 * scale;
+  const int legend_x0 = mw + gap;
+  const int width = legend_x0 + LegendWidth(legend, scale);
+  const int height = std::max(mh, LegendMinHeight(legend, scale));
+
+  Image image(width, height, 3, kWhite);
+  // Each pixel takes the max over the cells it overlaps: blown up when the
+  // raster is coarse, max-pooled (so no peak is lost) when it is fine.
+  const int64_t cols = raster.cols, rows = raster.rows;
+  ThreadPool::Default().ParallelFor(mh, [&](int64_t py) {
+    const int64_t q = mh - 1 - py;  // rows count from the bottom
+    const int64_t r0 = q * rows / mh;
+    const int64_t r1 = std::max(r0 + 1, ((q + 1) * rows + mh - 1) / mh);
+    for (int64_t px = 0; px < mw; ++px) {
+      const int64_t c0 = px * cols / mw;
+      const int64_t c1 = std::max(c0 + 1, ((px + 1) * cols + mw - 1) / mw);
+      double v = 0;
+      for (int64_t rr = r0; rr < r1; ++rr) {
+        for (int64_t c = c0; c < c1; ++c) {
+          const double e = raster.max_error[rr * cols + c];
+          // An invalid value must show: it wins over every valid one.
+          if (!(std::isfinite(e) && e >= 0)) {
+            v = e;
+            rr = r1;
+            break;
+          }
+          v = std::max(v, e);
+        }
+      }
+      image.Set(static_cast<int>(px), static_cast<int>(py),
+                ErrorColor(v, lo, hi));
+    }
+  });
+  Box bar, sw;
+  DrawLegend(image, legend_x0, height, legend, scale, &bar, &sw);
+  if (layout != nullptr) {
+    layout->map_width = mw;
+    layout->map_height = mh;
+    layout->bar_x0 = bar.x0;
+    layout->bar_y0 = bar.y0;
+    layout->bar_x1 = bar.x1;
+    layout->bar_y1 = bar.y1;
+    layout->zero_x0 = sw.x0;
+    layout->zero_y0 = sw.y0;
+    layout->zero_x1 = sw.x1;
+    layout->zero_y1 = sw.y1;
+    layout->legend_x0 = legend_x0;
+    layout->lo = lo;
+    layout->hi = hi;
+    layout->ticks.clear();
+    for (const auto& [t, label] : legend.ticks) {
+      layout->ticks.push_back(lo * std::exp(t * span));
+    }
+  }
+  return image;
+}
+
+namespace {
+
+// A segment in pixel coordinates with the mark angle at both ends.
+struct PixelSegment {
+  double ax, ay, bx, by;
+  double angle_a, angle_b;
+};
+
+// Anti-aliased stroke: each pixel's coverage is how far its centre lies
+// inside the stroke's edge (a one-pixel ramp), which is cheap and good
+// enough for lines of a few pixels.
+// The rows a stroke of `width` may touch, [*y0, *y1] within [0, max_y).
+void StrokeRows(const PixelSegment& s, double width, int max_y, int* y0,
+                int* y1) {
+  const double half = width / 2;
+  *y0 = std::max(0, static_cast<int>(std::floor(
+                        std::min(s.ay, s.by) - half - 1)));
+  *y1 = std::min(max_y - 1, static_cast<int>(std::ceil(
+                                std::max(s.ay, s.by) + half + 1)));
+}
+
+// Draws the stroke's pixels in rows [row0, row1) only: a pixel's blends
+// happen in segment order whichever band draws it, so bands of rows can be
+// drawn at once with the same result.
+void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
+            double width, bool halo, int row0, int row1) {
+  const double half = width / 2;
+  const int x0 = std::max(0, static_cast<int>(std::floor(
+                                 std::min(s.ax, s.bx) - half - 1)));
+  const int x1 = std::min(max_x - 1, static_cast<int>(std::ceil(
+                                         std::max(s.ax, s.bx) + half + 1)));
+  int y0, y1;
+  StrokeRows(s, width, max_y, &y0, &y1);
+  y0 = std::max(y0, row0);
+  y1 = std::min(y1, row1 - 1);
+  const double dx = s.bx - s.ax, dy = s.by - s.ay;
+  const double len2 = dx * dx + dy * dy;
+  // Pixels at squared distance r2 or more have no coverage: sqrt is
+  // monotonic and sqrt(fl(r * r)) == r, so sqrt(d2) >= r there.
+  const double r = half + 0.5, r2 = r * r;
+  const double seg_x0 = std::min(s.ax, s.bx), seg_x1 = std::max(s.ax, s.bx);
+  const double seg_y0 = std::min(s.ay, s.by), seg_y1 = std::max(s.ay, s.by);
+  const double len = std::sqrt(len2);
+  for (int py = y0; py <= y1; ++py) {
+    // The row's pixels that can be within r of the segment: within r of
+    // its box, and of its line. A pixel more off than that fails the test
+    // below anyway; the bounds are widened by a pixel against rounding, so
+    // the same pixels are drawn, in the same order, with fewer tests.
+    const double off_y = std::max({0.0, seg_y0 - py, py - seg_y1});
+    if (off_y > r + 1) continue;
+    const double reach = std::sqrt(std::max(0.0, r2 - off_y * off_y));
+    double lo = seg_x0 - reach, hi = seg_x1 + reach;
+    if (std::fabs(dy) * 8 > len) {
+      // |cross((px, py) - a, d)| < r len: px within r len / |dy| of where
+      // the line crosses the row.
+      const double at = s.ax + (py - s.ay) * dx / dy;
+      const double w = r * len / std::fabs(dy);
+      lo = std::max(lo, at - w);
+      hi = std::min(hi, at + w);
+    }
+    const int row_x0 = std::max(x0, static_cast<int>(std::floor(lo)) - 1);
+    const int row_x1 = std::min(x1, static_cast<int>(std::ceil(hi)) + 1);
+    for (int px = row_x0; px <= row_x1; ++px) {
+      double t = len2 > 0 ? ((px - s.ax) * dx + (py - s.ay) * dy) / len2 : 0;
+      t = std::clamp(t, 0.0, 1.0);
+      const double ex = s.ax + t * dx - px, ey = s.ay + t * dy - py;
+      const double d2 = ex * ex + ey * ey;
+      if (d2 >= r2) continue;
+      const double coverage = r - std::sqrt(d2);
+      if (coverage <= 0) continue;
+      const Rgb c = halo ? kHalo
+                         : AngleColor(s.angle_a + t * (s.angle_b - s.angle_a));
+      image.Blend(px, py, c, halo ? 0.75 * std::min(coverage, 1.0) : coverage);
+    }
+  }
+}
+
+}  // namespace
+
+namespace {
+
+// DrawMarks with the relief's pixel rows from relief_row(y, rgb).
+absl::StatusOr<Image> DrawMarksOver(
+    const std::function<void(int, uint8_t*)>& relief_row,
+    const PixelFrame& frame, const std::vector<MarkPolyline>& marks,
+    const MarksPictureOptions& options) {
+  if (!(options.line_width_px >= 0 && options.line_width_px <= 100)) {
+    return absl::InvalidArgumentError("line_width_px must be in [0, 100]");
+  }
+  // Each segment as its polyline and first vertex (8 bytes, not the 48 of
+  // its pixel coordinates and angles: a detailed job has millions), its
+  // PixelSegment computed where it is drawn.
+  struct SegmentRef {
+    uint32_t polyline, k;
+  };
+  std::vector<SegmentRef> segments;
+  for (size_t q = 0; q < marks.size(); ++q) {
+    const MarkPolyline& p = marks[q];
+    const size_t n = p.vertices.size();
+    if (p.angle_deg.size() != n) {
+      return absl::InvalidArgumentError(absl::StrFormat(
+          "mark polyline with %d vertices has %d angles", n,
+          p.angle_deg.size()));
+    }
+    const size_t ends = p.closed && n > 2 ? n : (n > 0 ? n - 1 : 0);
+    for (size_t k = 0; k < ends || (n == 1 && k == 0); ++k) {
+      segments.push_back(
+          {static_cast<uint32_t>(q), static_cast<uint32_t>(k)});
+    }
+  }
+  auto segment = [&](const SegmentRef& r) {
+    const MarkPolyline& p = marks[r.polyline];
+    const size_t n = p.vertices.size();
+    const size_t a = r.k, b = n == 1 ? 0 : (r.k + 1) % n;
+    return PixelSegment{frame.PixelX(p.vertices[a].x),
+                        frame.PixelY(p.vertices[a].y),
+                        frame.PixelX(p.vertices[b].x),
+                        frame.PixelY(p.vertices[b].y), p.angle_deg[a],
+                        p.angle_deg[b]};
+  };
+  for (const SegmentRef& r : segments) {
+    const PixelSegment s = segment(r);
+    if (!(std::isfinite(s.ax) && std::isfinite(s.ay) && std::isfinite(s.bx) &&
+          std::isfinite(s.by))) {
+      return absl::InvalidArgumentError("mark vertex is not finite");
+    }
+  }
+
+  const int side = std::max(frame.width, frame.height);
+  const double width = options.line_width_px > 0
+                           ? options.line_width_px
+                           : std::max(2.0, side / 600.0);
+  Legend legend;
+  legend.title = {"mark angle", "(deg)"};
+  legend.color = [](double t) { return AngleColor(t * kAngleScaleMaxDeg); };
+  for (int a = 0; a <= kAngleScaleMaxDeg; a += 15) {
+    legend.ticks.emplace_back(
+        a / kAngleScaleMaxDeg,
+        a == kAngleScaleMaxDeg ? absl::StrCat(a, "+") : absl::StrCat(a));
+  }
+  const int scale = FontScale(side);
+  const int legend_x0 = frame.width + 4 * scale;
+  Image image(legend_x0 + LegendWidth(legend, scale),
+              std::max(frame.height, LegendMinHeight(legend, scale)), 3,
+              kWhite);
+  for (int y = 0; y < frame.height; ++y) relief_row(y, image.row(y));
+  // All halos first, so that no halo covers an earlier line's colour. In
+  // bands of rows at once, each band's segments in their order (a halo's
+  // rows hold its line's).
+  constexpr int kBandRows = 32;
+  const int bands = (frame.height + kBandRows - 1) / kBandRows;
+  std::vector<std::vector<uint32_t>> band_segments(bands);
+  for (size_t k = 0; k < segments.size(); ++k) {
+    int y0, y1;
+    StrokeRows(segment(segments[k]), width + 2, frame.height, &y0, &y1);
+    for (int b = y0 / kBandRows; b <= y1 / kBandRows && b < bands; ++b) {
+      band_segments[b].push_back(static_cast<uint32_t>(k));
+    }
+  }
+  ThreadPool::Default().ParallelFor(bands, [&](int64_t b) {
+    const int row0 = static_cast<int>(b) * kBandRows;
+    const int row1 = std::min(frame.height, row0 + kBandRows);
+    for (uint32_t k : band_segments[b]) {
+      Stroke(image, frame.width, frame.height, segment(segments[k]), width + 2,
+             true, row0, row1);
+    }
+    for (uint32_t k : band_segments[b]) {
+      Stroke(image, frame.width, frame.height, segment(segments[k]), width,
+             false, row0, row1);
+    }
+  });
+  DrawLegend(image, legend_x0, image.height(), legend, scale, nullptr,
+             nullptr);
+  return image;
+}
+
+}  // namespace
+
+absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
+                                const std::vector<MarkPolyline>& marks,
+                                const MarksPictureOptions& options) {
+  if (relief.width() != frame.width || relief.height() != frame.height ||
+      relief.channels() != 3) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "relief of %d x %d (%d channels) does not match the %d x %d RGB frame",
+        relief.width(), relief.height(), relief.channels(), frame.width,
+        frame.height));
+  }
+  return DrawMarksOver(
+      [&](int y, uint8_t* out) {
+        std::copy(relief.row(y), relief.row(y) + 3 * frame.width, out);
+      },
+      frame, marks, options);
+}
+
+absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
+                                const std::vector<MarkPolyline>& marks,
+                                const MarksPictureOptions& options) {
+  return DrawMarksOver(
+      [&](int y, uint8_t* out) { relief.ColorRow(y, out); }, relief.frame(),
+      marks, options);
+}
+
+absl::StatusOr<Image> RenderMarks(const SurfaceGrid& grid,
+                                  const std::vector<MarkPolyline>& marks,
+                                  const MarksPictureOptions& options,
+                                  const Image* drawn,
+                                  const ReliefOptions& drawn_with) {
+  const PixelFrame frame = ReliefFrame(grid.spec, options.relief);
+  if (drawn != nullptr && frame == ReliefFrame(grid.spec, drawn_with)) {
+    return DrawMarks(*drawn, frame, marks, options);
+  }
+  absl::StatusOr<Image> relief = RenderRelief(grid, options.relief);
+  if (!relief.ok()) return relief.status();
+  return DrawMarks(*relief, frame, marks, options);
+}
+
+}  // namespace swarf::cli

@@ -1,0 +1,170 @@
+// The pictures of `swarf run`: relief.png (the machined surface, hill-shaded
+// and tinted by height), error.png (where the scheme's error is, log scale
+// with a legend) and marks.png (the cutting marks over the relief).
+//
+// Contract:
+// - North up: image row 0 is the largest y, column 0 the smallest x.
+// - Pixels are square in mm (up to rounding of the pixel counts).
+// - Thread safety: the functions only read their inputs; they run their row
+//   loops on ThreadPool::Default().
+#ifndef SWARF_CLIENT_PICTURES_H_
+#define SWARF_CLIENT_PICTURES_H_
+
+#include <cstdint>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "client/outputs/png_image.h"
+#include "client/outputs/surface_grid.h"
+#include "core/cutting_marks.h"
+#include "core/geometry.h"
+#include "core/stock.h"
+
+namespace swarf::cli {
+
+// Where pixel centres lie on the stock: pixel (px, py) samples
+// (x0 + px * sx, y1 - py * sy), so the outer pixel centres sit on the stock
+// edges and corners.
+struct PixelFrame {
+  int width = 0, height = 0;
+  double x0 = 0, y1 = 0;  // mm, the centre of pixel (0, 0)
+  double sx = 0, sy = 0;  // mm per pixel
+  double X(double px) const { return x0 + px * sx; }
+  double Y(double py) const { return y1 - py * sy; }
+  double PixelX(double x) const { return (x - x0) / sx; }
+  double PixelY(double y) const { return (y1 - y) / sy; }
+  friend bool operator==(const PixelFrame&, const PixelFrame&) = default;
+};
+
+struct ReliefOptions {
+  // Pixels along the stock's longer side: at most max_side; by default one
+  // pixel per node spacing (never finer than the grid), or at least
+  // min_side when that is larger (the reconstruction sampled between nodes;
+  // still capped by max_side).
+  int max_side = 1600;
+  int min_side = 0;
+};
+
+// The frame RenderRelief uses. Needs a valid spec and max_side >= 2.
+PixelFrame ReliefFrame(const StockSpec& spec, const ReliefOptions& options);
+
+// InvalidArgument unless 0 <= min_side <= max_side and 2 <= max_side <=
+// 32768.
+absl::Status CheckPictureSides(int min_side, int max_side);
+
+// RenderRelief's pixels sampled band by band (GridBands), then coloured:
+// pixel row py samples element row ElementY(clamped Y(py)), so each row is
+// sampled from the one band that lists it, as from the whole grid. Holds a
+// height and a shade (float) per pixel: memory bounded by the frame, not
+// the grid. AddBand runs its rows on ThreadPool::Default(); not otherwise
+// thread-safe.
+class ReliefSampler {
+ public:
+  ReliefSampler(const StockSpec& spec, const PixelFrame& frame);
+  const PixelFrame& frame() const { return frame_; }
+  // Samples the pixel rows of element rows [e0, e1) from `band`.
+  void AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1);
+  // After every band: pixel row py as RGB (3 * width bytes), as
+  // RenderRelief colours it.
+  void ColorRow(int py, uint8_t* rgb) const;
+  Image ToImage() const;
+
+ private:
+  StockSpec spec_;
+  PixelFrame frame_;
+  std::vector<int32_t> row_element_;  // per pixel row
+  std::vector<float> height_, shade_;
+  std::vector<double> row_min_;
+  mutable double depth_ = -1;  // computed on the first ColorRow
+};
+
+// Hill-shaded relief: the reconstruction's normal lit from the upper left
+// (azimuth north-west, 45 degrees up; a flat surface keeps its colour), times
+// a height tint from dark blue (lowest point) to pale cream (just below the
+// top); untouched stock (height == z_top) is kStockColor. RGB.
+// InvalidArgument for an invalid grid or options.
+absl::StatusOr<Image> RenderRelief(const SurfaceGrid& grid,
+                                   const ReliefOptions& options = {});
+
+// The service's error map: cols x rows cells over `region`, row-major, cell
+// (0, 0) at (region.x0, region.y0), each the max |w - w_exact| (mm) of the
+// samples in it, 0 where none fell.
+struct ErrorRaster {
+  Rect region;
+  int32_t cols = 0, rows = 0;
+  std::vector<float> max_error;
+};
+
+struct ErrorMapOptions {
+  // Bottom of the log colour scale (mm): smaller non-zero errors take its
+  // colour. The top is the raster's max (10 min_error if smaller).
+  double min_error = 1e-6;
+  // Pixels along the region's longer side: the cell count clamped to
+  // [min_side, max_side] (cells are blown up or max-pooled).
+  int max_side = 1600;
+  int min_side = 600;
+};
+
+// Colours of error.png: zero error, and cells with a non-finite or negative
+// value.
+inline constexpr Rgb kZeroErrorColor = {228, 228, 228};
+inline constexpr Rgb kInvalidErrorColor = {255, 0, 255};
+
+// The colour of an error value on a log scale [lo, hi] (viridis).
+Rgb ErrorColor(double error, double lo, double hi);
+
+// Where things are in error.png, for callers and tests. Boxes are
+// [x0, x1) x [y0, y1) in image pixels.
+struct ErrorMapLayout {
+  int map_width = 0, map_height = 0;  // the map at the image's top-left
+  int bar_x0 = 0, bar_y0 = 0, bar_x1 = 0, bar_y1 = 0;  // colour bar, hi on top
+  int zero_x0 = 0, zero_y0 = 0, zero_x1 = 0, zero_y1 = 0;  // zero swatch
+  int legend_x0 = 0;  // legend panel's left edge
+  double lo = 0, hi = 0;  // the colour scale (mm)
+  std::vector<double> ticks;  // labelled powers of ten (mm)
+};
+
+// The error map with its legend to the right: title "error mm", the max
+// value, a vertical colour bar with power-of-ten tick labels ("1e-6") and a
+// swatch for zero. InvalidArgument for a raster whose size does not match
+// cols * rows, an empty or non-finite region, or bad options.
+absl::StatusOr<Image> RenderErrorMap(const ErrorRaster& raster,
+                                     const ErrorMapOptions& options = {},
+                                     ErrorMapLayout* layout = nullptr);
+
+struct MarksPictureOptions {
+  // The relief under the marks; sampled finer than the grid by default so
+  // that the lines read well on coarse grids.
+  ReliefOptions relief = {.max_side = 1600, .min_side = 1000};
+  // Stroke width in pixels; 0: about 1/600 of the longer side, at least 2.
+  double line_width_px = 0;
+};
+
+// The cutting marks drawn over a relief rendered in `frame` (anti-aliased,
+// with a dark halo so that they read on light and dark ground), coloured by
+// AngleColor of the angle interpolated along each segment, plus an angle
+// legend to the right of the relief (relief at the image's top-left).
+// `relief` must have frame's size.
+absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
+                                const std::vector<MarkPolyline>& marks,
+                                const MarksPictureOptions& options = {});
+
+// The same over a relief sampled (every band added), coloured straight
+// into the picture (no copy of the relief).
+absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
+                                const std::vector<MarkPolyline>& marks,
+                                const MarksPictureOptions& options = {});
+
+// RenderRelief(grid, options.relief) then DrawMarks. A relief already
+// rendered (`drawn`, by RenderRelief(grid, drawn_with)) serves instead when
+// its frame is the same (with the defaults, grids of about 1000 nodes and
+// more per side); not owned, may be null.
+absl::StatusOr<Image> RenderMarks(const SurfaceGrid& grid,
+                                  const std::vector<MarkPolyline>& marks,
+                                  const MarksPictureOptions& options = {},
+                                  const Image* drawn = nullptr,
+                                  const ReliefOptions& drawn_with = {});
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_PICTURES_H_

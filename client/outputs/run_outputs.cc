@@ -1,0 +1,302 @@
+#include "client/outputs/run_outputs.h"
+
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <functional>
+#include <future>
+#include <algorithm>
+#include <array>
+#include <optional>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "client/outputs/marks_files.h"
+#include "client/outputs/png_image.h"
+#include "core/workpiece.h"
+
+namespace swarf::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Files built and written one after the other, each timed; stops at the
+// first error.
+class Chain {
+ public:
+  explicit Chain(std::string base) : base_(std::move(base)) {}
+  // `earlier`: seconds already spent on this file (its share of the pass
+  // over the grid).
+  void Then(const std::string& name,
+            const std::function<absl::Status(const std::string&)>& write,
+            double earlier = 0) {
+    if (!status_.ok()) return;
+    const auto t0 = Clock::now();
+    status_ = write(base_ + name);
+    if (status_.ok()) written_.push_back({base_ + name, earlier + Since(t0)});
+  }
+  absl::Status status() const { return status_; }
+  const std::vector<WrittenFile>& written() const { return written_; }
+
+ private:
+  const std::string base_;
+  absl::Status status_;
+  std::vector<WrittenFile> written_;
+};
+
+// The lattice's heights at subdivision 1 (the nodes' heights, capped at the
+// top, as FillLatticeRows sets them) read again from the grid's tile rows,
+// heights only. The adaptive mesh asks for root rows in increasing order
+// (a window is a tile row and the next one's first rows): the last tile
+// rows read are kept, so a pass reads each tile row once.
+class GridRows : public LatticeWindows {
+ public:
+  GridRows(GridBands& grid, SurfaceGrid band)
+      : grid_(grid), band_(std::move(band)) {}
+  absl::StatusOr<const double*> Rows(int64_t j0, int64_t j1) override {
+    const int32_t nx = band_.nodes_x(), ny = band_.spec.ny;
+    z_.resize(static_cast<size_t>(j1 - j0 + 1) * nx);
+    for (int64_t t = j0 / kTileSize; t <= j1 / kTileSize; ++t) {
+      absl::StatusOr<const std::vector<double>*> tile_row = TileRow(t);
+      if (!tile_row.ok()) return tile_row.status();
+      const int64_t a = std::max(j0, t * kTileSize);
+      const int64_t b = std::min<int64_t>(j1, t * kTileSize + kTileSize - 1);
+      std::copy_n((*tile_row)->begin() + (a - t * kTileSize) * nx,
+                  (b - a + 1) * nx, z_.begin() + (a - j0) * nx);
+    }
+    (void)ny;
+    return z_.data();
+  }
+
+ private:
+  absl::StatusOr<const std::vector<double>*> TileRow(int64_t t) {
+    for (const auto& [held, z] : held_) {
+      if (held == t) return &z;
+    }
+    const int32_t nx = band_.nodes_x();
+    const int32_t j0 = static_cast<int32_t>(t * kTileSize);
+    const int32_t j1 = std::min(band_.spec.ny, j0 + kTileSize - 1);
+    if (absl::Status st = grid_.ReadRows(j0, j1, &band_,
+                                         /*heights_only=*/true);
+        !st.ok()) {
+      return st;
+    }
+    auto& [held, z] = held_[next_];
+    next_ = (next_ + 1) % held_.size();
+    held = t;
+    z.resize(static_cast<size_t>(j1 - j0 + 1) * nx);
+    const double z_top = band_.spec.z_top;
+    for (int32_t j = j0; j <= j1; ++j) {
+      for (int32_t i = 0; i < nx; ++i) {
+        z[static_cast<size_t>(j - j0) * nx + i] =
+            std::min(band_.jet(i, j).w, z_top);
+      }
+    }
+    return &z;
+  }
+
+  GridBands& grid_;
+  SurfaceGrid band_;
+  std::vector<double> z_;
+  std::array<std::pair<int64_t, std::vector<double>>, 3> held_ = {
+      {{-1, {}}, {-1, {}}, {-1, {}}}};
+  size_t next_ = 0;
+};
+
+}  // namespace
+
+absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
+    const std::string& dir, const SurfaceGrid& grid, const ErrorRaster* error,
+    const std::vector<MarkPolyline>* marks, const RunOutputOptions& options,
+    RunOutputSummary* summary) {
+  if (absl::Status st = grid.Validate(); !st.ok()) return st;
+  InMemoryBands bands(grid);
+  return WriteRunOutputs(dir, bands, error, marks, options, summary);
+}
+
+absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
+    const std::string& dir, GridBands& grid, const ErrorRaster* error,
+    const std::vector<MarkPolyline>* marks, const RunOutputOptions& options,
+    RunOutputSummary* summary) {
+  const std::string base = dir.empty() || dir.back() == '/' ? dir : dir + "/";
+  const StockSpec spec = grid.spec();
+  if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
+  if (absl::Status st = CheckPictureSides(options.relief.min_side,
+                                          options.relief.max_side);
+      !st.ok()) {
+    return st;
+  }
+  if (marks != nullptr) {
+    if (absl::Status st = CheckPictureSides(options.marks.relief.min_side,
+                                            options.marks.relief.max_side);
+        !st.ok()) {
+      return st;
+    }
+  }
+  // What the pass over the bands fills: the relief's pixels, the marks
+  // picture's when its frame differs, the mesh lattice.
+  std::optional<ReliefSampler> relief;
+  relief.emplace(spec, ReliefFrame(spec, options.relief));
+  std::optional<ReliefSampler> marks_relief;
+  const PixelFrame marks_frame = ReliefFrame(spec, options.marks.relief);
+  if (marks != nullptr && !(marks_frame == relief->frame())) {
+    marks_relief.emplace(spec, marks_frame);
+  }
+  // On the nodes (subdivision 1) the meshes read the lattice's heights
+  // again from the grid (a root row, or 64 rows, at a time) instead of
+  // holding them: 8 bytes a node less.
+  const bool reread = options.mesh.subdivision == 1;
+  absl::StatusOr<LatticeHeights> lattice =
+      NewLattice(spec, options.mesh.subdivision, /*heights=*/!reread);
+  if (!lattice.ok()) return lattice.status();
+  std::optional<GridRows> rows;
+  if (reread) {
+    auto band = SurfaceGrid::Band(spec, grid.scheme(), 0, 1);
+    if (!band.ok()) return band.status();
+    rows.emplace(grid, *std::move(band));
+  }
+  double relief_s = 0, marks_relief_s = 0, lattice_s = 0;
+  const auto pass0 = Clock::now();
+  absl::Status pass = grid.ForEach(
+      [&](const SurfaceGrid& band, int32_t e0, int32_t e1) {
+        auto t = Clock::now();
+        relief->AddBand(band, e0, e1);
+        relief_s += Since(t);
+        if (marks_relief) {
+          t = Clock::now();
+          marks_relief->AddBand(band, e0, e1);
+          marks_relief_s += Since(t);
+        }
+        t = Clock::now();
+        FillLatticeRows(band, e0, e1, &*lattice);
+        lattice_s += Since(t);
+        return absl::OkStatus();
+      });
+  if (!pass.ok()) return pass;
+  const double pass_s = Since(pass0);
+  if (summary != nullptr) {
+    summary->pass_seconds = pass_s;
+    summary->read_seconds =
+        std::max(0.0, pass_s - relief_s - marks_relief_s - lattice_s);
+  }
+
+  // Three independent chains at once (most writers are serial): the
+  // pictures, the marks files, the meshes.
+  auto meshes = std::async(std::launch::async, [&] {
+    Chain c(base);
+    if (options.mesh.tolerance == 0) {
+      // The full lattice: written from its rows, never built (48 bytes a
+      // node and more as a TriangleMesh).
+      const LatticeHeights& l = *lattice;
+      std::unique_ptr<LatticeWindows> held;
+      LatticeWindows* source = rows ? &*rows : nullptr;
+      if (source == nullptr) {
+        held = HeldLatticeRows(l);
+        source = held.get();
+      }
+      const double z_min =
+          *std::min_element(l.row_min.begin(), l.row_min.end());
+      const double z_bottom = options.mesh.z_bottom
+                                  ? *options.mesh.z_bottom
+                                  : DefaultZBottom(spec, z_min);
+      c.Then("surface.stl", [&](const std::string& path) {
+        if (!std::isfinite(z_bottom) || !(z_bottom < z_min)) {
+          return absl::InvalidArgumentError(absl::StrFormat(
+              "z_bottom %g must be finite and below the lowest top vertex %g",
+              z_bottom, z_min));
+        }
+        return WriteLatticeStl(*source, l, z_bottom, path);
+      }, lattice_s);
+      c.Then("surface.wrl", [&](const std::string& path) {
+        return WriteLatticeVrml(*source, l, z_bottom, spec.z_top,
+                                options.vrml_colors, path);
+      });
+      if (c.status().ok() && summary != nullptr) {
+        summary->full_mesh_triangles = FullMeshTriangles(l.nx, l.ny);
+        summary->mesh_triangles = summary->full_mesh_triangles;
+        summary->mesh_deviation = 0;
+      }
+      return c;
+    }
+    absl::StatusOr<TriangleMesh> mesh;
+    c.Then("surface.stl", [&](const std::string& path) {
+      mesh = MeshFromLattice(*std::move(lattice), spec, options.mesh,
+                             rows ? &*rows : nullptr);
+      if (!mesh.ok()) return mesh.status();
+      return WriteStl(*mesh, path);
+    }, lattice_s);
+    c.Then("surface.wrl", [&](const std::string& path) {
+      const std::vector<Rgb> colors =
+          options.vrml_colors ? SurfaceColors(*mesh, spec.z_top)
+                              : std::vector<Rgb>();
+      return WriteVrml(*mesh, path, colors);
+    });
+    if (c.status().ok() && summary != nullptr) {
+      const int64_t nx = mesh->lattice_nx, ny = mesh->lattice_ny;
+      summary->full_mesh_triangles = 2 * nx * ny + 6 * (nx + ny) - 2;
+      summary->mesh_triangles = static_cast<int64_t>(mesh->triangles.size());
+      summary->mesh_deviation = mesh->max_deviation;
+    }
+    return c;
+  });
+  std::future<Chain> marks_files;
+  if (marks != nullptr) {
+    marks_files = std::async(std::launch::async, [&] {
+      Chain c(base);
+      c.Then("marks.svg", [&](const std::string& path) {
+        return WriteMarksSvg(spec, *marks, path);
+      });
+      c.Then("marks.json", [&](const std::string& path) {
+        return WriteMarksJson(*marks, path);
+      });
+      return c;
+    });
+  }
+
+  Chain pictures(base);
+  pictures.Then("relief.png", [&](const std::string& path) {
+    // Row by row: the RGB picture is never held.
+    absl::Status st = WritePngRows(
+        relief->frame().width, relief->frame().height,
+        [&](int y, uint8_t* out) { relief->ColorRow(y, out); }, path);
+    // Sampled again at another size, or no marks: not needed any more.
+    if (marks == nullptr || marks_relief) relief.reset();
+    return st;
+  }, relief_s);
+  if (error != nullptr) {
+    pictures.Then("error.png", [&](const std::string& path) {
+      absl::StatusOr<Image> map = RenderErrorMap(*error, options.error);
+      if (!map.ok()) return map.status();
+      return WritePng(*map, path);
+    });
+  }
+  if (marks != nullptr) {
+    pictures.Then("marks.png", [&](const std::string& path) {
+      // The relief already sampled serves when the frames agree.
+      absl::StatusOr<Image> picture = DrawMarks(
+          marks_relief ? *marks_relief : *relief, *marks, options.marks);
+      marks_relief.reset();
+      relief.reset();
+      if (!picture.ok()) return picture.status();
+      return WritePng(*picture, path);
+    }, marks_relief_s);
+  }
+
+  std::vector<Chain> chains;
+  chains.push_back(std::move(pictures));
+  if (marks_files.valid()) chains.push_back(marks_files.get());
+  chains.push_back(meshes.get());
+  std::vector<WrittenFile> written;
+  for (const Chain& c : chains) {
+    if (!c.status().ok()) return c.status();
+    written.insert(written.end(), c.written().begin(), c.written().end());
+  }
+  return written;
+}
+
+}  // namespace swarf::cli

@@ -1,0 +1,274 @@
+#include "client/outputs/surface_grid.h"
+
+#include <algorithm>
+#include <span>
+#include <vector>
+
+#include "absl/strings/str_format.h"
+#include "core/thread_pool.h"
+
+namespace swarf::cli {
+
+absl::StatusOr<SurfaceGrid> SurfaceGrid::Uncut(const StockSpec& spec,
+                                               SchemeKind scheme) {
+  if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
+  const int64_t n = (int64_t{spec.nx} + 1) * (int64_t{spec.ny} + 1);
+  if (n > kMaxGridNodes) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "grid of %d nodes exceeds the writers' limit of %d", n,
+        kMaxGridNodes));
+  }
+  SurfaceGrid g;
+  g.spec = spec;
+  g.scheme = scheme;
+  SurfaceJet top;
+  top.w = spec.z_top;
+  g.jets.assign(n, top);
+  g.owners.assign(n, -1);
+  return g;
+}
+
+absl::StatusOr<SurfaceGrid> SurfaceGrid::Band(const StockSpec& spec,
+                                              SchemeKind scheme, int32_t row0,
+                                              int32_t rows) {
+  if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
+  if (row0 < 0 || rows < 1 || row0 > spec.ny) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "band of %d node rows from row %d leaves the grid's %d rows", rows,
+        row0, spec.ny + 1));
+  }
+  SurfaceGrid g;
+  g.spec = spec;
+  g.scheme = scheme;
+  g.ResetBand(row0, rows);
+  return g;
+}
+
+void SurfaceGrid::ResetBand(int32_t first, int32_t rows) {
+  row0 = first;
+  rows = std::max(0, std::min(rows, nodes_y() - first));
+  const size_t n = static_cast<size_t>(nodes_x()) * rows;
+  SurfaceJet top;
+  top.w = spec.z_top;
+  jets.assign(n, top);
+  owners.assign(n, -1);
+}
+
+absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
+  absl::StatusOr<SurfaceGrid> g = Uncut(wp.spec(), wp.scheme().kind());
+  if (!g.ok()) return g.status();
+  g->SetMoves(wp.moves().ToVector());
+  std::vector<double> w(kTileNodes);
+  std::vector<float> dbuf(5 * kTileNodes);
+  std::vector<int32_t> owner(kTileNodes);
+  float* const d[5] = {&dbuf[0], &dbuf[kTileNodes], &dbuf[2 * kTileNodes],
+                       &dbuf[3 * kTileNodes], &dbuf[4 * kTileNodes]};
+  // Unallocated tiles are untouched stock, which Uncut already holds.
+  std::vector<int32_t> tiles;
+  for (int32_t t = 0; t < wp.tile_count(); ++t) {
+    if (wp.TileAllocated(t)) tiles.push_back(t);
+  }
+  // A chunk's derivatives on the workpiece's threads, then its reads.
+  constexpr size_t kChunk = 64;
+  static_assert(kChunk <= Workpiece::kJetCacheTiles);
+  for (size_t c = 0; c < tiles.size(); c += kChunk) {
+    const std::span<const int32_t> chunk(
+        tiles.data() + c, std::min(kChunk, tiles.size() - c));
+    wp.PrepareJets(chunk);
+    for (const int32_t t : chunk) {
+      const Workpiece::TileExtent e = wp.Extent(t);
+      wp.ReadTile(t, w.data(), d, owner.data());
+      if (absl::Status st = g->SetNodes(e.i0, e.j0, e.nx, e.ny, w.data(), d,
+                                        owner.data());
+          !st.ok()) {
+        return st;
+      }
+    }
+  }
+  return g;
+}
+
+void SurfaceGrid::SetMoves(std::shared_ptr<const MoveSource> list) {
+  moves = std::move(list);
+  surfaces = nullptr;
+  if (moves == nullptr) return;
+  // Reaches are computed per corner from each thread's cache of owners (no
+  // table of every move's). Only the schemes that look at the sweeps need
+  // them, indexed by bin.
+  const Scheme& s = GetScheme(scheme);
+  if (s.uses_reach() || s.uses_candidates()) {
+    surfaces = std::make_shared<const MoveSweeps>(moves, spec);
+  }
+}
+
+void SurfaceGrid::SetMoves(std::span<const Move> list) {
+  SetMoves(std::make_shared<const MoveList>(list));
+}
+
+absl::Status SurfaceGrid::SetNodes(int32_t i0, int32_t j0, int32_t nx,
+                                   int32_t ny, const double* w,
+                                   const float* const d[5],
+                                   const int32_t* owner) {
+  if (i0 < 0 || j0 < 0 || nx < 0 || ny < 0 ||
+      int64_t{i0} + nx > nodes_x() || int64_t{j0} + ny > nodes_y()) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "node block at (%d, %d) of %d x %d nodes leaves the %d x %d grid", i0,
+        j0, nx, ny, nodes_x(), nodes_y()));
+  }
+  if (w == nullptr && (nx > 0 && ny > 0)) {
+    return absl::InvalidArgumentError("node block without heights");
+  }
+  // Only the rows this band holds.
+  const int32_t ja = std::max(0, row0 - j0);
+  const int32_t jb = std::min(ny, row0 + held_rows() - j0);
+  for (int32_t j = ja; j < jb; ++j) {
+    for (int32_t i = 0; i < nx; ++i) {
+      const int64_t in = int64_t{j} * nx + i;
+      SurfaceJet& jet = jets[Index(i0 + i, j0 + j)];
+      jet.w = w[in];
+      if (d != nullptr) {
+        jet.wx = d[0][in];
+        jet.wy = d[1][in];
+        jet.wxx = d[2][in];
+        jet.wxy = d[3][in];
+        jet.wyy = d[4][in];
+      } else {
+        jet.wx = jet.wy = jet.wxx = jet.wxy = jet.wyy = 0;
+      }
+      owners[Index(i0 + i, j0 + j)] = owner != nullptr ? owner[in] : -1;
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status SurfaceGrid::Validate() const {
+  if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
+  const int64_t n = (int64_t{spec.nx} + 1) * (int64_t{spec.ny} + 1);
+  if (static_cast<int64_t>(jets.size()) != n ||
+      static_cast<int64_t>(owners.size()) != n || row0 != 0) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "grid holds %d jets and %d owners from row %d, the spec needs %d "
+        "nodes",
+        jets.size(), owners.size(), row0, n));
+  }
+  return absl::OkStatus();
+}
+
+ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej,
+                                    bool prepare) const {
+  // Same construction as Workpiece::Corners so that reconstructions agree
+  // bit for bit.
+  const GridGeometry g(spec);
+  ElementCorners e;
+  e.ei = ei;
+  e.ej = ej;
+  e.x0 = g.NodeX(ei);
+  e.x1 = g.NodeX(ei + 1);
+  e.y0 = g.NodeY(ej);
+  e.y1 = g.NodeY(ej + 1);
+  e.z_top = spec.z_top;
+  const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
+  const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
+  for (int k = 0; k < 4; ++k) {
+    e.c[k] = jet(is[k], js[k]);
+    const int32_t o = owner(is[k], js[k]);
+    e.owner[k] = o;
+    if (o >= 0 && o < move_count() && GetScheme(scheme).uses_reach()) {
+      e.reach[k] = surfaces->Reach(o, spec.z_top);
+    }
+  }
+  if (GetScheme(scheme).uses_candidates() && surfaces != nullptr) {
+    surfaces->FillCandidates(&e);
+  }
+  if (GetScheme(scheme).uses_reach()) e.surfaces = surfaces.get();
+  if (prepare) GetScheme(scheme).Prepare(&e);
+  return e;
+}
+
+double SurfaceGrid::Height(double x, double y) const {
+  const GridGeometry g(spec);
+  x = std::clamp(x, spec.x0, spec.x1);
+  y = std::clamp(y, spec.y0, spec.y1);
+  return GetScheme(scheme).Reconstruct(Corners(g.ElementX(x), g.ElementY(y)),
+                                       x, y);
+}
+
+void SurfaceGrid::Gradient(double x, double y, double* gx, double* gy) const {
+  HeightAndGradient(x, y, gx, gy);
+}
+
+double SurfaceGrid::HeightAndGradient(double x, double y, double* gx,
+                                      double* gy) const {
+  const GridGeometry g(spec);
+  x = std::clamp(x, spec.x0, spec.x1);
+  y = std::clamp(y, spec.y0, spec.y1);
+  return GetScheme(scheme).HeightAndGradient(
+      Corners(g.ElementX(x), g.ElementY(y)), x, y, gx, gy);
+}
+
+SurfaceSampler::SurfaceSampler(const SurfaceGrid& grid)
+    : grid_(grid), scheme_(GetScheme(grid.scheme)) {}
+
+const PatchTrustRegion* SurfaceSampler::Region(int32_t i, int32_t j) {
+  int k = 0;
+  while (k < kRows && row_[k] != j) ++k;
+  if (k == kRows) {
+    // A new row replaces the oldest.
+    k = next_;
+    next_ = (next_ + 1) % kRows;
+    row_[k] = j;
+    regions_[k].resize(grid_.nodes_x());
+    has_[k].assign(grid_.nodes_x(), 0);
+  }
+  if (!has_[k][i]) {
+    regions_[k][i] = TrustRegion(grid_.jet(i, j));
+    has_[k][i] = 1;
+  }
+  return &regions_[k][i];
+}
+
+double SurfaceSampler::HeightAndGradient(double x, double y, double* gx,
+                                         double* gy) {
+  // As SurfaceGrid::HeightAndGradient.
+  const GridGeometry g(grid_.spec);
+  x = std::clamp(x, grid_.spec.x0, grid_.spec.x1);
+  y = std::clamp(y, grid_.spec.y0, grid_.spec.y1);
+  Select(g.ElementX(x), g.ElementY(y));
+  return scheme_.HeightAndGradient(e_, x, y, gx, gy);
+}
+
+void SurfaceSampler::Select(int32_t ei, int32_t ej) {
+  if (ei == ei_ && ej == ej_) return;
+  if (scheme_.kind() == SchemeKind::kGuarded) {
+    // Prepared from the nodes' regions (a node serves four elements);
+    // PrepareGuarded reads them for cut corners only.
+    e_ = grid_.Corners(ei, ej, /*prepare=*/false);
+    const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
+    const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
+    static const PatchTrustRegion kNone;
+    const PatchTrustRegion* trust[4];
+    for (int k = 0; k < 4; ++k) {
+      trust[k] = e_.owner[k] >= 0 ? Region(is[k], js[k]) : &kNone;
+    }
+    PrepareGuarded(&e_, trust);
+  } else {
+    e_ = grid_.Corners(ei, ej);
+  }
+  ei_ = ei;
+  ej_ = ej;
+}
+
+void SurfaceSampler::ReconstructInElement(int32_t ei, int32_t ej,
+                                          const double* x, const double* y,
+                                          int32_t n, double* out) {
+  Select(ei, ej);
+  scheme_.ReconstructMany(e_, x, y, n, out);
+}
+
+double SurfaceGrid::MinNodeHeight() const {
+  double lo = spec.z_top;
+  for (const SurfaceJet& j : jets) lo = std::min(lo, j.w);
+  return lo;
+}
+
+}  // namespace swarf::cli

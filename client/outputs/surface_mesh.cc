@@ -1,0 +1,714 @@
+#include "client/outputs/surface_mesh.h"
+
+#include <algorithm>
+#include <bit>
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <optional>
+
+#include "absl/strings/str_format.h"
+#include "client/outputs/colormap.h"
+#include "client/outputs/file_writer.h"
+#include "core/scheme.h"
+#include "core/thread_pool.h"
+
+namespace swarf::cli {
+namespace {
+
+// STL is little-endian; the writer copies floats as they are in memory.
+static_assert(std::endian::native == std::endian::little,
+              "WriteStl assumes a little-endian host");
+
+constexpr Rgb kWallColor = {110, 110, 110};
+
+// One binary STL record: the unit normal from the cross product (zero for
+// a degenerate triangle), the vertices as float32, a zero attribute word.
+void AppendStlRecord(const Vec3& p, const Vec3& q, const Vec3& r,
+                     FileWriter& out) {
+  char rec[50];
+  const double ux = q.x - p.x, uy = q.y - p.y, uz = q.z - p.z;
+  const double vx = r.x - p.x, vy = r.y - p.y, vz = r.z - p.z;
+  double nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
+  const double len = std::sqrt(nx * nx + ny * ny + nz * nz);
+  if (len > 0 && std::isfinite(len)) {
+    nx /= len;
+    ny /= len;
+    nz /= len;
+  } else {
+    nx = ny = nz = 0;
+  }
+  const float f[12] = {static_cast<float>(nx),  static_cast<float>(ny),
+                       static_cast<float>(nz),  static_cast<float>(p.x),
+                       static_cast<float>(p.y), static_cast<float>(p.z),
+                       static_cast<float>(q.x), static_cast<float>(q.y),
+                       static_cast<float>(q.z), static_cast<float>(r.x),
+                       static_cast<float>(r.y), static_cast<float>(r.z)};
+  std::memcpy(rec, f, 48);
+  rec[48] = rec[49] = 0;
+  out.Write(std::string_view(rec, 50));
+}
+
+// A vertex of the full-resolution mesh: top lattice vertex (i, j), or the
+// bottom vertex under boundary vertex (i, j).
+struct MeshVertex {
+  bool bottom;
+  int64_t i, j;
+};
+
+// The full mesh's walls and bottom face, in BuildSurfaceMesh's order, to
+// emit(a, b, c).
+template <typename Emit>
+void EmitWallsAndBottom(int64_t big_nx, int64_t big_ny, Emit emit) {
+  auto top = [](int64_t i, int64_t j) { return MeshVertex{false, i, j}; };
+  auto bot = [](int64_t i, int64_t j) { return MeshVertex{true, i, j}; };
+  // Side walls: the top's boundary runs counter-clockwise seen from above
+  // (a -> b); each wall quad takes the reverse edge b -> a and its bottom
+  // edge a' -> b', leaving b' -> a' to the bottom face.
+  auto wall = [&](MeshVertex a, MeshVertex b, MeshVertex ab, MeshVertex bb) {
+    emit(ab, bb, b);
+    emit(ab, b, a);
+  };
+  for (int64_t i = 0; i < big_nx; ++i) {  // south, eastwards
+    wall(top(i, 0), top(i + 1, 0), bot(i, 0), bot(i + 1, 0));
+  }
+  for (int64_t j = 0; j < big_ny; ++j) {  // east, northwards
+    wall(top(big_nx, j), top(big_nx, j + 1), bot(big_nx, j),
+         bot(big_nx, j + 1));
+  }
+  for (int64_t i = big_nx; i > 0; --i) {  // north, westwards
+    wall(top(i, big_ny), top(i - 1, big_ny), bot(i, big_ny),
+         bot(i - 1, big_ny));
+  }
+  for (int64_t j = big_ny; j > 0; --j) {  // west, southwards
+    wall(top(0, j), top(0, j - 1), bot(0, j), bot(0, j - 1));
+  }
+  // Bottom face, clockwise seen from above, using only the walls' bottom
+  // vertices and no degenerate (collinear) triangle: columns between the
+  // south and north rows, with the west and east columns fanned from an
+  // inner south vertex to take the vertices of the west and east sides.
+  if (big_nx == 1) {
+    for (int64_t j = 0; j < big_ny; ++j) {
+      emit(bot(0, j), bot(1, j + 1), bot(1, j));
+      emit(bot(0, j), bot(0, j + 1), bot(1, j + 1));
+    }
+  } else {
+    const MeshVertex cw = bot(1, 0);
+    for (int64_t j = 0; j < big_ny; ++j) emit(cw, bot(0, j), bot(0, j + 1));
+    emit(cw, bot(0, big_ny), bot(1, big_ny));
+    for (int64_t i = 1; i + 1 < big_nx; ++i) {
+      emit(bot(i, 0), bot(i + 1, big_ny), bot(i + 1, 0));
+      emit(bot(i, 0), bot(i, big_ny), bot(i + 1, big_ny));
+    }
+    const MeshVertex ce = bot(big_nx - 1, 0);
+    for (int64_t j = 0; j < big_ny; ++j) {
+      emit(ce, bot(big_nx, j + 1), bot(big_nx, j));
+    }
+    emit(ce, bot(big_nx - 1, big_ny), bot(big_nx, big_ny));
+  }
+}
+
+// Index of bottom vertex (i, j) in the full mesh (after the top's): the
+// south and north rows (corners included), then the west and east columns.
+int64_t BottomIndex(int64_t big_nx, int64_t big_ny, int64_t i, int64_t j) {
+  const int64_t top = (big_nx + 1) * (big_ny + 1);
+  if (j == 0) return top + i;
+  if (j == big_ny) return top + (big_nx + 1) + i;
+  if (i == 0) return top + 2 * (big_nx + 1) + (j - 1);
+  return top + 2 * (big_nx + 1) + (big_ny - 1) + (j - 1);
+}
+
+// The top cells' triangles, row by row from windows of rows, as
+// BuildSurfaceMesh splits them, to emit(a, b, c) with the heights
+// z(i, j) of the window (valid during the call). Keeps the boundary's
+// heights in `boundary` (south row, north row, west and east columns).
+struct BoundaryHeights {
+  std::vector<double> south, north, west, east;
+};
+
+template <typename Emit>
+absl::Status EmitTopCells(LatticeWindows& rows, int64_t big_nx, int64_t big_ny,
+                          BoundaryHeights* boundary, Emit emit) {
+  constexpr int64_t kRows = 64;
+  boundary->west.resize(big_ny + 1);
+  boundary->east.resize(big_ny + 1);
+  for (int64_t j0 = 0; j0 < big_ny; j0 += kRows) {
+    const int64_t j1 = std::min(big_ny, j0 + kRows);
+    absl::StatusOr<const double*> z = rows.Rows(j0, j1);
+    if (!z.ok()) return z.status();
+    auto at = [&](int64_t i, int64_t j) {
+      return (*z)[(j - j0) * (big_nx + 1) + i];
+    };
+    for (int64_t j = j0; j <= j1; ++j) {
+      boundary->west[j] = at(0, j);
+      boundary->east[j] = at(big_nx, j);
+    }
+    if (j0 == 0) boundary->south.assign(*z, *z + big_nx + 1);
+    if (j1 == big_ny) {
+      boundary->north.assign(*z + (j1 - j0) * (big_nx + 1),
+                             *z + (j1 - j0 + 1) * (big_nx + 1));
+    }
+    for (int64_t j = j0; j < j1; ++j) {
+      for (int64_t i = 0; i < big_nx; ++i) {
+        const double z00 = at(i, j), z10 = at(i + 1, j), z11 = at(i + 1, j + 1),
+                     z01 = at(i, j + 1);
+        const MeshVertex v00{false, i, j}, v10{false, i + 1, j},
+            v11{false, i + 1, j + 1}, v01{false, i, j + 1};
+        // The diagonal along the smaller height change follows a crease or
+        // a groove instead of cutting across it.
+        if (std::fabs(z00 - z11) <= std::fabs(z10 - z01)) {
+          emit(v00, v10, v11, at);
+          emit(v00, v11, v01, at);
+        } else {
+          emit(v00, v10, v01, at);
+          emit(v10, v11, v01, at);
+        }
+      }
+    }
+  }
+  return absl::OkStatus();
+}
+
+class HeldRowsOf : public LatticeWindows {
+ public:
+  explicit HeldRowsOf(const LatticeHeights& h) : h_(h) {}
+  absl::StatusOr<const double*> Rows(int64_t j0, int64_t) override {
+    return h_.z.data() + j0 * (h_.nx + 1);
+  }
+
+ private:
+  const LatticeHeights& h_;
+};
+
+// The binary STL's 80-byte header and its triangle count (WriteStl,
+// WriteLatticeStl).
+void WriteStlHeader(uint32_t triangles, FileWriter& out) {
+  char header[80] = {};
+  std::snprintf(header, sizeof header,
+                "swarf machined surface, binary STL, mm, %zu triangles",
+                static_cast<size_t>(triangles));
+  out.Write(std::string_view(header, sizeof header));
+  out.Write(std::string_view(reinterpret_cast<const char*>(&triangles), 4));
+}
+
+}  // namespace
+
+double DefaultZBottom(const StockSpec& spec, double z_min) {
+  const double longer = std::max(spec.x1 - spec.x0, spec.y1 - spec.y0);
+  return z_min - std::max(0.1 * (spec.z_top - z_min), 0.02 * longer);
+}
+
+absl::StatusOr<LatticeHeights> NewLattice(const StockSpec& spec, int s,
+                                          bool heights) {
+  if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
+  if (s < 1 || s > 4096) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("subdivision must be in [1, 4096], got %d", s));
+  }
+  const int64_t nx = spec.nx, ny = spec.ny;
+  const int64_t big_nx = nx * s, big_ny = ny * s;
+  const int64_t top = (big_nx + 1) * (big_ny + 1);
+  if (top > kMaxMeshTopVertices) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "a %d x %d lattice (grid %d x %d, subdivision %d) exceeds %d "
+        "vertices",
+        big_nx, big_ny, nx, ny, s, kMaxMeshTopVertices));
+  }
+  const GridGeometry g(spec);
+  LatticeHeights l;
+  l.nx = big_nx;
+  l.ny = big_ny;
+  l.s = s;
+  l.elements_y = spec.ny;
+  l.xs.resize(big_nx + 1);
+  l.ys.resize(big_ny + 1);
+  for (int64_t i = 0; i <= big_nx; ++i) {
+    l.xs[i] = g.NodeX(static_cast<int32_t>(i / s)) + (i % s) * (g.dx() / s);
+  }
+  for (int64_t j = 0; j <= big_ny; ++j) {
+    l.ys[j] = g.NodeY(static_cast<int32_t>(j / s)) + (j % s) * (g.dy() / s);
+  }
+  if (heights) l.z.resize(top);
+  l.row_min.assign(big_ny + 1, spec.z_top);
+  return l;
+}
+
+void FillLatticeRows(const SurfaceGrid& grid, int32_t e0, int32_t e1,
+                     LatticeHeights* lattice) {
+  LatticeHeights& l = *lattice;
+  const int s = l.s;
+  const int64_t nx = grid.spec.nx, ny = grid.spec.ny;
+  const int64_t big_nx = l.nx;
+  const Scheme& scheme = GetScheme(grid.scheme);
+  // Lattice rows of element rows [e0, e1): from e0 s to e1 s - 1, and the
+  // last row (J = NY) with the last element row.
+  const int64_t j0 = int64_t{e0} * s;
+  const int64_t j1 = e1 == ny ? l.ny + 1 : int64_t{e1} * s;
+  ThreadPool::Default().ParallelFor(j1 - j0, [&](int64_t r) {
+    const int64_t j = j0 + r;
+    const int32_t ej = static_cast<int32_t>(std::min(j / s, ny - 1));
+    double lo = grid.spec.z_top;
+    double* const row = l.z.empty() ? nullptr : &l.z[j * (big_nx + 1)];
+    for (int32_t ei = 0; ei < nx; ++ei) {
+      // Corners once per element for its s (s + 1 in the last) vertices,
+      // and only where one lies between nodes (never at s = 1).
+      std::optional<ElementCorners> e;
+      const int64_t i_end = ei == nx - 1 ? big_nx : (ei + 1) * int64_t{s} - 1;
+      for (int64_t i = ei * int64_t{s}; i <= i_end; ++i) {
+        // At a node its simulated height is exact; eq. (2) there can sit
+        // below it where a neighbour's patch, extrapolated across a steep
+        // element, undershoots. The patches fill in between nodes.
+        double z;
+        if (i % s == 0 && j % s == 0) {
+          z = std::min(
+              grid.jet(static_cast<int32_t>(i / s), static_cast<int32_t>(j / s))
+                  .w,
+              grid.spec.z_top);
+        } else {
+          if (!e.has_value()) e = grid.Corners(ei, ej);
+          z = scheme.Reconstruct(*e, l.xs[i], l.ys[j]);
+        }
+        if (row != nullptr) row[i] = z;
+        lo = std::min(lo, z);
+      }
+    }
+    l.row_min[j] = lo;
+  });
+}
+
+absl::StatusOr<TriangleMesh> BuildSurfaceMesh(
+    const SurfaceGrid& grid, const SurfaceMeshOptions& options) {
+  if (absl::Status st = grid.Validate(); !st.ok()) return st;
+  auto lattice = NewLattice(grid.spec, options.subdivision);
+  if (!lattice.ok()) return lattice.status();
+  FillLatticeRows(grid, 0, grid.spec.ny, &*lattice);
+  return MeshFromLattice(*std::move(lattice), grid.spec, options);
+}
+
+absl::StatusOr<TriangleMesh> MeshFromLattice(LatticeHeights lattice,
+                                             const StockSpec& spec,
+                                             const SurfaceMeshOptions& options,
+                                             LatticeWindows* rows) {
+  const LatticeHeights& l = lattice;
+  const double z_min = *std::min_element(l.row_min.begin(), l.row_min.end());
+  const double z_bottom =
+      options.z_bottom ? *options.z_bottom : DefaultZBottom(spec, z_min);
+  if (!std::isfinite(z_bottom) || !(z_bottom < z_min)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "z_bottom %g must be finite and below the lowest top vertex %g",
+        z_bottom, z_min));
+  }
+  if (l.z.empty() && (rows == nullptr || options.tolerance == 0)) {
+    return absl::InvalidArgumentError(
+        "a lattice without heights needs them read again, for the adaptive "
+        "mesh only");
+  }
+  // The adaptive mesh needs only the lattice's heights.
+  if (options.tolerance != 0) {
+    if (l.z.empty()) {
+      return SimplifyLatticeRows(*rows, l.xs, l.ys, z_bottom,
+                                 options.tolerance);
+    }
+    return SimplifyLattice(l, z_bottom, options.tolerance);
+  }
+  const int64_t big_nx = l.nx, big_ny = l.ny;
+  const int64_t top = (big_nx + 1) * (big_ny + 1);
+  const std::vector<double>& xs = l.xs;
+  const std::vector<double>& ys = l.ys;
+  TriangleMesh mesh;
+  mesh.top_vertices = top;
+  mesh.lattice_nx = static_cast<int32_t>(big_nx);
+  mesh.lattice_ny = static_cast<int32_t>(big_ny);
+  mesh.z_bottom = z_bottom;
+  mesh.vertices.resize(top + 2 * (big_nx + big_ny));
+  auto top_index = [big_nx](int64_t i, int64_t j) {
+    return static_cast<int32_t>(j * (big_nx + 1) + i);
+  };
+  ThreadPool::Default().ParallelFor(big_ny + 1, [&](int64_t j) {
+    for (int64_t i = 0; i <= big_nx; ++i) {
+      mesh.vertices[top_index(i, j)] = {xs[i], ys[j], l.Z(i, j)};
+    }
+  });
+  lattice.z = {};
+
+  // Bottom vertices, one under each boundary vertex of the top: the south
+  // and north rows (corners included), then the west and east columns.
+  auto bottom_index = [&](int64_t i, int64_t j) {
+    int64_t k;
+    if (j == 0) {
+      k = i;
+    } else if (j == big_ny) {
+      k = (big_nx + 1) + i;
+    } else if (i == 0) {
+      k = 2 * (big_nx + 1) + (j - 1);
+    } else {
+      k = 2 * (big_nx + 1) + (big_ny - 1) + (j - 1);
+    }
+    return static_cast<int32_t>(top + k);
+  };
+  auto set_bottom = [&](int64_t i, int64_t j) {
+    mesh.vertices[bottom_index(i, j)] = {xs[i], ys[j], z_bottom};
+  };
+  for (int64_t i = 0; i <= big_nx; ++i) {
+    set_bottom(i, 0);
+    set_bottom(i, big_ny);
+  }
+  for (int64_t j = 1; j < big_ny; ++j) {
+    set_bottom(0, j);
+    set_bottom(big_nx, j);
+  }
+
+  const int64_t top_tris = 2 * big_nx * big_ny;
+  mesh.triangles.resize(top_tris);
+  ThreadPool::Default().ParallelFor(big_ny, [&](int64_t j) {
+    for (int64_t i = 0; i < big_nx; ++i) {
+      const int32_t v00 = top_index(i, j), v10 = top_index(i + 1, j),
+                    v11 = top_index(i + 1, j + 1), v01 = top_index(i, j + 1);
+      const double z00 = mesh.vertices[v00].z, z10 = mesh.vertices[v10].z,
+                   z11 = mesh.vertices[v11].z, z01 = mesh.vertices[v01].z;
+      auto* t = &mesh.triangles[2 * (j * big_nx + i)];
+      // The diagonal along the smaller height change follows a crease or
+      // a groove instead of cutting across it.
+      if (std::fabs(z00 - z11) <= std::fabs(z10 - z01)) {
+        t[0] = {v00, v10, v11};
+        t[1] = {v00, v11, v01};
+      } else {
+        t[0] = {v00, v10, v01};
+        t[1] = {v10, v11, v01};
+      }
+    }
+  });
+
+  // Side walls: the top's boundary runs counter-clockwise seen from above
+  // (a -> b); each wall quad takes the reverse edge b -> a and its bottom
+  // edge a' -> b', leaving b' -> a' to the bottom face.
+  mesh.triangles.reserve(top_tris + 6 * (big_nx + big_ny) - 2);
+  auto wall = [&](int32_t a, int32_t b, int32_t ab, int32_t bb) {
+    mesh.triangles.push_back({ab, bb, b});
+    mesh.triangles.push_back({ab, b, a});
+  };
+  for (int64_t i = 0; i < big_nx; ++i) {  // south, eastwards
+    wall(top_index(i, 0), top_index(i + 1, 0), bottom_index(i, 0),
+         bottom_index(i + 1, 0));
+  }
+  for (int64_t j = 0; j < big_ny; ++j) {  // east, northwards
+    wall(top_index(big_nx, j), top_index(big_nx, j + 1),
+         bottom_index(big_nx, j), bottom_index(big_nx, j + 1));
+  }
+  for (int64_t i = big_nx; i > 0; --i) {  // north, westwards
+    wall(top_index(i, big_ny), top_index(i - 1, big_ny),
+         bottom_index(i, big_ny), bottom_index(i - 1, big_ny));
+  }
+  for (int64_t j = big_ny; j > 0; --j) {  // west, southwards
+    wall(top_index(0, j), top_index(0, j - 1), bottom_index(0, j),
+         bottom_index(0, j - 1));
+  }
+
+  // Bottom face, clockwise seen from above, using only the walls' bottom
+  // vertices and no degenerate (collinear) triangle: columns between the
+  // south and north rows, with the west and east columns fanned from an
+  // inner south vertex to take the vertices of the west and east sides.
+  auto b = [&](int64_t i, int64_t j) { return bottom_index(i, j); };
+  if (big_nx == 1) {
+    for (int64_t j = 0; j < big_ny; ++j) {
+      mesh.triangles.push_back({b(0, j), b(1, j + 1), b(1, j)});
+      mesh.triangles.push_back({b(0, j), b(0, j + 1), b(1, j + 1)});
+    }
+  } else {
+    const int32_t cw = b(1, 0);
+    for (int64_t j = 0; j < big_ny; ++j) {
+      mesh.triangles.push_back({cw, b(0, j), b(0, j + 1)});
+    }
+    mesh.triangles.push_back({cw, b(0, big_ny), b(1, big_ny)});
+    for (int64_t i = 1; i + 1 < big_nx; ++i) {
+      mesh.triangles.push_back({b(i, 0), b(i + 1, big_ny), b(i + 1, 0)});
+      mesh.triangles.push_back({b(i, 0), b(i, big_ny), b(i + 1, big_ny)});
+    }
+    const int32_t ce = b(big_nx - 1, 0);
+    for (int64_t j = 0; j < big_ny; ++j) {
+      mesh.triangles.push_back({ce, b(big_nx, j + 1), b(big_nx, j)});
+    }
+    mesh.triangles.push_back({ce, b(big_nx - 1, big_ny), b(big_nx, big_ny)});
+  }
+  return mesh;
+}
+
+absl::Status WriteStl(const TriangleMesh& mesh, const std::string& path) {
+  if (mesh.triangles.size() > UINT32_MAX) {
+    return absl::InvalidArgumentError("too many triangles for STL");
+  }
+  FileWriter out(path);
+  if (!out.status().ok()) return out.status();
+  WriteStlHeader(static_cast<uint32_t>(mesh.triangles.size()), out);
+  for (const auto& t : mesh.triangles) {
+    AppendStlRecord(mesh.vertices[t[0]], mesh.vertices[t[1]],
+                    mesh.vertices[t[2]], out);
+  }
+  return out.Close();
+}
+
+std::vector<Rgb> SurfaceColors(const TriangleMesh& mesh, double z_top) {
+  std::vector<Rgb> colors(mesh.vertices.size(), kWallColor);
+  double lo = z_top;
+  for (int64_t k = 0; k < mesh.top_vertices; ++k) {
+    lo = std::min(lo, mesh.vertices[k].z);
+  }
+  for (int64_t k = 0; k < mesh.top_vertices; ++k) {
+    const double z = mesh.vertices[k].z;
+    colors[k] = z < z_top ? HeightTint((z - lo) / (z_top - lo)) : kStockColor;
+  }
+  return colors;
+}
+
+namespace {
+
+// Appends `v` as written in the STL (float32), shortest round-trip form.
+void AppendFloat(std::string& out, double v) {
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, static_cast<float>(v));
+  out.append(buf, r.ptr);
+}
+
+void AppendInt(std::string& out, int64_t v) {
+  char buf[24];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  out.append(buf, r.ptr);
+}
+
+// The VRML file up to its first coordinate (WriteVrml, WriteLatticeVrml).
+std::string VrmlHeader(size_t vertices, size_t triangles) {
+  return absl::StrFormat(
+      "#VRML V2.0 utf8\n"
+      "# swarf machined surface (mm): %d vertices, %d triangles\n"
+      "Shape {\n"
+      "  appearance Appearance { material Material { diffuseColor 0.8 0.8 "
+      "0.8 } }\n"
+      "  geometry IndexedFaceSet {\n"
+      "    solid TRUE\n"
+      "    ccw TRUE\n"
+      "    creaseAngle 0.5\n"
+      "    coord Coordinate {\n"
+      "      point [\n",
+      vertices, triangles);
+}
+
+}  // namespace
+
+absl::Status WriteVrml(const TriangleMesh& mesh, const std::string& path,
+                       std::span<const Rgb> vertex_colors) {
+  if (!vertex_colors.empty() && vertex_colors.size() != mesh.vertices.size()) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("%d vertex colours for %d vertices",
+                        vertex_colors.size(), mesh.vertices.size()));
+  }
+  FileWriter out(path);
+  if (!out.status().ok()) return out.status();
+  std::string s = VrmlHeader(mesh.vertices.size(), mesh.triangles.size());
+  constexpr size_t kChunk = size_t{1} << 20;
+  for (const Vec3& v : mesh.vertices) {
+    AppendFloat(s, v.x);
+    s += ' ';
+    AppendFloat(s, v.y);
+    s += ' ';
+    AppendFloat(s, v.z);
+    s += '\n';
+    if (s.size() >= kChunk) {
+      out.Write(s);
+      s.clear();
+    }
+  }
+  s += "      ]\n    }\n";
+  if (!vertex_colors.empty()) {
+    s += "    colorPerVertex TRUE\n    color Color {\n      color [\n";
+    char table[256][8];
+    for (int k = 0; k < 256; ++k) {
+      std::snprintf(table[k], sizeof table[k], "%.3f", k / 255.0);
+    }
+    for (const Rgb& c : vertex_colors) {
+      s += table[c.r];
+      s += ' ';
+      s += table[c.g];
+      s += ' ';
+      s += table[c.b];
+      s += '\n';
+      if (s.size() >= kChunk) {
+        out.Write(s);
+        s.clear();
+      }
+    }
+    s += "      ]\n    }\n";
+  }
+  s += "    coordIndex [\n";
+  for (const auto& t : mesh.triangles) {
+    AppendInt(s, t[0]);
+    s += ' ';
+    AppendInt(s, t[1]);
+    s += ' ';
+    AppendInt(s, t[2]);
+    s += " -1\n";
+    if (s.size() >= kChunk) {
+      out.Write(s);
+      s.clear();
+    }
+  }
+  s += "    ]\n  }\n}\n";
+  out.Write(s);
+  return out.Close();
+}
+
+}  // namespace swarf::cli
+
+namespace swarf::cli {
+
+std::unique_ptr<LatticeWindows> HeldLatticeRows(const LatticeHeights& lattice) {
+  return std::make_unique<HeldRowsOf>(lattice);
+}
+
+absl::Status WriteLatticeStl(LatticeWindows& rows,
+                             const LatticeHeights& lattice, double z_bottom,
+                             const std::string& path) {
+  const int64_t big_nx = lattice.nx, big_ny = lattice.ny;
+  const int64_t count = FullMeshTriangles(big_nx, big_ny);
+  if (count > UINT32_MAX) {
+    return absl::InvalidArgumentError("too many triangles for STL");
+  }
+  FileWriter out(path);
+  if (!out.status().ok()) return out.status();
+  WriteStlHeader(static_cast<uint32_t>(count), out);
+  const std::vector<double>& xs = lattice.xs;
+  const std::vector<double>& ys = lattice.ys;
+  BoundaryHeights boundary;
+  absl::Status st = EmitTopCells(
+      rows, big_nx, big_ny, &boundary,
+      [&](MeshVertex a, MeshVertex b, MeshVertex c, const auto& z) {
+        AppendStlRecord({xs[a.i], ys[a.j], z(a.i, a.j)},
+                        {xs[b.i], ys[b.j], z(b.i, b.j)},
+                        {xs[c.i], ys[c.j], z(c.i, c.j)}, out);
+      });
+  if (!st.ok()) return st;
+  auto point = [&](const MeshVertex& v) -> Vec3 {
+    if (v.bottom) return {xs[v.i], ys[v.j], z_bottom};
+    const double z = v.j == 0        ? boundary.south[v.i]
+                     : v.j == big_ny ? boundary.north[v.i]
+                     : v.i == 0      ? boundary.west[v.j]
+                                     : boundary.east[v.j];
+    return {xs[v.i], ys[v.j], z};
+  };
+  EmitWallsAndBottom(big_nx, big_ny,
+                     [&](MeshVertex a, MeshVertex b, MeshVertex c) {
+                       AppendStlRecord(point(a), point(b), point(c), out);
+                     });
+  return out.Close();
+}
+
+absl::Status WriteLatticeVrml(LatticeWindows& rows,
+                              const LatticeHeights& lattice, double z_bottom,
+                              double z_top, bool colors,
+                              const std::string& path) {
+  const int64_t big_nx = lattice.nx, big_ny = lattice.ny;
+  const std::vector<double>& xs = lattice.xs;
+  const std::vector<double>& ys = lattice.ys;
+  const int64_t vertices = (big_nx + 1) * (big_ny + 1) + 2 * (big_nx + big_ny);
+  FileWriter out(path);
+  if (!out.status().ok()) return out.status();
+  std::string s =
+      VrmlHeader(static_cast<size_t>(vertices),
+                 static_cast<size_t>(FullMeshTriangles(big_nx, big_ny)));
+  constexpr size_t kChunk = size_t{1} << 20;
+  auto flush = [&] {
+    if (s.size() >= kChunk) {
+      out.Write(s);
+      s.clear();
+    }
+  };
+  auto put_point = [&](double x, double y, double z) {
+    AppendFloat(s, x);
+    s += ' ';
+    AppendFloat(s, y);
+    s += ' ';
+    AppendFloat(s, z);
+    s += '\n';
+    flush();
+  };
+  // Every top row once: rows [j0, j1) of windows of 64 (the last holds NY).
+  auto top_rows = [&](const std::function<void(int64_t, const double*)>& row)
+      -> absl::Status {
+    for (int64_t j0 = 0; j0 <= big_ny; j0 += 64) {
+      const int64_t j1 = std::min(big_ny, j0 + 63);
+      absl::StatusOr<const double*> z = rows.Rows(j0, j1);
+      if (!z.ok()) return z.status();
+      for (int64_t j = j0; j <= j1; ++j) {
+        row(j, *z + (j - j0) * (big_nx + 1));
+      }
+    }
+    return absl::OkStatus();
+  };
+  absl::Status st = top_rows([&](int64_t j, const double* z) {
+    for (int64_t i = 0; i <= big_nx; ++i) put_point(xs[i], ys[j], z[i]);
+  });
+  if (!st.ok()) return st;
+  auto bottom_point = [&](int64_t i, int64_t j) {
+    put_point(xs[i], ys[j], z_bottom);
+  };
+  for (int64_t i = 0; i <= big_nx; ++i) bottom_point(i, 0);
+  for (int64_t i = 0; i <= big_nx; ++i) bottom_point(i, big_ny);
+  for (int64_t j = 1; j < big_ny; ++j) bottom_point(0, j);
+  for (int64_t j = 1; j < big_ny; ++j) bottom_point(big_nx, j);
+  s += "      ]\n    }\n";
+  if (colors) {
+    s += "    colorPerVertex TRUE\n    color Color {\n      color [\n";
+    char table[256][8];
+    for (int k = 0; k < 256; ++k) {
+      std::snprintf(table[k], sizeof table[k], "%.3f", k / 255.0);
+    }
+    auto put_color = [&](const Rgb& c) {
+      s += table[c.r];
+      s += ' ';
+      s += table[c.g];
+      s += ' ';
+      s += table[c.b];
+      s += '\n';
+      flush();
+    };
+    // SurfaceColors: the lowest top vertex (or z_top) is each row's
+    // minimum's minimum.
+    const double lo =
+        *std::min_element(lattice.row_min.begin(), lattice.row_min.end());
+    st = top_rows([&](int64_t, const double* z) {
+      for (int64_t i = 0; i <= big_nx; ++i) {
+        put_color(z[i] < z_top ? HeightTint((z[i] - lo) / (z_top - lo))
+                               : kStockColor);
+      }
+    });
+    if (!st.ok()) return st;
+    for (int64_t k = 0; k < 2 * (big_nx + big_ny); ++k) put_color(kWallColor);
+    s += "      ]\n    }\n";
+  }
+  s += "    coordIndex [\n";
+  auto index = [&](const MeshVertex& v) {
+    return v.bottom ? BottomIndex(big_nx, big_ny, v.i, v.j)
+                    : v.j * (big_nx + 1) + v.i;
+  };
+  auto put_face = [&](const MeshVertex& a, const MeshVertex& b,
+                      const MeshVertex& c) {
+    AppendInt(s, index(a));
+    s += ' ';
+    AppendInt(s, index(b));
+    s += ' ';
+    AppendInt(s, index(c));
+    s += " -1\n";
+    flush();
+  };
+  BoundaryHeights boundary;
+  st = EmitTopCells(rows, big_nx, big_ny, &boundary,
+                    [&](MeshVertex a, MeshVertex b, MeshVertex c, const auto&) {
+                      put_face(a, b, c);
+                    });
+  if (!st.ok()) return st;
+  EmitWallsAndBottom(big_nx, big_ny, put_face);
+  s += "    ]\n  }\n}\n";
+  out.Write(s);
+  return out.Close();
+}
+
+}  // namespace swarf::cli
