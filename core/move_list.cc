@@ -40,8 +40,8 @@ void MoveList::Append(const Move& move) {
   uint32_t tag = CutterIndex(move.cutter);
   // Programs are chains: a move mostly starts where the last one ended.
   if (id == 0 || !SameBits(move.from, Get(id - 1).to)) {
-    tag |= kOwnStart;
-    starts_.emplace_back(id, move.from);
+    starts_.push_back({move.from, tag});
+    tag = kOwnStart | static_cast<uint32_t>(starts_.size() - 1);
   }
   Chunk& c = *chunks_.back();
   c.to[id & (kChunkMoves - 1)] = move.to;
@@ -51,26 +51,6 @@ void MoveList::Append(const Move& move) {
 
 void MoveList::Append(std::span<const Move> moves) {
   for (const Move& m : moves) Append(m);
-}
-
-Move MoveList::Get(int64_t id) const {
-  const Chunk& c = *chunks_[id >> kChunkBits];
-  const int64_t k = id & (kChunkMoves - 1);
-  const uint32_t tag = c.tag[k];
-  Move m;
-  m.to = c.to[k];
-  m.cutter = cutters_[tag & ~kOwnStart];
-  if (tag & kOwnStart) {
-    const auto it = std::lower_bound(
-        starts_.begin(), starts_.end(), id,
-        [](const std::pair<int64_t, Vec3>& s, int64_t v) { return s.first < v; });
-    m.from = it->second;
-  } else if (k > 0) {
-    m.from = c.to[k - 1];
-  } else {
-    m.from = chunks_[(id >> kChunkBits) - 1]->to[kChunkMoves - 1];
-  }
-  return m;
 }
 
 int64_t MoveList::MemoryBytes() const {

@@ -72,7 +72,23 @@ class MoveList final : public MoveSource {
   MoveList& operator=(const MoveList&) = delete;
 
   int64_t size() const override { return size_; }
-  Move Get(int64_t id) const override;
+  Move Get(int64_t id) const override {
+    const Chunk& c = *chunks_[id >> kChunkBits];
+    const int64_t k = id & (kChunkMoves - 1);
+    const uint32_t tag = c.tag[k];
+    Move m;
+    m.to = c.to[k];
+    if (tag & kOwnStart) {
+      const Start& s = starts_[tag & ~kOwnStart];
+      m.from = s.from;
+      m.cutter = cutters_[s.cutter];
+    } else {
+      m.from = k > 0 ? c.to[k - 1]
+                     : chunks_[(id >> kChunkBits) - 1]->to[kChunkMoves - 1];
+      m.cutter = cutters_[tag];
+    }
+    return m;
+  }
   Move operator[](int64_t id) const { return Get(id); }
   // Asks the cache for move id's end, its tag and its start, for a Get soon.
   void Prefetch(int64_t id) const {
@@ -89,9 +105,13 @@ class MoveList final : public MoveSource {
   int64_t MemoryBytes() const;
 
  private:
-  // A tag's high bit: the move's start is not the previous move's end (it
-  // is in starts_); the other bits index cutters_.
+  // A tag's high bit: the move's start is not the previous move's end; the
+  // other bits index starts_ then, cutters_ otherwise.
   static constexpr uint32_t kOwnStart = uint32_t{1} << 31;
+  struct Start {
+    Vec3 from;
+    uint32_t cutter;  // index in cutters_
+  };
   struct Chunk {
     std::array<Vec3, kChunkMoves> to;
     std::array<uint32_t, kChunkMoves> tag;
@@ -103,8 +123,8 @@ class MoveList final : public MoveSource {
 
   int64_t size_ = 0;
   std::vector<std::unique_ptr<Chunk>> chunks_;
-  // (id, start) of each move whose start is its own, ascending ids.
-  std::vector<std::pair<int64_t, Vec3>> starts_;
+  // Each move's whose start is its own, in id order.
+  std::vector<Start> starts_;
   std::vector<Cutter> cutters_;
   absl::flat_hash_map<CutterKey, uint32_t> cutter_index_;
   uint32_t last_cutter_ = 0;  // the index Append found last

@@ -811,12 +811,16 @@ CornerReach ReachOf(const Move& m, double z_top) {
 }
 
 MoveSweeps::MoveSweeps(const MoveSource* moves, const MoveIndex* index)
-    : moves_(moves), index_(index), serial_(NextSerial()) {}
+    : moves_(moves),
+      list_(dynamic_cast<const MoveList*>(moves)),
+      index_(index),
+      serial_(NextSerial()) {}
 
 MoveSweeps::MoveSweeps(std::shared_ptr<const MoveSource> moves,
                        const StockSpec& spec)
     : owned_(std::move(moves)),
       moves_(owned_.get()),
+      list_(dynamic_cast<const MoveList*>(moves_)),
       owned_index_(std::make_unique<MoveIndex>(GridGeometry(spec))),
       index_(owned_index_.get()),
       serial_(NextSerial()) {
@@ -843,7 +847,7 @@ const Sweep* MoveSweeps::SweepOf(int32_t id) const {
   thread_local Entry cache[kEntries];
   Entry& e = cache[id & (kEntries - 1)];
   if (e.id == id && e.serial == serial_) return &*e.sweep;
-  const Move m = moves_->Get(id);
+  const Move m = MoveAt(id);
   e.sweep.emplace(m.from, m.to, m.cutter);
   e.id = id;
   e.serial = serial_;
@@ -861,7 +865,7 @@ CornerReach MoveSweeps::Reach(int32_t id, double z_top) const {
   thread_local Entry cache[kEntries];
   Entry& e = cache[id & (kEntries - 1)];
   if (e.id != id || e.serial != serial_ || e.z_top != z_top) {
-    e.reach = ReachOf(moves_->Get(id), z_top);
+    e.reach = ReachOf(MoveAt(id), z_top);
     e.id = id;
     e.serial = serial_;
     e.z_top = z_top;
@@ -874,7 +878,7 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
   double w = cap;
   int32_t lowest = -1;
   for (const uint32_t k : index_->Bin(index_->BinOfElement(ei, ej))) {
-    const Move m = moves_->Get(k);
+    const Move m = MoveAt(k);
     if (!(std::min(m.from.z, m.to.z) < w)) continue;
     // Beyond its footprint below w a move is not below w.
     if (FootprintSurelyMisses(m.from, m.to, m.cutter, {x, y, x, y}, w)) {
@@ -916,7 +920,7 @@ void MoveSweeps::FillCandidates(ElementCorners* e) const {
   const size_t owners = e->candidates.size();
   const Rect box{e->x0, e->y0, e->x1, e->y1};
   for (const uint32_t id : index_->Bin(index_->BinOfElement(ei, ej))) {
-    const Move m = moves_->Get(id);
+    const Move m = MoveAt(id);
     if (!(std::min(m.from.z, m.to.z) < cap)) continue;
     bool owner = false;
     for (size_t q = 0; q < owners && !owner; ++q) {

@@ -89,8 +89,14 @@ class MoveSweeps final : public MoveSurfaces {
 
  private:
   const Sweep* SweepOf(int32_t id) const;
+  // Move `id`: through MoveList's inline Get where the source is one (the
+  // workpiece's own), without a virtual call per candidate.
+  Move MoveAt(int64_t id) const {
+    return list_ != nullptr ? list_->Get(id) : moves_->Get(id);
+  }
   std::shared_ptr<const MoveSource> owned_;
   const MoveSource* moves_;
+  const MoveList* list_;  // moves_ when it is a MoveList, else null
   std::unique_ptr<MoveIndex> owned_index_;
   const MoveIndex* index_;
   uint64_t serial_;  // tells this list's cached sweeps from others'
