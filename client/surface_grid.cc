@@ -69,10 +69,9 @@ absl::Status SurfaceGrid::SetTileRows(const Workpiece& wp, int32_t t0,
   std::vector<double> w(kTileNodes);
   std::vector<float> dbuf(heights_only ? 0 : 5 * kTileNodes);
   std::vector<int32_t> owner(heights_only ? 0 : kTileNodes);
-  float* const d[5] = {dbuf.data(), dbuf.data() + kTileNodes,
-                       dbuf.data() + 2 * kTileNodes,
-                       dbuf.data() + 3 * kTileNodes,
-                       dbuf.data() + 4 * kTileNodes};
+  float* const d[5] = {
+      dbuf.data(), dbuf.data() + kTileNodes, dbuf.data() + 2 * kTileNodes,
+      dbuf.data() + 3 * kTileNodes, dbuf.data() + 4 * kTileNodes};
   // Unallocated tiles are untouched stock, which the grid already holds.
   std::vector<int32_t> tiles;
   t0 = std::max(t0, 0);
@@ -91,10 +90,9 @@ absl::Status SurfaceGrid::SetTileRows(const Workpiece& wp, int32_t t0,
       const Workpiece::TileExtent e = wp.Extent(t);
       wp.ReadTile(t, w.data(), heights_only ? nullptr : d,
                   heights_only ? nullptr : owner.data());
-      if (absl::Status st =
-              SetNodes(e.i0, e.j0, e.nx, e.ny, w.data(),
-                       heights_only ? nullptr : d,
-                       heights_only ? nullptr : owner.data());
+      if (absl::Status st = SetNodes(e.i0, e.j0, e.nx, e.ny, w.data(),
+                                     heights_only ? nullptr : d,
+                                     heights_only ? nullptr : owner.data());
           !st.ok()) {
         return st;
       }
