@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <numbers>
 #include <utility>
 
@@ -1219,21 +1220,33 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
   const int32_t bands = (ej1 - ej0 + kBandRows) / kBandRows;
   std::vector<std::vector<Segment>> band_segments(bands);
 
+  // Bands are claimed in order; four read each tile row (and a fifth its
+  // first node row): the nodes' jets in a cache of this traversal's own,
+  // of two rows of tiles (the workpiece's, shared with other readers such
+  // as the valuation, holds less than a row of a wide grid: each tile was
+  // computed up to once per node row).
+  const std::unique_ptr<Workpiece::JetCache> jets = wp.TraversalJetCache();
   wp.pool().ParallelFor(bands, [&](int64_t band) {
     const int32_t r0 = ej0 + static_cast<int32_t>(band) * kBandRows;
     const int32_t r1 = std::min(r0 + kBandRows, ej1 + 1);  // rows [r0, r1)
-    // Node rows r0..r1, columns ei0..ei1+1.
+    // Node rows r0..r1, columns ei0..ei1+1, a tile's columns at a time (a
+    // row crosses every tile of the band).
     const int32_t nc = cols + 1;
     std::vector<NodeRef> nodes(static_cast<size_t>(nc) * (r1 - r0 + 1));
-    for (int32_t j = r0; j <= r1; ++j) {
-      for (int32_t i = 0; i < nc; ++i) {
-        const NodeValue v = wp.Node(ei0 + i, j);
-        NodeRef& n = nodes[size_t(j - r0) * nc + i];
-        n.jet = v.jet;
-        n.owner = v.owner;
-        n.x = grid.NodeX(ei0 + i);
-        n.y = grid.NodeY(j);
+    for (int32_t c0 = 0; c0 < nc;) {
+      const int32_t c1 =
+          std::min(nc, ((ei0 + c0) / kTileSize + 1) * kTileSize - ei0);
+      for (int32_t j = r0; j <= r1; ++j) {
+        for (int32_t i = c0; i < c1; ++i) {
+          const NodeValue v = wp.Node(ei0 + i, j, jets.get());
+          NodeRef& n = nodes[size_t(j - r0) * nc + i];
+          n.jet = v.jet;
+          n.owner = v.owner;
+          n.x = grid.NodeX(ei0 + i);
+          n.y = grid.NodeY(j);
+        }
       }
+      c0 = c1;
     }
     auto node = [&](int32_t i, int32_t j) -> const NodeRef& {
       return nodes[size_t(j - r0) * nc + (i - ei0)];

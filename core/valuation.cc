@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -195,6 +196,12 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
   lattice_lines(/*along_x=*/false, &lattice_y, &cell_of_y);
   const double z_top = wp.spec().z_top;
   const Scheme& scheme = wp.scheme();
+  // The bins are claimed in order, a row of bins at a time: the nodes'
+  // jets in a cache of this traversal's own, of two rows of tiles (the
+  // workpiece's, shared with other readers such as the cutting marks,
+  // holds less than a row of a wide grid: each tile was computed up to
+  // once per row of bins).
+  const std::unique_ptr<Workpiece::JetCache> jets = wp.TraversalJetCache();
   pool.ParallelFor(bins, [&](int64_t b) {
     const int32_t bx = static_cast<int32_t>(b % index.bins_x());
     const int32_t by = static_cast<int32_t>(b / index.bins_x());
@@ -236,14 +243,22 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     const size_t region_nodes = static_cast<size_t>(region_w) * (ej1 - ej0 + 1);
     std::vector<NodeValue> nodes(region_nodes);
     std::vector<PatchTrustRegion> regions(guarded ? region_nodes : 0);
-    for (int32_t j = ej0; j <= ej1; ++j) {
-      for (int32_t i = ei0; i <= ei1; ++i) {
-        const size_t at = static_cast<size_t>(j - ej0) * region_w + (i - ei0);
-        nodes[at] = wp.Node(i, j);
-        if (guarded && nodes[at].owner >= 0) {
-          regions[at] = TrustRegion(nodes[at].jet);
+    // A tile's columns at a time: a bin's last column may be the next
+    // tile's first, and a row's reads alternating between the two would
+    // each look the tile up in the cache.
+    for (int32_t c0 = ei0; c0 <= ei1;) {
+      const int32_t c1 = std::min(ei1, (c0 / kTileSize + 1) * kTileSize - 1);
+      for (int32_t j = ej0; j <= ej1; ++j) {
+        for (int32_t i = c0; i <= c1; ++i) {
+          const size_t at =
+              static_cast<size_t>(j - ej0) * region_w + (i - ei0);
+          nodes[at] = wp.Node(i, j, jets.get());
+          if (guarded && nodes[at].owner >= 0) {
+            regions[at] = TrustRegion(nodes[at].jet);
+          }
         }
       }
+      c0 = c1 + 1;
     }
     // The sweeps of recent corner owners: neighbouring elements share most.
     struct Owner {

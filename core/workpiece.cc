@@ -86,7 +86,7 @@ Workpiece::Workpiece(const StockSpec& spec, const Scheme& scheme,
       index_(grid_),
       serial_(NextSerial()),
       derivatives_(scheme.stores_derivatives()),
-      jets_(tiles_.size()) {}
+      jets_(static_cast<int32_t>(tiles_.size()), kJetCacheTiles) {}
 
 Workpiece::~Workpiece() {
   tiles_.clear();  // blocks go back to the arena before it goes
@@ -592,19 +592,57 @@ void Workpiece::ComputeJets(int32_t t, const Tile& tile, int32_t stride,
   }
 }
 
-std::shared_ptr<const Workpiece::TileJets> Workpiece::CachedJets(
-    int32_t t, uint64_t version) const {
-  std::lock_guard<std::mutex> lock(jets_mu_);
+Workpiece::JetCache::JetCache(int32_t tile_count, size_t tiles)
+    : capacity_(std::max<size_t>(tiles, 1)), jets_(tile_count) {}
+
+Workpiece::JetCache::~JetCache() = default;
+
+std::shared_ptr<const Workpiece::TileJets> Workpiece::JetCache::Find(
+    int32_t t, uint64_t serial, uint64_t version) const {
+  std::lock_guard<std::mutex> lock(mu_);
   const auto& cached = jets_[t];
-  if (cached != nullptr && cached->serial == serial_ &&
+  if (cached != nullptr && cached->serial == serial &&
       cached->version == version) {
     return cached;
   }
   return nullptr;
 }
 
-std::shared_ptr<const Workpiece::TileJets> Workpiece::NewJets(
+void Workpiece::JetCache::Insert(int32_t t,
+                                 std::shared_ptr<const TileJets> jets) {
+  std::lock_guard<std::mutex> lock(mu_);
+  if (jets_[t] == nullptr) {
+    order_.push_back(t);
+    if (order_.size() > capacity_) {
+      jets_[order_.front()] = nullptr;
+      order_.pop_front();
+    }
+  }
+  jets_[t] = std::move(jets);
+}
+
+std::unique_ptr<Workpiece::JetCache> Workpiece::NewJetCache(
+    size_t tiles) const {
+  return std::unique_ptr<JetCache>(new JetCache(tile_count(), tiles));
+}
+
+std::unique_ptr<Workpiece::JetCache> Workpiece::TraversalJetCache() const {
+  // A traversal in order of rows of tiles first computes a tile when it
+  // reaches the node row above its tile row (or its own first row), and
+  // last reads it about a tile row of tiles later: two rows, and room for
+  // the threads working ahead of the slowest one.
+  const size_t rows = 2 * static_cast<size_t>(tiles_x_) + 64;
+  return NewJetCache(std::min({rows, static_cast<size_t>(tile_count()),
+                               kTraversalJetBytes / sizeof(TileJets)}));
+}
+
+std::shared_ptr<const Workpiece::TileJets> Workpiece::CachedJets(
     int32_t t, uint64_t version) const {
+  return jets_.Find(t, serial_, version);
+}
+
+std::shared_ptr<const Workpiece::TileJets> Workpiece::NewJets(
+    int32_t t, uint64_t version, JetCache* cache) const {
   // Not value-initialised: ComputeJets writes every node of the tile's
   // rows.
   std::shared_ptr<TileJets> fresh(new TileJets);
@@ -613,23 +651,16 @@ std::shared_ptr<const Workpiece::TileJets> Workpiece::NewJets(
   float* const d[5] = {fresh->d[0], fresh->d[1], fresh->d[2], fresh->d[3],
                        fresh->d[4]};
   ComputeJets(t, *tiles_[t], kTileSize, fresh->lo, fresh->hi, d);
-  std::lock_guard<std::mutex> lock(jets_mu_);
-  if (jets_[t] == nullptr) {
-    jets_order_.push_back(t);
-    if (jets_order_.size() > kJetCacheTiles) {
-      jets_[jets_order_.front()] = nullptr;
-      jets_order_.pop_front();
-    }
-  }
-  jets_[t] = fresh;
+  cache->Insert(t, fresh);
   return fresh;
 }
 
 namespace {
 
-// The tile jets this thread read last (Workpiece::Jets): most reads stay in
-// one tile. Plain values, constant-initialised, so that the hit test costs
-// no TLS guard; `holder` (touched on misses only) keeps `jets` alive.
+// The tile jets this thread read last (Workpiece::Jets), whichever cache
+// they came from: most reads stay in one tile. Plain values,
+// constant-initialised, so that the hit test costs no TLS guard; `holder`
+// (touched on misses only) keeps `jets` alive.
 struct LastJets {
   const void* jets = nullptr;
   int32_t tile = -1;
@@ -640,21 +671,23 @@ thread_local std::shared_ptr<const void> last_jets_holder;
 
 }  // namespace
 
-inline const Workpiece::TileJets& Workpiece::Jets(int32_t t) const {
+inline const Workpiece::TileJets& Workpiece::Jets(int32_t t,
+                                                  JetCache* cache) const {
   const LastJets& last = last_jets;
   if (last.tile == t && last.serial == serial_ &&
       last.version == tile_version_[t] && last.jets != nullptr) {
     return *static_cast<const TileJets*>(last.jets);
   }
-  return JetsMiss(t);
+  return JetsMiss(t, cache);
 }
 
-const Workpiece::TileJets& Workpiece::JetsMiss(int32_t t) const {
+const Workpiece::TileJets& Workpiece::JetsMiss(int32_t t,
+                                               JetCache* cache) const {
   const uint64_t version = tile_version_[t];
-  std::shared_ptr<const TileJets> jets = CachedJets(t, version);
+  std::shared_ptr<const TileJets> jets = cache->Find(t, serial_, version);
   // Computed outside the lock; two threads may both compute a tile, with
   // the same result.
-  if (jets == nullptr) jets = NewJets(t, version);
+  if (jets == nullptr) jets = NewJets(t, version, cache);
   const TileJets* p = jets.get();
   last_jets_holder = std::move(jets);
   last_jets = {p, t, serial_, version};
@@ -670,11 +703,11 @@ void Workpiece::PrepareJets(std::span<const int32_t> tiles) const {
     if (CachedJets(t, tile_version_[t]) == nullptr) todo.push_back(t);
   }
   if (todo.size() < 2) {
-    for (const int32_t t : todo) NewJets(t, tile_version_[t]);
+    for (const int32_t t : todo) NewJets(t, tile_version_[t], &jets_);
     return;
   }
   pool_->ParallelFor(static_cast<int64_t>(todo.size()), [&](int64_t k) {
-    NewJets(todo[k], tile_version_[todo[k]]);
+    NewJets(todo[k], tile_version_[todo[k]], &jets_);
   });
 }
 
@@ -698,6 +731,10 @@ double Workpiece::TileMax(int32_t t) const {
 }
 
 NodeValue Workpiece::Node(int32_t i, int32_t j) const {
+  return Node(i, j, &jets_);
+}
+
+NodeValue Workpiece::Node(int32_t i, int32_t j, JetCache* cache) const {
   NodeValue v;
   const int32_t t = (j >> kTileBits) * tiles_x_ + (i >> kTileBits);
   const Tile* tile = tiles_[t].get();
@@ -709,7 +746,7 @@ NodeValue Workpiece::Node(int32_t i, int32_t j) const {
   v.jet.w = tile->w[k];
   v.owner = tile->owner[k];
   if (v.owner >= 0 && derivatives_) {
-    const TileJets& jets = Jets(t);
+    const TileJets& jets = Jets(t, cache);
     v.jet.wx = jets.d[0][k];
     v.jet.wy = jets.d[1][k];
     v.jet.wxx = jets.d[2][k];

@@ -214,8 +214,53 @@ class Workpiece {
   }
   uint64_t version() const { return version_; }
 
+ private:
+  struct TileJets;
+
+ public:
+  // Tile jets kept for one traversal of the nodes (MeasureError's bins,
+  // FindCuttingMarks' bands): its own tiles, so that traversals running at
+  // once do not evict each other's, sized for how far the traversal reaches
+  // back. Holds at most `tiles` tiles (80 KiB each), evicting the oldest
+  // computed first. Thread-safe: the threads of one traversal share it.
+  // Made by NewJetCache or TraversalJetCache for one workpiece, used only
+  // with it and only while it does not change (no Apply, no LoadState).
+  class JetCache {
+   public:
+    JetCache(const JetCache&) = delete;
+    JetCache& operator=(const JetCache&) = delete;
+    ~JetCache();
+    size_t capacity() const { return capacity_; }
+
+   private:
+    friend class Workpiece;
+    JetCache(int32_t tile_count, size_t tiles);
+    // Tile t's jets if they are of `serial` and `version`, else null.
+    std::shared_ptr<const TileJets> Find(int32_t t, uint64_t serial,
+                                         uint64_t version) const;
+    void Insert(int32_t t, std::shared_ptr<const TileJets> jets);
+    const size_t capacity_;
+    mutable std::mutex mu_;
+    std::vector<std::shared_ptr<const TileJets>> jets_;  // per tile
+    std::deque<int32_t> order_;  // cached tiles, oldest first
+  };
+  // A cache of at most `tiles` tiles (at least 1).
+  std::unique_ptr<JetCache> NewJetCache(size_t tiles) const;
+  // A cache for a traversal that goes over the grid in order of rows of
+  // tiles and reads each node row of a tile row several times (by bins or
+  // bands a fraction of a tile high), or a node row past it: two tile rows
+  // and some, so that each tile's jets are computed once; at most
+  // kTraversalJetBytes (a grid wider than that allows computes a tile's
+  // jets once per pass of the traversal over its tile row instead).
+  std::unique_ptr<JetCache> TraversalJetCache() const;
+  static constexpr size_t kTraversalJetBytes = size_t{256} << 20;
+
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.
   NodeValue Node(int32_t i, int32_t j) const;
+  // The same, the jets kept in `cache` (from this workpiece's
+  // NewJetCache or TraversalJetCache) instead of the workpiece's own
+  // cache (kJetCacheTiles).
+  NodeValue Node(int32_t i, int32_t j, JetCache* cache) const;
   // Node (i, j)'s owner (-1: uncut), without its jet: Node(i, j).owner.
   int32_t OwnerAt(int32_t i, int32_t j) const;
   // Node (i, j)'s height alone (no derivatives): Node(i, j).jet.w.
@@ -301,7 +346,6 @@ class Workpiece {
 
  private:
   struct Tile;
-  struct TileJets;
   Workpiece(const StockSpec& spec, const Scheme& scheme, ThreadPool* pool);
   std::unique_ptr<Tile> NewTile() const;
   // ValidateMoves, and ResourceExhausted past kMaxMoves (Apply and Record).
@@ -320,16 +364,20 @@ class Workpiece {
                   std::vector<TileCut>* cuts = nullptr) const;
 
   // The derivatives of tile t's nodes at its current version, computed from
-  // the owners' sweeps once and cached (thread-safe). The reference stays
-  // valid until this thread's next call (the thread keeps the last one).
-  const TileJets& Jets(int32_t t) const;
-  const TileJets& JetsMiss(int32_t t) const;  // Jets() past its hit test
-  // Tile t's cached jets if they are of `version` (and this state), else
-  // null.
+  // the owners' sweeps once and cached in `cache` (thread-safe). The
+  // reference stays valid until this thread's next call (the thread keeps
+  // the last one).
+  const TileJets& Jets(int32_t t, JetCache* cache) const;
+  // Jets() past its hit test.
+  const TileJets& JetsMiss(int32_t t, JetCache* cache) const;
+  // Tile t's jets in the workpiece's cache if they are of `version` (and
+  // this state), else null.
   std::shared_ptr<const TileJets> CachedJets(int32_t t,
                                              uint64_t version) const;
-  // Computes tile t's jets (at `version`, its current one) and caches them.
-  std::shared_ptr<const TileJets> NewJets(int32_t t, uint64_t version) const;
+  // Computes tile t's jets (at `version`, its current one) and caches them
+  // in `cache`.
+  std::shared_ptr<const TileJets> NewJets(int32_t t, uint64_t version,
+                                          JetCache* cache) const;
   // Tile t's jets into d[c] (row j at d[c] + j * stride, only its cut
   // columns [lo[j], hi[j]] written). With nx = Extent(t).nx: 0 <= lo[j] <=
   // nx and hi[j] < nx; a row with no cut node has lo[j] = nx, hi[j] = nx - 1.
@@ -349,9 +397,8 @@ class Workpiece {
   uint64_t serial_;  // changes when LoadState replaces the nodes
   const bool derivatives_;  // scheme_->stores_derivatives()
   MoveSweeps surfaces_{&moves_, &index_};
-  mutable std::mutex jets_mu_;
-  mutable std::vector<std::shared_ptr<const TileJets>> jets_;  // per tile
-  mutable std::deque<int32_t> jets_order_;  // cached tiles, oldest first
+  // The workpiece's own cache (Node, PrepareJets, ReadTile).
+  mutable JetCache jets_;
 };
 
 }  // namespace swarf

@@ -19,6 +19,7 @@
 #include "absl/time/clock.h"
 #include "absl/time/time.h"
 #include "client/outputs/deviation.h"
+#include "client/outputs/grid_bands.h"
 #include "client/outputs/surface_grid.h"
 #include "core/valuation.h"
 #include "server/convert.h"
@@ -133,16 +134,75 @@ absl::StatusOr<pb::Deviation> ComputeDeviation(const Session& session,
     return absl::InvalidArgumentError("max_moves must be >= 0");
   }
   if (req.max_moves() > 0) o.max_lines = req.max_moves();
-  auto grid = session.Read(
-      [](const Workpiece& wp) { return cli::SurfaceGrid::FromWorkpiece(wp); });
-  if (!grid.ok()) return grid.status();
-  // The moves themselves are the "lines": the client maps them.
-  std::vector<cli::SourceLine> moves(grid->move_count());
-  for (size_t k = 0; k < moves.size(); ++k) {
-    moves[k] = {0, static_cast<int32_t>(k)};
+  // The session's grid band by band (tile rows of about 1 M nodes,
+  // cli::TileRowBands), never a whole-grid copy: the banded measure gives
+  // the whole grid's figures bit for bit. Each band is read under the
+  // session's shared lock, let go between bands so that batches can apply
+  // meanwhile; a band that finds another state than the pass began with (a
+  // batch applied, the session reloaded) stops the pass, which starts over;
+  // the last try holds the lock for its whole pass.
+  struct State {
+    const Workpiece* wp = nullptr;
+    uint64_t version = 0;
+    int64_t moves = 0;
+    bool operator==(const State&) const = default;
+  };
+  auto state_of = [](const Workpiece& wp) {
+    return State{&wp, wp.version(), wp.move_count()};
+  };
+  struct Start {
+    State state;
+    StockSpec spec;
+    SchemeKind scheme;
+    std::shared_ptr<const MoveSource> moves;
+  };
+  auto start_of = [&](const Workpiece& wp) {
+    // The moves copied compactly (28 bytes each): the session's list grows
+    // while the pass lets the lock go.
+    auto moves = std::make_shared<MoveList>();
+    for (int64_t id = 0; id < wp.move_count(); ++id) moves->Append(wp.move(id));
+    return Start{state_of(wp), wp.spec(), wp.scheme().kind(),
+                 std::move(moves)};
+  };
+  auto measure = [&](Start start, cli::TileRowBands::Fill fill)
+      -> absl::StatusOr<cli::DeviationReport> {
+    // The moves themselves are the "lines": the client maps them.
+    std::vector<cli::SourceLine> lines(start.moves->size());
+    for (size_t k = 0; k < lines.size(); ++k) {
+      lines[k] = {0, static_cast<int32_t>(k)};
+    }
+    cli::TileRowBands bands(start.spec, start.scheme, std::move(fill),
+                            std::move(start.moves));
+    return cli::MeasureDeviation(bands, design->envelope(), design->index(),
+                                 lines, o,
+                                 [](int32_t, int32_t, const float*) {});
+  };
+  constexpr int kTries = 3;
+  absl::StatusOr<cli::DeviationReport> r;
+  bool changed = true;
+  for (int attempt = 1; attempt < kTries && changed; ++attempt) {
+    Start start = session.Read(start_of);
+    const State seen = start.state;
+    changed = false;
+    r = measure(std::move(start), [&](cli::SurfaceGrid* band, int32_t t0,
+                                      int32_t t1, bool heights_only) {
+      return session.Read([&](const Workpiece& wp) -> absl::Status {
+        if (!(state_of(wp) == seen)) {
+          changed = true;
+          return absl::AbortedError("the session changed during the pass");
+        }
+        return band->SetTileRows(wp, t0, t1, heights_only);
+      });
+    });
   }
-  auto r = cli::MeasureDeviation(*grid, design->envelope(), design->index(),
-                                 moves, o);
+  if (changed) {
+    r = session.Read([&](const Workpiece& wp) {
+      return measure(start_of(wp), [&](cli::SurfaceGrid* band, int32_t t0,
+                                       int32_t t1, bool heights_only) {
+        return band->SetTileRows(wp, t0, t1, heights_only);
+      });
+    });
+  }
   if (!r.ok()) return r.status();
   pb::Deviation out;
   out.set_triangles(static_cast<int64_t>(design->mesh().triangles.size()));

@@ -94,11 +94,12 @@ grpc::Status Upload(pb::Swarf::Stub* stub, const std::string& id,
   return grpc::Status::OK;
 }
 
-// A guarded session over kStock with the ball kTool.
-void Create(pb::Swarf::Stub* stub, const std::string& id) {
+// A guarded session over `stock` with the ball kTool.
+void Create(pb::Swarf::Stub* stub, const std::string& id,
+            const StockSpec& stock = kStock) {
   pb::CreateSessionRequest create;
   create.set_session_id(id);
-  SetStock(kStock, &create);
+  SetStock(stock, &create);
   create.set_scheme(pb::SCHEME_GUARDED);
   pb::Tool* tool = create.add_tools();
   tool->set_id(kTool);
@@ -110,8 +111,9 @@ void Create(pb::Swarf::Stub* stub, const std::string& id) {
 }
 
 // Create, then the whole raster in one batch.
-void CreateAndCut(pb::Swarf::Stub* stub, const std::string& id) {
-  Create(stub, id);
+void CreateAndCut(pb::Swarf::Stub* stub, const std::string& id,
+                  const StockSpec& stock = kStock) {
+  Create(stub, id, stock);
   std::vector<double> xyz;
   for (const Vec3& p : RasterPoints()) xyz.insert(xyz.end(), {p.x, p.y, p.z});
   SimStream s(stub, id);
@@ -131,8 +133,9 @@ grpc::Status Deviation(pb::Swarf::Stub* stub, const std::string& id,
 }
 
 // The same comparison on the core directly.
-cli::DeviationReport Reference(const design::DesignMesh& mesh) {
-  auto wp = *Workpiece::Create(kStock, SchemeKind::kGuarded);
+cli::DeviationReport Reference(const design::DesignMesh& mesh,
+                               const StockSpec& stock = kStock) {
+  auto wp = *Workpiece::Create(stock, SchemeKind::kGuarded);
   const std::vector<Vec3> p = RasterPoints();
   std::vector<Move> moves;
   for (size_t k = 1; k < p.size(); ++k) {
@@ -244,6 +247,22 @@ TEST_F(DesignApiTest, ChunkedDesignGivesTheCoresDeviationBitForBit) {
   }
   EXPECT_EQ(checked, 201 * 201);
   EXPECT_NEAR(deepest, -d.gouge_max(), 1e-6);
+}
+
+// A grid the server reads in two bands (1201 x 1201 nodes, bands of about
+// 1 M nodes, whole tile rows): the figures are still the core's whole-grid
+// comparison's, bit for bit.
+TEST_F(DesignApiTest, BandedDeviationGivesTheWholeGridsFigures) {
+  const StockSpec fine{0, 0, 20, 20, 0, 1200, 1200};
+  CreateAndCut(stub_.get(), "fine", fine);
+  const std::string stl = design::ToBinaryStl(Floor());
+  pb::DesignInfo info;
+  ASSERT_TRUE(Upload(stub_.get(), "fine", stl, 1 << 19, &info).ok());
+  pb::Deviation d;
+  ASSERT_TRUE(Deviation(stub_.get(), "fine", &d).ok());
+  EXPECT_EQ(d.nodes(), 1201 * 1201);
+  EXPECT_GT(d.gouge_moves_size(), 0);
+  ExpectSame(d, Reference(*design::ParseStl(stl, "floor.stl"), fine));
 }
 
 // A DeviationRequest on the Simulate stream sees exactly the batches sent

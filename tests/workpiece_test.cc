@@ -966,6 +966,53 @@ TEST(WorkpieceJetsTest, EveryNodeHasItsOwnersJet) {
   }
 }
 
+// A traversal's own jet cache gives every node what Node gives it, bit for
+// bit, whatever its capacity (one tile: each change of tile evicts), read
+// from two threads at once, one of them interleaving the workpiece's own
+// cache.
+TEST(WorkpieceJetsTest, TraversalCachesReadTheSameNodes) {
+  const StockSpec spec{0, 0, 90, 90, 10, 900, 900};
+  ThreadPool pool(4);
+  auto wp = MakeWorkpiece(spec, SchemeKind::kTaylor, &pool);
+  ASSERT_TRUE(wp->Apply(JetMixMoves()).ok());
+  ASSERT_EQ(wp->allocated_tiles(), wp->tile_count());
+  const int32_t nx = spec.nx + 1, ny = spec.ny + 1;
+  std::vector<NodeValue> want(static_cast<size_t>(nx) * ny);
+  for (int32_t j = 0; j < ny; ++j) {
+    for (int32_t i = 0; i < nx; ++i) want[size_t(j) * nx + i] = wp->Node(i, j);
+  }
+  const std::unique_ptr<Workpiece::JetCache> traversal =
+      wp->TraversalJetCache();
+  // Two rows of 15 tiles and 64 more, fewer than the grid's 225.
+  EXPECT_EQ(wp->tiles_x(), 15);
+  EXPECT_EQ(traversal->capacity(), size_t{2 * 15 + 64});
+  const std::unique_ptr<Workpiece::JetCache> one = wp->NewJetCache(1);
+  EXPECT_EQ(one->capacity(), 1u);
+  EXPECT_EQ(wp->NewJetCache(0)->capacity(), 1u);
+  for (Workpiece::JetCache* cache : {traversal.get(), one.get()}) {
+    SCOPED_TRACE(cache->capacity());
+    const int32_t step = cache == one.get() ? 7 : 1;  // rows read
+    auto read = [&](bool down, bool mixed, int64_t* bad) {
+      for (int32_t r = 0; r < ny; r += step) {
+        const int32_t j = down ? ny - 1 - r : r;
+        for (int32_t i = 0; i < nx; ++i) {
+          const NodeValue v = mixed && i % 3 == 0 ? wp->Node(nx - 1 - i, j)
+                                                  : wp->Node(i, j, cache);
+          const NodeValue& w =
+              want[size_t(j) * nx + (mixed && i % 3 == 0 ? nx - 1 - i : i)];
+          *bad += !SameJet(v.jet, w.jet) || v.owner != w.owner;
+        }
+      }
+    };
+    int64_t bad_up = 0, bad_down = 0;
+    std::thread other([&] { read(/*down=*/true, /*mixed=*/true, &bad_down); });
+    read(/*down=*/false, /*mixed=*/false, &bad_up);
+    other.join();
+    EXPECT_EQ(bad_up, 0);
+    EXPECT_EQ(bad_down, 0);
+  }
+}
+
 // The z-map has no derivatives: zeros, and PrepareJets does nothing.
 TEST(WorkpieceJetsTest, ZmapReadsZeros) {
   auto wp = MakeWorkpiece(MixedStock(), SchemeKind::kZmap);

@@ -58,14 +58,25 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
   absl::StatusOr<SurfaceGrid> g = Uncut(wp.spec(), wp.scheme().kind());
   if (!g.ok()) return g.status();
   g->SetMoves(wp.moves().ToVector());
+  if (absl::Status st = g->SetTileRows(wp, 0, wp.tiles_y()); !st.ok()) {
+    return st;
+  }
+  return g;
+}
+
+absl::Status SurfaceGrid::SetTileRows(const Workpiece& wp, int32_t t0,
+                                      int32_t t1, bool heights_only) {
   std::vector<double> w(kTileNodes);
-  std::vector<float> dbuf(5 * kTileNodes);
-  std::vector<int32_t> owner(kTileNodes);
-  float* const d[5] = {&dbuf[0], &dbuf[kTileNodes], &dbuf[2 * kTileNodes],
-                       &dbuf[3 * kTileNodes], &dbuf[4 * kTileNodes]};
-  // Unallocated tiles are untouched stock, which Uncut already holds.
+  std::vector<float> dbuf(heights_only ? 0 : 5 * kTileNodes);
+  std::vector<int32_t> owner(heights_only ? 0 : kTileNodes);
+  float* const d[5] = {
+      dbuf.data(), dbuf.data() + kTileNodes, dbuf.data() + 2 * kTileNodes,
+      dbuf.data() + 3 * kTileNodes, dbuf.data() + 4 * kTileNodes};
+  // Unallocated tiles are untouched stock, which the grid already holds.
   std::vector<int32_t> tiles;
-  for (int32_t t = 0; t < wp.tile_count(); ++t) {
+  t0 = std::max(t0, 0);
+  t1 = std::min(t1, wp.tiles_y());
+  for (int32_t t = t0 * wp.tiles_x(); t < t1 * wp.tiles_x(); ++t) {
     if (wp.TileAllocated(t)) tiles.push_back(t);
   }
   // A chunk's derivatives on the workpiece's threads, then its reads.
@@ -74,18 +85,20 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
   for (size_t c = 0; c < tiles.size(); c += kChunk) {
     const std::span<const int32_t> chunk(
         tiles.data() + c, std::min(kChunk, tiles.size() - c));
-    wp.PrepareJets(chunk);
+    if (!heights_only) wp.PrepareJets(chunk);
     for (const int32_t t : chunk) {
       const Workpiece::TileExtent e = wp.Extent(t);
-      wp.ReadTile(t, w.data(), d, owner.data());
-      if (absl::Status st = g->SetNodes(e.i0, e.j0, e.nx, e.ny, w.data(), d,
-                                        owner.data());
+      wp.ReadTile(t, w.data(), heights_only ? nullptr : d,
+                  heights_only ? nullptr : owner.data());
+      if (absl::Status st = SetNodes(e.i0, e.j0, e.nx, e.ny, w.data(),
+                                     heights_only ? nullptr : d,
+                                     heights_only ? nullptr : owner.data());
           !st.ok()) {
         return st;
       }
     }
   }
-  return g;
+  return absl::OkStatus();
 }
 
 void SurfaceGrid::SetMoves(std::shared_ptr<const MoveSource> list) {

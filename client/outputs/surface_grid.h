@@ -67,6 +67,13 @@ struct SurfaceGrid {
   // A copy of every node of `wp` (derivatives widened from the core's
   // floats, as ReadTile gives them).
   static absl::StatusOr<SurfaceGrid> FromWorkpiece(const Workpiece& wp);
+  // Copies the nodes of wp's tile rows [t0, t1) that this grid or band
+  // holds, as FromWorkpiece does (heights only, zero derivatives and owner
+  // -1, with `heights_only`); unallocated tiles are left as they are
+  // (untouched stock after Uncut, Band or ResetBand). wp must have this
+  // grid's stock. Uses wp's threads and jet cache.
+  absl::Status SetTileRows(const Workpiece& wp, int32_t t0, int32_t t1,
+                           bool heights_only = false);
 
   // Copies a block of nx x ny nodes with first node (i0, j0), row-major
   // ((j - j0) * nx + (i - i0)), as in Workpiece::ReadTile and the service's
