@@ -38,6 +38,14 @@ struct Move {
   Cutter cutter;
 };
 
+// A move's parts by pointer, into a MoveList (valid until its next Append)
+// or into a Move the caller keeps.
+struct MoveView {
+  const Vec3* from;
+  const Vec3* to;
+  const Cutter* cutter;
+};
+
 // Moves by id, 0 <= id < size(), however they are kept: a workpiece's
 // MoveList, or a client's program (its toolpath points). Implementations
 // state their own thread safety; Get must be safe to call concurrently.
@@ -90,6 +98,20 @@ class MoveList final : public MoveSource {
     return m;
   }
   Move operator[](int64_t id) const { return Get(id); }
+  // Move `id` without a copy: for the scans that look at many moves and
+  // keep few.
+  MoveView View(int64_t id) const {
+    const Chunk& c = *chunks_[id >> kChunkBits];
+    const int64_t k = id & (kChunkMoves - 1);
+    const uint32_t tag = c.tag[k];
+    if (tag & kOwnStart) {
+      const Start& s = starts_[tag & ~kOwnStart];
+      return {&s.from, &c.to[k], &cutters_[s.cutter]};
+    }
+    return {k > 0 ? &c.to[k - 1]
+                  : &chunks_[(id >> kChunkBits) - 1]->to[kChunkMoves - 1],
+            &c.to[k], &cutters_[tag]};
+  }
   // Asks the cache for move id's end, its tag and its start, for a Get soon.
   void Prefetch(int64_t id) const {
     const Chunk& c = *chunks_[id >> kChunkBits];

@@ -914,14 +914,16 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
                             double cap, int32_t* id) const {
   double w = cap;
   int32_t lowest = -1;
+  Move scratch;
   for (const uint32_t k : index_->Bin(index_->BinOfElement(ei, ej))) {
-    const Move m = MoveAt(k);
-    if (!(std::min(m.from.z, m.to.z) < w)) continue;
+    const MoveView m = ViewAt(k, &scratch);
+    if (!(std::min(m.from->z, m.to->z) < w)) continue;
     // Beyond its footprint below w a move is not below w.
-    if (FootprintSurelyMisses(m.from, m.to, m.cutter, {x, y, x, y}, w)) {
+    if (FootprintSurelyMisses(*m.from, *m.to, *m.cutter, {x, y, x, y}, w)) {
       continue;
     }
-    const std::optional<Rect> b = FootprintBounds(m.from, m.to, m.cutter, w);
+    const std::optional<Rect> b =
+        FootprintBounds(*m.from, *m.to, *m.cutter, w);
     if (!b.has_value() || !b->Contains(x, y)) continue;
     const double h = Height(static_cast<int32_t>(k), x, y);
     if (h < w) {
@@ -956,16 +958,18 @@ void MoveSweeps::FillCandidates(ElementCorners* e) const {
   }
   const size_t owners = e->candidates.size();
   const Rect box{e->x0, e->y0, e->x1, e->y1};
+  Move scratch;
   for (const uint32_t id : index_->Bin(index_->BinOfElement(ei, ej))) {
-    const Move m = MoveAt(id);
-    if (!(std::min(m.from.z, m.to.z) < cap)) continue;
+    const MoveView m = ViewAt(id, &scratch);
+    if (!(std::min(m.from->z, m.to->z) < cap)) continue;
     bool owner = false;
     for (size_t q = 0; q < owners && !owner; ++q) {
       owner = e->candidates[q] == static_cast<int32_t>(id);
     }
     if (owner) continue;
-    if (FootprintSurelyMisses(m.from, m.to, m.cutter, box, cap)) continue;
-    const std::optional<Rect> b = FootprintBounds(m.from, m.to, m.cutter, cap);
+    if (FootprintSurelyMisses(*m.from, *m.to, *m.cutter, box, cap)) continue;
+    const std::optional<Rect> b =
+        FootprintBounds(*m.from, *m.to, *m.cutter, cap);
     if (b.has_value() && b->Intersects(box)) {
       e->candidates.push_back(static_cast<int32_t>(id));
     }

@@ -94,6 +94,13 @@ class MoveSweeps final : public MoveSurfaces {
   Move MoveAt(int64_t id) const {
     return list_ != nullptr ? list_->Get(id) : moves_->Get(id);
   }
+  // The same without a copy where the source is a MoveList (else a copy
+  // into *scratch).
+  MoveView ViewAt(int64_t id, Move* scratch) const {
+    if (list_ != nullptr) return list_->View(id);
+    *scratch = moves_->Get(id);
+    return {&scratch->from, &scratch->to, &scratch->cutter};
+  }
   std::shared_ptr<const MoveSource> owned_;
   const MoveSource* moves_;
   const MoveList* list_;  // moves_ when it is a MoveList, else null
