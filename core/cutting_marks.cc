@@ -1,11 +1,13 @@
 #include "core/cutting_marks.h"
 
 #include <algorithm>
+#include <map>
 #include <cmath>
 #include <memory>
 #include <numbers>
 #include <utility>
 
+#include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
 
 namespace swarf {
@@ -897,9 +899,16 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
   }
 }
 
-std::vector<MarkPolyline> Chain(const std::vector<Segment>& segs, double tol,
-                                double fold, double end_fold,
-                                ThreadPool& pool) {
+// With `starts`, each polyline's first segment (the lowest index of its
+// chain: polylines come out in that order); with `chain_of`, each
+// segment's chain, by that first segment (also for chains too short to
+// give a polyline). `ghosts` counts, per vertex key, segments chained
+// before that end there too (they count in its degree).
+std::vector<MarkPolyline> Chain(
+    const std::vector<Segment>& segs, double tol, double fold,
+    double end_fold, ThreadPool& pool, std::vector<int64_t>* starts = nullptr,
+    std::vector<int64_t>* chain_of = nullptr,
+    const absl::flat_hash_map<uint64_t, int32_t>* ghosts = nullptr) {
   const int64_t n = static_cast<int64_t>(segs.size());
   // Incidences sorted by vertex key.
   struct Inc {
@@ -935,7 +944,11 @@ std::vector<MarkPolyline> Chain(const std::vector<Segment>& segs, double tol,
   for (size_t i = 0; i < inc.size();) {
     size_t j = i;
     while (j < inc.size() && inc[j].key == inc[i].key) ++j;
-    const int d = static_cast<int>(j - i);
+    int d = static_cast<int>(j - i);
+    if (ghosts != nullptr) {
+      const auto g = ghosts->find(inc[i].key);
+      if (g != ghosts->end()) d += g->second;
+    }
     for (size_t k = i; k < j; ++k) degree[2 * inc[k].seg + inc[k].end] = d;
     if (d == 2) {
       other[2 * inc[i].seg + inc[i].end] = 2 * inc[i + 1].seg + inc[i + 1].end;
@@ -944,6 +957,7 @@ std::vector<MarkPolyline> Chain(const std::vector<Segment>& segs, double tol,
     i = j;
   }
   std::vector<bool> used(n, false);
+  if (chain_of != nullptr) chain_of->assign(n, -1);
   std::vector<MarkPolyline> out;
   auto push_vertex = [&](MarkPolyline* p, const End& e) {
     if (!p->vertices.empty()) {
@@ -981,6 +995,7 @@ std::vector<MarkPolyline> Chain(const std::vector<Segment>& segs, double tol,
     push_vertex(&p, segs[seg].e[end]);
     for (;;) {
       used[seg] = true;
+      if (chain_of != nullptr) (*chain_of)[seg] = s;
       const End& far = segs[seg].e[1 - end];
       push_vertex(&p, far);
       const int64_t o = other[2 * seg + (1 - end)];
@@ -1001,6 +1016,7 @@ std::vector<MarkPolyline> Chain(const std::vector<Segment>& segs, double tol,
     if (p.vertices.size() < (closed ? 3u : 2u)) continue;
     p.owners = p.vertex_owners.front();
     out.push_back(std::move(p));
+    if (starts != nullptr) starts->push_back(s);
   }
   return out;
 }
@@ -1191,8 +1207,8 @@ void ProjectOntoExactCrease(const Workpiece& wp,
   // Not converged: the vertex stays where the patches put it.
 }
 
-absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
-    const Workpiece& wp, const MarkOptions& options) {
+absl::Status FindCuttingMarks(const Workpiece& wp, const MarkOptions& options,
+                              absl::FunctionRef<void(MarkPolyline)> emit) {
   if (!wp.scheme().stores_derivatives()) {
     return absl::FailedPreconditionError(absl::StrCat(
         "cutting marks need the node derivatives of the taylor scheme; this "
@@ -1218,7 +1234,6 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
   const int32_t cols = ei1 - ei0 + 1;  // elements per row in the region
   constexpr int32_t kBandRows = 16;
   const int32_t bands = (ej1 - ej0 + kBandRows) / kBandRows;
-  std::vector<std::vector<Segment>> band_segments(bands);
 
   // Bands are claimed in order; four read each tile row (and a fifth its
   // first node row): the nodes' jets in a cache of this traversal's own,
@@ -1226,7 +1241,7 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
   // as the valuation, holds less than a row of a wide grid: each tile was
   // computed up to once per node row).
   const std::unique_ptr<Workpiece::JetCache> jets = wp.TraversalJetCache();
-  wp.pool().ParallelFor(bands, [&](int64_t band) {
+  auto find_band = [&](int64_t band, std::vector<Segment>* out) {
     const int32_t r0 = ej0 + static_cast<int32_t>(band) * kBandRows;
     const int32_t r1 = std::min(r0 + kBandRows, ej1 + 1);  // rows [r0, r1)
     // Node rows r0..r1, columns ei0..ei1+1, a tile's columns at a time (a
@@ -1270,7 +1285,6 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
             flagged(node(i, j), node(i, j + 1), s.threshold_v);
       }
     }
-    std::vector<Segment>& out = band_segments[band];
     for (int32_t j = r0; j < r1; ++j) {
       for (int32_t i = ei0; i <= ei1; ++i) {
         const size_t hi = size_t(j - r0) * cols + (i - ei0);
@@ -1281,53 +1295,23 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
         }
         const NodeRef* const c[4] = {&node(i, j), &node(i + 1, j),
                                      &node(i + 1, j + 1), &node(i, j + 1)};
-        ProcessElement(c, i, j, grid.nodes_x(), grid, s, &out);
+        ProcessElement(c, i, j, grid.nodes_x(), grid, s, out);
       }
     }
-  });
+  };
 
-  // Keep what lies in the region (junctions may sit a little outside their
-  // element, hence outside the stock), each band's segments at once with
-  // their index in the bands' concatenation, then the bands concatenated
-  // once (segments are large: a copy of all of them is ~100 MB on a
-  // detailed relief).
-  std::vector<size_t> first(bands + 1, 0);
-  for (int32_t b = 0; b < bands; ++b) {
-    first[b + 1] = first[b] + band_segments[b].size();
-  }
-  std::vector<size_t> band_kept(bands, 0);
-  wp.pool().ParallelFor(bands, [&](int64_t b) {
-    std::vector<Segment>& band = band_segments[b];
-    size_t n = 0;
-    for (size_t i = 0; i < band.size(); ++i) {
-      Segment seg = band[i];
-      if (ClipSegment(region, first[b] + i, &seg)) band[n++] = seg;
-    }
-    band_kept[b] = n;
-  });
-  std::vector<size_t> kept_first(bands + 1, 0);
-  for (int32_t b = 0; b < bands; ++b) {
-    kept_first[b + 1] = kept_first[b] + band_kept[b];
-  }
-  std::vector<Segment> kept(kept_first[bands]);
-  wp.pool().ParallelFor(bands, [&](int64_t b) {
-    std::copy_n(band_segments[b].begin(), band_kept[b],
-                kept.begin() + kept_first[b]);
-    std::vector<Segment>().swap(band_segments[b]);
-  });
   // Vertices closer than this are one (crossings clamped onto a node).
   const double tol = 1e-9 * std::fmax(grid.dx(), grid.dy());
   // Folds shorter than a tenth of an element are the patches' disagreement,
   // not the crease's shape; next to a junction, up to the half element by
   // which a junction may leave its element.
   const double h = std::fmin(grid.dx(), grid.dy());
-  std::vector<MarkPolyline> marks =
-      Chain(kept, tol, 0.1 * h, kJunctionMargin * h, wp.pool());
-  if (wp.scheme().kind() == SchemeKind::kGuarded) {
-    // A crease lies on both owners' surfaces: never below either's lowest
-    // point (patches met far from their nodes can cross lower): the owner's
-    // lowest tip, ReachOf(...).z_low, without building its reach.
-    for (MarkPolyline& p : marks) {
+  // A polyline chained: lifted and projected as its scheme's marks are.
+  auto finish = [&](MarkPolyline& p) {
+    if (wp.scheme().kind() == SchemeKind::kGuarded) {
+      // A crease lies on both owners' surfaces: never below either's lowest
+      // point (patches met far from their nodes can cross lower): the
+      // owner's lowest tip, ReachOf(...).z_low, without building its reach.
       for (size_t k = 0; k < p.vertices.size(); ++k) {
         for (int32_t id : p.vertex_owners[k]) {
           if (id < 0 || id >= wp.move_count()) continue;
@@ -1337,18 +1321,136 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
         }
       }
     }
-  }
-  // Sessions whose reconstruction uses the exact surfaces have their marks
-  // on the exact creases too.
-  if (wp.scheme().kind() == SchemeKind::kExact ||
-      wp.scheme().kind() == SchemeKind::kGuarded) {
-    for (MarkPolyline& p : marks) {
+    // Sessions whose reconstruction uses the exact surfaces have their
+    // marks on the exact creases too.
+    if (wp.scheme().kind() == SchemeKind::kExact ||
+        wp.scheme().kind() == SchemeKind::kGuarded) {
       for (size_t k = 0; k < p.vertices.size(); ++k) {
-        ProjectOntoExactCrease(wp, p.vertex_owners[k], h, s.t1, &p.vertices[k],
-                               &p.angle_deg[k]);
+        ProjectOntoExactCrease(wp, p.vertex_owners[k], h, s.t1,
+                               &p.vertices[k], &p.angle_deg[k]);
       }
     }
+  };
+
+  // The bands a window at a time, so that the segments of the whole grid
+  // are never held: after each window, the chains that no segment of it
+  // touches are complete (a later band's segments end on its own elements'
+  // edges and junctions only) and are chained, in the order of their first
+  // segment as if every segment had been chained at once (Chain numbers
+  // the segments in band order; a chain's polyline and its place depend
+  // only on its own segments and their order), and handed on once no open
+  // chain can still come before them.
+  const int32_t window = std::max(8, 4 * wp.pool().size());
+  std::vector<std::vector<Segment>> band_segments;
+  std::vector<Segment> open;      // kept segments not chained yet, in order
+  std::vector<int64_t> open_at;   // their index among every kept segment
+  uint64_t raw_before = 0;        // segments found in earlier windows
+  int64_t kept_before = 0;        // kept (clipped) in earlier windows
+  // Polylines chained, by first segment, waiting for earlier open chains.
+  std::map<int64_t, MarkPolyline> ready;
+  // Segments handed on, per vertex key an open segment uses (Chain).
+  absl::flat_hash_map<uint64_t, int32_t> ghosts;
+  for (int32_t w0 = 0; w0 < bands; w0 += window) {
+    const int32_t wn = std::min(window, bands - w0);
+    band_segments.assign(wn, {});
+    wp.pool().ParallelFor(wn, [&](int64_t b) {
+      find_band(w0 + b, &band_segments[b]);
+    });
+    // Keep what lies in the region (junctions may sit a little outside
+    // their element, hence outside the stock), each segment clipped with
+    // its index among every band's segments.
+    std::vector<uint64_t> first(wn + 1, raw_before);
+    for (int32_t b = 0; b < wn; ++b) {
+      first[b + 1] = first[b] + band_segments[b].size();
+    }
+    raw_before = first[wn];
+    wp.pool().ParallelFor(wn, [&](int64_t b) {
+      std::vector<Segment>& band = band_segments[b];
+      size_t n = 0;
+      for (size_t i = 0; i < band.size(); ++i) {
+        Segment seg = band[i];
+        if (ClipSegment(region, first[b] + i, &seg)) band[n++] = seg;
+      }
+      band.resize(n);
+    });
+    const size_t window_first = open.size();
+    for (std::vector<Segment>& band : band_segments) {
+      for (const Segment& seg : band) {
+        open.push_back(seg);
+        open_at.push_back(kept_before++);
+      }
+      std::vector<Segment>().swap(band);
+    }
+    // Chain what is open. A chain with a segment of this window may still
+    // grow (not after the last): its segments stay open. Every other chain
+    // is complete, every segment at its vertices known (a later window's
+    // segments end on its own elements' edges and junctions only), so its
+    // polyline is the one chaining every segment at once gives.
+    const bool last = w0 + wn >= bands;
+    std::vector<int64_t> starts, chain_of;
+    std::vector<MarkPolyline> chained =
+        Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts,
+              &chain_of, &ghosts);
+    std::vector<bool> growing(open.size(), false);
+    if (!last) {
+      for (size_t k = window_first; k < open.size(); ++k) {
+        growing[chain_of[k]] = true;
+      }
+    }
+    std::vector<size_t> complete;
+    for (size_t k = 0; k < chained.size(); ++k) {
+      if (!growing[starts[k]]) complete.push_back(k);
+    }
+    wp.pool().ParallelFor(static_cast<int64_t>(complete.size()),
+                          [&](int64_t k) { finish(chained[complete[k]]); });
+    for (const size_t k : complete) {
+      ready.emplace(open_at[starts[k]], std::move(chained[k]));
+    }
+    // The complete chains' segments leave; where one ends at a vertex an
+    // open segment still uses, it stays counted there (a junction of three
+    // chains must not join the other two once the first is handed on).
+    absl::flat_hash_map<uint64_t, int32_t> kept_ghosts;
+    for (size_t k = 0; k < open.size(); ++k) {
+      if (!growing[chain_of[k]]) continue;
+      for (const End& e : open[k].e) kept_ghosts.try_emplace(e.key, 0);
+    }
+    for (auto& [key, count] : kept_ghosts) {
+      const auto g = ghosts.find(key);
+      if (g != ghosts.end()) count = g->second;
+    }
+    size_t n = 0;
+    for (size_t k = 0; k < open.size(); ++k) {
+      if (!growing[chain_of[k]]) {
+        for (const End& e : open[k].e) {
+          const auto g = kept_ghosts.find(e.key);
+          if (g != kept_ghosts.end()) ++g->second;
+        }
+        continue;
+      }
+      open[n] = open[k];
+      open_at[n++] = open_at[k];
+    }
+    open.resize(n);
+    open_at.resize(n);
+    absl::erase_if(kept_ghosts, [](const auto& g) { return g.second == 0; });
+    ghosts.swap(kept_ghosts);
+    // Hand on what no open chain can come before.
+    const int64_t before = open_at.empty() ? INT64_MAX : open_at.front();
+    while (!ready.empty() && ready.begin()->first < before) {
+      emit(std::move(ready.begin()->second));
+      ready.erase(ready.begin());
+    }
   }
+  for (auto& [at, p] : ready) emit(std::move(p));
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
+    const Workpiece& wp, const MarkOptions& options) {
+  std::vector<MarkPolyline> marks;
+  absl::Status st = FindCuttingMarks(
+      wp, options, [&](MarkPolyline p) { marks.push_back(std::move(p)); });
+  if (!st.ok()) return st;
   return marks;
 }
 

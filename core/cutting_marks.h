@@ -47,6 +47,7 @@
 #include <optional>
 #include <vector>
 
+#include "absl/functional/function_ref.h"
 #include "absl/status/statusor.h"
 #include "core/geometry.h"
 #include "core/surface_jet.h"
@@ -106,6 +107,12 @@ struct MarkPolyline {
 // the field for bad options; FailedPrecondition for a zmap workpiece.
 absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
     const Workpiece& wp, const MarkOptions& options = {});
+// The same marks, in the same order, handed to `emit` as they are found:
+// the grid is read a window of bands at a time and only the chains still
+// open (and the polylines that wait for an earlier one) are held, not every
+// crease segment of the grid. `emit` runs on the calling thread.
+absl::Status FindCuttingMarks(const Workpiece& wp, const MarkOptions& options,
+                              absl::FunctionRef<void(MarkPolyline)> emit);
 
 // The paper's equations as used here.
 

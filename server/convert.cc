@@ -482,11 +482,10 @@ absl::StatusOr<std::vector<pb::Polyline>> ComputeMarks(
   }
   if (screening_threshold != 0) opt.screening_threshold = screening_threshold;
   if (min_angle_deg != 0) opt.t2_deg = min_angle_deg;
-  auto marks = FindCuttingMarks(wp, opt);
-  if (!marks.ok()) return marks.status();
+  // Each polyline converted as the core hands it on: the core's marks are
+  // never all held beside their protobuf copies.
   std::vector<pb::Polyline> out;
-  out.reserve(marks->size());
-  for (const MarkPolyline& m : *marks) {
+  absl::Status found = FindCuttingMarks(wp, opt, [&](MarkPolyline m) {
     pb::Polyline& p = out.emplace_back();
     p.set_closed(m.closed);
     p.add_owners(m.owners[0]);
@@ -498,7 +497,8 @@ absl::StatusOr<std::vector<pb::Polyline>> ComputeMarks(
       p.add_xyz(v.z);
     }
     p.mutable_angle_deg()->Assign(m.angle_deg.begin(), m.angle_deg.end());
-  }
+  });
+  if (!found.ok()) return found;
   return out;
 }
 

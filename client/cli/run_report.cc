@@ -80,10 +80,15 @@ absl::StatusOr<std::vector<MarkPolyline>> FetchMarks(Connection& conn,
   while (stream->Read(&resp)) {
     if (resp.has_polylines() && resp.polylines().request_id() == 1) {
       answered = true;
-      marks.reserve(resp.polylines().polylines_size());
-      for (const pb::Polyline& p : resp.polylines().polylines()) {
+      // Each polyline's message freed once converted: the marks are not
+      // held twice.
+      auto* lines = resp.mutable_polylines()->mutable_polylines();
+      marks.reserve(lines->size());
+      for (pb::Polyline& p : *lines) {
         marks.push_back(MarkFromProto(p));
+        pb::Polyline().Swap(&p);
       }
+      resp.Clear();
     } else if (resp.has_error() && resp.error().request_id() == 1) {
       request_error =
           absl::Status(static_cast<absl::StatusCode>(resp.error().code()),
@@ -438,7 +443,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   report->mesh_tolerance = options.mesh_tolerance;
   report->marks_display = options.marks_display;
   if (report->marks) {
-    marks = FilterMarks(marks, options.marks_display);
+    marks = FilterMarks(std::move(marks), options.marks_display);
     report->marks_shown = Summarize(marks);
   }
   out.relief.max_side = options.picture_size;

@@ -14,10 +14,12 @@
 
 namespace swarf::cli {
 
-std::vector<MarkPolyline> FilterMarks(const std::vector<MarkPolyline>& marks,
+std::vector<MarkPolyline> FilterMarks(std::vector<MarkPolyline> marks,
                                       const MarkDisplayFilter& filter) {
   std::vector<MarkPolyline> out;
-  for (const MarkPolyline& p : marks) {
+  for (MarkPolyline& item : marks) {
+    // Moved out, so that it is freed at the end of its turn.
+    MarkPolyline p = std::move(item);
     const size_t n = p.vertices.size();
     const bool rim = p.owners[0] == kStockTopOwner;
     auto keep = [&](size_t k) {
@@ -42,7 +44,7 @@ std::vector<MarkPolyline> FilterMarks(const std::vector<MarkPolyline>& marks,
       }
     }
     if (all) {
-      emit(p);
+      emit(std::move(p));
       continue;
     }
     MarkPolyline piece;

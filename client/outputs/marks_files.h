@@ -26,7 +26,9 @@ inline constexpr MarkDisplayFilter kDefaultMarkDisplay;
 // runs of at least two vertices and min_length (3D length) are kept, with
 // their owners, angles and vertex owners. Rims on the stock top (owner -1)
 // are kept whatever their angle.
-std::vector<MarkPolyline> FilterMarks(const std::vector<MarkPolyline>& marks,
+// Takes `marks` by value: a caller that moves them in holds them once
+// (each polyline is freed once filtered).
+std::vector<MarkPolyline> FilterMarks(std::vector<MarkPolyline> marks,
                                       const MarkDisplayFilter& filter);
 
 // Compact JSON, without a trailing newline:
