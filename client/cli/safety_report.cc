@@ -74,7 +74,8 @@ SafetyCollector::SafetyCollector(const gcode::Toolpath& path,
   for (int64_t m = 0; m < move_count_; ++m) {
     const SafetyItem where = At(m);
     const LineKey key{where.file, where.line};
-    load_total_ += Seconds(PointOf(m));
+    const int64_t p = PointOf(m);
+    load_total_ += Seconds(p, Length(p));
     if (key == last || key.first < 0 || key.second < 0) continue;
     last = key;
     if (static_cast<size_t>(key.first) >= line_seen_.size()) {
@@ -95,15 +96,19 @@ int64_t SafetyCollector::PointOf(int64_t move_id) const {
                     run_starts_.begin());
 }
 
-double SafetyCollector::Seconds(int64_t p) const {
+double SafetyCollector::Length(int64_t p) const {
   const auto& points = path_.points();
   const Vec3& a = points[p - 1].position;
   const Vec3& b = points[p].position;
-  const double len = std::sqrt((b.x - a.x) * (b.x - a.x) +
-                               (b.y - a.y) * (b.y - a.y) +
-                               (b.z - a.z) * (b.z - a.z));
+  return std::sqrt((b.x - a.x) * (b.x - a.x) + (b.y - a.y) * (b.y - a.y) +
+                   (b.z - a.z) * (b.z - a.z));
+}
+
+double SafetyCollector::Seconds(int64_t p, double len) const {
   const double feed = path_.feed(p);
-  if (points[p].rapid || feed == 0) return len / options_.rapid_rate * 60;
+  if (path_.points()[p].rapid || feed == 0) {
+    return len / options_.rapid_rate * 60;
+  }
   return feed > 0 ? len / feed * 60 : 0;
 }
 
@@ -185,9 +190,7 @@ void SafetyCollector::OnAck(const pb::Ack& ack, int64_t first_move_id) {
     const gcode::ToolpathPoint& to = points[p];
     const Vec3& a = points[p - 1].position;
     const Vec3& b = to.position;
-    const double len = std::sqrt((b.x - a.x) * (b.x - a.x) +
-                                 (b.y - a.y) * (b.y - a.y) +
-                                 (b.z - a.z) * (b.z - a.z));
+    const double len = Length(p);
     const double v = ack.removed_mm3(k);
     const SafetyItem where = At(id);
     const LineKey key{where.file, where.line};
@@ -203,19 +206,14 @@ void SafetyCollector::OnAck(const pb::Ack& ack, int64_t first_move_id) {
     // The time at the programmed feed; rapids and feeds of F0 at the rapid
     // rate; none where the feed is not known (x,y,z files).
     const double feed = path_.feed(p);
-    double seconds = 0;
+    const double seconds = Seconds(p, len);
     if (to.rapid || feed == 0) {
-      seconds = len / options_.rapid_rate * 60;
       rapid_mm_ += len;
       rapid_s_ += seconds;
       if (!to.rapid) ++f0_moves_;
     } else {
       feed_mm_ += len;
-      if (feed > 0) {
-        seconds = len / feed * 60;
-      } else {
-        unknown_feed_mm_ += len;
-      }
+      if (!(feed > 0)) unknown_feed_mm_ += len;
       if (v > 0) {
         ++cutting_moves_;
         cutting_s_ += seconds;

@@ -113,9 +113,11 @@ class SafetyCollector {
   SafetyItem At(int64_t move_id) const;
   // The point that move `move_id` (< move_count_) ends at.
   int64_t PointOf(int64_t move_id) const;
-  // The move's duration at its programmed feed (rapids and F0 at the rapid
-  // rate; 0 where the feed is not known).
-  double Seconds(int64_t point) const;
+  // The length (mm) of the move ending at `point`, and its duration at its
+  // programmed feed (rapids and F0 at the rapid rate; 0 where the feed is
+  // not known).
+  double Length(int64_t point) const;
+  double Seconds(int64_t point, double length) const;
   bool Repeated(const LineKey& key) const;
   // Hands a complete group's amounts to the top lists.
   static void Flush(const Group& g, TopLines* lines, TopLines* air);
