@@ -266,6 +266,32 @@ TEST(StreamedOutputsTest, ThinGridsFromRowsAreTheBuiltMeshesFiles) {
   }
 }
 
+// The full 1000 mm plate at 0.05 mm (400 M nodes): its lattice is read
+// again from the grid, never held, so only held lattices (8 bytes a
+// vertex) keep the 2^28-vertex cap; the streamed ones go up to 2^31 - 1.
+TEST(StreamedOutputsTest, LatticesReadAgainAreNotCappedAtHeldOnes) {
+  const StockSpec plate{0, 0, 1000, 1000, 0, 20000, 20000};
+  auto streamed = NewLattice(plate, 1, /*heights=*/false);
+  ASSERT_TRUE(streamed.ok()) << streamed.status();
+  EXPECT_EQ(streamed->nx, 20000);
+  EXPECT_EQ(streamed->ny, 20000);
+  EXPECT_TRUE(streamed->z.empty());
+  EXPECT_EQ(streamed->xs.size(), 20001u);
+  EXPECT_EQ(streamed->xs[20000], 1000.0);
+  EXPECT_EQ(streamed->row_min.size(), 20001u);
+  auto held = NewLattice(plate, 1, /*heights=*/true);
+  EXPECT_EQ(held.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(held.status().message().find("exceeds 268435456 vertices"),
+            std::string::npos)
+      << held.status();
+  // Subdivision 3 of the plate: 60000^2 > 2^31 - 1 even when streamed.
+  auto too_many = NewLattice(plate, 3, /*heights=*/false);
+  EXPECT_EQ(too_many.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(too_many.status().message().find("exceeds 2147483647"),
+            std::string::npos)
+      << too_many.status();
+}
+
 TEST(StreamedOutputsTest, PictureSizeBoundsThePictures) {
   auto wp = Workpiece::Create(Stock(), SchemeKind::kTaylor);
   ASSERT_TRUE(wp.ok());

@@ -603,6 +603,16 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   // The used lattice vertices, row-major, are the new top vertices: their
   // heights read a root row at a time. A vertex's new index is the number
   // of used ones before it (counted from each block of 64's).
+  // The mesh's indices are int32: its top vertices, a bottom one under
+  // each boundary one and the bottom's middle must fit.
+  int64_t kept = 0;
+  for (const uint8_t u : used) kept += u;
+  if (2 * kept + 1 > INT32_MAX) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the adaptive mesh keeps %d of the lattice's vertices, more than "
+        "its int32 indices hold: raise the mesh tolerance",
+        kept));
+  }
   TriangleMesh mesh;
   mesh.lattice_nx = static_cast<int32_t>(nx);
   mesh.lattice_ny = static_cast<int32_t>(ny);

@@ -208,11 +208,15 @@ absl::StatusOr<LatticeHeights> NewLattice(const StockSpec& spec, int s,
   const int64_t nx = spec.nx, ny = spec.ny;
   const int64_t big_nx = nx * s, big_ny = ny * s;
   const int64_t top = (big_nx + 1) * (big_ny + 1);
-  if (top > kMaxMeshTopVertices) {
+  // Held heights cost 8 bytes a vertex; heights read again cost 1 (the
+  // adaptive mesh's marks), so only the index width bounds those.
+  const int64_t cap = heights ? kMaxMeshTopVertices : kMaxStreamedLatticeVertices;
+  if (top > cap) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "a %d x %d lattice (grid %d x %d, subdivision %d) exceeds %d "
-        "vertices",
-        big_nx, big_ny, nx, ny, s, kMaxMeshTopVertices));
+        "vertices%s",
+        big_nx, big_ny, nx, ny, s, cap,
+        heights ? " (with its heights held)" : ""));
   }
   const GridGeometry g(spec);
   LatticeHeights l;

@@ -61,8 +61,14 @@ struct SurfaceMeshOptions {
 };
 
 // Most top lattice vertices BuildSurfaceMesh accepts (int32 triangle
-// indices with room for the walls).
+// indices with room for the walls), and the most a lattice whose heights
+// are held may have (8 bytes a vertex: 2 GiB).
 inline constexpr int64_t kMaxMeshTopVertices = int64_t{1} << 28;
+// Most vertices of a lattice whose heights are read again (NewLattice with
+// heights false: the streamed full mesh, the adaptive mesh): 1 byte a
+// vertex, indices 64-bit. The streamed STL's triangle count must still fit
+// its uint32 field, and the adaptive mesh's own vertices int32 indices.
+inline constexpr int64_t kMaxStreamedLatticeVertices = (int64_t{1} << 31) - 1;
 
 // A bottom plane below `z_min` (the lowest top vertex) by a tenth of the
 // depth machined below the top, and at least 2% of the stock's longer side.
@@ -84,7 +90,8 @@ struct LatticeHeights {
 
 // An empty lattice for `spec` at subdivision `s` (heights held unless
 // `heights` is false); InvalidArgument for an invalid spec, s outside
-// [1, 4096] or more than kMaxMeshTopVertices.
+// [1, 4096] or more than kMaxMeshTopVertices vertices (heights held) or
+// kMaxStreamedLatticeVertices (not held).
 absl::StatusOr<LatticeHeights> NewLattice(const StockSpec& spec, int s,
                                           bool heights = true);
 // Sets the lattice rows J whose element row min(J / s, ny - 1) lies in
