@@ -3,7 +3,24 @@
 #include <algorithm>
 #include <atomic>
 
+#ifdef __linux__
+#include <sched.h>
+#endif
+
 namespace swarf {
+
+int AvailableCores() {
+#ifdef __linux__
+  // hardware_concurrency() counts the machine's cores, not those a taskset
+  // or a container's cpuset leaves: more threads than cores only contend.
+  cpu_set_t set;
+  if (sched_getaffinity(0, sizeof set, &set) == 0) {
+    const int n = CPU_COUNT(&set);
+    if (n > 0) return n;
+  }
+#endif
+  return static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+}
 
 struct ThreadPool::Job {
   const std::function<void(int64_t)>* fn;
@@ -23,7 +40,7 @@ struct ThreadPool::Job {
 
 ThreadPool::ThreadPool(int threads) {
   if (threads <= 0) {
-    threads = std::max(1u, std::thread::hardware_concurrency());
+    threads = AvailableCores();
   }
   for (int i = 1; i < threads; ++i) {
     workers_.emplace_back([this] { WorkerLoop(); });

@@ -11,11 +11,16 @@
 
 namespace swarf {
 
+// The cores this process may run on: its CPU affinity mask's count where
+// the system has one (taskset, a container's cpuset), else
+// std::thread::hardware_concurrency(); at least 1.
+int AvailableCores();
+
 // ParallelFor may be called from several threads at once; each call blocks
 // until its loop is done, and the calling thread works on it too.
 class ThreadPool {
  public:
-  // threads <= 0: one per hardware thread.
+  // threads <= 0: one per core this process may run on (AvailableCores).
   explicit ThreadPool(int threads = 0);
   ~ThreadPool();
   ThreadPool(const ThreadPool&) = delete;
@@ -27,7 +32,7 @@ class ThreadPool {
   // (indices are claimed in runs of about n / (1024 * size())).
   void ParallelFor(int64_t n, const std::function<void(int64_t)>& fn);
 
-  // A process-wide pool with one thread per hardware thread.
+  // A process-wide pool with one thread per available core.
   static ThreadPool& Default();
 
  private:

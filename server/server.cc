@@ -5,6 +5,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "core/thread_pool.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
 #include "grpcpp/security/server_credentials.h"
@@ -93,7 +94,7 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
   }
   const int threads = options.worker_threads > 0
                           ? options.worker_threads
-                          : static_cast<int>(std::thread::hardware_concurrency());
+                          : AvailableCores();
   s->executor_ = std::make_unique<Executor>(threads);
   s->service_ = std::make_unique<SwarfService>(
       s->registry_.get(), s->executor_.get(), s->tokens_.get(),

@@ -21,7 +21,7 @@ namespace swarf::server {
 struct ServerOptions {
   // host:port; port 0 picks a free one. Empty: in-process only.
   std::string listen = "127.0.0.1:50051";
-  int worker_threads = 0;  // 0: one per hardware thread
+  int worker_threads = 0;  // 0: one per available core (AvailableCores)
   Limits limits;
   std::string replica = "swarfd";  // reported in x-swarf-replica
   // Journal sessions under data_dir and restore them at start; empty: in

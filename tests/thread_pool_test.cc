@@ -11,6 +11,10 @@
 
 #include "gtest/gtest.h"
 
+#ifdef __linux__
+#include <sched.h>
+#endif
+
 namespace swarf {
 namespace {
 
@@ -29,6 +33,28 @@ void ExpectEachIndexOnce(ThreadPool& pool, int64_t n) {
   EXPECT_EQ(wrong, 0) << "n = " << n;
   EXPECT_EQ(hits[n].load(), 0);
 }
+
+#ifdef __linux__
+// Held to one core (as `taskset -c N` does), a default pool has one
+// thread: the machine's other cores are not ours to contend for.
+TEST(ThreadPoolTest, DefaultSizeFollowsTheAffinityMask) {
+  cpu_set_t all;
+  ASSERT_EQ(sched_getaffinity(0, sizeof all, &all), 0);
+  EXPECT_EQ(AvailableCores(), CPU_COUNT(&all));
+  EXPECT_EQ(ThreadPool().size(), CPU_COUNT(&all));
+  int first = 0;
+  while (!CPU_ISSET(first, &all)) ++first;
+  cpu_set_t one;
+  CPU_ZERO(&one);
+  CPU_SET(first, &one);
+  ASSERT_EQ(sched_setaffinity(0, sizeof one, &one), 0);
+  const int held = AvailableCores();
+  const int pool = ThreadPool().size();
+  ASSERT_EQ(sched_setaffinity(0, sizeof all, &all), 0);
+  EXPECT_EQ(held, 1);
+  EXPECT_EQ(pool, 1);
+}
+#endif
 
 TEST(ThreadPoolTest, EveryIndexExactlyOnce) {
   for (int threads : {1, 2, 4, 7}) {
