@@ -72,7 +72,8 @@ fuzz: deps
 # FreeCAD add-on's (Python in FreeCAD; `make test` runs them). Run by .ci/run after `make test`.
 $(ASAN_BUILD)/build.ninja:
 	cmake -S . -B $(ASAN_BUILD) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
-	  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1" -DSWARF_SANITIZE=ON
+	  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1" -DSWARF_SANITIZE=ON \
+	  -DSWARF_BENCH=OFF
 
 test-sanitize: deps $(ASAN_BUILD)/build.ninja
 	cmake --build $(ASAN_BUILD) -j $(JOBS)
