@@ -226,6 +226,52 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     };
     std::vector<uint32_t> ids;
     index.BinIds(static_cast<int32_t>(b), &ids);
+    // Untouched stock: no move reaches the bin and its nodes' tiles were
+    // never cut (flat at z_top, owner -1). Every sample's reconstruction
+    // and exact height are then z_top, its error exactly 0: only the
+    // samples are counted (adding zeros changes no sum, maximum or map
+    // cell), so the figures are the same, bit for bit, without sampling
+    // the large uncut parts of a big stock.
+    if (ids.empty()) {
+      bool untouched = true;
+      for (int32_t ty = ej0 / kTileSize; ty <= ej1 / kTileSize && untouched;
+           ++ty) {
+        for (int32_t tx = ei0 / kTileSize; tx <= ei1 / kTileSize; ++tx) {
+          if (wp.TileAllocated(ty * wp.tiles_x() + tx)) {
+            untouched = false;
+            break;
+          }
+        }
+      }
+      if (untouched) {
+        Partial p = partials[b];
+        for (int32_t ej = ej0; ej < ej1; ++ej) {
+          const double ey0 = grid.NodeY(ej), ey1 = grid.NodeY(ej + 1);
+          if (ey0 > region.y1 || ey1 < region.y0) continue;
+          const double* const row_y = &lattice_y[static_cast<size_t>(ej) * n];
+          for (int32_t ei = ei0; ei < ei1; ++ei) {
+            const double ex0 = grid.NodeX(ei), ex1 = grid.NodeX(ei + 1);
+            if (ex0 > region.x1 || ex1 < region.x0) continue;
+            const double* const col_x = &lattice_x[static_cast<size_t>(ei) * n];
+            if (region.Contains(col_x[0], row_y[0]) &&
+                region.Contains(col_x[n - 1], row_y[n - 1])) {
+              p.n += n * n - 4;
+              continue;
+            }
+            // The element's lattice points in the region, as counted below.
+            for (int32_t sj = 0; sj < n; ++sj) {
+              const bool end_row = sj == 0 || sj == n - 1;
+              for (int32_t si = end_row ? 1 : 0; si < (end_row ? n - 1 : n);
+                   ++si) {
+                p.n += region.Contains(col_x[si], row_y[sj]);
+              }
+            }
+          }
+        }
+        partials[b] = p;
+        return;
+      }
+    }
     std::vector<Candidate> bin;
     std::vector<Sweep> sweeps;
     for (uint32_t id : ids) {
