@@ -1247,10 +1247,39 @@ absl::Status FindCuttingMarks(const Workpiece& wp, const MarkOptions& options,
     // Node rows r0..r1, columns ei0..ei1+1, a tile's columns at a time (a
     // row crosses every tile of the band).
     const int32_t nc = cols + 1;
+    // Tile columns of the band whose tiles were never cut: their nodes are
+    // the stock top (owner -1), so no edge between two of them is flagged
+    // (owners differ on every crease edge). A band of untouched stock has
+    // no segment at all.
+    const int32_t tx0 = ei0 / kTileSize, tx1 = (ei0 + nc - 1) / kTileSize;
+    std::vector<uint8_t> untouched(tx1 - tx0 + 1, 1);
+    bool any_cut = false;
+    for (int32_t tx = tx0; tx <= tx1; ++tx) {
+      for (int32_t ty = r0 / kTileSize; ty <= r1 / kTileSize; ++ty) {
+        if (wp.TileAllocated(ty * wp.tiles_x() + tx)) {
+          untouched[tx - tx0] = 0;
+          any_cut = true;
+          break;
+        }
+      }
+    }
+    if (!any_cut) return;
+    auto column_untouched = [&](int32_t i) {
+      return untouched[i / kTileSize - tx0] != 0;
+    };
     std::vector<NodeRef> nodes(static_cast<size_t>(nc) * (r1 - r0 + 1));
     for (int32_t c0 = 0; c0 < nc;) {
       const int32_t c1 =
           std::min(nc, ((ei0 + c0) / kTileSize + 1) * kTileSize - ei0);
+      // Untouched and beside untouched ones: no edge reads these nodes
+      // (they stay NodeRef's default); beside a cut tile, the edges across
+      // the border need their real values.
+      const int32_t tx = (ei0 + c0) / kTileSize - tx0;
+      if (untouched[tx] && (tx == 0 || untouched[tx - 1]) &&
+          (tx + tx0 == tx1 || untouched[tx + 1])) {
+        c0 = c1;
+        continue;
+      }
       for (int32_t j = r0; j <= r1; ++j) {
         for (int32_t i = c0; i < c1; ++i) {
           const NodeValue v = wp.Node(ei0 + i, j, jets.get());
@@ -1275,12 +1304,14 @@ absl::Status FindCuttingMarks(const Workpiece& wp, const MarkOptions& options,
     std::vector<uint8_t> flag_v(size_t(nc) * (r1 - r0));
     for (int32_t j = r0; j <= r1; ++j) {
       for (int32_t i = ei0; i <= ei1; ++i) {
+        if (column_untouched(i) && column_untouched(i + 1)) continue;
         flag_h[size_t(j - r0) * cols + (i - ei0)] =
             flagged(node(i, j), node(i + 1, j), s.threshold_h);
       }
     }
     for (int32_t j = r0; j < r1; ++j) {
       for (int32_t i = ei0; i <= ei1 + 1; ++i) {
+        if (column_untouched(i)) continue;
         flag_v[size_t(j - r0) * nc + (i - ei0)] =
             flagged(node(i, j), node(i, j + 1), s.threshold_v);
       }

@@ -262,6 +262,45 @@ TEST(CuttingMarksTest, PlungeRimIsOneClosedCircle) {
               1e-3 * 2 * std::numbers::pi * rim);
 }
 
+// Tiles never cut are skipped (their nodes are the stock top): a rim that
+// crosses into one between nodes needs that tile's nodes all the same.
+// Nodes every 0.1 mm, tiles of 64: tile column 1 starts at x = 6.4. The
+// rim's west end, x = 6.35, lies between the last node of tile column 0
+// and the first of column 1, and its south end likewise between rows.
+TEST(CuttingMarksTest, RimIntoUntouchedTilesIsWhole) {
+  const double r = 6, depth = 2;
+  const double rim = std::sqrt(r * r - (r - depth) * (r - depth));
+  const double cx = 6.35 + rim, cy = 6.35 + rim;
+  // A top other than 0: an unread node (a default jet, flat at 0) would
+  // not pass for the stock top.
+  const double top = 2.5;
+  auto wp = Cut({0, 0, 40, 40, top, 400, 400},
+                {{{cx, cy, top + 1}, {cx, cy, top - depth}, r}});
+  ASSERT_EQ(wp->tiles_x(), 7);
+  EXPECT_FALSE(wp->TileAllocated(0 * 7 + 1));  // west of the rim
+  EXPECT_FALSE(wp->TileAllocated(1 * 7 + 0));  // south of it
+  EXPECT_TRUE(wp->TileAllocated(1 * 7 + 1));
+  EXPECT_LT(wp->allocated_tiles(), 7 * 7 / 2);
+  const double h = Spacing(*wp);
+  const auto marks = Marks(*wp);
+  ExpectClean(marks, /*smooth=*/true);
+  ASSERT_EQ(marks.size(), 1u);
+  const MarkPolyline& p = marks[0];
+  EXPECT_TRUE(p.closed);
+  double west = cx, south = cy;
+  for (size_t k = 0; k < p.vertices.size(); ++k) {
+    const Vec3& v = p.vertices[k];
+    EXPECT_LE(std::fabs(std::hypot(v.x - cx, v.y - cy) - rim), h / 50)
+        << "vertex " << k << " at (" << v.x << ", " << v.y << ")";
+    west = std::min(west, v.x);
+    south = std::min(south, v.y);
+  }
+  EXPECT_LT(west, 6.4);
+  EXPECT_LT(south, 6.4);
+  EXPECT_NEAR(PolylineLength(p), 2 * std::numbers::pi * rim,
+              1e-3 * 2 * std::numbers::pi * rim);
+}
+
 // Only rims: one closed polyline whose every vertex has the top on one side.
 void ExpectOnlyOneRim(const std::vector<MarkPolyline>& marks) {
   ExpectClean(marks, /*smooth=*/true);
