@@ -8,9 +8,13 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
+#include <random>
 #include <fstream>
 #include <iterator>
 #include <memory>
@@ -20,7 +24,10 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_replace.h"
 #include "client/outputs/grid_bands.h"
+#include "client/outputs/marks_files.h"
+#include "client/outputs/marks_stream.h"
 #include "client/outputs/png_image.h"
 #include "client/outputs/pictures.h"
 #include "client/outputs/run_outputs.h"
@@ -314,6 +321,246 @@ TEST(StreamedOutputsTest, PictureSizeBoundsThePictures) {
   auto drawn = RenderRelief(*grid, options.relief);
   ASSERT_TRUE(drawn.ok());
   EXPECT_EQ(relief->pixels(), drawn->pixels());
+}
+
+// ------------------------------------------------------ the marks streamed
+
+// The scene's cutting marks (taylor) and many more made up over the stock:
+// open and closed, rims (owner -1), angles on both sides of the display
+// threshold (so polylines are cut into pieces), vertex owners, a few
+// vertices to a hundred.
+std::vector<MarkPolyline> ManyMarks(const Workpiece& wp) {
+  auto found = FindCuttingMarks(wp, {});
+  EXPECT_TRUE(found.ok()) << found.status();
+  std::vector<MarkPolyline> marks = found.ok() ? *found
+                                               : std::vector<MarkPolyline>();
+  EXPECT_GT(marks.size(), 5u);
+  std::mt19937_64 rng(28);
+  std::uniform_real_distribution<double> ux(0.5, 39.5), uy(0.5, 32.5),
+      step(-0.6, 0.6), angle(0, 4), z(3, 5);
+  for (int q = 0; q < 3000; ++q) {
+    MarkPolyline p;
+    p.closed = q % 9 == 0;
+    p.owners = {q % 13 == 0 ? kStockTopOwner : q % 7, 7 + q % 5};
+    const int n = 1 + static_cast<int>(rng() % (q % 50 == 0 ? 100 : 12));
+    double x = ux(rng), y = uy(rng);
+    for (int k = 0; k < n; ++k) {
+      p.vertices.push_back({x, y, z(rng)});
+      p.angle_deg.push_back(q % 4 == 0 ? 30 + angle(rng) : angle(rng));
+      p.vertex_owners.push_back({k % 3, 7 + q % 5});
+      x = std::clamp(x + step(rng), 0.0, 40.0);
+      y = std::clamp(y + step(rng), 0.0, 33.0);
+    }
+    marks.push_back(std::move(p));
+  }
+  return marks;
+}
+
+void ExpectSameSummary(const MarkSummary& a, const MarkSummary& b,
+                       const std::string& what) {
+  EXPECT_EQ(a.polylines, b.polylines) << what;
+  EXPECT_EQ(a.closed, b.closed) << what;
+  EXPECT_EQ(a.vertices, b.vertices) << what;
+  // Bit for bit: summed in the same order.
+  EXPECT_EQ(std::memcmp(&a.total_length, &b.total_length, sizeof(double)), 0)
+      << what << ": " << a.total_length << " vs " << b.total_length;
+  EXPECT_EQ(a.min_angle_deg, b.min_angle_deg) << what;
+  EXPECT_EQ(a.max_angle_deg, b.max_angle_deg) << what;
+}
+
+// What `swarf run` wrote from the marks held whole (Summarize,
+// FilterMarks, WriteRunOutputs) against the marks consumed one at a time
+// (MarksStream, WriteRunOutputsStreamed): the same summaries, and every
+// file the same bytes, with batches and drawn chunks small enough that
+// their boundaries fall everywhere. The spool and the SVG body go.
+TEST(StreamedMarksTest, StreamedMarksWriteTheHeldMarksFilesByteForByte) {
+  auto wp = Workpiece::Create(Stock(), SchemeKind::kTaylor);
+  ASSERT_TRUE(wp.ok()) << wp.status();
+  ASSERT_TRUE((*wp)->Apply(Moves()).ok());
+  auto grid = SurfaceGrid::FromWorkpiece(**wp);
+  ASSERT_TRUE(grid.ok()) << grid.status();
+  const std::vector<MarkPolyline> marks = ManyMarks(**wp);
+  const MarkDisplayFilter filter = kDefaultMarkDisplay;
+  const MarkSummary all = Summarize(marks);
+  const std::vector<MarkPolyline> shown = FilterMarks(marks, filter);
+  const MarkSummary shown_summary = Summarize(shown);
+  ASSERT_GT(shown.size(), 1000u);
+  ASSERT_LT(shown_summary.vertices, all.vertices);  // some were cut away
+  RunOutputOptions options;
+  options.mesh.tolerance = 0.005;
+  options.marks.relief = {.max_side = 400, .min_side = 300};
+  InMemoryBands whole(*grid, 16);
+  const Written want = Write(whole, nullptr, &shown, options);
+  ASSERT_EQ(want.names,
+            (std::vector<std::string>{"relief.png", "marks.png", "marks.svg",
+                                      "marks.json", "surface.stl",
+                                      "surface.wrl"}));
+  EXPECT_TRUE(want.bytes[2] == MarksSvg(Stock(), shown) &&
+              want.bytes[3] == MarksJson(shown) + "\n");
+
+  struct Sizes {
+    size_t batch_vertices, chunk_segments;
+  };
+  for (const Sizes sizes : {Sizes{1, 1}, Sizes{7, 13}, Sizes{1000, 4096},
+                            Sizes{size_t{1} << 18, size_t{1} << 16}}) {
+    const std::string what = absl::StrCat("batch ", sizes.batch_vertices,
+                                          " chunk ", sizes.chunk_segments);
+    TempDir dir;
+    const std::string spool = dir.path + "/marks.png.spool";
+    Written got;
+    {
+      MarksStream stream(Stock(), dir.path, filter,
+                         {.batch_vertices = sizes.batch_vertices});
+      for (const MarkPolyline& p : marks) stream.Add(p);
+      stream.Finish();
+      ExpectSameSummary(stream.all(), all, what + " all");
+      ASSERT_TRUE(stream.shown().has_value());
+      ExpectSameSummary(*stream.shown(), shown_summary, what + " shown");
+      EXPECT_TRUE(fs::exists(spool)) << what;
+      EXPECT_FALSE(fs::exists(dir.path + "/marks.svg.body")) << what;
+      const StreamedMarks streamed = stream.streamed();
+      ASSERT_TRUE(streamed.status.ok()) << streamed.status;
+      RunOutputOptions o = options;
+      o.marks.chunk_segments = sizes.chunk_segments;
+      auto files = WriteRunOutputsStreamed(dir.path, whole, nullptr,
+                                           &streamed, o, &got.summary);
+      ASSERT_TRUE(files.ok()) << files.status();
+      for (const WrittenFile& f : *files) {
+        got.names.push_back(fs::path(f.path).filename().string());
+        got.bytes.push_back(ReadAll(f.path));
+      }
+    }
+    ExpectSame(got, want, what);
+    EXPECT_FALSE(fs::exists(spool)) << what;
+    EXPECT_EQ(std::distance(fs::directory_iterator(dir.path),
+                            fs::directory_iterator()),
+              6)
+        << what;
+  }
+  // Without --out: the summary only, nothing written.
+  MarksStream summary_only;
+  for (const MarkPolyline& p : marks) summary_only.Add(p);
+  summary_only.Finish();
+  ExpectSameSummary(summary_only.all(), all, "summary only");
+  EXPECT_FALSE(summary_only.shown().has_value());
+}
+
+// The marks drawn a chunk at a time from a source against the held marks'
+// picture, and the errors: the first polyline whose angles do not match
+// wins over an earlier non-finite vertex, as when they were all checked
+// before drawing.
+TEST(StreamedMarksTest, ChunkedDrawingIsTheHeldDrawing) {
+  auto wp = Workpiece::Create(Stock(), SchemeKind::kTaylor);
+  ASSERT_TRUE(wp.ok());
+  ASSERT_TRUE((*wp)->Apply(Moves()).ok());
+  auto grid = SurfaceGrid::FromWorkpiece(**wp);
+  ASSERT_TRUE(grid.ok());
+  const std::vector<MarkPolyline> marks = ManyMarks(**wp);
+  MarksPictureOptions mo;
+  mo.relief = {.max_side = 500, .min_side = 300};
+  ReliefSampler relief(Stock(), ReliefFrame(Stock(), mo.relief));
+  relief.AddBand(*grid, 0, Stock().ny);
+  auto want = DrawMarks(relief, marks, mo);
+  ASSERT_TRUE(want.ok()) << want.status();
+  for (size_t chunk : {size_t{1}, size_t{3}, size_t{250}}) {
+    mo.chunk_segments = chunk;
+    auto got = DrawMarks(relief, MarksOf(marks), mo);
+    ASSERT_TRUE(got.ok()) << got.status();
+    EXPECT_TRUE(got->pixels() == want->pixels()) << "chunk " << chunk;
+  }
+  std::vector<MarkPolyline> bad = {marks[0], marks[1], marks[2]};
+  bad[0].vertices[0].x = std::nan("");
+  EXPECT_EQ(DrawMarks(relief, MarksOf(bad), mo).status().message(),
+            "mark vertex is not finite");
+  bad[2].angle_deg.push_back(1);
+  EXPECT_EQ(DrawMarks(relief, MarksOf(bad), mo).status().message(),
+            absl::StrCat("mark polyline with ", bad[2].vertices.size(),
+                         " vertices has ", bad[2].angle_deg.size(),
+                         " angles"));
+  mo.chunk_segments = 0;
+  EXPECT_EQ(DrawMarks(relief, MarksOf(marks), mo).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+// Errors: a marks file that cannot be written is the held path's error
+// (naming the file), returned in the marks files' place; a stream that
+// stops before Finish (a failed fetch) leaves no marks file; the spool is
+// gone after a failure too.
+TEST(StreamedMarksTest, ErrorsNameTheFileAndLeaveNoSpool) {
+  auto wp = Workpiece::Create(Stock(), SchemeKind::kTaylor);
+  ASSERT_TRUE(wp.ok());
+  ASSERT_TRUE((*wp)->Apply(Moves()).ok());
+  auto grid = SurfaceGrid::FromWorkpiece(**wp);
+  ASSERT_TRUE(grid.ok());
+  const std::vector<MarkPolyline> marks = ManyMarks(**wp);
+  const std::vector<MarkPolyline> shown =
+      FilterMarks(marks, kDefaultMarkDisplay);
+  RunOutputOptions options;
+  options.relief.max_side = 100;
+  options.marks.relief = {.max_side = 100, .min_side = 100};
+  InMemoryBands bands(*grid, 32);
+  for (const char* blocked : {"marks.svg", "marks.json"}) {
+    SCOPED_TRACE(blocked);
+    // A directory where the file should be.
+    TempDir held_dir, dir;
+    fs::create_directory(held_dir.path + "/" + blocked);
+    fs::create_directory(dir.path + "/" + blocked);
+    auto held = WriteRunOutputs(held_dir.path, bands, nullptr, &shown, options);
+    ASSERT_FALSE(held.ok());
+    {
+      MarksStream stream(Stock(), dir.path, kDefaultMarkDisplay,
+                         {.batch_vertices = 100});
+      for (const MarkPolyline& p : marks) stream.Add(p);
+      stream.Finish();
+      const StreamedMarks streamed = stream.streamed();
+      EXPECT_FALSE(streamed.status.ok());
+      auto got = WriteRunOutputsStreamed(dir.path, bands, nullptr, &streamed,
+                                         options);
+      ASSERT_FALSE(got.ok());
+      EXPECT_EQ(got.status().code(), held.status().code());
+      EXPECT_NE(got.status().message().find(dir.path + "/" + blocked),
+                std::string::npos)
+          << got.status();
+      EXPECT_EQ(absl::StrReplaceAll(got.status().message(), {{dir.path, "D"}}),
+                absl::StrReplaceAll(held.status().message(),
+                                    {{held_dir.path, "D"}}));
+    }
+    EXPECT_FALSE(fs::exists(dir.path + "/marks.png.spool"));
+    EXPECT_FALSE(fs::exists(dir.path + "/marks.svg.body"));
+    // As the chained files: no marks.json after marks.svg failed; marks.svg
+    // written before marks.json failed.
+    EXPECT_EQ(fs::is_regular_file(dir.path + "/marks.json"),
+              fs::is_regular_file(held_dir.path + "/marks.json"));
+    EXPECT_EQ(fs::is_regular_file(dir.path + "/marks.svg"),
+              fs::is_regular_file(held_dir.path + "/marks.svg"));
+  }
+  {
+    // A fetch that fails half way: the stream goes unfinished.
+    TempDir dir;
+    {
+      MarksStream stream(Stock(), dir.path, kDefaultMarkDisplay,
+                         {.batch_vertices = 10});
+      for (size_t k = 0; k < marks.size() / 2; ++k) stream.Add(marks[k]);
+      EXPECT_TRUE(fs::exists(dir.path + "/marks.png.spool"));
+    }
+    EXPECT_TRUE(fs::is_empty(dir.path));
+  }
+  {
+    // marks.png fails (a bad stroke width): the spool still goes.
+    TempDir dir;
+    {
+      MarksStream stream(Stock(), dir.path, kDefaultMarkDisplay);
+      for (const MarkPolyline& p : marks) stream.Add(p);
+      stream.Finish();
+      const StreamedMarks streamed = stream.streamed();
+      RunOutputOptions o = options;
+      o.marks.line_width_px = 1000;
+      auto got = WriteRunOutputsStreamed(dir.path, bands, nullptr, &streamed,
+                                         o);
+      EXPECT_EQ(got.status().code(), absl::StatusCode::kInvalidArgument);
+    }
+    EXPECT_FALSE(fs::exists(dir.path + "/marks.png.spool"));
+  }
 }
 
 // Resident memory of `swarf run` on 4101 x 4101 nodes (16.8 M, past the old

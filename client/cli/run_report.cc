@@ -22,6 +22,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
+#include "client/outputs/marks_stream.h"
 #include "client/outputs/run_outputs.h"
 #include "client/outputs/grid_bands.h"
 #include "client/outputs/surface_grid.h"
@@ -45,19 +46,28 @@ MarkPolyline MarkFromProto(const pb::Polyline& p) {
   return m;
 }
 
+// Gives each fetched polyline to consume(p) as soon as it is converted
+// (the marks are never all held here); restart() comes before a fetch's
+// first polyline, so that a consumer begins again when the marks are asked
+// again (a retry, or the fallback below).
+struct MarksConsumer {
+  std::function<void()> restart;
+  std::function<void(MarkPolyline)> consume;
+};
+
 // One polyline per message (GetCuttingMarks): any number of marks.
-absl::StatusOr<std::vector<MarkPolyline>> FetchMarksStreamed(
-    Connection& conn, const std::string& id) {
+absl::Status FetchMarksStreamed(Connection& conn, const std::string& id,
+                                const MarksConsumer& to) {
   auto ctx = conn.Context(id, 3600);
   pb::GetCuttingMarksRequest req;
   req.set_session_id(id);
   auto reader = conn.stub().GetCuttingMarks(ctx.get(), req);
-  std::vector<MarkPolyline> marks;
+  to.restart();
   pb::Polyline p;
-  while (reader->Read(&p)) marks.push_back(MarkFromProto(p));
+  while (reader->Read(&p)) to.consume(MarkFromProto(p));
   grpc::Status st = reader->Finish();
   if (!st.ok()) return FromGrpc(st);
-  return marks;
+  return absl::OkStatus();
 }
 
 // The marks as one Polylines message (a MarksRequest on a Simulate stream):
@@ -65,27 +75,25 @@ absl::StatusOr<std::vector<MarkPolyline>> FetchMarksStreamed(
 // each (cameo.nc: 91k). Marks beyond the server's message limit are
 // RESOURCE_EXHAUSTED; then they come one per message. The same marks
 // either way (ComputeMarks).
-absl::StatusOr<std::vector<MarkPolyline>> FetchMarks(Connection& conn,
-                                                     const std::string& id) {
+absl::Status FetchMarks(Connection& conn, const std::string& id,
+                        const MarksConsumer& to) {
   auto ctx = conn.Context(id, 3600);
   auto stream = conn.stub().Simulate(ctx.get());
   pb::SimulateRequest req;
   req.mutable_marks()->set_request_id(1);
   stream->Write(req);
   stream->WritesDone();
-  std::vector<MarkPolyline> marks;
+  to.restart();
   absl::Status request_error;
   bool answered = false;
   pb::SimulateResponse resp;
   while (stream->Read(&resp)) {
     if (resp.has_polylines() && resp.polylines().request_id() == 1) {
       answered = true;
-      // Each polyline's message freed once converted: the marks are not
-      // held twice.
-      auto* lines = resp.mutable_polylines()->mutable_polylines();
-      marks.reserve(lines->size());
-      for (pb::Polyline& p : *lines) {
-        marks.push_back(MarkFromProto(p));
+      // Each polyline's message freed once converted and consumed: the
+      // marks are not held twice.
+      for (pb::Polyline& p : *resp.mutable_polylines()->mutable_polylines()) {
+        to.consume(MarkFromProto(p));
         pb::Polyline().Swap(&p);
       }
       resp.Clear();
@@ -98,13 +106,13 @@ absl::StatusOr<std::vector<MarkPolyline>> FetchMarks(Connection& conn,
   grpc::Status st = stream->Finish();
   if (!st.ok()) return FromGrpc(st);
   if (request_error.code() == absl::StatusCode::kResourceExhausted) {
-    return FetchMarksStreamed(conn, id);
+    return FetchMarksStreamed(conn, id, to);
   }
   if (!request_error.ok()) return request_error;
   if (!answered) {
     return absl::DataLossError("the marks request got no answer");
   }
-  return marks;
+  return absl::OkStatus();
 }
 
 // Sets tile rows [t0, t1) of `band` from the session's tiles (every tile
@@ -325,16 +333,50 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   auto seconds = [](Clock::time_point t0) {
     return std::chrono::duration<double>(Clock::now() - t0).count();
   };
+  // The output directory is made first: the marks files are written as the
+  // marks arrive. Its error is returned where it was before the marks were
+  // streamed (after the statistics, the marks and the deviation).
+  std::error_code dir_error;
+  bool dir_made = false;
+  if (files) dir_made = std::filesystem::create_directories(options.dir,
+                                                            dir_error);
+  // A directory made here and left empty by an error goes again.
+  struct RemoveIfEmpty {
+    std::string dir;
+    bool armed = false;
+    ~RemoveIfEmpty() {
+      std::error_code ec;
+      if (armed) std::filesystem::remove(dir, ec);  // only if empty
+    }
+  } remove_dir{options.dir, dir_made};
+  // The marks, consumed as they come (summarised; with --out filtered,
+  // written to marks.svg and marks.json and spooled for marks.png); the
+  // stream removes its spool and any unfinished file when it goes.
+  std::unique_ptr<MarksStream> marks_stream;
+  const MarksConsumer to_stream{
+      [&] {
+        marks_stream.reset();
+        marks_stream = files && !dir_error
+                           ? std::make_unique<MarksStream>(
+                                 stock, options.dir, options.marks_display)
+                           : std::make_unique<MarksStream>();
+      },
+      [&](MarkPolyline p) { marks_stream->Add(std::move(p)); }};
   // The marks and the tiles are fetched while the server measures the
   // error (each step's own time is reported; they overlap).
-  std::future<std::pair<absl::StatusOr<std::vector<MarkPolyline>>, double>>
-      marks_fetch;
+  std::future<std::pair<absl::Status, double>> marks_fetch;
   if (GetScheme(report->scheme).stores_derivatives()) {
     marks_fetch = std::async(std::launch::async, [&] {
       const auto t0 = Clock::now();
-      auto m = Retrying<std::vector<MarkPolyline>>(
-          "the cutting marks", [&] { return FetchMarks(conn, id); });
-      return std::make_pair(std::move(m), seconds(t0));
+      auto m = Retrying<bool>(
+          "the cutting marks", [&]() -> absl::StatusOr<bool> {
+            if (absl::Status s = FetchMarks(conn, id, to_stream); !s.ok()) {
+              return s;
+            }
+            marks_stream->Finish();
+            return true;
+          });
+      return std::make_pair(m.status(), seconds(t0));
     });
   }
   const DesignInput* design = options.design;
@@ -371,16 +413,14 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
         return out;
       });
   report->output_steps.emplace_back("error_stats", seconds(t0));
-  std::vector<MarkPolyline> marks;
   absl::Status marks_status;
   if (marks_fetch.valid()) {
     auto [m, s] = marks_fetch.get();
+    // Their fetch, with marks.svg's and marks.json's writing (also given
+    // on their own, below).
     report->output_steps.emplace_back("marks", s);
-    if (m.ok()) {
-      marks = *std::move(m);
-      report->marks = Summarize(marks);
-    }
-    marks_status = m.status();
+    if (m.ok()) report->marks = marks_stream->all();
+    marks_status = m;
   }
   if (!stats.ok()) return stats.status();
   report->error = *std::move(stats);
@@ -417,11 +457,9 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   }
   if (!files) return absl::OkStatus();
 
-  std::error_code ec;
-  std::filesystem::create_directories(options.dir, ec);
-  if (ec) {
-    return absl::FailedPreconditionError(
-        absl::StrCat("cannot create --out ", options.dir, ": ", ec.message()));
+  if (dir_error) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "cannot create --out ", options.dir, ": ", dir_error.message()));
   }
   if (deviation_map.has_value()) {
     const auto tw = Clock::now();
@@ -442,9 +480,10 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   out.mesh.tolerance = options.mesh_tolerance;
   report->mesh_tolerance = options.mesh_tolerance;
   report->marks_display = options.marks_display;
+  StreamedMarks streamed;
   if (report->marks) {
-    marks = FilterMarks(std::move(marks), options.marks_display);
-    report->marks_shown = Summarize(marks);
+    report->marks_shown = marks_stream->shown();
+    streamed = marks_stream->streamed();
   }
   out.relief.max_side = options.picture_size;
   out.marks.relief.max_side = options.picture_size;
@@ -457,11 +496,11 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   // take theirs: freed pages would otherwise still count in the peak.
   malloc_trim(0);
   std::unique_ptr<TileRowBands> bands = session_bands();
-  auto written = WriteRunOutputs(options.dir, *bands,
-                                 raster.cols > 0 ? &raster : nullptr,
-                                 report->marks ? &marks : nullptr, out,
-                                 &report->mesh);
+  auto written = WriteRunOutputsStreamed(
+      options.dir, *bands, raster.cols > 0 ? &raster : nullptr,
+      report->marks ? &streamed : nullptr, out, &report->mesh);
   if (!written.ok()) return written.status();
+  remove_dir.armed = false;
   // Reading the session's tiles, band by band, during the pass.
   report->output_steps.emplace_back("tiles", report->mesh.read_seconds);
   for (const WrittenFile& f : *written) {

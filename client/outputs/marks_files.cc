@@ -2,8 +2,14 @@
 
 #include <algorithm>
 #include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <cerrno>
 #include <functional>
+#include <limits>
 #include <string_view>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -14,69 +20,105 @@
 
 namespace swarf::cli {
 
+void FilterMark(MarkPolyline p, const MarkDisplayFilter& filter,
+                std::vector<MarkPolyline>* out) {
+  const size_t n = p.vertices.size();
+  const bool rim = p.owners[0] == kStockTopOwner;
+  auto keep = [&](size_t k) {
+    return rim || (k < p.angle_deg.size() &&
+                   p.angle_deg[k] >= filter.min_angle_deg);
+  };
+  auto emit = [&](MarkPolyline piece) {
+    if (piece.vertices.size() >= 2 &&
+        PolylineLength(piece) >= filter.min_length) {
+      out->push_back(std::move(piece));
+    }
+  };
+  // Start after a dropped vertex, so that a closed polyline's run over
+  // its first vertex stays whole.
+  size_t start = 0;
+  bool all = true;
+  for (size_t k = 0; k < n; ++k) {
+    if (!keep(k)) {
+      all = false;
+      start = p.closed ? k + 1 : 0;
+      break;
+    }
+  }
+  if (all) {
+    emit(std::move(p));
+    return;
+  }
+  MarkPolyline piece;
+  auto flush = [&] {
+    if (!piece.vertices.empty()) emit(std::move(piece));
+    piece = MarkPolyline();
+  };
+  for (size_t q = 0; q < n; ++q) {
+    const size_t k = (start + q) % n;
+    if (!keep(k)) {
+      flush();
+      continue;
+    }
+    if (piece.vertices.empty()) {
+      piece.owners = k < p.vertex_owners.size() ? p.vertex_owners[k]
+                                                : p.owners;
+    }
+    piece.vertices.push_back(p.vertices[k]);
+    if (k < p.angle_deg.size()) piece.angle_deg.push_back(p.angle_deg[k]);
+    if (k < p.vertex_owners.size()) {
+      piece.vertex_owners.push_back(p.vertex_owners[k]);
+    }
+  }
+  flush();
+}
+
 std::vector<MarkPolyline> FilterMarks(std::vector<MarkPolyline> marks,
                                       const MarkDisplayFilter& filter) {
   std::vector<MarkPolyline> out;
   for (MarkPolyline& item : marks) {
     // Moved out, so that it is freed at the end of its turn.
-    MarkPolyline p = std::move(item);
-    const size_t n = p.vertices.size();
-    const bool rim = p.owners[0] == kStockTopOwner;
-    auto keep = [&](size_t k) {
-      return rim || (k < p.angle_deg.size() &&
-                     p.angle_deg[k] >= filter.min_angle_deg);
-    };
-    auto emit = [&](MarkPolyline piece) {
-      if (piece.vertices.size() >= 2 &&
-          PolylineLength(piece) >= filter.min_length) {
-        out.push_back(std::move(piece));
-      }
-    };
-    // Start after a dropped vertex, so that a closed polyline's run over
-    // its first vertex stays whole.
-    size_t start = 0;
-    bool all = true;
-    for (size_t k = 0; k < n; ++k) {
-      if (!keep(k)) {
-        all = false;
-        start = p.closed ? k + 1 : 0;
-        break;
-      }
-    }
-    if (all) {
-      emit(std::move(p));
-      continue;
-    }
-    MarkPolyline piece;
-    auto flush = [&] {
-      if (!piece.vertices.empty()) emit(std::move(piece));
-      piece = MarkPolyline();
-    };
-    for (size_t q = 0; q < n; ++q) {
-      const size_t k = (start + q) % n;
-      if (!keep(k)) {
-        flush();
-        continue;
-      }
-      if (piece.vertices.empty()) {
-        piece.owners = k < p.vertex_owners.size() ? p.vertex_owners[k]
-                                                  : p.owners;
-      }
-      piece.vertices.push_back(p.vertices[k]);
-      if (k < p.angle_deg.size()) piece.angle_deg.push_back(p.angle_deg[k]);
-      if (k < p.vertex_owners.size()) {
-        piece.vertex_owners.push_back(p.vertex_owners[k]);
-      }
-    }
-    flush();
+    FilterMark(std::move(item), filter, &out);
   }
   return out;
+}
+
+MarkSummarizer::MarkSummarizer() {
+  s_.min_angle_deg = std::numeric_limits<double>::infinity();
+  s_.max_angle_deg = -std::numeric_limits<double>::infinity();
+}
+
+void MarkSummarizer::Add(const MarkPolyline& p) {
+  // Summarize's loop body, one polyline at a time.
+  ++s_.polylines;
+  s_.closed += p.closed;
+  s_.vertices += static_cast<int64_t>(p.vertices.size());
+  s_.total_length += PolylineLength(p);
+  for (double a : p.angle_deg) {
+    s_.min_angle_deg = std::fmin(s_.min_angle_deg, a);
+    s_.max_angle_deg = std::fmax(s_.max_angle_deg, a);
+  }
+}
+
+MarkSummary MarkSummarizer::summary() const {
+  MarkSummary s = s_;
+  if (s.vertices == 0) s.min_angle_deg = s.max_angle_deg = 0;
+  return s;
 }
 
 namespace {
 
 // Polylines per chunk formatted by one task.
 constexpr size_t kChunkPolylines = 1024;
+
+// A streamed batch's chunks: a few per thread, so that a batch of a few
+// long polylines is still formatted in parallel. Each polyline's text is
+// its own whatever the chunk, so the bytes are the same.
+size_t BatchChunk(size_t n) {
+  const size_t per =
+      n / (4 * static_cast<size_t>(ThreadPool::Default().size()));
+  return std::clamp<size_t>(per, 1, kChunkPolylines);
+}
 
 // Chunks formatted at once before they are written: the text held at a
 // time is this many chunks', whatever the number of marks.
@@ -87,16 +129,17 @@ constexpr size_t kChunksAtOnce = 32;
 // put in order and dropped.
 void EmitChunks(size_t n,
                 const std::function<void(size_t, std::string*)>& format,
-                const std::function<void(std::string_view)>& put) {
-  const size_t chunks = (n + kChunkPolylines - 1) / kChunkPolylines;
+                const std::function<void(std::string_view)>& put,
+                size_t chunk_polylines = kChunkPolylines) {
+  const size_t chunks = (n + chunk_polylines - 1) / chunk_polylines;
   std::vector<std::string> out(std::min(chunks, kChunksAtOnce));
   for (size_t c0 = 0; c0 < chunks; c0 += kChunksAtOnce) {
     const size_t m = std::min(kChunksAtOnce, chunks - c0);
     ThreadPool::Default().ParallelFor(static_cast<int64_t>(m), [&](int64_t w) {
       const size_t c = c0 + static_cast<size_t>(w);
       out[w].clear();
-      const size_t end = std::min(n, (c + 1) * kChunkPolylines);
-      for (size_t k = c * kChunkPolylines; k < end; ++k) format(k, &out[w]);
+      const size_t end = std::min(n, (c + 1) * chunk_polylines);
+      for (size_t k = c * chunk_polylines; k < end; ++k) format(k, &out[w]);
     });
     for (size_t w = 0; w < m; ++w) put(out[w]);
   }
@@ -162,6 +205,31 @@ absl::Status WriteMarksJson(const std::vector<MarkPolyline>& marks,
   EmitMarksJson(marks, false, [&](std::string_view p) { f.Write(p); });
   f.Write("\n");
   return f.Close();
+}
+
+MarksJsonWriter::MarksJsonWriter(std::string path)
+    : path_(std::move(path)), file_(std::make_unique<FileWriter>(path_)) {
+  file_->Write(kMarksJsonHead);
+}
+
+MarksJsonWriter::~MarksJsonWriter() = default;
+
+absl::Status MarksJsonWriter::Append(std::span<const MarkPolyline> batch) {
+  if (!file_->status().ok()) return file_->status();
+  EmitChunks(
+      batch.size(),
+      [&](size_t k, std::string* out) {
+        AppendMarkJson(batch[k], false, count_ + k == 0, out);
+      },
+      [&](std::string_view p) { file_->Write(p); }, BatchChunk(batch.size()));
+  count_ += batch.size();
+  return file_->status();
+}
+
+absl::Status MarksJsonWriter::Finish() {
+  file_->Write(kMarksJsonTail);
+  file_->Write("\n");
+  return file_->Close();
 }
 
 namespace {
@@ -259,6 +327,61 @@ absl::Status WriteMarksSvg(const StockSpec& stock,
   if (!f.status().ok()) return f.status();
   EmitMarksSvg(stock, marks, [&](std::string_view p) { f.Write(p); });
   return f.Close();
+}
+
+MarksSvgWriter::MarksSvgWriter(const StockSpec& stock, std::string path)
+    : stock_(stock),
+      path_(std::move(path)),
+      body_(std::make_unique<FileWriter>(body_path())) {}
+
+// An unclosed body is removed by its FileWriter; Finish removes a closed
+// one.
+MarksSvgWriter::~MarksSvgWriter() = default;
+
+absl::Status MarksSvgWriter::Append(std::span<const MarkPolyline> batch) {
+  if (!body_->status().ok()) return body_->status();
+  const double stroke = SvgStroke(stock_);
+  EmitChunks(
+      batch.size(),
+      [&](size_t k, std::string* out) {
+        AppendMarkSvg(batch[k], stroke, out);
+      },
+      [&](std::string_view p) { body_->Write(p); }, BatchChunk(batch.size()));
+  count_ += batch.size();
+  return body_->status();
+}
+
+absl::Status MarksSvgWriter::Finish() {
+  const std::string body = body_path();
+  if (absl::Status st = body_->Close(); !st.ok()) return st;
+  absl::Status status;
+  {
+    FileWriter out(path_);
+    out.Write(MarksSvgHead(stock_, count_, SvgStroke(stock_)));
+    std::FILE* in = std::fopen(body.c_str(), "rb");
+    if (in == nullptr) {
+      status = absl::InternalError(absl::StrCat(
+          "cannot read ", body, " back: ", std::strerror(errno)));
+    } else {
+      std::string block(size_t{1} << 20, '\0');
+      size_t got;
+      while ((got = std::fread(block.data(), 1, block.size(), in)) > 0) {
+        out.Write(std::string_view(block.data(), got));
+      }
+      if (std::ferror(in)) {
+        status = absl::InternalError(absl::StrCat(
+            "reading ", body, " back failed: ", std::strerror(errno)));
+      }
+      std::fclose(in);
+    }
+    if (status.ok()) {
+      out.Write(kMarksSvgTail);
+      status = out.Close();
+    }
+    // Otherwise `out`, unclosed, is removed.
+  }
+  std::remove(body.c_str());
+  return status;
 }
 
 }  // namespace swarf::cli

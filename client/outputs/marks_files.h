@@ -3,6 +3,9 @@
 #ifndef SWARF_CLIENT_MARKS_FILES_H_
 #define SWARF_CLIENT_MARKS_FILES_H_
 
+#include <cstddef>
+#include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -31,6 +34,24 @@ inline constexpr MarkDisplayFilter kDefaultMarkDisplay;
 std::vector<MarkPolyline> FilterMarks(std::vector<MarkPolyline> marks,
                                       const MarkDisplayFilter& filter);
 
+// FilterMarks of one polyline: its pieces appended to *out, in the order
+// FilterMarks gives them (FilterMarks is this over each polyline in turn).
+void FilterMark(MarkPolyline mark, const MarkDisplayFilter& filter,
+                std::vector<MarkPolyline>* out);
+
+// Summarize one polyline at a time: after Add of each polyline in turn,
+// summary() is Summarize of them all, bit for bit (the lengths are summed
+// in the same order).
+class MarkSummarizer {
+ public:
+  MarkSummarizer();
+  void Add(const MarkPolyline& p);
+  MarkSummary summary() const;
+
+ private:
+  MarkSummary s_;  // its angles +-inf until one is seen, as in Summarize
+};
+
 // Compact JSON, without a trailing newline:
 // {"polylines":[{"closed":false,"owners":[a,b],"vertices":[[x,y,z],...],
 // "angle_deg":[...]}]}, owner -1 for the stock top; with vertex_owners also
@@ -43,6 +64,31 @@ std::string MarksJson(const std::vector<MarkPolyline>& marks,
 absl::Status WriteMarksJson(const std::vector<MarkPolyline>& marks,
                             const std::string& path);
 
+class FileWriter;
+
+// WriteMarksJson a batch of polylines at a time: after Append of batches
+// whose concatenation is `marks`, then Finish, the file holds the bytes
+// WriteMarksJson(marks, path) writes. Memory: the text of one batch (formatted
+// in chunks on ThreadPool::Default()). Not thread-safe. An unfinished file
+// (or one whose write failed) is removed; errors name the path and are
+// sticky.
+class MarksJsonWriter {
+ public:
+  explicit MarksJsonWriter(std::string path);
+  ~MarksJsonWriter();
+  MarksJsonWriter(const MarksJsonWriter&) = delete;
+  MarksJsonWriter& operator=(const MarksJsonWriter&) = delete;
+
+  absl::Status Append(std::span<const MarkPolyline> batch);
+  absl::Status Finish();
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+  std::unique_ptr<FileWriter> file_;
+  size_t count_ = 0;
+};
+
 // SVG 1.1 in mm: viewBox the stock rectangle with y up (a scale(1,-1) group,
 // so path coordinates are the marks' x and y), the stock outline as a
 // <rect>, and one <path> per polyline (closed ones end in Z) stroked with
@@ -53,6 +99,29 @@ std::string MarksSvg(const StockSpec& stock,
 absl::Status WriteMarksSvg(const StockSpec& stock,
                            const std::vector<MarkPolyline>& marks,
                            const std::string& path);
+
+// WriteMarksSvg a batch of polylines at a time, byte for byte (as
+// MarksJsonWriter). The head counts the polylines, so the paths go to
+// `path` + ".body" first; Finish writes the head then copies them after it
+// and removes that file. Neither file stays when unfinished or failed.
+class MarksSvgWriter {
+ public:
+  MarksSvgWriter(const StockSpec& stock, std::string path);
+  ~MarksSvgWriter();
+  MarksSvgWriter(const MarksSvgWriter&) = delete;
+  MarksSvgWriter& operator=(const MarksSvgWriter&) = delete;
+
+  absl::Status Append(std::span<const MarkPolyline> batch);
+  absl::Status Finish();
+  const std::string& path() const { return path_; }
+  std::string body_path() const { return path_ + ".body"; }
+
+ private:
+  StockSpec stock_;
+  std::string path_;
+  std::unique_ptr<FileWriter> body_;
+  size_t count_ = 0;
+};
 
 }  // namespace swarf::cli
 

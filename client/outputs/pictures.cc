@@ -475,50 +475,14 @@ namespace {
 // DrawMarks with the relief's pixel rows from relief_row(y, rgb).
 absl::StatusOr<Image> DrawMarksOver(
     const std::function<void(int, uint8_t*)>& relief_row,
-    const PixelFrame& frame, const std::vector<MarkPolyline>& marks,
+    const PixelFrame& frame, const MarkSource& marks,
     const MarksPictureOptions& options) {
   if (!(options.line_width_px >= 0 && options.line_width_px <= 100)) {
     return absl::InvalidArgumentError("line_width_px must be in [0, 100]");
   }
-  // Each segment as its polyline and first vertex (8 bytes, not the 48 of
-  // its pixel coordinates and angles: a detailed job has millions), its
-  // PixelSegment computed where it is drawn.
-  struct SegmentRef {
-    uint32_t polyline, k;
-  };
-  std::vector<SegmentRef> segments;
-  for (size_t q = 0; q < marks.size(); ++q) {
-    const MarkPolyline& p = marks[q];
-    const size_t n = p.vertices.size();
-    if (p.angle_deg.size() != n) {
-      return absl::InvalidArgumentError(absl::StrFormat(
-          "mark polyline with %d vertices has %d angles", n,
-          p.angle_deg.size()));
-    }
-    const size_t ends = p.closed && n > 2 ? n : (n > 0 ? n - 1 : 0);
-    for (size_t k = 0; k < ends || (n == 1 && k == 0); ++k) {
-      segments.push_back(
-          {static_cast<uint32_t>(q), static_cast<uint32_t>(k)});
-    }
+  if (options.chunk_segments < 1) {
+    return absl::InvalidArgumentError("chunk_segments must be >= 1");
   }
-  auto segment = [&](const SegmentRef& r) {
-    const MarkPolyline& p = marks[r.polyline];
-    const size_t n = p.vertices.size();
-    const size_t a = r.k, b = n == 1 ? 0 : (r.k + 1) % n;
-    return PixelSegment{frame.PixelX(p.vertices[a].x),
-                        frame.PixelY(p.vertices[a].y),
-                        frame.PixelX(p.vertices[b].x),
-                        frame.PixelY(p.vertices[b].y), p.angle_deg[a],
-                        p.angle_deg[b]};
-  };
-  for (const SegmentRef& r : segments) {
-    const PixelSegment s = segment(r);
-    if (!(std::isfinite(s.ax) && std::isfinite(s.ay) && std::isfinite(s.bx) &&
-          std::isfinite(s.by))) {
-      return absl::InvalidArgumentError("mark vertex is not finite");
-    }
-  }
-
   const int side = std::max(frame.width, frame.height);
   const double width = options.line_width_px > 0
                            ? options.line_width_px
@@ -537,31 +501,71 @@ absl::StatusOr<Image> DrawMarksOver(
               std::max(frame.height, LegendMinHeight(legend, scale)), 3,
               kWhite);
   for (int y = 0; y < frame.height; ++y) relief_row(y, image.row(y));
-  // All halos first, so that no halo covers an earlier line's colour. In
-  // bands of rows at once, each band's segments in their order (a halo's
-  // rows hold its line's).
+  // All halos first, so that no halo covers an earlier line's colour: two
+  // passes over the marks. Each pass takes a chunk of segments at a time,
+  // bucketed by bands of rows drawn at once, each band's segments in their
+  // order (a pixel's blends happen in segment order whichever band and
+  // chunk draws it).
   constexpr int kBandRows = 32;
   const int bands = (frame.height + kBandRows - 1) / kBandRows;
+  std::vector<PixelSegment> chunk;
+  chunk.reserve(std::min<size_t>(options.chunk_segments, 1 << 16));
   std::vector<std::vector<uint32_t>> band_segments(bands);
-  for (size_t k = 0; k < segments.size(); ++k) {
-    int y0, y1;
-    StrokeRows(segment(segments[k]), width + 2, frame.height, &y0, &y1);
-    for (int b = y0 / kBandRows; b <= y1 / kBandRows && b < bands; ++b) {
-      band_segments[b].push_back(static_cast<uint32_t>(k));
+  auto draw_chunk = [&](bool halo) {
+    const double w = halo ? width + 2 : width;
+    for (auto& b : band_segments) b.clear();
+    for (size_t k = 0; k < chunk.size(); ++k) {
+      int y0, y1;
+      StrokeRows(chunk[k], w, frame.height, &y0, &y1);
+      for (int b = y0 / kBandRows; b <= y1 / kBandRows && b < bands; ++b) {
+        band_segments[b].push_back(static_cast<uint32_t>(k));
+      }
     }
+    ThreadPool::Default().ParallelFor(bands, [&](int64_t b) {
+      const int row0 = static_cast<int>(b) * kBandRows;
+      const int row1 = std::min(frame.height, row0 + kBandRows);
+      for (uint32_t k : band_segments[b]) {
+        Stroke(image, frame.width, frame.height, chunk[k], w, halo, row0,
+               row1);
+      }
+    });
+    chunk.clear();
+  };
+  // The first pass checks the marks too: the first polyline whose angles
+  // do not match fails at once; a non-finite vertex fails after the pass
+  // (a later polyline's angles take precedence), and nothing more is drawn
+  // once either is seen (the picture is not returned).
+  bool finite = true;
+  for (const bool halo : {true, false}) {
+    absl::Status st = marks([&](const MarkPolyline& p) -> absl::Status {
+      const size_t n = p.vertices.size();
+      if (p.angle_deg.size() != n) {
+        return absl::InvalidArgumentError(absl::StrFormat(
+            "mark polyline with %d vertices has %d angles", n,
+            p.angle_deg.size()));
+      }
+      const size_t ends = p.closed && n > 2 ? n : (n > 0 ? n - 1 : 0);
+      for (size_t k = 0; k < ends || (n == 1 && k == 0); ++k) {
+        const size_t a = k, b = n == 1 ? 0 : (k + 1) % n;
+        const PixelSegment s{frame.PixelX(p.vertices[a].x),
+                             frame.PixelY(p.vertices[a].y),
+                             frame.PixelX(p.vertices[b].x),
+                             frame.PixelY(p.vertices[b].y), p.angle_deg[a],
+                             p.angle_deg[b]};
+        if (!(std::isfinite(s.ax) && std::isfinite(s.ay) &&
+              std::isfinite(s.bx) && std::isfinite(s.by))) {
+          finite = false;
+        }
+        if (!finite) continue;
+        chunk.push_back(s);
+        if (chunk.size() >= options.chunk_segments) draw_chunk(halo);
+      }
+      return absl::OkStatus();
+    });
+    if (!st.ok()) return st;
+    if (!finite) return absl::InvalidArgumentError("mark vertex is not finite");
+    draw_chunk(halo);
   }
-  ThreadPool::Default().ParallelFor(bands, [&](int64_t b) {
-    const int row0 = static_cast<int>(b) * kBandRows;
-    const int row1 = std::min(frame.height, row0 + kBandRows);
-    for (uint32_t k : band_segments[b]) {
-      Stroke(image, frame.width, frame.height, segment(segments[k]), width + 2,
-             true, row0, row1);
-    }
-    for (uint32_t k : band_segments[b]) {
-      Stroke(image, frame.width, frame.height, segment(segments[k]), width,
-             false, row0, row1);
-    }
-  });
   DrawLegend(image, legend_x0, image.height(), legend, scale, nullptr,
              nullptr);
   return image;
@@ -583,15 +587,31 @@ absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
       [&](int y, uint8_t* out) {
         std::copy(relief.row(y), relief.row(y) + 3 * frame.width, out);
       },
-      frame, marks, options);
+      frame, MarksOf(marks), options);
 }
 
 absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
                                 const std::vector<MarkPolyline>& marks,
                                 const MarksPictureOptions& options) {
+  return DrawMarks(relief, MarksOf(marks), options);
+}
+
+absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
+                                const MarkSource& marks,
+                                const MarksPictureOptions& options) {
   return DrawMarksOver(
       [&](int y, uint8_t* out) { relief.ColorRow(y, out); }, relief.frame(),
       marks, options);
+}
+
+MarkSource MarksOf(const std::vector<MarkPolyline>& marks) {
+  return [&marks](const std::function<absl::Status(const MarkPolyline&)>&
+                      visit) -> absl::Status {
+    for (const MarkPolyline& p : marks) {
+      if (absl::Status st = visit(p); !st.ok()) return st;
+    }
+    return absl::OkStatus();
+  };
 }
 
 absl::StatusOr<Image> RenderMarks(const SurfaceGrid& grid,

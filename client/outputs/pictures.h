@@ -10,7 +10,9 @@
 #ifndef SWARF_CLIENT_PICTURES_H_
 #define SWARF_CLIENT_PICTURES_H_
 
+#include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -138,7 +140,19 @@ struct MarksPictureOptions {
   ReliefOptions relief = {.max_side = 1600, .min_side = 1000};
   // Stroke width in pixels; 0: about 1/600 of the longer side, at least 2.
   double line_width_px = 0;
+  // Segments drawn at a time (bucketed by bands of rows, the bands drawn
+  // at once): memory, not the picture, depends on it (>= 1).
+  size_t chunk_segments = size_t{1} << 16;
 };
+
+// Polylines read in order: calls visit(p) on each, returning visit's first
+// error (stopping there) or the source's own (a read error). May be called
+// more than once; each call gives the same polylines.
+using MarkSource = std::function<absl::Status(
+    const std::function<absl::Status(const MarkPolyline&)>& visit)>;
+
+// A MarkSource over `marks` (not copied: they must outlive it).
+MarkSource MarksOf(const std::vector<MarkPolyline>& marks);
 
 // The cutting marks drawn over a relief rendered in `frame` (anti-aliased,
 // with a dark halo so that they read on light and dark ground), coloured by
@@ -153,6 +167,17 @@ absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
 // into the picture (no copy of the relief).
 absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
                                 const std::vector<MarkPolyline>& marks,
+                                const MarksPictureOptions& options = {});
+
+// The same from a source read in two passes (every halo, then every line),
+// options.chunk_segments segments at a time: the marks are never held. The
+// picture is the same whatever the chunk (a pixel's blends happen in the
+// same order: all halos in segment order, then all lines); the functions
+// above are this over MarksOf. InvalidArgument for a polyline whose angles
+// do not match its vertices (the first such), else for a non-finite vertex;
+// or the source's error.
+absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
+                                const MarkSource& marks,
                                 const MarksPictureOptions& options = {});
 
 // RenderRelief(grid, options.relief) then DrawMarks. A relief already

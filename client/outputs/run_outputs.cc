@@ -119,10 +119,18 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
   return WriteRunOutputs(dir, bands, error, marks, options, summary);
 }
 
-absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
+namespace {
+
+// WriteRunOutputs with the marks held (`marks`: marks.svg and marks.json
+// written here) or streamed (`streamed`), or neither.
+absl::StatusOr<std::vector<WrittenFile>> WriteAll(
     const std::string& dir, GridBands& grid, const ErrorRaster* error,
-    const std::vector<MarkPolyline>* marks, const RunOutputOptions& options,
-    RunOutputSummary* summary) {
+    const std::vector<MarkPolyline>* held, const StreamedMarks* streamed,
+    const RunOutputOptions& options, RunOutputSummary* summary) {
+  // marks.png's polylines, whichever way they come.
+  std::optional<MarkSource> marks;
+  if (held != nullptr) marks = MarksOf(*held);
+  if (streamed != nullptr) marks = streamed->source;
   const std::string base = dir.empty() || dir.back() == '/' ? dir : dir + "/";
   const StockSpec spec = grid.spec();
   if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
@@ -131,7 +139,7 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
       !st.ok()) {
     return st;
   }
-  if (marks != nullptr) {
+  if (marks) {
     if (absl::Status st = CheckPictureSides(options.marks.relief.min_side,
                                             options.marks.relief.max_side);
         !st.ok()) {
@@ -144,7 +152,7 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
   relief.emplace(spec, ReliefFrame(spec, options.relief));
   std::optional<ReliefSampler> marks_relief;
   const PixelFrame marks_frame = ReliefFrame(spec, options.marks.relief);
-  if (marks != nullptr && !(marks_frame == relief->frame())) {
+  if (marks && !(marks_frame == relief->frame())) {
     marks_relief.emplace(spec, marks_frame);
   }
   // On the nodes (subdivision 1) the meshes read the lattice's heights
@@ -245,14 +253,14 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     return c;
   });
   std::future<Chain> marks_files;
-  if (marks != nullptr) {
+  if (held != nullptr) {
     marks_files = std::async(std::launch::async, [&] {
       Chain c(base);
       c.Then("marks.svg", [&](const std::string& path) {
-        return WriteMarksSvg(spec, *marks, path);
+        return WriteMarksSvg(spec, *held, path);
       });
       c.Then("marks.json", [&](const std::string& path) {
-        return WriteMarksJson(*marks, path);
+        return WriteMarksJson(*held, path);
       });
       return c;
     });
@@ -265,7 +273,7 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
         relief->frame().width, relief->frame().height,
         [&](int y, uint8_t* out) { relief->ColorRow(y, out); }, path);
     // Sampled again at another size, or no marks: not needed any more.
-    if (marks == nullptr || marks_relief) relief.reset();
+    if (!marks || marks_relief) relief.reset();
     return st;
   }, relief_s);
   if (error != nullptr) {
@@ -275,7 +283,7 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
       return WritePng(*map, path);
     });
   }
-  if (marks != nullptr) {
+  if (marks) {
     pictures.Then("marks.png", [&](const std::string& path) {
       // The relief already sampled serves when the frames agree.
       absl::StatusOr<Image> picture = DrawMarks(
@@ -290,13 +298,38 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
   std::vector<Chain> chains;
   chains.push_back(std::move(pictures));
   if (marks_files.valid()) chains.push_back(marks_files.get());
-  chains.push_back(meshes.get());
+  Chain mesh_chain = meshes.get();
   std::vector<WrittenFile> written;
   for (const Chain& c : chains) {
     if (!c.status().ok()) return c.status();
     written.insert(written.end(), c.written().begin(), c.written().end());
   }
+  // The streamed marks files in the marks chain's place.
+  if (streamed != nullptr) {
+    if (!streamed->status.ok()) return streamed->status;
+    written.insert(written.end(), streamed->files.begin(),
+                   streamed->files.end());
+  }
+  if (!mesh_chain.status().ok()) return mesh_chain.status();
+  written.insert(written.end(), mesh_chain.written().begin(),
+                 mesh_chain.written().end());
   return written;
+}
+
+}  // namespace
+
+absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
+    const std::string& dir, GridBands& grid, const ErrorRaster* error,
+    const std::vector<MarkPolyline>* marks, const RunOutputOptions& options,
+    RunOutputSummary* summary) {
+  return WriteAll(dir, grid, error, marks, nullptr, options, summary);
+}
+
+absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputsStreamed(
+    const std::string& dir, GridBands& grid, const ErrorRaster* error,
+    const StreamedMarks* marks, const RunOutputOptions& options,
+    RunOutputSummary* summary) {
+  return WriteAll(dir, grid, error, nullptr, marks, options, summary);
 }
 
 }  // namespace swarf::cli

@@ -29,6 +29,17 @@ struct WrittenFile {
   double seconds = 0;
 };
 
+// The shown marks when they are not held (MarksStream): marks.svg and
+// marks.json already written as they arrived, marks.png to draw from
+// `source` (read twice).
+struct StreamedMarks {
+  MarkSource source;
+  std::vector<WrittenFile> files;  // marks.svg, marks.json as written
+  // Their first write error (naming the file): returned where
+  // WriteRunOutputs returns the marks files' errors.
+  absl::Status status;
+};
+
 // What the meshes came to.
 struct RunOutputSummary {
   int64_t mesh_triangles = 0;       // in surface.stl / surface.wrl
@@ -57,6 +68,14 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     const std::string& dir, GridBands& grid, const ErrorRaster* error,
     const std::vector<MarkPolyline>* marks,
     const RunOutputOptions& options = {}, RunOutputSummary* summary = nullptr);
+// The same with the marks streamed: marks.png drawn from marks->source
+// (a chunk of segments at a time, options.marks.chunk_segments), marks.svg
+// and marks.json as marks->files (in that place in the list) or
+// marks->status. `marks` may be null (no marks files).
+absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputsStreamed(
+    const std::string& dir, GridBands& grid, const ErrorRaster* error,
+    const StreamedMarks* marks, const RunOutputOptions& options = {},
+    RunOutputSummary* summary = nullptr);
 // The same from a whole grid in memory (one band).
 absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     const std::string& dir, const SurfaceGrid& grid, const ErrorRaster* error,

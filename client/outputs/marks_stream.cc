@@ -1,0 +1,204 @@
+#include "client/outputs/marks_stream.h"
+
+#include <cerrno>
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "client/outputs/file_writer.h"
+
+namespace swarf::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double Since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// A spooled polyline: this head, then vertices * (x, y) and angles doubles,
+// in the machine's byte order (the file never leaves the run).
+struct SpoolHead {
+  uint64_t vertices = 0, angles = 0;
+  uint8_t closed = 0;
+  uint8_t pad[7] = {};
+};
+
+template <typename T>
+void Put(std::string* s, const T& v) {
+  s->append(reinterpret_cast<const char*>(&v), sizeof v);
+}
+
+}  // namespace
+
+MarksSpool::MarksSpool(std::string path)
+    : path_(std::move(path)), file_(std::make_unique<FileWriter>(path_)) {
+  status_ = file_->status();
+}
+
+MarksSpool::~MarksSpool() {
+  file_.reset();  // removed if unclosed
+  std::remove(path_.c_str());
+}
+
+absl::Status MarksSpool::Append(std::span<const MarkPolyline> batch) {
+  if (!status_.ok()) return status_;
+  std::string bytes;
+  for (const MarkPolyline& p : batch) {
+    bytes.clear();
+    SpoolHead h;
+    h.vertices = p.vertices.size();
+    h.angles = p.angle_deg.size();
+    h.closed = p.closed ? 1 : 0;
+    Put(&bytes, h);
+    for (const Vec3& v : p.vertices) {
+      Put(&bytes, v.x);
+      Put(&bytes, v.y);
+    }
+    for (double a : p.angle_deg) Put(&bytes, a);
+    file_->Write(bytes);
+  }
+  status_ = file_->status();
+  return status_;
+}
+
+absl::Status MarksSpool::Finish() {
+  if (!status_.ok()) return status_;
+  status_ = file_->Close();
+  return status_;
+}
+
+MarkSource MarksSpool::source() const {
+  return [this](const std::function<absl::Status(const MarkPolyline&)>&
+                    visit) -> absl::Status {
+    if (!status_.ok()) return status_;
+    std::FILE* in = std::fopen(path_.c_str(), "rb");
+    if (in == nullptr) {
+      return absl::InternalError(absl::StrCat("cannot read ", path_, " back: ",
+                                              std::strerror(errno)));
+    }
+    // 1 MiB reads instead of the default few KiB.
+    std::vector<char> buffer(size_t{1} << 20);
+    std::setvbuf(in, buffer.data(), _IOFBF, buffer.size());
+    absl::Status st;
+    MarkPolyline p;
+    std::vector<double> xy;
+    SpoolHead h;
+    while (st.ok() && std::fread(&h, sizeof h, 1, in) == 1) {
+      xy.resize(2 * h.vertices);
+      p.angle_deg.resize(h.angles);
+      if (std::fread(xy.data(), sizeof(double), xy.size(), in) != xy.size() ||
+          std::fread(p.angle_deg.data(), sizeof(double), h.angles, in) !=
+              h.angles) {
+        st = absl::DataLossError(absl::StrCat(path_, " is truncated"));
+        break;
+      }
+      p.closed = h.closed != 0;
+      p.vertices.resize(h.vertices);
+      for (size_t k = 0; k < h.vertices; ++k) {
+        p.vertices[k] = {xy[2 * k], xy[2 * k + 1], 0};
+      }
+      st = visit(p);
+    }
+    if (st.ok() && std::ferror(in)) {
+      st = absl::InternalError(absl::StrCat("reading ", path_, " back failed: ",
+                                            std::strerror(errno)));
+    }
+    std::fclose(in);
+    return st;
+  };
+}
+
+MarksStream::MarksStream() = default;
+
+MarksStream::MarksStream(const StockSpec& stock, const std::string& dir,
+                         const MarkDisplayFilter& filter,
+                         const MarksStreamOptions& options)
+    : files_(true), filter_(filter), options_(options) {
+  const std::filesystem::path d(dir);
+  const auto t0 = Clock::now();
+  svg_ = std::make_unique<MarksSvgWriter>(stock, (d / "marks.svg").string());
+  svg_seconds_ += Since(t0);
+  const auto t1 = Clock::now();
+  json_ = std::make_unique<MarksJsonWriter>((d / "marks.json").string());
+  json_seconds_ += Since(t1);
+  spool_ = std::make_unique<MarksSpool>((d / "marks.png.spool").string());
+}
+
+// The writers' destructors remove unfinished files; the spool's its file.
+MarksStream::~MarksStream() = default;
+
+void MarksStream::Add(MarkPolyline p) {
+  all_.Add(p);
+  if (!files_) return;
+  pieces_.clear();
+  FilterMark(std::move(p), filter_, &pieces_);
+  for (MarkPolyline& piece : pieces_) {
+    shown_.Add(piece);
+    batch_vertices_ += piece.vertices.size();
+    batch_.push_back(std::move(piece));
+  }
+  if (batch_vertices_ >= options_.batch_vertices) Flush();
+}
+
+void MarksStream::Flush() {
+  if (batch_.empty()) return;
+  // As the files were chained: marks.json stops at marks.svg's error.
+  if (svg_status_.ok()) {
+    const auto t0 = Clock::now();
+    svg_status_ = svg_->Append(batch_);
+    svg_seconds_ += Since(t0);
+  }
+  if (svg_status_.ok() && json_status_.ok()) {
+    const auto t0 = Clock::now();
+    json_status_ = json_->Append(batch_);
+    json_seconds_ += Since(t0);
+  }
+  // Its error is marks.png's, when it is drawn.
+  (void)spool_->Append(batch_);
+  batch_.clear();
+  batch_vertices_ = 0;
+}
+
+void MarksStream::Finish() {
+  if (!files_ || finished_) return;
+  finished_ = true;
+  Flush();
+  if (svg_status_.ok()) {
+    const auto t0 = Clock::now();
+    svg_status_ = svg_->Finish();
+    svg_seconds_ += Since(t0);
+  }
+  if (svg_status_.ok() && json_status_.ok()) {
+    const auto t0 = Clock::now();
+    json_status_ = json_->Finish();
+    json_seconds_ += Since(t0);
+  }
+  (void)spool_->Finish();
+  // Not needed any more: their buffers go.
+  batch_ = std::vector<MarkPolyline>();
+  pieces_ = std::vector<MarkPolyline>();
+}
+
+std::optional<MarkSummary> MarksStream::shown() const {
+  if (!files_) return std::nullopt;
+  return shown_.summary();
+}
+
+StreamedMarks MarksStream::streamed() const {
+  StreamedMarks s;
+  if (!files_) return s;
+  s.source = spool_->source();
+  if (svg_status_.ok()) s.files.push_back({svg_->path(), svg_seconds_});
+  if (svg_status_.ok() && json_status_.ok()) {
+    s.files.push_back({json_->path(), json_seconds_});
+  }
+  s.status = !svg_status_.ok() ? svg_status_ : json_status_;
+  return s;
+}
+
+}  // namespace swarf::cli

@@ -1,0 +1,113 @@
+// The cutting marks of `swarf run --out` consumed as they arrive (issue 28):
+// summarised, filtered for display, the shown pieces appended to marks.svg
+// and marks.json and spooled to disk for marks.png, which needs the relief
+// sampled later. No more than a batch of marks is held at a time.
+#ifndef SWARF_CLIENT_MARKS_STREAM_H_
+#define SWARF_CLIENT_MARKS_STREAM_H_
+
+#include <cstddef>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "client/outputs/marks_files.h"
+#include "client/outputs/pictures.h"
+#include "client/outputs/run_outputs.h"
+#include "core/cutting_marks.h"
+#include "core/stock.h"
+
+namespace swarf::cli {
+
+class FileWriter;
+
+// Polylines kept on disk for marks.png, with what drawing them needs, in
+// exact doubles: closed, the vertices' x and y (z is read back as 0) and
+// the angles. The file is removed when the spool goes (whatever happened).
+// Not thread-safe.
+class MarksSpool {
+ public:
+  explicit MarksSpool(std::string path);
+  ~MarksSpool();
+  MarksSpool(const MarksSpool&) = delete;
+  MarksSpool& operator=(const MarksSpool&) = delete;
+
+  // Appends (buffered); errors name the file and are sticky.
+  absl::Status Append(std::span<const MarkPolyline> batch);
+  // After the last Append: flushes and closes.
+  absl::Status Finish();
+  // The polylines as appended, read from the file (after Finish): the
+  // first write error instead if there was one. Valid while the spool
+  // lives.
+  MarkSource source() const;
+  const std::string& path() const { return path_; }
+
+ private:
+  std::string path_;
+  std::unique_ptr<FileWriter> file_;
+  absl::Status status_;
+};
+
+// Consumes the marks one polyline at a time, in the order they come.
+//
+// Summary only (no `dir`): all() is Summarize of the polylines added.
+// With `dir` (an existing directory): also shown() (Summarize of
+// FilterMarks of them), and the shown pieces written to dir/marks.svg and
+// dir/marks.json (the bytes WriteMarksSvg/WriteMarksJson write for
+// FilterMarks of all of them) and spooled to dir/marks.png.spool, a batch
+// of `batch_vertices` shown vertices at a time (formatted in parallel;
+// memory, not the files, depends on it).
+//
+// Write errors do not stop the consumption (the summaries are still
+// computed): they are kept, the first naming its file, and reported by
+// streamed(). As the files are chained in WriteRunOutputs, marks.json is
+// not written past an error in marks.svg. Files not finished are removed
+// when the stream goes, and the spool always. Not thread-safe.
+struct MarksStreamOptions {
+  size_t batch_vertices = size_t{1} << 18;  // >= 1
+};
+
+class MarksStream {
+ public:
+  MarksStream();
+  MarksStream(const StockSpec& stock, const std::string& dir,
+              const MarkDisplayFilter& filter,
+              const MarksStreamOptions& options = {});
+  ~MarksStream();
+  MarksStream(const MarksStream&) = delete;
+  MarksStream& operator=(const MarksStream&) = delete;
+
+  void Add(MarkPolyline p);
+  // After the last Add: writes what is held, finishes the files.
+  void Finish();
+
+  MarkSummary all() const { return all_.summary(); }
+  std::optional<MarkSummary> shown() const;
+  // After Finish: marks.svg and marks.json as written (with the seconds
+  // spent formatting and writing each), the first write error, and the
+  // spooled shown marks for marks.png. The source is valid while the
+  // stream lives.
+  StreamedMarks streamed() const;
+
+ private:
+  void Flush();
+
+  const bool files_ = false;
+  MarkDisplayFilter filter_;
+  MarksStreamOptions options_;
+  MarkSummarizer all_, shown_;
+  std::unique_ptr<MarksSvgWriter> svg_;
+  std::unique_ptr<MarksJsonWriter> json_;
+  std::unique_ptr<MarksSpool> spool_;
+  std::vector<MarkPolyline> batch_, pieces_;
+  size_t batch_vertices_ = 0;
+  absl::Status svg_status_, json_status_;
+  double svg_seconds_ = 0, json_seconds_ = 0;
+  bool finished_ = false;
+};
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_MARKS_STREAM_H_
