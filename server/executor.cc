@@ -1,5 +1,7 @@
 #include "server/executor.h"
 
+#include <system_error>
+
 namespace swarf::server {
 
 Executor::Executor(int threads) {
@@ -23,7 +25,7 @@ Executor::~Executor() {
   for (auto& [id, t] : own) t.join();
 }
 
-void Executor::StartThread(std::function<void()> task) {
+bool Executor::StartThread(std::function<void()> task) {
   absl::MutexLock l(&own_mu_);
   JoinEndedLocked();
   const uint64_t id = next_own_++;
@@ -33,7 +35,14 @@ void Executor::StartThread(std::function<void()> task) {
     absl::MutexLock l(&own_mu_);
     ended_.push_back(id);
   };
-  own_.emplace(id, std::thread(std::move(run)));
+  std::thread thread;
+  try {
+    thread = std::thread(std::move(run));
+  } catch (const std::system_error&) {  // the only way std::thread says so
+    return false;
+  }
+  own_.emplace(id, std::move(thread));
+  return true;
 }
 
 void Executor::JoinEndedLocked() {

@@ -31,8 +31,9 @@ class Executor {
   // GetCuttingMarks search waits while its queue is full). The pool has one
   // thread per core for every session's calls; a few slow readers there
   // would stall them all. The task must end by itself (a cancelled call
-  // stops its search): the destructor waits for it.
-  void StartThread(std::function<void()> task);
+  // stops its search): the destructor waits for it. False, and `task` not
+  // run, when the system makes no more threads.
+  bool StartThread(std::function<void()> task);
 
  private:
   void Loop();

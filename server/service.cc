@@ -483,7 +483,10 @@ class MarksWriter : public grpc::ServerWriteReactor<pb::Polyline> {
     }
     refs_.Add();
     counters_->searches.fetch_add(1, std::memory_order_relaxed);
-    executor->StartThread([this] { Search(); });
+    if (!executor->StartThread([this] { Search(); })) {
+      Ended(absl::ResourceExhaustedError(
+          "no thread for the cutting marks' search: try again later"));
+    }
   }
 
   void OnWriteDone(bool ok) override {
@@ -609,8 +612,11 @@ class MarksWriter : public grpc::ServerWriteReactor<pb::Polyline> {
   }
 
   // The search thread's task.
-  void Search() {
-    const absl::Status st = Find();  // the session's lock is let go
+  void Search() { Ended(Find()); }  // the session's lock is let go
+
+  // The search ended with `st` (or never started): the call ends once the
+  // queue is written. Releases the search's reference.
+  void Ended(const absl::Status& st) {
     // Before the call can end: once a client sees the end, no search runs.
     counters_->searches.fetch_sub(1, std::memory_order_relaxed);
     Act act;
