@@ -1207,8 +1207,10 @@ void ProjectOntoExactCrease(const Workpiece& wp,
   // Not converged: the vertex stays where the patches put it.
 }
 
-absl::Status FindCuttingMarks(const Workpiece& wp, const MarkOptions& options,
-                              absl::FunctionRef<void(MarkPolyline)> emit) {
+absl::Status FindCuttingMarks(
+    const Workpiece& wp, const MarkOptions& options,
+    absl::FunctionRef<absl::Status(MarkPolyline)> emit,
+    absl::FunctionRef<absl::Status()> poll) {
   if (!wp.scheme().stores_derivatives()) {
     return absl::FailedPreconditionError(absl::StrCat(
         "cutting marks need the node derivatives of the taylor scheme; this "
@@ -1468,12 +1470,29 @@ absl::Status FindCuttingMarks(const Workpiece& wp, const MarkOptions& options,
     // Hand on what no open chain can come before.
     const int64_t before = open_at.empty() ? INT64_MAX : open_at.front();
     while (!ready.empty() && ready.begin()->first < before) {
-      emit(std::move(ready.begin()->second));
+      MarkPolyline p = std::move(ready.begin()->second);
       ready.erase(ready.begin());
+      if (absl::Status st = emit(std::move(p)); !st.ok()) return st;
     }
+    if (absl::Status st = poll(); !st.ok()) return st;
   }
-  for (auto& [at, p] : ready) emit(std::move(p));
+  while (!ready.empty()) {
+    MarkPolyline p = std::move(ready.begin()->second);
+    ready.erase(ready.begin());
+    if (absl::Status st = emit(std::move(p)); !st.ok()) return st;
+  }
   return absl::OkStatus();
+}
+
+absl::Status FindCuttingMarks(const Workpiece& wp, const MarkOptions& options,
+                              absl::FunctionRef<void(MarkPolyline)> emit) {
+  return FindCuttingMarks(
+      wp, options,
+      [&](MarkPolyline p) {
+        emit(std::move(p));
+        return absl::OkStatus();
+      },
+      [] { return absl::OkStatus(); });
 }
 
 absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(

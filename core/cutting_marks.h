@@ -113,6 +113,19 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
 // crease segment of the grid. `emit` runs on the calling thread.
 absl::Status FindCuttingMarks(const Workpiece& wp, const MarkOptions& options,
                               absl::FunctionRef<void(MarkPolyline)> emit);
+// The same, and the caller may stop the search: the first non-OK status
+// `emit` returns is returned at once (no other polyline is handed on), and
+// `poll`, called after every window of bands (a few ms to a second of work,
+// whether or not it completed a polyline), stops it the same way, so that a
+// caller that is cancelled does not wait for the next polyline: there may
+// be none until the end (a crease along y spans every band). The polylines
+// handed on before are the first ones of the whole result. Both run on the
+// calling thread, and may block (the search waits; the workpiece's pool is
+// not held meanwhile).
+absl::Status FindCuttingMarks(
+    const Workpiece& wp, const MarkOptions& options,
+    absl::FunctionRef<absl::Status(MarkPolyline)> emit,
+    absl::FunctionRef<absl::Status()> poll);
 
 // The paper's equations as used here.
 

@@ -460,9 +460,10 @@ absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,
   return out;
 }
 
-absl::StatusOr<std::vector<pb::Polyline>> ComputeMarks(
-    const Workpiece& wp, const pb::Rect* region, double screening_threshold,
-    double min_angle_deg) {
+absl::Status StreamMarks(const Workpiece& wp, const pb::Rect* region,
+                         double screening_threshold, double min_angle_deg,
+                         absl::FunctionRef<absl::Status(pb::Polyline)> emit,
+                         absl::FunctionRef<absl::Status()> poll) {
   MarkOptions opt;
   if (region != nullptr) {
     auto r = RectFromProto(*region, "region");
@@ -484,20 +485,36 @@ absl::StatusOr<std::vector<pb::Polyline>> ComputeMarks(
   if (min_angle_deg != 0) opt.t2_deg = min_angle_deg;
   // Each polyline converted as the core hands it on: the core's marks are
   // never all held beside their protobuf copies.
+  return FindCuttingMarks(
+      wp, opt,
+      [&](MarkPolyline m) {
+        pb::Polyline p;
+        p.set_closed(m.closed);
+        p.add_owners(m.owners[0]);
+        p.add_owners(m.owners[1]);
+        p.mutable_xyz()->Reserve(3 * m.vertices.size());
+        for (const Vec3& v : m.vertices) {
+          p.add_xyz(v.x);
+          p.add_xyz(v.y);
+          p.add_xyz(v.z);
+        }
+        p.mutable_angle_deg()->Assign(m.angle_deg.begin(), m.angle_deg.end());
+        return emit(std::move(p));
+      },
+      poll);
+}
+
+absl::StatusOr<std::vector<pb::Polyline>> ComputeMarks(
+    const Workpiece& wp, const pb::Rect* region, double screening_threshold,
+    double min_angle_deg) {
   std::vector<pb::Polyline> out;
-  absl::Status found = FindCuttingMarks(wp, opt, [&](MarkPolyline m) {
-    pb::Polyline& p = out.emplace_back();
-    p.set_closed(m.closed);
-    p.add_owners(m.owners[0]);
-    p.add_owners(m.owners[1]);
-    p.mutable_xyz()->Reserve(3 * m.vertices.size());
-    for (const Vec3& v : m.vertices) {
-      p.add_xyz(v.x);
-      p.add_xyz(v.y);
-      p.add_xyz(v.z);
-    }
-    p.mutable_angle_deg()->Assign(m.angle_deg.begin(), m.angle_deg.end());
-  });
+  absl::Status found = StreamMarks(
+      wp, region, screening_threshold, min_angle_deg,
+      [&](pb::Polyline p) {
+        out.push_back(std::move(p));
+        return absl::OkStatus();
+      },
+      [] { return absl::OkStatus(); });
   if (!found.ok()) return found;
   return out;
 }

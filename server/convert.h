@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/functional/function_ref.h"
 #include "absl/status/statusor.h"
 #include "core/geometry.h"
 #include "core/workpiece.h"
@@ -82,9 +83,18 @@ absl::StatusOr<pb::ErrorStats> ComputeStats(const Workpiece& wp,
                                             int32_t map_cols = 0,
                                             int32_t map_rows = 0);
 
+// The cutting marks (GetCuttingMarksRequest's fields), every one held.
 absl::StatusOr<std::vector<pb::Polyline>> ComputeMarks(
     const Workpiece& wp, const pb::Rect* region, double screening_threshold,
     double min_angle_deg);
+// The same marks in the same order, one at a time as the core completes
+// them (FindCuttingMarks with emit and poll): only the open creases are
+// held. A non-OK status from `emit` or `poll` stops the search and is
+// returned. Both run on the calling thread and may block.
+absl::Status StreamMarks(const Workpiece& wp, const pb::Rect* region,
+                         double screening_threshold, double min_angle_deg,
+                         absl::FunctionRef<absl::Status(pb::Polyline)> emit,
+                         absl::FunctionRef<absl::Status()> poll);
 
 absl::StatusOr<pb::ProbeResponse> ComputeProbe(const Workpiece& wp,
                                                const pb::ProbeRequest& req);

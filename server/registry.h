@@ -31,6 +31,10 @@ struct Limits {
   // Journaled sessions idle this long leave memory until used (0: never).
   double idle_evict_seconds = 600;
   int32_t max_message_bytes = 64 << 20;
+  // Polylines one GetCuttingMarks call holds queued for its client (their
+  // serialized bytes, the one being written included); one polyline when a
+  // single one is larger. The search waits while the queue is full.
+  int64_t marks_queue_bytes = int64_t{4} << 20;
   // Largest design upload per session (SetDesign).
   int64_t max_design_bytes = int64_t{256} << 20;
 };

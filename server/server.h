@@ -63,6 +63,11 @@ class SwarfServer {
   void Shutdown(absl::Duration deadline);
   // Blocks until Shutdown.
   void Wait();
+  // The service's GetCuttingMarks counters (for tests); valid until the
+  // server is destroyed.
+  const MarksStreamCounters& marks_counters() const {
+    return service_->marks_counters();
+  }
 
  private:
   SwarfServer() = default;

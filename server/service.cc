@@ -22,6 +22,7 @@
 #include "client/outputs/grid_bands.h"
 #include "client/outputs/surface_grid.h"
 #include "core/valuation.h"
+#include "google/protobuf/io/coded_stream.h"
 #include "server/convert.h"
 #include "server/program.h"
 #include "server/status_util.h"
@@ -31,6 +32,7 @@ namespace swarf::server {
 namespace {
 
 namespace pb = ::swarf::v1;
+using ::google::protobuf::io::CodedOutputStream;
 
 // The call's metadata value under `key` ("" when absent).
 std::string MetadataOf(grpc::CallbackServerContext* ctx, const char* key) {
@@ -98,6 +100,16 @@ absl::Status FitsMessage(size_t bytes, int64_t limit, absl::string_view what) {
       what, " would be a message of ", bytes,
       " bytes, over the server's limit of ", limit,
       " (--max_message_mb): ask for a smaller region or map"));
+}
+
+// FitsMessage's error for a MarksRequest's answer, found a polyline at a
+// time and stopped once its first `bytes` were over the limit.
+absl::Status MarksAnswerOverLimit(size_t bytes, int64_t limit) {
+  return absl::ResourceExhaustedError(absl::StrCat(
+      "the answer to this request would be a message of more than ", bytes,
+      " bytes, over the server's limit of ", limit,
+      " (--max_message_mb): ask for a smaller region, or for GetCuttingMarks "
+      "(a message per polyline)"));
 }
 
 // The error map's size is known before it is computed: refuse early.
@@ -425,6 +437,216 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
   grpc::Status status_ ABSL_GUARDED_BY(mu_);
   ReactorRefs refs_;  // gRPC's, and each Produce task's
+};
+
+// GetCuttingMarks: the polylines written one per message as the search
+// finds them (StreamMarks), never all of them held.
+//
+// The search runs on a thread of its own (Executor::StartThread), not on
+// the executor: it waits whenever its client reads slower than it finds
+// marks, and the executor's threads (one per core) serve every session's
+// calls, so a few slow readers there would stall the server. That thread
+// mostly waits: the search's loops run on the workpiece's pool. It holds the
+// session's shared lock while it runs, as every read does: a batch or a
+// DeleteSession of that session waits for the search, so for its client,
+// at most until the call's deadline; other sessions do not. One thread per
+// open call: as many as there are GetCuttingMarks calls at once.
+//
+// Flow control: one write in flight, the next started by OnWriteDone or by
+// the search when it queues one; the queue holds at most
+// limits.marks_queue_bytes of polylines (serialized, the one in flight
+// included), or one polyline when a single one is larger (each is at most
+// the message limit). A cancelled call (the client gone, its deadline, the
+// server shutting down) wakes the search, which stops at its next polyline
+// or window of bands (FindCuttingMarks' poll); the call ends CANCELLED once
+// the search has ended and no write is in flight.
+//
+// Lifetime: gRPC's reference until OnDone and the search thread's until its
+// last step; whoever releases the last deletes the reactor (ReactorRefs).
+class MarksWriter : public grpc::ServerWriteReactor<pb::Polyline> {
+ public:
+  MarksWriter(grpc::CallbackServerContext* ctx, Registry* registry,
+              TokenStore* tokens, Executor* executor,
+              MarksStreamCounters* counters, const std::string& replica,
+              const pb::GetCuttingMarksRequest& req)
+      : ctx_(ctx),
+        registry_(registry),
+        tokens_(tokens),
+        counters_(counters),
+        req_(req),
+        max_queued_(registry->limits().marks_queue_bytes) {
+    ctx->AddInitialMetadata(kReplicaMetadata, replica);
+    this->StartSendInitialMetadata();
+    {
+      absl::MutexLock l(&mu_);
+      searching_ = true;
+    }
+    refs_.Add();
+    counters_->searches.fetch_add(1, std::memory_order_relaxed);
+    if (!executor->StartThread([this] { Search(); })) {
+      Ended(absl::ResourceExhaustedError(
+          "no thread for the cutting marks' search: try again later"));
+    }
+  }
+
+  void OnWriteDone(bool ok) override {
+    Act act;
+    {
+      absl::MutexLock l(&mu_);
+      writing_ = false;
+      queued_bytes_ -= queue_.front().bytes;
+      queue_.pop_front();
+      if (!ok) cancelled_ = true;
+      act = NextLocked();
+    }
+    Do(act);  // the search, if it waits for room, wakes when mu_ is let go
+  }
+
+  void OnCancel() override {
+    Act act;
+    {
+      absl::MutexLock l(&mu_);
+      cancelled_ = true;
+      act = NextLocked();
+    }
+    Do(act);
+  }
+
+  void OnDone() override {
+    if (refs_.Release()) delete this;
+  }
+
+ private:
+  struct Queued {
+    pb::Polyline message;
+    int64_t bytes = 0;
+  };
+
+  struct Act {
+    const pb::Polyline* write = nullptr;
+    std::optional<grpc::Status> finish;
+  };
+
+  // Decides what to do next; the caller does it without holding mu_.
+  Act NextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    Act act;
+    if (finished_) return act;
+    if (cancelled_) {
+      if (!writing_ && !searching_) {
+        finished_ = true;
+        act.finish = grpc::Status::CANCELLED;
+      }
+      return act;
+    }
+    if (!writing_ && !queue_.empty()) {
+      writing_ = true;
+      act.write = &queue_.front().message;  // a deque's elements stay put
+    }
+    if (!writing_ && !searching_ && queue_.empty()) {
+      finished_ = true;
+      act.finish = status_;
+    }
+    return act;
+  }
+
+  void Do(const Act& act) {
+    if (act.write != nullptr) this->StartWrite(act.write);
+    if (act.finish.has_value()) this->Finish(*act.finish);
+  }
+
+  // Whether the search may queue a polyline of next_bytes_ (or must stop).
+  bool CanQueueLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    return cancelled_ || queued_bytes_ == 0 ||
+           queued_bytes_ + next_bytes_ <= max_queued_;
+  }
+
+  // The search's emit: waits for room, then queues `p` (and writes it if
+  // no write is in flight). CANCELLED stops the search.
+  absl::Status Enqueue(pb::Polyline p) {
+    const int64_t bytes = static_cast<int64_t>(p.ByteSizeLong());
+    if (absl::Status fits = FitsMessage(
+            bytes, registry_->limits().max_message_bytes, "a cutting mark");
+        !fits.ok()) {
+      return fits;
+    }
+    Act act;
+    {
+      absl::MutexLock l(&mu_);
+      next_bytes_ = bytes;
+      if (!CanQueueLocked()) {
+        counters_->waits.fetch_add(1, std::memory_order_relaxed);
+        mu_.Await(absl::Condition(this, &MarksWriter::CanQueueLocked));
+      }
+      if (cancelled_) return absl::CancelledError("the call was cancelled");
+      queued_bytes_ += bytes;
+      int64_t peak = counters_->peak_queued_bytes.load();
+      while (queued_bytes_ > peak &&
+             !counters_->peak_queued_bytes.compare_exchange_weak(
+                 peak, queued_bytes_)) {
+      }
+      queue_.push_back({std::move(p), bytes});
+      act = NextLocked();
+    }
+    Do(act);
+    return absl::OkStatus();
+  }
+
+  // The search's poll, after every window of bands.
+  absl::Status Cancelled() {
+    absl::MutexLock l(&mu_);
+    return cancelled_ ? absl::CancelledError("the call was cancelled")
+                      : absl::OkStatus();
+  }
+
+  absl::Status Find() {
+    if (absl::Status st = Cancelled(); !st.ok()) return st;
+    auto session = SessionOf(registry_, tokens_, ctx_, req_.session_id());
+    if (!session.ok()) return session.status();
+    return (*session)->Read([&](const Workpiece& wp) {
+      return StreamMarks(
+          wp, req_.has_region() ? &req_.region() : nullptr,
+          req_.screening_threshold(), req_.min_angle_deg(),
+          [this](pb::Polyline p) { return Enqueue(std::move(p)); },
+          [this] { return Cancelled(); });
+    });
+  }
+
+  // The search thread's task.
+  void Search() { Ended(Find()); }  // the session's lock is let go
+
+  // The search ended with `st` (or never started): the call ends once the
+  // queue is written. Releases the search's reference.
+  void Ended(const absl::Status& st) {
+    // Before the call can end: once a client sees the end, no search runs.
+    counters_->searches.fetch_sub(1, std::memory_order_relaxed);
+    Act act;
+    {
+      absl::MutexLock l(&mu_);
+      searching_ = false;
+      status_ = ToGrpcStatus(st);  // unless cancelled (NextLocked)
+      act = NextLocked();
+    }
+    Do(act);
+    if (refs_.Release()) delete this;
+  }
+
+  grpc::CallbackServerContext* const ctx_;  // valid until OnDone
+  Registry* const registry_;
+  TokenStore* const tokens_;
+  MarksStreamCounters* const counters_;
+  const pb::GetCuttingMarksRequest req_;
+  const int64_t max_queued_;
+  absl::Mutex mu_;
+  // Its front is being written while writing_.
+  std::deque<Queued> queue_ ABSL_GUARDED_BY(mu_);
+  int64_t queued_bytes_ ABSL_GUARDED_BY(mu_) = 0;
+  int64_t next_bytes_ ABSL_GUARDED_BY(mu_) = 0;  // the polyline to queue
+  bool writing_ ABSL_GUARDED_BY(mu_) = false;
+  bool searching_ ABSL_GUARDED_BY(mu_) = false;
+  bool cancelled_ ABSL_GUARDED_BY(mu_) = false;
+  bool finished_ ABSL_GUARDED_BY(mu_) = false;
+  grpc::Status status_ ABSL_GUARDED_BY(mu_);
+  ReactorRefs refs_;  // gRPC's, and the search thread's
 };
 
 // The Simulate stream of one session.
@@ -798,18 +1020,35 @@ class SimulateReactor
         return;
       }
       case pb::SimulateRequest::kMarks: {
+        // One message holds them all: the search stops once they are more
+        // than the message limit (Process would refuse the answer), rather
+        // than finding and holding the rest. So a MarksRequest holds at most
+        // about one message of marks; GetCuttingMarks serves any number.
         const pb::MarksRequest& r = req.marks();
-        auto marks = session_->Read([&](const Workpiece& wp) {
-          return ComputeMarks(wp, r.has_region() ? &r.region() : nullptr,
-                              r.screening_threshold(), r.min_angle_deg());
+        const int64_t limit = registry_->limits().max_message_bytes;
+        pb::Polylines answer;
+        answer.set_request_id(r.request_id());
+        // The answer's size so far (Polylines.polylines entries: a tag byte,
+        // the length, the polyline): less than the whole SimulateResponse.
+        size_t bytes = 0;
+        absl::Status st = session_->Read([&](const Workpiece& wp) {
+          return StreamMarks(
+              wp, r.has_region() ? &r.region() : nullptr,
+              r.screening_threshold(), r.min_angle_deg(),
+              [&](pb::Polyline line) {
+                line.set_request_id(r.request_id());
+                const size_t n = line.ByteSizeLong();
+                bytes += 1 + CodedOutputStream::VarintSize64(n) + n;
+                if (static_cast<int64_t>(bytes) > limit) {
+                  return MarksAnswerOverLimit(bytes, limit);
+                }
+                *answer.add_polylines() = std::move(line);
+                return absl::OkStatus();
+              },
+              [] { return absl::OkStatus(); });
         });
-        if (!marks.ok()) return Error(r.request_id(), marks.status(), out);
-        pb::Polylines* p = out->emplace_back().mutable_polylines();
-        p->set_request_id(r.request_id());
-        for (pb::Polyline& line : *marks) {
-          line.set_request_id(r.request_id());
-          *p->add_polylines() = std::move(line);
-        }
+        if (!st.ok()) return Error(r.request_id(), st, out);
+        *out->emplace_back().mutable_polylines() = std::move(answer);
         return;
       }
       case pb::SimulateRequest::kSubscribe:
@@ -1361,30 +1600,8 @@ grpc::ServerUnaryReactor* SwarfService::GetErrorStats(
 
 grpc::ServerWriteReactor<pb::Polyline>* SwarfService::GetCuttingMarks(
     grpc::CallbackServerContext* ctx, const pb::GetCuttingMarksRequest* req) {
-  Registry* registry = registry_;
-  TokenStore* tokens = tokens_;
-  return new ChunkedWriter<pb::Polyline>(
-      ctx, executor_, replica_,
-      [=](std::deque<pb::Polyline>* out) -> absl::StatusOr<bool> {
-        auto session = SessionOf(registry, tokens, ctx, req->session_id());
-        if (!session.ok()) return session.status();
-        auto marks = (*session)->Read([&](const Workpiece& wp) {
-          return ComputeMarks(wp, req->has_region() ? &req->region() : nullptr,
-                              req->screening_threshold(),
-                              req->min_angle_deg());
-        });
-        if (!marks.ok()) return marks.status();
-        for (pb::Polyline& p : *marks) {
-          if (absl::Status fits = FitsMessage(
-                  p.ByteSizeLong(), registry->limits().max_message_bytes,
-                  "a cutting mark");
-              !fits.ok()) {
-            return fits;
-          }
-        }
-        for (pb::Polyline& p : *marks) out->push_back(std::move(p));
-        return false;
-      });
+  return new MarksWriter(ctx, registry_, tokens_, executor_, &marks_, replica_,
+                         *req);
 }
 
 grpc::ServerUnaryReactor* SwarfService::Probe(

@@ -5,6 +5,8 @@
 #ifndef SWARF_SERVER_SERVICE_H_
 #define SWARF_SERVER_SERVICE_H_
 
+#include <atomic>
+#include <cstdint>
 #include <functional>
 #include <map>
 #include <string>
@@ -39,6 +41,17 @@ using SwarfCallbackBase = ::swarf::v1::Swarf::WithCallbackMethod_CreateSession<
                                     ::swarf::v1::Swarf::WithCallbackMethod_SetDesign<
                                         ::swarf::v1::Swarf::WithCallbackMethod_GetDeviation<
                                             ::swarf::v1::Swarf::Service>>>>>>>>>>>;
+
+// What GetCuttingMarks' flow control did, over the service's calls (for
+// tests and the log). Thread-safe.
+struct MarksStreamCounters {
+  // The most bytes of polylines one call held queued at once.
+  std::atomic<int64_t> peak_queued_bytes{0};
+  // Times a search waited for its client (the queue was full).
+  std::atomic<int64_t> waits{0};
+  // Searches running now (each on a thread of its own).
+  std::atomic<int32_t> searches{0};
+};
 
 class SwarfService final : public SwarfCallbackBase {
  public:
@@ -94,6 +107,8 @@ class SwarfService final : public SwarfCallbackBase {
       const ::swarf::v1::GetDeviationRequest* req,
       ::swarf::v1::Deviation* resp) override;
 
+  const MarksStreamCounters& marks_counters() const { return marks_; }
+
  private:
   // Open Simulate streams per client key. Thread-safe.
  public:
@@ -120,6 +135,7 @@ class SwarfService final : public SwarfCallbackBase {
   const std::string replica_;
   const ProxyTrust trust_;
   StreamCounter streams_;
+  MarksStreamCounters marks_;
 };
 
 }  // namespace swarf::server

@@ -733,6 +733,111 @@ TEST(CuttingMarksTest, SameResultWhateverTheThreads) {
   }
 }
 
+// Bit for bit.
+void ExpectSamePolyline(const MarkPolyline& p, const MarkPolyline& q) {
+  EXPECT_EQ(p.closed, q.closed);
+  EXPECT_EQ(p.owners, q.owners);
+  ASSERT_EQ(p.vertices.size(), q.vertices.size());
+  ASSERT_EQ(p.angle_deg.size(), q.angle_deg.size());
+  EXPECT_EQ(p.vertex_owners, q.vertex_owners);
+  for (size_t i = 0; i < p.vertices.size(); ++i) {
+    EXPECT_EQ(p.vertices[i].x, q.vertices[i].x);
+    EXPECT_EQ(p.vertices[i].y, q.vertices[i].y);
+    EXPECT_EQ(p.vertices[i].z, q.vertices[i].z);
+    EXPECT_EQ(p.angle_deg[i], q.angle_deg[i]);
+  }
+}
+
+// Raster passes along x, 0.5 mm apart, over 500 element rows: a mark
+// between every two passes, completed band by band, over several windows of
+// bands (8 bands of 16 rows with one thread).
+std::unique_ptr<Workpiece> LongRaster(ThreadPool* pool) {
+  std::vector<Move> moves;
+  for (int k = -5; k <= 105; ++k) {
+    const double y = (k + 0.037) * 0.5;
+    moves.push_back({{-3, y, -0.5}, {13, y, -0.5}, 2});
+  }
+  return Cut({0, 0, 10, 50, 0, 100, 500}, moves, SchemeKind::kTaylor, pool);
+}
+
+TEST(CuttingMarksTest, EmitStopsTheSearchAfterTheFirstPolylines) {
+  ThreadPool one(1);
+  auto wp = LongRaster(&one);
+  const std::vector<MarkPolyline> all = Marks(*wp);
+  ASSERT_GE(all.size(), 90u);
+  for (size_t k : {size_t{0}, size_t{1}, size_t{7}, all.size() / 2,
+                   all.size() - 1, all.size()}) {
+    SCOPED_TRACE(k);
+    std::vector<MarkPolyline> got;
+    int calls = 0, polls = 0;
+    const absl::Status st = FindCuttingMarks(
+        *wp, {},
+        [&](MarkPolyline p) {
+          ++calls;
+          if (got.size() == k) return absl::CancelledError("enough marks");
+          got.push_back(std::move(p));
+          return absl::OkStatus();
+        },
+        [&] {
+          ++polls;
+          return absl::OkStatus();
+        });
+    if (k < all.size()) {
+      EXPECT_EQ(st, absl::CancelledError("enough marks"));
+      EXPECT_EQ(calls, static_cast<int>(k) + 1);  // none after the stop
+    } else {
+      EXPECT_TRUE(st.ok()) << st;
+      EXPECT_EQ(calls, static_cast<int>(k));
+    }
+    EXPECT_GE(polls, 1);
+    ASSERT_EQ(got.size(), k);
+    for (size_t i = 0; i < k; ++i) ExpectSamePolyline(got[i], all[i]);
+  }
+}
+
+TEST(CuttingMarksTest, PollStopsTheSearchBetweenWindows) {
+  ThreadPool one(1);
+  auto wp = LongRaster(&one);
+  const std::vector<MarkPolyline> all = Marks(*wp);
+  // 500 rows: 32 bands, 4 windows. A chain is complete once a window has
+  // passed without touching it: the poll after the second window stops the
+  // search once the first window's marks are handed on.
+  std::vector<MarkPolyline> got;
+  int polls = 0;
+  const absl::Status st = FindCuttingMarks(
+      *wp, {},
+      [&](MarkPolyline p) {
+        got.push_back(std::move(p));
+        return absl::OkStatus();
+      },
+      [&] {
+        return ++polls == 2 ? absl::DeadlineExceededError("no more time")
+                            : absl::OkStatus();
+      });
+  EXPECT_EQ(st, absl::DeadlineExceededError("no more time"));
+  EXPECT_EQ(polls, 2);
+  // The marks of the first window's passes, and none of the rest.
+  EXPECT_GT(got.size(), 0u);
+  EXPECT_LT(got.size(), all.size() / 2);
+  for (size_t i = 0; i < got.size(); ++i) ExpectSamePolyline(got[i], all[i]);
+  // Without a stop, a poll after every window.
+  polls = 0;
+  size_t n = 0;
+  ASSERT_TRUE(FindCuttingMarks(
+                  *wp, {},
+                  [&](MarkPolyline) {
+                    ++n;
+                    return absl::OkStatus();
+                  },
+                  [&] {
+                    ++polls;
+                    return absl::OkStatus();
+                  })
+                  .ok());
+  EXPECT_EQ(n, all.size());
+  EXPECT_EQ(polls, 4);
+}
+
 TEST(CuttingMarksTest, UntouchedStockHasNoMarks) {
   auto wp = Cut({0, 0, 10, 10, 0, 50, 50}, {});
   EXPECT_TRUE(Marks(*wp).empty());
