@@ -1545,22 +1545,32 @@ double PolylineLength(const MarkPolyline& p) {
   return len;
 }
 
-MarkSummary Summarize(const std::vector<MarkPolyline>& marks) {
-  MarkSummary s;
-  s.min_angle_deg = kInf;
-  s.max_angle_deg = -kInf;
-  for (const MarkPolyline& p : marks) {
-    ++s.polylines;
-    s.closed += p.closed;
-    s.vertices += static_cast<int64_t>(p.vertices.size());
-    s.total_length += PolylineLength(p);
-    for (double a : p.angle_deg) {
-      s.min_angle_deg = std::fmin(s.min_angle_deg, a);
-      s.max_angle_deg = std::fmax(s.max_angle_deg, a);
-    }
+MarkSummarizer::MarkSummarizer() {
+  s_.min_angle_deg = kInf;
+  s_.max_angle_deg = -kInf;
+}
+
+void MarkSummarizer::Add(const MarkPolyline& p) {
+  ++s_.polylines;
+  s_.closed += p.closed;
+  s_.vertices += static_cast<int64_t>(p.vertices.size());
+  s_.total_length += PolylineLength(p);
+  for (double a : p.angle_deg) {
+    s_.min_angle_deg = std::fmin(s_.min_angle_deg, a);
+    s_.max_angle_deg = std::fmax(s_.max_angle_deg, a);
   }
+}
+
+MarkSummary MarkSummarizer::summary() const {
+  MarkSummary s = s_;
   if (s.vertices == 0) s.min_angle_deg = s.max_angle_deg = 0;
   return s;
+}
+
+MarkSummary Summarize(const std::vector<MarkPolyline>& marks) {
+  MarkSummarizer s;
+  for (const MarkPolyline& p : marks) s.Add(p);
+  return s.summary();
 }
 
 MarkAccuracy MeasureMarkAccuracy(const Workpiece& wp,

@@ -193,6 +193,19 @@ struct MarkSummary {
 };
 MarkSummary Summarize(const std::vector<MarkPolyline>& marks);
 
+// Summarize one polyline at a time: after Add of each polyline in turn,
+// summary() is Summarize of them all, bit for bit (the lengths are summed
+// in the same order). Not thread-safe.
+class MarkSummarizer {
+ public:
+  MarkSummarizer();
+  void Add(const MarkPolyline& p);
+  MarkSummary summary() const;
+
+ private:
+  MarkSummary s_;  // its angles +-inf until one is seen
+};
+
 // 3D length of a polyline, including the closing segment when closed.
 double PolylineLength(const MarkPolyline& p);
 

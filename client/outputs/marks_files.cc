@@ -7,7 +7,6 @@
 #include <cstring>
 #include <cerrno>
 #include <functional>
-#include <limits>
 #include <string_view>
 #include <utility>
 
@@ -81,29 +80,6 @@ std::vector<MarkPolyline> FilterMarks(std::vector<MarkPolyline> marks,
     FilterMark(std::move(item), filter, &out);
   }
   return out;
-}
-
-MarkSummarizer::MarkSummarizer() {
-  s_.min_angle_deg = std::numeric_limits<double>::infinity();
-  s_.max_angle_deg = -std::numeric_limits<double>::infinity();
-}
-
-void MarkSummarizer::Add(const MarkPolyline& p) {
-  // Summarize's loop body, one polyline at a time.
-  ++s_.polylines;
-  s_.closed += p.closed;
-  s_.vertices += static_cast<int64_t>(p.vertices.size());
-  s_.total_length += PolylineLength(p);
-  for (double a : p.angle_deg) {
-    s_.min_angle_deg = std::fmin(s_.min_angle_deg, a);
-    s_.max_angle_deg = std::fmax(s_.max_angle_deg, a);
-  }
-}
-
-MarkSummary MarkSummarizer::summary() const {
-  MarkSummary s = s_;
-  if (s.vertices == 0) s.min_angle_deg = s.max_angle_deg = 0;
-  return s;
 }
 
 namespace {

@@ -39,19 +39,6 @@ std::vector<MarkPolyline> FilterMarks(std::vector<MarkPolyline> marks,
 void FilterMark(MarkPolyline mark, const MarkDisplayFilter& filter,
                 std::vector<MarkPolyline>* out);
 
-// Summarize one polyline at a time: after Add of each polyline in turn,
-// summary() is Summarize of them all, bit for bit (the lengths are summed
-// in the same order).
-class MarkSummarizer {
- public:
-  MarkSummarizer();
-  void Add(const MarkPolyline& p);
-  MarkSummary summary() const;
-
- private:
-  MarkSummary s_;  // its angles +-inf until one is seen, as in Summarize
-};
-
 // Compact JSON, without a trailing newline:
 // {"polylines":[{"closed":false,"owners":[a,b],"vertices":[[x,y,z],...],
 // "angle_deg":[...]}]}, owner -1 for the stock top; with vertex_owners also
