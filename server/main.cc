@@ -9,6 +9,7 @@
 #include "absl/flags/usage.h"
 #include "absl/flags/usage_config.h"
 #include "absl/strings/match.h"
+#include "core/memory_policy.h"
 #include "server/server.h"
 #include "spdlog/spdlog.h"
 
@@ -78,6 +79,7 @@ std::string ReplicaName() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  swarf::ReturnLargeBuffersOnFree();
   absl::SetProgramUsageMessage("swarfd [flags]: the swarf simulation server");
   // absl lists only the flags of a file named like the program (swarfd.cc);
   // ours are here, so --help and --helpshort must be told.

@@ -4,6 +4,7 @@
 #include <vector>
 
 #include "client/cli/commands.h"
+#include "core/memory_policy.h"
 #include "spdlog/spdlog.h"
 
 namespace {
@@ -24,6 +25,7 @@ constexpr char kUsage[] =
 }  // namespace
 
 int main(int argc, char** argv) {
+  swarf::ReturnLargeBuffersOnFree();
   if (argc < 2) {
     std::cerr << kUsage;
     return 2;
