@@ -903,12 +903,15 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
 // chain: polylines come out in that order); with `chain_of`, each
 // segment's chain, by that first segment (also for chains too short to
 // give a polyline). `ghosts` counts, per vertex key, segments chained
-// before that end there too (they count in its degree).
+// before that end there too (they count in its degree). Chains with a
+// segment of index `grow_from` or more give no polyline (their segments
+// still get their chain_of): they may still grow.
 std::vector<MarkPolyline> Chain(
     const std::vector<Segment>& segs, double tol, double fold,
     double end_fold, ThreadPool& pool, std::vector<int64_t>* starts = nullptr,
     std::vector<int64_t>* chain_of = nullptr,
-    const absl::flat_hash_map<uint64_t, int32_t>* ghosts = nullptr) {
+    const absl::flat_hash_map<uint64_t, int32_t>* ghosts = nullptr,
+    int64_t grow_from = INT64_MAX) {
   const int64_t n = static_cast<int64_t>(segs.size());
   // Incidences sorted by vertex key.
   struct Inc {
@@ -988,6 +991,29 @@ std::vector<MarkPolyline> Chain(
     if (closed) {
       seg = s;
       end = 0;
+    }
+    if (grow_from < n) {
+      // A chain that may still grow is only marked: its polyline would be
+      // built again, whole, once complete.
+      bool grows = false;
+      for (int64_t g = seg, ge = end;;) {
+        grows = grows || g >= grow_from;
+        const int64_t o = other[2 * g + (1 - ge)];
+        if (o < 0 || o / 2 == seg || used[o / 2]) break;
+        g = o / 2;
+        ge = o % 2;
+      }
+      if (grows) {
+        for (;;) {
+          used[seg] = true;
+          if (chain_of != nullptr) (*chain_of)[seg] = s;
+          const int64_t o = other[2 * seg + (1 - end)];
+          if (o < 0 || used[o / 2]) break;
+          seg = o / 2;
+          end = static_cast<int>(o % 2);
+        }
+        continue;
+      }
     }
     // Walk forward from (seg, end).
     MarkPolyline p;
@@ -1423,7 +1449,8 @@ absl::Status FindCuttingMarks(
     std::vector<int64_t> starts, chain_of;
     std::vector<MarkPolyline> chained =
         Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts,
-              &chain_of, &ghosts);
+              &chain_of, &ghosts,
+              last ? INT64_MAX : static_cast<int64_t>(window_first));
     std::vector<bool> growing(open.size(), false);
     if (!last) {
       for (size_t k = window_first; k < open.size(); ++k) {
