@@ -15,7 +15,7 @@ keeping only counts:
 Prints swarfd's VmRSS before and VmHWM during each. Needs grpcio and
 grpcio-tools (python3-grpcio, python3-grpc-tools).
 
-usage: tests/marks_server_memory.py SWARFD PROGRAM MODE...
+usage: bench/marks_server_memory.py SWARFD PROGRAM MODE...
 """
 import os
 import socket
