@@ -1457,13 +1457,10 @@ absl::Status FindCuttingMarks(
         growing[chain_of[k]] = true;
       }
     }
-    std::vector<size_t> complete;
+    // Chain gave polylines for the complete chains only.
+    wp.pool().ParallelFor(static_cast<int64_t>(chained.size()),
+                          [&](int64_t k) { finish(chained[k]); });
     for (size_t k = 0; k < chained.size(); ++k) {
-      if (!growing[starts[k]]) complete.push_back(k);
-    }
-    wp.pool().ParallelFor(static_cast<int64_t>(complete.size()),
-                          [&](int64_t k) { finish(chained[complete[k]]); });
-    for (const size_t k : complete) {
       ready.emplace(open_at[starts[k]], std::move(chained[k]));
     }
     // The complete chains' segments leave; where one ends at a vertex an
@@ -1494,7 +1491,8 @@ absl::Status FindCuttingMarks(
     open_at.resize(n);
     absl::erase_if(kept_ghosts, [](const auto& g) { return g.second == 0; });
     ghosts.swap(kept_ghosts);
-    // Hand on what no open chain can come before.
+    // Hand on what no open chain can come before (after the last window,
+    // none is open).
     const int64_t before = open_at.empty() ? INT64_MAX : open_at.front();
     while (!ready.empty() && ready.begin()->first < before) {
       MarkPolyline p = std::move(ready.begin()->second);
@@ -1502,11 +1500,6 @@ absl::Status FindCuttingMarks(
       if (absl::Status st = emit(std::move(p)); !st.ok()) return st;
     }
     if (absl::Status st = poll(); !st.ok()) return st;
-  }
-  while (!ready.empty()) {
-    MarkPolyline p = std::move(ready.begin()->second);
-    ready.erase(ready.begin());
-    if (absl::Status st = emit(std::move(p)); !st.ok()) return st;
   }
   return absl::OkStatus();
 }
