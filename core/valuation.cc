@@ -201,6 +201,20 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
   // workpiece's, shared with other readers such as the cutting marks,
   // holds less than a row of a wide grid: each tile was computed up to
   // once per row of bins).
+  // An element's lattice points in the region, row by row, the corners
+  // left out: the order the sums are taken in. `all_in`: every point is in
+  // (no test). point(si, sj) for each.
+  auto for_each_point = [&region, n](const double* col_x, const double* row_y,
+                                     bool all_in, auto&& point) {
+    for (int32_t sj = 0; sj < n; ++sj) {
+      const bool end_row = sj == 0 || sj == n - 1;
+      const int32_t si1 = end_row ? n - 1 : n;
+      for (int32_t si = end_row ? 1 : 0; si < si1; ++si) {
+        if (!all_in && !region.Contains(col_x[si], row_y[sj])) continue;
+        point(si, sj);
+      }
+    }
+  };
   const std::unique_ptr<Workpiece::JetCache> jets = wp.TraversalJetCache();
   pool.ParallelFor(bins, [&](int64_t b) {
     const int32_t bx = static_cast<int32_t>(b % index.bins_x());
@@ -258,14 +272,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
               p.n += n * n - 4;
               continue;
             }
-            // The element's lattice points in the region, as counted below.
-            for (int32_t sj = 0; sj < n; ++sj) {
-              const bool end_row = sj == 0 || sj == n - 1;
-              for (int32_t si = end_row ? 1 : 0; si < (end_row ? n - 1 : n);
-                   ++si) {
-                p.n += region.Contains(col_x[si], row_y[sj]);
-              }
-            }
+            for_each_point(col_x, row_y, false,
+                           [&p](int32_t, int32_t) { ++p.n; });
           }
         }
         partials[b] = p;
@@ -364,9 +372,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const double* const col_x = &lattice_x[static_cast<size_t>(ei) * n];
         const int64_t* const col_cell =
             mapped ? &cell_of_x[static_cast<size_t>(ei) * n] : nullptr;
-        // The lattice's points in the region, row by row, the corners left
-        // out: the order the sums are taken in. The coordinates grow with
-        // si and sj, so the first and last points bound them all.
+        // The coordinates grow with si and sj, so the first and last
+        // lattice points bound them all.
         const bool all_in = region.Contains(col_x[0], row_y[0]) &&
                             region.Contains(col_x[n - 1], row_y[n - 1]);
         // With every point in and at most two map cells across and two
@@ -377,21 +384,12 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
                               col_cell[n - 1] - col_cell[0] <= 1 &&
                               row_cell[n - 1] - row_cell[0] <= options.map_cols;
         int32_t count = 0;
-        for (int32_t sj = 0; sj < n; ++sj) {
-          const double y = row_y[sj];
-          const bool end_row = sj == 0 || sj == n - 1;
-          const int32_t si1 = end_row ? n - 1 : n;
-          for (int32_t si = end_row ? 1 : 0; si < si1; ++si) {
-            const double x = col_x[si];
-            if (!all_in && !region.Contains(x, y)) continue;
-            xs[count] = x;
-            ys[count] = y;
-            if (mapped && !quarters) {
-              cells[count] = row_cell[sj] + col_cell[si];
-            }
-            ++count;
-          }
-        }
+        for_each_point(col_x, row_y, all_in, [&](int32_t si, int32_t sj) {
+          xs[count] = col_x[si];
+          ys[count] = row_y[sj];
+          if (mapped && !quarters) cells[count] = row_cell[sj] + col_cell[si];
+          ++count;
+        });
         if (count == 0) continue;
         // An upper bound of the exact surface at each sample: the sweeps
         // that own the corners (exact heights of real moves). Only moves

@@ -391,6 +391,23 @@ TEST(MeasureErrorTest, UntouchedBinsCountedNotSampledSameBits) {
     EXPECT_EQ(got.rms_error, ref.rms_error);
     EXPECT_EQ(got.map, ref.map);
     EXPECT_GT(got.max_error, 1e-3);
+    // A region whose edges fall between samples (every 0.05 mm): each
+    // element's lattice points inside, untouched bins included.
+    ValuationOptions in_region;
+    in_region.region = Rect{2.33, 1.17, 47.61, 33.93};
+    int64_t want = 0;
+    for (int ej = 0; ej < 225; ++ej) {
+      for (int ei = 0; ei < 300; ++ei) {
+        for (int sj = 0; sj < 5; ++sj) {
+          for (int si = 0; si < 5; ++si) {
+            if ((si == 0 || si == 4) && (sj == 0 || sj == 4)) continue;
+            want += in_region.region->Contains(ei * 0.2 + si * 0.05,
+                                               ej * 0.2 + sj * 0.05);
+          }
+        }
+      }
+    }
+    EXPECT_EQ(MeasureError(*wp, in_region)->samples, want);
   }
 }
 
