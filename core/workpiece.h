@@ -347,6 +347,9 @@ class Workpiece {
   const MoveIndex& index() const { return index_; }
   // The moves' exact surfaces, by id (the exact scheme's).
   const MoveSurfaces& surfaces() const { return surfaces_; }
+  // The same, as the concrete type (its Reach, for a reader of the
+  // workpiece's own moves outside it).
+  const MoveSweeps& sweeps() const { return surfaces_; }
   ThreadPool& pool() const { return *pool_; }
 
   ~Workpiece();

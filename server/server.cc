@@ -162,6 +162,13 @@ std::shared_ptr<grpc::Channel> SwarfServer::InProcessChannel() {
   return server_->InProcessChannel(args);
 }
 
+absl::StatusOr<std::shared_ptr<const Workpiece>> SwarfServer::PinSession(
+    const std::string& id) {
+  absl::StatusOr<std::shared_ptr<Session>> s = registry_->Get(id);
+  if (!s.ok()) return s.status();
+  return (*s)->Pin();
+}
+
 void SwarfServer::Shutdown(absl::Duration deadline) {
   if (shut_down_) return;
   shut_down_ = true;

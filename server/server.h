@@ -63,6 +63,11 @@ class SwarfServer {
   void Shutdown(absl::Duration deadline);
   // Blocks until Shutdown.
   void Wait();
+  // Session `id`'s workpiece pinned for reading in this process (Session::
+  // Pin): the embedded server's client reads its moves and their index
+  // instead of building its own. NotFound as Registry::Get (principal "").
+  absl::StatusOr<std::shared_ptr<const Workpiece>> PinSession(
+      const std::string& id);
   // The service's GetCuttingMarks counters (for tests); valid until the
   // server is destroyed.
   const MarksStreamCounters& marks_counters() const {

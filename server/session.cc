@@ -541,6 +541,13 @@ absl::StatusOr<BatchResult> Session::ApplyBatch(uint64_t seq, int32_t tool_id,
     return absl::NotFoundError(
         absl::StrCat("session ", spec_.id, " was deleted"));
   }
+  if (pins_->load() > 0) {
+    // A reader holds the workpiece outside the lock (Pin).
+    return absl::FailedPreconditionError(absl::StrCat(
+        "session ", spec_.id,
+        " is being read by an in-process client; batches are refused "
+        "until it is done"));
+  }
   if (wp_ == nullptr) {
     if (absl::Status s = ReloadLocked(); !s.ok()) return s;
   }
@@ -562,9 +569,40 @@ double Session::IdleSeconds() const {
          1000.0;
 }
 
+absl::StatusOr<std::shared_ptr<const Workpiece>> Session::Pin() const {
+  EnsureLoaded();
+  absl::MutexLock l(&mu_);
+  if (deleted_) {
+    return absl::NotFoundError(
+        absl::StrCat("session ", spec_.id, " was deleted"));
+  }
+  if (wp_ == nullptr) {
+    return absl::UnavailableError(
+        absl::StrCat("session ", spec_.id, " could not be reloaded"));
+  }
+  // Counted under mu_, as ApplyBatch and Evict check it: a batch either
+  // ends before the pin or is refused.
+  struct Holder {
+    Holder(std::shared_ptr<const Workpiece> w,
+           std::shared_ptr<std::atomic<int>> p)
+        : wp(std::move(w)), pins(std::move(p)) {
+      pins->fetch_add(1);
+    }
+    ~Holder() { pins->fetch_sub(1); }
+    Holder(const Holder&) = delete;
+    Holder& operator=(const Holder&) = delete;
+    std::shared_ptr<const Workpiece> wp;
+    std::shared_ptr<std::atomic<int>> pins;
+  };
+  auto holder = std::make_shared<Holder>(wp_, pins_);
+  const Workpiece* wp = holder->wp.get();
+  return std::shared_ptr<const Workpiece>(std::move(holder), wp);
+}
+
 bool Session::Evict() {
   absl::MutexLock l(&mu_);
   if (journal_ == nullptr || wp_ == nullptr || deleted_) return false;
+  if (pins_->load() > 0) return false;
   // So that the reload loads the state instead of redoing every cut.
   SaveSnapshotLocked().IgnoreError();  // logged inside
   evicted_state_.last_seq = last_seq_;

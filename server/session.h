@@ -233,8 +233,18 @@ class Session {
     return fn(*wp_);
   }
 
+  // The workpiece, held for reading outside the session's lock by an
+  // in-process reader that drives the session alone: swarf run's outputs
+  // on its embedded server read its moves and their index (Workpiece::
+  // moves, sweeps) instead of indexing every move a second time. While a
+  // pin is held, batches are refused (FailedPrecondition) and the session
+  // is not evicted; a deleted session's workpiece lives until its last pin
+  // goes. NotFound once deleted. Thread-safe; the pin may be dropped on
+  // any thread.
+  absl::StatusOr<std::shared_ptr<const Workpiece>> Pin() const;
+
   // Drops the grid from memory (a journaled session only; it is rebuilt
-  // from the journal on next use). False when not evictable.
+  // from the journal on next use). False when not evictable, or pinned.
   bool Evict();
   bool evicted() const;
   // Seconds since the session was last used.
@@ -293,8 +303,11 @@ class Session {
   std::string upload_ ABSL_GUARDED_BY(design_mu_);
   mutable std::atomic<int64_t> last_used_ms_{0};
   mutable absl::Mutex mu_;
-  // Null while evicted; rebuilt (mutable) on use.
-  mutable std::unique_ptr<Workpiece> wp_ ABSL_GUARDED_BY(mu_);
+  // Null while evicted; rebuilt (mutable) on use. Shared with pins (Pin).
+  mutable std::shared_ptr<Workpiece> wp_ ABSL_GUARDED_BY(mu_);
+  // Pins held (Pin); shared with them, as they may outlive the session.
+  const std::shared_ptr<std::atomic<int>> pins_ =
+      std::make_shared<std::atomic<int>>(0);
   // Counters kept while evicted.
   mutable SessionState evicted_state_ ABSL_GUARDED_BY(mu_);
   mutable std::unique_ptr<Journal> journal_ ABSL_GUARDED_BY(mu_);

@@ -415,6 +415,54 @@ TEST_F(JournalTest, IdleSessionIsEvictedAndReloadedBitIdentical) {
   EXPECT_TRUE(Take(*s) == Reference(kBatches + 2));
 }
 
+// A pinned workpiece (Session::Pin, read outside the lock by an in-process
+// client) stays as it was: batches are refused while a pin is held, the
+// session is not evicted, and a deleted session's workpiece lives on until
+// the pin goes. Once the pins go, batches and eviction work again.
+TEST_F(JournalTest, PinnedSessionRefusesBatchesAndIsNotEvicted) {
+  Registry r(Limits{}, Durable());
+  ASSERT_TRUE(r.RestoreAll().ok());
+  auto s = *r.Create(Spec("pinned"));
+  ASSERT_TRUE(s->ApplyBatch(1, 1, Points(1), 1000).ok());
+  const NodeState before = Take(*s);
+  absl::StatusOr<std::shared_ptr<const Workpiece>> pin = s->Pin();
+  ASSERT_TRUE(pin.ok()) << pin.status();
+  auto second = s->Pin();
+  ASSERT_TRUE(second.ok()) << second.status();
+  EXPECT_EQ(pin->get(), second->get());
+  const auto refused = s->ApplyBatch(2, 1, Points(2), 1000);
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kFailedPrecondition)
+      << refused.status();
+  EXPECT_NE(refused.status().message().find("session pinned is being read"),
+            std::string::npos)
+      << refused.status();
+  EXPECT_EQ(s->State().last_seq, 1u);  // nothing applied
+  EXPECT_FALSE(s->Evict());
+  const int64_t moves = (*pin)->move_count();
+  EXPECT_EQ(moves, kPoints - 1);
+  second->reset();
+  // One pin is still held.
+  EXPECT_EQ(s->ApplyBatch(2, 1, Points(2), 1000).status().code(),
+            absl::StatusCode::kFailedPrecondition);
+  pin->reset();
+  ASSERT_TRUE(s->ApplyBatch(2, 1, Points(2), 1000).ok());
+  EXPECT_FALSE(Take(*s) == before);
+  EXPECT_TRUE(s->Evict());
+  EXPECT_TRUE(s->evicted());
+  // Pinning reloads an evicted session, exactly as it was.
+  pin = s->Pin();
+  ASSERT_TRUE(pin.ok()) << pin.status();
+  EXPECT_FALSE(s->evicted());
+  EXPECT_EQ((*pin)->move_count(), 2 * kPoints - 1);
+  EXPECT_TRUE(Take(*s) == Reference(2));
+  // Deleted while pinned: the pin's workpiece is still whole.
+  s.reset();
+  ASSERT_TRUE(r.Delete("pinned").ok());
+  EXPECT_EQ((*pin)->move_count(), 2 * kPoints - 1);
+  EXPECT_EQ((*pin)->moves().Get(0).to.x, Points(1)[3]);
+  EXPECT_EQ(r.Get("pinned").status().code(), absl::StatusCode::kNotFound);
+}
+
 TEST_F(JournalTest, InMemorySessionsAreNeverEvicted) {
   Registry r(Limits{});
   auto s = *r.Create(Spec("mem"));

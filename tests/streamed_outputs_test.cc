@@ -183,6 +183,18 @@ TEST(StreamedOutputsTest, BandsWriteTheWholeGridsFilesByteForByte) {
         ExpectSame(Write(tiles, &raster, mp, options), want,
                    absl::StrCat(name, " tile rows, ", nodes, " nodes"));
       }
+      // The workpiece's own moves and index (as swarf run reads its
+      // embedded session's, pinned) instead of a copy indexed again.
+      const Workpiece& own = **wp;
+      TileRowBands shared(
+          Stock(), scheme, FillFrom(own),
+          std::shared_ptr<const MoveSource>(std::shared_ptr<void>(),
+                                            &own.moves()),
+          std::shared_ptr<const MoveSweeps>(std::shared_ptr<void>(),
+                                            &own.sweeps()),
+          int64_t{2} * 64 * 161);
+      ExpectSame(Write(shared, &raster, mp, options), want,
+                 absl::StrCat(name, " tile rows, the workpiece's sweeps"));
     }
   }
 }

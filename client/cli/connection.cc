@@ -92,6 +92,15 @@ absl::StatusOr<std::unique_ptr<Connection>> Connection::Open(
   return c;
 }
 
+absl::StatusOr<std::shared_ptr<const Workpiece>>
+Connection::PinEmbeddedSession(const std::string& id) {
+  if (embedded_ == nullptr) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "session ", id, " is on ", target_, ", not in this process"));
+  }
+  return embedded_->PinSession(id);
+}
+
 std::unique_ptr<grpc::ClientContext> Connection::Context(
     const std::string& session_id, double timeout_s) const {
   auto ctx = std::make_unique<grpc::ClientContext>();

@@ -57,6 +57,11 @@ class Connection {
   pb::Swarf::Stub& stub() { return *stub_; }
   bool embedded() const { return embedded_ != nullptr; }
   const std::string& target() const { return target_; }
+  // The embedded server's session `id`, its workpiece pinned for reading
+  // here (server::Session::Pin: batches are refused while it is held).
+  // FailedPrecondition on a remote server.
+  absl::StatusOr<std::shared_ptr<const Workpiece>> PinEmbeddedSession(
+      const std::string& id);
 
   // A context carrying the session metadata (for routing) and a deadline.
   std::unique_ptr<grpc::ClientContext> Context(const std::string& session_id,

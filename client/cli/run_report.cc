@@ -393,7 +393,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
             return true;
           }).status();
         },
-        options.moves);
+        options.moves, options.sweeps);
   };
   const auto t0 = Clock::now();
   auto stats = Retrying<pb::ErrorStats>(

@@ -110,6 +110,9 @@ struct OutputOptions {
   int picture_size = kDefaultPictureSize;
   // The session's moves by id (SurfaceGrid::moves); may be null.
   std::shared_ptr<const MoveSource> moves;
+  // Their sweeps already indexed over the stock (the embedded session's
+  // own, pinned); null: indexed here where the scheme needs them.
+  std::shared_ptr<const MoveSweeps> sweeps;
   // The design to compare with (LoadDesign done); not owned, may be null.
   const DesignInput* design = nullptr;
 };

@@ -44,8 +44,10 @@ struct SafetyItem {
 
 class SafetyCollector {
  public:
-  // `path`'s points; `file_starts` the first point of each file (as
-  // run_command numbers them); `assemblies` by tool number.
+  // `path`'s points (read by the constructor and OnAck only: the path may
+  // go once the last batch is acknowledged); `file_starts` the first point
+  // of each file (as run_command numbers them); `assemblies` by tool
+  // number.
   SafetyCollector(const gcode::Toolpath& path,
                   const std::vector<int64_t>& file_starts,
                   std::vector<std::string> files,

@@ -59,17 +59,30 @@ TileRowBands::TileRowBands(const StockSpec& spec, SchemeKind scheme,
                            Fill fill,
                            std::shared_ptr<const MoveSource> moves,
                            int64_t max_band_nodes)
+    : TileRowBands(spec, scheme, std::move(fill), std::move(moves), nullptr,
+                   max_band_nodes) {}
+
+TileRowBands::TileRowBands(const StockSpec& spec, SchemeKind scheme,
+                           Fill fill,
+                           std::shared_ptr<const MoveSource> moves,
+                           std::shared_ptr<const MoveSweeps> sweeps,
+                           int64_t max_band_nodes)
     : spec_(spec),
       scheme_(scheme),
       fill_(std::move(fill)),
       moves_(std::move(moves)),
+      sweeps_(std::move(sweeps)),
       max_band_nodes_(max_band_nodes) {}
 
 absl::Status TileRowBands::ForEach(const BandVisitor& visit) {
   auto made = SurfaceGrid::Band(spec_, scheme_, 0, 1);
   if (!made.ok()) return made.status();
   SurfaceGrid& band = *made;
-  band.SetMoves(moves_);
+  if (sweeps_ != nullptr) {
+    band.SetMoves(moves_, sweeps_);
+  } else {
+    band.SetMoves(moves_);
+  }
   const int32_t ny = spec_.ny, nodes_x = spec_.nx + 1;
   const int32_t tiles_y = (ny + 1 + kTileSize - 1) / kTileSize;
   const int64_t tile_row_nodes = int64_t{kTileSize} * nodes_x;

@@ -68,13 +68,20 @@ class InMemoryBands : public GridBands {
 // stock), the heights only where `heights_only` says so. Each band
 // holds the last node row of the previous one (carried over, not fetched
 // again) and at most about `max_band_nodes` nodes (at least one tile row).
-// The band's moves are set once from `moves` (SurfaceGrid::SetMoves).
+// The band's moves are set once from `moves` (SurfaceGrid::SetMoves), with
+// `sweeps` where given: the same moves' sweeps already indexed over `spec`
+// (the session's own, Workpiece::sweeps), so that they are not indexed
+// again.
 class TileRowBands : public GridBands {
  public:
   using Fill = std::function<absl::Status(SurfaceGrid* band, int32_t t0,
                                           int32_t t1, bool heights_only)>;
   TileRowBands(const StockSpec& spec, SchemeKind scheme, Fill fill,
                std::shared_ptr<const MoveSource> moves,
+               int64_t max_band_nodes = 1 << 20);
+  TileRowBands(const StockSpec& spec, SchemeKind scheme, Fill fill,
+               std::shared_ptr<const MoveSource> moves,
+               std::shared_ptr<const MoveSweeps> sweeps,
                int64_t max_band_nodes = 1 << 20);
   const StockSpec& spec() const override { return spec_; }
   SchemeKind scheme() const override { return scheme_; }
@@ -88,6 +95,7 @@ class TileRowBands : public GridBands {
   SchemeKind scheme_;
   Fill fill_;
   std::shared_ptr<const MoveSource> moves_;
+  std::shared_ptr<const MoveSweeps> sweeps_;  // null: the band indexes them
   int64_t max_band_nodes_;
 };
 

@@ -114,6 +114,15 @@ void SurfaceGrid::SetMoves(std::shared_ptr<const MoveSource> list) {
   }
 }
 
+void SurfaceGrid::SetMoves(std::shared_ptr<const MoveSource> list,
+                           std::shared_ptr<const MoveSweeps> sweeps) {
+  moves = std::move(list);
+  const Scheme& s = GetScheme(scheme);
+  surfaces = moves != nullptr && (s.uses_reach() || s.uses_candidates())
+                 ? std::move(sweeps)
+                 : nullptr;
+}
+
 void SurfaceGrid::SetMoves(std::span<const Move> list) {
   SetMoves(std::make_shared<const MoveList>(list));
 }

@@ -49,6 +49,11 @@ struct SurfaceGrid {
   void SetMoves(std::shared_ptr<const MoveSource> moves);
   // The same over a MoveList of `moves`.
   void SetMoves(std::span<const Move> moves);
+  // Sets moves and, where the scheme uses them, `sweeps`: the same moves'
+  // sweeps already indexed over this grid's stock (a session's own,
+  // Workpiece::sweeps), instead of indexing them again.
+  void SetMoves(std::shared_ptr<const MoveSource> moves,
+                std::shared_ptr<const MoveSweeps> sweeps);
   int64_t move_count() const { return moves != nullptr ? moves->size() : 0; }
 
   // Untouched stock: every node at z_top, flat, owner -1. InvalidArgument
