@@ -2,6 +2,10 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cstdlib>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
 
 #ifdef __linux__
 #include <sched.h>
@@ -22,6 +26,24 @@ int AvailableCores() {
   return static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
 }
 
+absl::StatusOr<std::optional<int>> ThreadsFromEnvironment() {
+  const char* v = std::getenv("SWARF_THREADS");
+  if (v == nullptr) return std::nullopt;
+  int n = 0;
+  if (!absl::SimpleAtoi(v, &n) || n < 1 || n > 1024) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "SWARF_THREADS must be a whole number from 1 to 1024, got \"", v,
+        "\""));
+  }
+  return n;
+}
+
+int DefaultThreads() {
+  const absl::StatusOr<std::optional<int>> n = ThreadsFromEnvironment();
+  if (n.ok() && n->has_value()) return **n;
+  return AvailableCores();
+}
+
 struct ThreadPool::Job {
   const std::function<void(int64_t)>* fn;
   int64_t n;
@@ -40,7 +62,7 @@ struct ThreadPool::Job {
 
 ThreadPool::ThreadPool(int threads) {
   if (threads <= 0) {
-    threads = AvailableCores();
+    threads = DefaultThreads();
   }
   for (int i = 1; i < threads; ++i) {
     workers_.emplace_back([this] { WorkerLoop(); });

@@ -6,8 +6,11 @@
 #include <cstdint>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
+
+#include "absl/status/statusor.h"
 
 namespace swarf {
 
@@ -16,11 +19,24 @@ namespace swarf {
 // std::thread::hardware_concurrency(); at least 1.
 int AvailableCores();
 
+// The value of SWARF_THREADS, the environment variable that sets the
+// default thread count: a whole number in [1, 1024]. nullopt when unset;
+// InvalidArgument naming the variable and the value when it is anything
+// else (the programs' mains refuse to start then).
+absl::StatusOr<std::optional<int>> ThreadsFromEnvironment();
+
+// The threads a pool (and swarfd's executor) gets by default: SWARF_THREADS
+// where it is valid (to leave cores to other work, or to run as a many-core
+// machine would, its memory measured on a small one), else
+// AvailableCores().
+int DefaultThreads();
+
 // ParallelFor may be called from several threads at once; each call blocks
 // until its loop is done, and the calling thread works on it too.
 class ThreadPool {
  public:
-  // threads <= 0: one per core this process may run on (AvailableCores).
+  // threads <= 0: DefaultThreads() (one per core this process may run on,
+  // unless SWARF_THREADS says otherwise).
   explicit ThreadPool(int threads = 0);
   ~ThreadPool();
   ThreadPool(const ThreadPool&) = delete;

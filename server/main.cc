@@ -10,13 +10,15 @@
 #include "absl/flags/usage_config.h"
 #include "absl/strings/match.h"
 #include "core/memory_policy.h"
+#include "core/thread_pool.h"
 #include "server/server.h"
 #include "spdlog/spdlog.h"
 
 ABSL_FLAG(std::string, listen, "127.0.0.1:50051",
           "host:port to listen on (port 0: any free port)");
 ABSL_FLAG(int, worker_threads, 0,
-          "threads running simulation work (0: one per hardware thread)");
+          "threads running simulation work (0: $SWARF_THREADS, else one per "
+          "core this process may use)");
 ABSL_FLAG(int, max_sessions, 256, "sessions this server holds at most");
 ABSL_FLAG(int64_t, max_session_memory_mb, 0,
           "worst-case memory of one session, every tile of its grid cut "
@@ -91,6 +93,10 @@ int main(int argc, char** argv) {
   absl::SetFlagsUsageConfig(usage);
   absl::ParseCommandLine(argc, argv);
   spdlog::set_level(spdlog::level::from_str(absl::GetFlag(FLAGS_log_level)));
+  if (auto threads = swarf::ThreadsFromEnvironment(); !threads.ok()) {
+    spdlog::error("{}", std::string(threads.status().message()));
+    return 2;
+  }
 
   // Signals are taken by a thread of ours, never by an arbitrary one.
   sigset_t signals;

@@ -94,7 +94,7 @@ absl::StatusOr<std::unique_ptr<SwarfServer>> SwarfServer::Start(
   }
   const int threads = options.worker_threads > 0
                           ? options.worker_threads
-                          : AvailableCores();
+                          : DefaultThreads();
   s->executor_ = std::make_unique<Executor>(threads);
   s->service_ = std::make_unique<SwarfService>(
       s->registry_.get(), s->executor_.get(), s->tokens_.get(),

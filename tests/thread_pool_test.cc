@@ -5,10 +5,13 @@
 #include <atomic>
 #include <chrono>
 #include <cstdint>
+#include <cstdlib>
 #include <memory>
+#include <string>
 #include <thread>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "gtest/gtest.h"
 
 #ifdef __linux__
@@ -55,6 +58,34 @@ TEST(ThreadPoolTest, DefaultSizeFollowsTheAffinityMask) {
   EXPECT_EQ(pool, 1);
 }
 #endif
+
+// SWARF_THREADS sets the default size, whatever the cores; anything but a
+// whole number in [1, 1024] is an error naming it, and the cores decide.
+TEST(ThreadPoolTest, SwarfThreadsSetsTheDefaultSize) {
+  const char* before = std::getenv("SWARF_THREADS");
+  const std::string saved = before != nullptr ? before : "";
+  ASSERT_EQ(setenv("SWARF_THREADS", "13", 1), 0);
+  EXPECT_EQ(DefaultThreads(), 13);
+  EXPECT_EQ(ThreadPool().size(), 13);
+  ASSERT_TRUE(ThreadsFromEnvironment().ok());
+  EXPECT_EQ(*ThreadsFromEnvironment(), 13);
+  for (const char* bad : {"0", "-2", "1025", "4x", "", "many"}) {
+    ASSERT_EQ(setenv("SWARF_THREADS", bad, 1), 0);
+    const auto t = ThreadsFromEnvironment();
+    EXPECT_EQ(t.status().code(), absl::StatusCode::kInvalidArgument) << bad;
+    EXPECT_NE(t.status().message().find(absl::StrCat("SWARF_THREADS must be "
+                                                     "a whole number from 1 "
+                                                     "to 1024, got \"",
+                                                     bad, "\"")),
+              std::string::npos)
+        << t.status();
+    EXPECT_EQ(DefaultThreads(), AvailableCores()) << bad;
+  }
+  ASSERT_EQ(unsetenv("SWARF_THREADS"), 0);
+  EXPECT_FALSE(ThreadsFromEnvironment()->has_value());
+  EXPECT_EQ(DefaultThreads(), AvailableCores());
+  if (before != nullptr) setenv("SWARF_THREADS", saved.c_str(), 1);
+}
 
 TEST(ThreadPoolTest, EveryIndexExactlyOnce) {
   for (int threads : {1, 2, 4, 7}) {

@@ -5,6 +5,7 @@
 
 #include "client/cli/commands.h"
 #include "core/memory_policy.h"
+#include "core/thread_pool.h"
 #include "spdlog/spdlog.h"
 
 namespace {
@@ -20,12 +21,18 @@ constexpr char kUsage[] =
     "  load    many sessions streaming at once: throughput and latency\n"
     "  view    the live 3D viewer of a running swarfd's session\n"
     "  moves   the interpreted moves of a program, one a line\n"
-    "Run 'swarf <command> --help' for a command's options.\n";
+    "Run 'swarf <command> --help' for a command's options.\n"
+    "Environment: SWARF_THREADS=N runs N threads a pool (default: one per\n"
+    "core this process may use); SWARF_TOKEN (see --token).\n";
 
 }  // namespace
 
 int main(int argc, char** argv) {
   swarf::ReturnLargeBuffersOnFree();
+  if (auto threads = swarf::ThreadsFromEnvironment(); !threads.ok()) {
+    std::cerr << "swarf: " << threads.status().message() << "\n";
+    return 2;
+  }
   if (argc < 2) {
     std::cerr << kUsage;
     return 2;
