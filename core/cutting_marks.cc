@@ -1057,6 +1057,10 @@ absl::Status ValidateOptions(const Workpiece& wp, const MarkOptions& o,
     return absl::InvalidArgumentError(
         absl::StrCat("t1 must be positive and finite, got ", o.t1));
   }
+  if (o.window_segment_bytes < 1) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "window_segment_bytes must be >= 1, got ", o.window_segment_bytes));
+  }
   if (o.screening_threshold.has_value() &&
       !(std::isfinite(*o.screening_threshold) &&
         *o.screening_threshold >= 0)) {
@@ -1403,7 +1407,15 @@ absl::Status FindCuttingMarks(
   // the segments in band order; a chain's polyline and its place depend
   // only on its own segments and their order), and handed on once no open
   // chain can still come before them.
-  const int32_t window = std::max(8, 4 * wp.pool().size());
+  //
+  // A window is four bands a thread (their costs vary), fewer where the
+  // marks are dense: its segments are held at once (in each band's vector,
+  // then in `open`), so after each window the next takes as many bands as
+  // fit options.window_segment_bytes at the last one's segments a band,
+  // one band a thread at least. The marks do not depend on the windows.
+  const int32_t threads = wp.pool().size();
+  const int32_t most_bands = std::max(8, 4 * threads);
+  int32_t window = most_bands;
   std::vector<std::vector<Segment>> band_segments;
   std::vector<Segment> open;      // kept segments not chained yet, in order
   std::vector<int64_t> open_at;   // their index among every kept segment
@@ -1413,12 +1425,22 @@ absl::Status FindCuttingMarks(
   std::map<int64_t, MarkPolyline> ready;
   // Segments handed on, per vertex key an open segment uses (Chain).
   absl::flat_hash_map<uint64_t, int32_t> ghosts;
-  for (int32_t w0 = 0; w0 < bands; w0 += window) {
-    const int32_t wn = std::min(window, bands - w0);
+  for (int32_t w0 = 0, wn = 0; w0 < bands; w0 += wn) {
+    wn = std::min(window, bands - w0);
     band_segments.assign(wn, {});
     wp.pool().ParallelFor(wn, [&](int64_t b) {
       find_band(w0 + b, &band_segments[b]);
     });
+    {
+      int64_t found = 0;
+      for (const std::vector<Segment>& band : band_segments) {
+        found += static_cast<int64_t>(band.size());
+      }
+      const int64_t band_bytes =
+          std::max<int64_t>(1, found * int64_t{sizeof(Segment)} / wn);
+      window = static_cast<int32_t>(std::clamp<int64_t>(
+          options.window_segment_bytes / band_bytes, threads, most_bands));
+    }
     // Keep what lies in the region (junctions may sit a little outside
     // their element, hence outside the stock), each segment clipped with
     // its index among every band's segments.

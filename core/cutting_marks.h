@@ -83,6 +83,10 @@ struct MarkOptions {
   // surfaces meet once their heights agree within t1. Edge crossings are
   // closed-form roots and agree to rounding. Must be finite and > 0.
   double t1 = 1e-9;
+  // About how many bytes of crease segments the search holds at once (its
+  // window of bands: see FindCuttingMarks); the marks do not depend on it.
+  // Must be >= 1.
+  int64_t window_segment_bytes = int64_t{64} << 20;
 };
 
 // A crease between junctions (points where three or more marks meet) or

@@ -316,6 +316,40 @@ class ReactorRefs {
   std::atomic<int> refs_{1};  // gRPC's
 };
 
+// What a server stream with one write in flight does next, decided under
+// its lock: start writing the queue's front, end the call, or neither.
+// `producing`: messages may still be added by a task now running; `more`:
+// a task may be started for more. A cancelled call ends CANCELLED once no
+// write is in flight and no task runs; otherwise with `status` once the
+// queue is written and nothing more can come. Sets *writing and *finished
+// as it decides (shared by ChunkedWriter and MarksWriter).
+struct WriteTurn {
+  bool write = false;
+  std::optional<grpc::Status> finish;
+};
+WriteTurn NextWriteTurn(bool cancelled, bool producing, bool more,
+                        bool queue_empty, const grpc::Status& status,
+                        bool* writing, bool* finished) {
+  WriteTurn turn;
+  if (*finished) return turn;
+  if (cancelled) {
+    if (!*writing && !producing) {
+      *finished = true;
+      turn.finish = grpc::Status::CANCELLED;
+    }
+    return turn;
+  }
+  if (!*writing && !queue_empty) {
+    *writing = true;
+    turn.write = true;
+  }
+  if (!*writing && !producing && !more && queue_empty) {
+    *finished = true;
+    turn.finish = status;
+  }
+  return turn;
+}
+
 // A server stream whose messages are produced on the executor in chunks:
 // `produce` appends the next messages and returns false once there are no
 // more (or an error). One write in flight; the next chunk is produced when
@@ -376,26 +410,16 @@ class ChunkedWriter : public grpc::ServerWriteReactor<T> {
   // Decides what to do next; the caller does it without holding mu_.
   Act NextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
     Act act;
-    if (finished_) return act;
-    if (cancelled_) {
-      if (!writing_ && !producing_) {
-        finished_ = true;
-        act.finish = grpc::Status::CANCELLED;
-      }
-      return act;
-    }
-    if (!writing_ && !queue_.empty()) {
-      writing_ = true;
-      act.write = &queue_.front();
-    }
-    if (!producing_ && more_ && queue_.size() <= kLowWater) {
+    const WriteTurn turn = NextWriteTurn(cancelled_, producing_, more_,
+                                         queue_.empty(), status_, &writing_,
+                                         &finished_);
+    if (turn.write) act.write = &queue_.front();
+    act.finish = turn.finish;
+    if (!finished_ && !cancelled_ && !producing_ && more_ &&
+        queue_.size() <= kLowWater) {
       producing_ = true;
       refs_.Add();
       act.produce = true;
-    }
-    if (!writing_ && !producing_ && queue_.empty() && !more_) {
-      finished_ = true;
-      act.finish = status_;
     }
     return act;
   }
@@ -530,22 +554,12 @@ class MarksWriter : public grpc::ServerWriteReactor<pb::Polyline> {
   // Decides what to do next; the caller does it without holding mu_.
   Act NextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
     Act act;
-    if (finished_) return act;
-    if (cancelled_) {
-      if (!writing_ && !searching_) {
-        finished_ = true;
-        act.finish = grpc::Status::CANCELLED;
-      }
-      return act;
-    }
-    if (!writing_ && !queue_.empty()) {
-      writing_ = true;
-      act.write = &queue_.front().message;  // a deque's elements stay put
-    }
-    if (!writing_ && !searching_ && queue_.empty()) {
-      finished_ = true;
-      act.finish = status_;
-    }
+    const WriteTurn turn =
+        NextWriteTurn(cancelled_, searching_, /*more=*/false, queue_.empty(),
+                      status_, &writing_, &finished_);
+    // A deque's elements stay put.
+    if (turn.write) act.write = &queue_.front().message;
+    act.finish = turn.finish;
     return act;
   }
 

@@ -795,6 +795,51 @@ TEST(CuttingMarksTest, EmitStopsTheSearchAfterTheFirstPolylines) {
   }
 }
 
+// Windows as small as the thread count (one band each) where the segments
+// would pass window_segment_bytes: the same marks, bit for bit, as windows
+// of 8 bands; the budget is validated.
+TEST(CuttingMarksTest, SmallerWindowsGiveTheSameMarks) {
+  for (int threads : {1, 3}) {
+    SCOPED_TRACE(threads);
+    ThreadPool pool(threads);
+    auto wp = LongRaster(&pool);
+    const std::vector<MarkPolyline> all = Marks(*wp);
+    ASSERT_GE(all.size(), 90u);
+    MarkOptions o;
+    o.window_segment_bytes = 1;
+    int polls = 0, default_polls = 0;
+    std::vector<MarkPolyline> got;
+    ASSERT_TRUE(FindCuttingMarks(
+                    *wp, o,
+                    [&](MarkPolyline p) {
+                      got.push_back(std::move(p));
+                      return absl::OkStatus();
+                    },
+                    [&] {
+                      ++polls;
+                      return absl::OkStatus();
+                    })
+                    .ok());
+    ASSERT_TRUE(FindCuttingMarks(
+                    *wp, {}, [](MarkPolyline) { return absl::OkStatus(); },
+                    [&] {
+                      ++default_polls;
+                      return absl::OkStatus();
+                    })
+                    .ok());
+    // A poll a window: more windows, of one band a thread after the first.
+    EXPECT_GT(polls, default_polls);
+    ASSERT_EQ(got.size(), all.size());
+    for (size_t k = 0; k < all.size(); ++k) ExpectSamePolyline(got[k], all[k]);
+  }
+  ThreadPool one(1);
+  auto wp = LongRaster(&one);
+  MarkOptions bad;
+  bad.window_segment_bytes = 0;
+  EXPECT_EQ(FindCuttingMarks(*wp, bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
 TEST(CuttingMarksTest, PollStopsTheSearchBetweenWindows) {
   ThreadPool one(1);
   auto wp = LongRaster(&one);
