@@ -14,22 +14,21 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
-#include <random>
 #include <fstream>
 #include <iterator>
 #include <memory>
+#include <nlohmann/json.hpp>
+#include <random>
 #include <string>
 #include <vector>
-
-#include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_replace.h"
 #include "client/outputs/grid_bands.h"
 #include "client/outputs/marks_files.h"
 #include "client/outputs/marks_stream.h"
-#include "client/outputs/png_image.h"
 #include "client/outputs/pictures.h"
+#include "client/outputs/png_image.h"
 #include "client/outputs/run_outputs.h"
 #include "client/outputs/surface_grid.h"
 #include "client/outputs/surface_mesh.h"
@@ -68,9 +67,9 @@ StockSpec Stock() { return StockSpec{0, 0, 40, 33, 5, 160, 132}; }
 
 std::vector<Move> Moves() {
   return {
-      {{2, 10, 3.5}, {38, 10, 3.5}, 3},   {{2, 11.5, 3.5}, {38, 11.5, 3.5}, 3},
-      {{20, 1, 3.8}, {20, 31, 3.8}, 2},   {{10, 25, 2.5}, {10, 25, 2.5}, 4},
-      {{3, 3, 4.2}, {37, 30, 3.9}, 1.5},  {{30, 20, 4.0}, {34, 28, 3.0}, 2},
+      {{2, 10, 3.5}, {38, 10, 3.5}, 3},  {{2, 11.5, 3.5}, {38, 11.5, 3.5}, 3},
+      {{20, 1, 3.8}, {20, 31, 3.8}, 2},  {{10, 25, 2.5}, {10, 25, 2.5}, 4},
+      {{3, 3, 4.2}, {37, 30, 3.9}, 1.5}, {{30, 20, 4.0}, {34, 28, 3.0}, 2},
   };
 }
 
@@ -84,8 +83,8 @@ Written Write(GridBands& bands, const ErrorRaster* error,
               const RunOutputOptions& options) {
   TempDir dir;
   Written w;
-  auto files = WriteRunOutputs(dir.path, bands, error, marks, options,
-                               &w.summary);
+  auto files =
+      WriteRunOutputs(dir.path, bands, error, marks, options, &w.summary);
   EXPECT_TRUE(files.ok()) << files.status();
   if (!files.ok()) return w;
   for (const WrittenFile& f : *files) {
@@ -99,8 +98,8 @@ void ExpectSame(const Written& a, const Written& b, const std::string& what) {
   ASSERT_EQ(a.names, b.names) << what;
   for (size_t k = 0; k < a.names.size(); ++k) {
     EXPECT_FALSE(a.bytes[k].empty()) << what << " " << a.names[k];
-    EXPECT_TRUE(a.bytes[k] == b.bytes[k]) << what << ": " << a.names[k]
-                                          << " differs";
+    EXPECT_TRUE(a.bytes[k] == b.bytes[k])
+        << what << ": " << a.names[k] << " differs";
   }
   EXPECT_EQ(a.summary.mesh_triangles, b.summary.mesh_triangles) << what;
   EXPECT_EQ(a.summary.full_mesh_triangles, b.summary.full_mesh_triangles)
@@ -111,31 +110,30 @@ void ExpectSame(const Written& a, const Written& b, const std::string& what) {
 // Tile rows of the workpiece, as the session's GetTiles gives them
 // (Workpiece::ReadTile of every tile of those rows).
 TileRowBands::Fill FillFrom(const Workpiece& wp) {
-  return [&wp](SurfaceGrid* band, int32_t t0, int32_t t1,
-               bool) -> absl::Status {
-    std::vector<double> w(kTileNodes);
-    std::vector<float> dbuf(5 * kTileNodes);
-    std::vector<int32_t> owner(kTileNodes);
-    float* const d[5] = {&dbuf[0], &dbuf[kTileNodes], &dbuf[2 * kTileNodes],
-                         &dbuf[3 * kTileNodes], &dbuf[4 * kTileNodes]};
-    for (int32_t ty = t0; ty < t1; ++ty) {
-      for (int32_t tx = 0; tx < wp.tiles_x(); ++tx) {
-        const int32_t t = ty * wp.tiles_x() + tx;
-        if (!wp.TileAllocated(t)) continue;  // untouched: the band has it
-        const int32_t one[1] = {t};
-        wp.PrepareJets(one);
-        const Workpiece::TileExtent e = wp.Extent(t);
-        wp.ReadTile(t, w.data(), d, owner.data());
-        if (absl::Status st =
-                band->SetNodes(e.i0, e.j0, e.nx, e.ny, w.data(), d,
-                               owner.data());
-            !st.ok()) {
-          return st;
+  return
+      [&wp](SurfaceGrid* band, int32_t t0, int32_t t1, bool) -> absl::Status {
+        std::vector<double> w(kTileNodes);
+        std::vector<float> dbuf(5 * kTileNodes);
+        std::vector<int32_t> owner(kTileNodes);
+        float* const d[5] = {&dbuf[0], &dbuf[kTileNodes], &dbuf[2 * kTileNodes],
+                             &dbuf[3 * kTileNodes], &dbuf[4 * kTileNodes]};
+        for (int32_t ty = t0; ty < t1; ++ty) {
+          for (int32_t tx = 0; tx < wp.tiles_x(); ++tx) {
+            const int32_t t = ty * wp.tiles_x() + tx;
+            if (!wp.TileAllocated(t)) continue;  // untouched: the band has it
+            const int32_t one[1] = {t};
+            wp.PrepareJets(one);
+            const Workpiece::TileExtent e = wp.Extent(t);
+            wp.ReadTile(t, w.data(), d, owner.data());
+            if (absl::Status st = band->SetNodes(e.i0, e.j0, e.nx, e.ny,
+                                                 w.data(), d, owner.data());
+                !st.ok()) {
+              return st;
+            }
+          }
         }
-      }
-    }
-    return absl::OkStatus();
-  };
+        return absl::OkStatus();
+      };
 }
 
 TEST(StreamedOutputsTest, BandsWriteTheWholeGridsFilesByteForByte) {
@@ -178,21 +176,19 @@ TEST(StreamedOutputsTest, BandsWriteTheWholeGridsFilesByteForByte) {
       for (int64_t nodes : {int64_t{1}, int64_t{2} * 64 * 161}) {
         TileRowBands tiles(
             Stock(), scheme, FillFrom(**wp),
-            std::make_shared<const MoveList>((*wp)->moves().ToVector()),
-            nodes);
+            std::make_shared<const MoveList>((*wp)->moves().ToVector()), nodes);
         ExpectSame(Write(tiles, &raster, mp, options), want,
                    absl::StrCat(name, " tile rows, ", nodes, " nodes"));
       }
       // The workpiece's own moves and index (as swarf run reads its
       // embedded session's, pinned) instead of a copy indexed again.
       const Workpiece& own = **wp;
-      TileRowBands shared(
-          Stock(), scheme, FillFrom(own),
-          std::shared_ptr<const MoveSource>(std::shared_ptr<void>(),
-                                            &own.moves()),
-          std::shared_ptr<const MoveSweeps>(std::shared_ptr<void>(),
-                                            &own.sweeps()),
-          int64_t{2} * 64 * 161);
+      TileRowBands shared(Stock(), scheme, FillFrom(own),
+                          std::shared_ptr<const MoveSource>(
+                              std::shared_ptr<void>(), &own.moves()),
+                          std::shared_ptr<const MoveSweeps>(
+                              std::shared_ptr<void>(), &own.sweeps()),
+                          int64_t{2} * 64 * 161);
       ExpectSame(Write(shared, &raster, mp, options), want,
                  absl::StrCat(name, " tile rows, the workpiece's sweeps"));
     }
@@ -213,8 +209,8 @@ TEST(StreamedOutputsTest, MeshesFromRowsAreTheBuiltMeshesFiles) {
     for (int s : {1, 2}) {
       for (double tolerance : {0.0, 0.005}) {
         const std::string what =
-            absl::StrCat(std::string(GetScheme(scheme).name()), " s ", s, " tol ",
-                         tolerance);
+            absl::StrCat(std::string(GetScheme(scheme).name()), " s ", s,
+                         " tol ", tolerance);
         SurfaceMeshOptions mopt;
         mopt.subdivision = s;
         mopt.tolerance = tolerance;
@@ -230,10 +226,8 @@ TEST(StreamedOutputsTest, MeshesFromRowsAreTheBuiltMeshesFiles) {
         InMemoryBands bands(*grid, 9);
         const Written w = Write(bands, nullptr, nullptr, options);
         ASSERT_EQ(w.names.size(), 3u) << what;
-        EXPECT_TRUE(w.bytes[1] == ReadAll(built.path + "/surface.stl"))
-            << what;
-        EXPECT_TRUE(w.bytes[2] == ReadAll(built.path + "/surface.wrl"))
-            << what;
+        EXPECT_TRUE(w.bytes[1] == ReadAll(built.path + "/surface.stl")) << what;
+        EXPECT_TRUE(w.bytes[2] == ReadAll(built.path + "/surface.wrl")) << what;
         EXPECT_EQ(w.summary.mesh_triangles,
                   static_cast<int64_t>(mesh->triangles.size()))
             << what;
@@ -344,8 +338,8 @@ TEST(StreamedOutputsTest, PictureSizeBoundsThePictures) {
 std::vector<MarkPolyline> ManyMarks(const Workpiece& wp) {
   auto found = FindCuttingMarks(wp, {});
   EXPECT_TRUE(found.ok()) << found.status();
-  std::vector<MarkPolyline> marks = found.ok() ? *found
-                                               : std::vector<MarkPolyline>();
+  std::vector<MarkPolyline> marks =
+      found.ok() ? *found : std::vector<MarkPolyline>();
   EXPECT_GT(marks.size(), 5u);
   std::mt19937_64 rng(28);
   std::uniform_real_distribution<double> ux(0.5, 39.5), uy(0.5, 32.5),
@@ -403,10 +397,9 @@ TEST(StreamedMarksTest, StreamedMarksWriteTheHeldMarksFilesByteForByte) {
   options.marks.relief = {.max_side = 400, .min_side = 300};
   InMemoryBands whole(*grid, 16);
   const Written want = Write(whole, nullptr, &shown, options);
-  ASSERT_EQ(want.names,
-            (std::vector<std::string>{"relief.png", "marks.png", "marks.svg",
-                                      "marks.json", "surface.stl",
-                                      "surface.wrl"}));
+  ASSERT_EQ(want.names, (std::vector<std::string>{
+                            "relief.png", "marks.png", "marks.svg",
+                            "marks.json", "surface.stl", "surface.wrl"}));
   EXPECT_TRUE(want.bytes[2] == MarksSvg(Stock(), shown) &&
               want.bytes[3] == MarksJson(shown) + "\n");
 
@@ -434,8 +427,8 @@ TEST(StreamedMarksTest, StreamedMarksWriteTheHeldMarksFilesByteForByte) {
       ASSERT_TRUE(streamed.status.ok()) << streamed.status;
       RunOutputOptions o = options;
       o.marks.chunk_segments = sizes.chunk_segments;
-      auto files = WriteRunOutputsStreamed(dir.path, whole, nullptr,
-                                           &streamed, o, &got.summary);
+      auto files = WriteRunOutputsStreamed(dir.path, whole, nullptr, &streamed,
+                                           o, &got.summary);
       ASSERT_TRUE(files.ok()) << files.status();
       for (const WrittenFile& f : *files) {
         got.names.push_back(fs::path(f.path).filename().string());
@@ -480,6 +473,22 @@ TEST(StreamedMarksTest, ChunkedDrawingIsTheHeldDrawing) {
     ASSERT_TRUE(got.ok()) << got.status();
     EXPECT_TRUE(got->pixels() == want->pixels()) << "chunk " << chunk;
   }
+  // Tiles of any size, down to a pixel, and one tile of the whole picture
+  // (every segment drawn on one thread, in order): the same pixels.
+  mo.chunk_segments = 1000;
+  for (const auto& [rows, cols] : std::vector<std::pair<int, int>>{
+           {1, 1}, {7, 3}, {32, 1}, {1000, 1000}}) {
+    mo.tile_rows = rows;
+    mo.tile_cols = cols;
+    auto got = DrawMarks(relief, MarksOf(marks), mo);
+    ASSERT_TRUE(got.ok()) << got.status();
+    EXPECT_TRUE(got->pixels() == want->pixels())
+        << "tiles " << rows << " x " << cols;
+  }
+  mo.tile_cols = 0;
+  EXPECT_EQ(DrawMarks(relief, MarksOf(marks), mo).status().message(),
+            "tile_rows and tile_cols must be >= 1");
+  mo.tile_rows = mo.tile_cols = 32;
   std::vector<MarkPolyline> bad = {marks[0], marks[1], marks[2]};
   bad[0].vertices[0].x = std::nan("");
   EXPECT_EQ(DrawMarks(relief, MarksOf(bad), mo).status().message(),
@@ -487,8 +496,7 @@ TEST(StreamedMarksTest, ChunkedDrawingIsTheHeldDrawing) {
   bad[2].angle_deg.push_back(1);
   EXPECT_EQ(DrawMarks(relief, MarksOf(bad), mo).status().message(),
             absl::StrCat("mark polyline with ", bad[2].vertices.size(),
-                         " vertices has ", bad[2].angle_deg.size(),
-                         " angles"));
+                         " vertices has ", bad[2].angle_deg.size(), " angles"));
   mo.chunk_segments = 0;
   EXPECT_EQ(DrawMarks(relief, MarksOf(marks), mo).status().code(),
             absl::StatusCode::kInvalidArgument);
@@ -526,16 +534,16 @@ TEST(StreamedMarksTest, ErrorsNameTheFileAndLeaveNoSpool) {
       stream.Finish();
       const StreamedMarks streamed = stream.streamed();
       EXPECT_FALSE(streamed.status.ok());
-      auto got = WriteRunOutputsStreamed(dir.path, bands, nullptr, &streamed,
-                                         options);
+      auto got =
+          WriteRunOutputsStreamed(dir.path, bands, nullptr, &streamed, options);
       ASSERT_FALSE(got.ok());
       EXPECT_EQ(got.status().code(), held.status().code());
       EXPECT_NE(got.status().message().find(dir.path + "/" + blocked),
                 std::string::npos)
           << got.status();
-      EXPECT_EQ(absl::StrReplaceAll(got.status().message(), {{dir.path, "D"}}),
-                absl::StrReplaceAll(held.status().message(),
-                                    {{held_dir.path, "D"}}));
+      EXPECT_EQ(
+          absl::StrReplaceAll(got.status().message(), {{dir.path, "D"}}),
+          absl::StrReplaceAll(held.status().message(), {{held_dir.path, "D"}}));
     }
     EXPECT_FALSE(fs::exists(dir.path + "/marks.png.spool"));
     EXPECT_FALSE(fs::exists(dir.path + "/marks.svg.body"));
@@ -567,8 +575,8 @@ TEST(StreamedMarksTest, ErrorsNameTheFileAndLeaveNoSpool) {
       const StreamedMarks streamed = stream.streamed();
       RunOutputOptions o = options;
       o.marks.line_width_px = 1000;
-      auto got = WriteRunOutputsStreamed(dir.path, bands, nullptr, &streamed,
-                                         o);
+      auto got =
+          WriteRunOutputsStreamed(dir.path, bands, nullptr, &streamed, o);
       EXPECT_EQ(got.status().code(), absl::StatusCode::kInvalidArgument);
     }
     EXPECT_FALSE(fs::exists(dir.path + "/marks.png.spool"));
@@ -601,9 +609,9 @@ TEST(StreamedOutputsTest, LargeGridRunStaysWithinTheMemoryBound) {
       dup2(null, 2);
     }
     execl(SWARF_CLI, SWARF_CLI, "run", job.c_str(), "--tool", "ball:d=6",
-          "--stock", "0,0,410,410,0", "--spacing", "0.1", "--scheme",
-          "taylor", "--picture-size", "1024", "--out", out.c_str(),
-          "--quiet", static_cast<char*>(nullptr));
+          "--stock", "0,0,410,410,0", "--spacing", "0.1", "--scheme", "taylor",
+          "--picture-size", "1024", "--out", out.c_str(), "--quiet",
+          static_cast<char*>(nullptr));
     _exit(127);
   }
   int status = 0;
@@ -628,11 +636,11 @@ TEST(StreamedOutputsTest, LargeGridRunStaysWithinTheMemoryBound) {
   const int64_t bound = 16 * nodes + (int64_t{1} << 30);
   EXPECT_LE(peak, bound) << "peak " << peak / (1 << 20) << " MiB, bound "
                          << bound / (1 << 20) << " MiB";
-  std::printf("swarf run on %lld nodes: peak resident %lld MiB (bound %lld "
-              "MiB)\n",
-              static_cast<long long>(nodes),
-              static_cast<long long>(peak >> 20),
-              static_cast<long long>(bound >> 20));
+  std::printf(
+      "swarf run on %lld nodes: peak resident %lld MiB (bound %lld "
+      "MiB)\n",
+      static_cast<long long>(nodes), static_cast<long long>(peak >> 20),
+      static_cast<long long>(bound >> 20));
 }
 
 }  // namespace

@@ -8,8 +8,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "client/outputs/text.h"
 #include "client/outputs/colormap.h"
+#include "client/outputs/text.h"
 #include "core/thread_pool.h"
 
 namespace swarf::cli {
@@ -287,9 +287,9 @@ absl::StatusOr<Image> RenderErrorMap(const ErrorRaster& raster,
   if (raster.cols <= 0 || raster.rows <= 0 ||
       static_cast<int64_t>(raster.max_error.size()) !=
           int64_t{raster.cols} * raster.rows) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "error raster of %d x %d cells holds %d values", raster.cols,
-        raster.rows, raster.max_error.size()));
+    return absl::InvalidArgumentError(
+        absl::StrFormat("error raster of %d x %d cells holds %d values",
+                        raster.cols, raster.rows, raster.max_error.size()));
   }
   if (!(std::isfinite(r.x0) && std::isfinite(r.x1) && std::isfinite(r.y0) &&
         std::isfinite(r.y1) && r.x1 > r.x0 && r.y1 > r.y0)) {
@@ -326,8 +326,8 @@ absl::StatusOr<Image> RenderErrorMap(const ErrorRaster& raster,
   // The tolerance keeps a decade whose bound is a float's rounding of it.
   for (int k = static_cast<int>(std::ceil(std::log10(lo) - 1e-6));
        k <= static_cast<int>(std::floor(std::log10(hi) + 1e-6)); ++k) {
-    const double t = std::clamp(std::log(std::pow(10.0, k) / lo) / span, 0.0,
-                                1.0);
+    const double t =
+        std::clamp(std::log(std::pow(10.0, k) / lo) / span, 0.0, 1.0);
     legend.ticks.emplace_back(t, PowerOfTenLabel(k));
   }
   legend.swatch = true;
@@ -406,26 +406,40 @@ struct PixelSegment {
 void StrokeRows(const PixelSegment& s, double width, int max_y, int* y0,
                 int* y1) {
   const double half = width / 2;
-  *y0 = std::max(0, static_cast<int>(std::floor(
-                        std::min(s.ay, s.by) - half - 1)));
-  *y1 = std::min(max_y - 1, static_cast<int>(std::ceil(
-                                std::max(s.ay, s.by) + half + 1)));
+  *y0 = std::max(0,
+                 static_cast<int>(std::floor(std::min(s.ay, s.by) - half - 1)));
+  *y1 = std::min(max_y - 1,
+                 static_cast<int>(std::ceil(std::max(s.ay, s.by) + half + 1)));
 }
 
-// Draws the stroke's pixels in rows [row0, row1) only: a pixel's blends
-// happen in segment order whichever band draws it, so bands of rows can be
-// drawn at once with the same result.
-void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
-            double width, bool halo, int row0, int row1) {
+// The columns, likewise, [*x0, *x1] within [0, max_x).
+void StrokeColumns(const PixelSegment& s, double width, int max_x, int* x0,
+                   int* x1) {
   const double half = width / 2;
-  const int x0 = std::max(0, static_cast<int>(std::floor(
-                                 std::min(s.ax, s.bx) - half - 1)));
-  const int x1 = std::min(max_x - 1, static_cast<int>(std::ceil(
-                                         std::max(s.ax, s.bx) + half + 1)));
-  int y0, y1;
+  *x0 = std::max(0,
+                 static_cast<int>(std::floor(std::min(s.ax, s.bx) - half - 1)));
+  *x1 = std::min(max_x - 1,
+                 static_cast<int>(std::ceil(std::max(s.ax, s.bx) + half + 1)));
+}
+
+// A rectangle of pixels: columns [col0, col1), rows [row0, row1).
+struct PixelTile {
+  int col0, col1, row0, row1;
+};
+
+// Draws the stroke's pixels within `tile` only: a pixel's blends happen in
+// segment order whichever tile draws it, so tiles can be drawn at once with
+// the same result.
+void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
+            double width, bool halo, const PixelTile& tile) {
+  const double half = width / 2;
+  int x0, x1, y0, y1;
+  StrokeColumns(s, width, max_x, &x0, &x1);
+  x0 = std::max(x0, tile.col0);
+  x1 = std::min(x1, tile.col1 - 1);
   StrokeRows(s, width, max_y, &y0, &y1);
-  y0 = std::max(y0, row0);
-  y1 = std::min(y1, row1 - 1);
+  y0 = std::max(y0, tile.row0);
+  y1 = std::min(y1, tile.row1 - 1);
   const double dx = s.bx - s.ax, dy = s.by - s.ay;
   const double len2 = dx * dx + dy * dy;
   // Pixels at squared distance r2 or more have no coverage: sqrt is
@@ -461,8 +475,8 @@ void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
       if (d2 >= r2) continue;
       const double coverage = r - std::sqrt(d2);
       if (coverage <= 0) continue;
-      const Rgb c = halo ? kHalo
-                         : AngleColor(s.angle_a + t * (s.angle_b - s.angle_a));
+      const Rgb c =
+          halo ? kHalo : AngleColor(s.angle_a + t * (s.angle_b - s.angle_a));
       image.Blend(px, py, c, halo ? 0.75 * std::min(coverage, 1.0) : coverage);
     }
   }
@@ -483,17 +497,19 @@ absl::StatusOr<Image> DrawMarksOver(
   if (options.chunk_segments < 1) {
     return absl::InvalidArgumentError("chunk_segments must be >= 1");
   }
+  if (options.tile_rows < 1 || options.tile_cols < 1) {
+    return absl::InvalidArgumentError("tile_rows and tile_cols must be >= 1");
+  }
   const int side = std::max(frame.width, frame.height);
-  const double width = options.line_width_px > 0
-                           ? options.line_width_px
-                           : std::max(2.0, side / 600.0);
+  const double width = options.line_width_px > 0 ? options.line_width_px
+                                                 : std::max(2.0, side / 600.0);
   Legend legend;
   legend.title = {"mark angle", "(deg)"};
   legend.color = [](double t) { return AngleColor(t * kAngleScaleMaxDeg); };
   for (int a = 0; a <= kAngleScaleMaxDeg; a += 15) {
-    legend.ticks.emplace_back(
-        a / kAngleScaleMaxDeg,
-        a == kAngleScaleMaxDeg ? absl::StrCat(a, "+") : absl::StrCat(a));
+    legend.ticks.emplace_back(a / kAngleScaleMaxDeg, a == kAngleScaleMaxDeg
+                                                         ? absl::StrCat(a, "+")
+                                                         : absl::StrCat(a));
   }
   const int scale = FontScale(side);
   const int legend_x0 = frame.width + 4 * scale;
@@ -503,32 +519,47 @@ absl::StatusOr<Image> DrawMarksOver(
   for (int y = 0; y < frame.height; ++y) relief_row(y, image.row(y));
   // All halos first, so that no halo covers an earlier line's colour: two
   // passes over the marks. Each pass takes a chunk of segments at a time,
-  // bucketed by bands of rows drawn at once, each band's segments in their
-  // order (a pixel's blends happen in segment order whichever band and
-  // chunk draws it).
-  constexpr int kBandRows = 32;
-  const int bands = (frame.height + kBandRows - 1) / kBandRows;
+  // bucketed by tiles of the picture drawn at once, each tile's segments in
+  // their order (a pixel's blends happen in segment order whichever tile
+  // and chunk draws it). Bands of rows alone left one or two threads
+  // drawing: a chunk's segments are near each other in y.
+  const int tile_rows = options.tile_rows, tile_cols = options.tile_cols;
+  const int tiles_y = (frame.height + tile_rows - 1) / tile_rows;
+  const int tiles_x = (frame.width + tile_cols - 1) / tile_cols;
   std::vector<PixelSegment> chunk;
   chunk.reserve(std::min<size_t>(options.chunk_segments, 1 << 16));
-  std::vector<std::vector<uint32_t>> band_segments(bands);
+  std::vector<std::vector<uint32_t>> tile_segments(
+      static_cast<size_t>(tiles_x) * tiles_y);
+  std::vector<int32_t> busy;  // the tiles with segments, ascending
   auto draw_chunk = [&](bool halo) {
     const double w = halo ? width + 2 : width;
-    for (auto& b : band_segments) b.clear();
+    for (int32_t t : busy) tile_segments[t].clear();
+    busy.clear();
     for (size_t k = 0; k < chunk.size(); ++k) {
-      int y0, y1;
+      int x0, x1, y0, y1;
+      StrokeColumns(chunk[k], w, frame.width, &x0, &x1);
       StrokeRows(chunk[k], w, frame.height, &y0, &y1);
-      for (int b = y0 / kBandRows; b <= y1 / kBandRows && b < bands; ++b) {
-        band_segments[b].push_back(static_cast<uint32_t>(k));
+      for (int ty = y0 / tile_rows; ty <= y1 / tile_rows && ty < tiles_y;
+           ++ty) {
+        for (int tx = x0 / tile_cols; tx <= x1 / tile_cols && tx < tiles_x;
+             ++tx) {
+          std::vector<uint32_t>& list = tile_segments[ty * tiles_x + tx];
+          if (list.empty()) busy.push_back(ty * tiles_x + tx);
+          list.push_back(static_cast<uint32_t>(k));
+        }
       }
     }
-    ThreadPool::Default().ParallelFor(bands, [&](int64_t b) {
-      const int row0 = static_cast<int>(b) * kBandRows;
-      const int row1 = std::min(frame.height, row0 + kBandRows);
-      for (uint32_t k : band_segments[b]) {
-        Stroke(image, frame.width, frame.height, chunk[k], w, halo, row0,
-               row1);
-      }
-    });
+    ThreadPool::Default().ParallelFor(
+        static_cast<int64_t>(busy.size()), [&](int64_t i) {
+          const int32_t t = busy[i];
+          const int tx = t % tiles_x, ty = t / tiles_x;
+          const PixelTile tile{
+              tx * tile_cols, std::min(frame.width, (tx + 1) * tile_cols),
+              ty * tile_rows, std::min(frame.height, (ty + 1) * tile_rows)};
+          for (uint32_t k : tile_segments[t]) {
+            Stroke(image, frame.width, frame.height, chunk[k], w, halo, tile);
+          }
+        });
     chunk.clear();
   };
   // The first pass checks the marks too: the first polyline whose angles
@@ -540,9 +571,9 @@ absl::StatusOr<Image> DrawMarksOver(
     absl::Status st = marks([&](const MarkPolyline& p) -> absl::Status {
       const size_t n = p.vertices.size();
       if (p.angle_deg.size() != n) {
-        return absl::InvalidArgumentError(absl::StrFormat(
-            "mark polyline with %d vertices has %d angles", n,
-            p.angle_deg.size()));
+        return absl::InvalidArgumentError(
+            absl::StrFormat("mark polyline with %d vertices has %d angles", n,
+                            p.angle_deg.size()));
       }
       const size_t ends = p.closed && n > 2 ? n : (n > 0 ? n - 1 : 0);
       for (size_t k = 0; k < ends || (n == 1 && k == 0); ++k) {
@@ -550,7 +581,8 @@ absl::StatusOr<Image> DrawMarksOver(
         const PixelSegment s{frame.PixelX(p.vertices[a].x),
                              frame.PixelY(p.vertices[a].y),
                              frame.PixelX(p.vertices[b].x),
-                             frame.PixelY(p.vertices[b].y), p.angle_deg[a],
+                             frame.PixelY(p.vertices[b].y),
+                             p.angle_deg[a],
                              p.angle_deg[b]};
         if (!(std::isfinite(s.ax) && std::isfinite(s.ay) &&
               std::isfinite(s.bx) && std::isfinite(s.by))) {
@@ -566,8 +598,7 @@ absl::StatusOr<Image> DrawMarksOver(
     if (!finite) return absl::InvalidArgumentError("mark vertex is not finite");
     draw_chunk(halo);
   }
-  DrawLegend(image, legend_x0, image.height(), legend, scale, nullptr,
-             nullptr);
+  DrawLegend(image, legend_x0, image.height(), legend, scale, nullptr, nullptr);
   return image;
 }
 
@@ -599,14 +630,13 @@ absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
 absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
                                 const MarkSource& marks,
                                 const MarksPictureOptions& options) {
-  return DrawMarksOver(
-      [&](int y, uint8_t* out) { relief.ColorRow(y, out); }, relief.frame(),
-      marks, options);
+  return DrawMarksOver([&](int y, uint8_t* out) { relief.ColorRow(y, out); },
+                       relief.frame(), marks, options);
 }
 
 MarkSource MarksOf(const std::vector<MarkPolyline>& marks) {
-  return [&marks](const std::function<absl::Status(const MarkPolyline&)>&
-                      visit) -> absl::Status {
+  return [&marks](const std::function<absl::Status(const MarkPolyline&)>& visit)
+             -> absl::Status {
     for (const MarkPolyline& p : marks) {
       if (absl::Status st = visit(p); !st.ok()) return st;
     }

@@ -121,8 +121,8 @@ struct ErrorMapLayout {
   int map_width = 0, map_height = 0;  // the map at the image's top-left
   int bar_x0 = 0, bar_y0 = 0, bar_x1 = 0, bar_y1 = 0;  // colour bar, hi on top
   int zero_x0 = 0, zero_y0 = 0, zero_x1 = 0, zero_y1 = 0;  // zero swatch
-  int legend_x0 = 0;  // legend panel's left edge
-  double lo = 0, hi = 0;  // the colour scale (mm)
+  int legend_x0 = 0;          // legend panel's left edge
+  double lo = 0, hi = 0;      // the colour scale (mm)
   std::vector<double> ticks;  // labelled powers of ten (mm)
 };
 
@@ -140,9 +140,14 @@ struct MarksPictureOptions {
   ReliefOptions relief = {.max_side = 1600, .min_side = 1000};
   // Stroke width in pixels; 0: about 1/600 of the longer side, at least 2.
   double line_width_px = 0;
-  // Segments drawn at a time (bucketed by bands of rows, the bands drawn
-  // at once): memory, not the picture, depends on it (>= 1).
+  // Segments drawn at a time (bucketed by tiles of the picture, the tiles
+  // drawn at once): memory, not the picture, depends on it (>= 1).
   size_t chunk_segments = size_t{1} << 16;
+  // The tiles' size in pixels (>= 1): the work each thread takes, not the
+  // picture, depends on it. Marks come in the order they were found (by
+  // rows of the grid), so a chunk's segments are near each other in y:
+  // tiles split its rows across the width too.
+  int tile_rows = 32, tile_cols = 128;
 };
 
 // Polylines read in order: calls visit(p) on each, returning visit's first
