@@ -191,7 +191,57 @@ TEST(StreamedOutputsTest, BandsWriteTheWholeGridsFilesByteForByte) {
                           int64_t{2} * 64 * 161);
       ExpectSame(Write(shared, &raster, mp, options), want,
                  absl::StrCat(name, " tile rows, the workpiece's sweeps"));
+      // As swarf run reads its embedded session: the tiles set on the
+      // workpiece's threads (SetTileRows), the mesh's heights read alone
+      // (ReadNodeHeights).
+      TileRowBands direct(
+          Stock(), scheme,
+          [&own](SurfaceGrid* band, int32_t t0, int32_t t1, bool heights_only) {
+            return band->SetTileRows(own, t0, t1, heights_only);
+          },
+          std::shared_ptr<const MoveSource>(std::shared_ptr<void>(),
+                                            &own.moves()),
+          std::shared_ptr<const MoveSweeps>(std::shared_ptr<void>(),
+                                            &own.sweeps()),
+          int64_t{2} * 64 * 161);
+      direct.SetHeightsFill([&own](int32_t j0, int32_t j1, double* z) {
+        ReadNodeHeights(own, j0, j1, z);
+        return absl::OkStatus();
+      });
+      ExpectSame(Write(direct, &raster, mp, options), want,
+                 absl::StrCat(name, " tiles read from the workpiece"));
     }
+  }
+}
+
+// ReadNodeHeights against the heights read through a band, over row ranges
+// within a tile, across tiles and of the whole grid, untouched tiles too.
+TEST(StreamedOutputsTest, NodeHeightsAreTheBandsHeights) {
+  for (SchemeKind scheme : {SchemeKind::kTaylor, SchemeKind::kGuarded}) {
+    auto wp = Workpiece::Create(Stock(), scheme);
+    ASSERT_TRUE(wp.ok());
+    ASSERT_TRUE((*wp)->Apply(Moves()).ok());
+    const Workpiece& own = **wp;
+    auto grid = SurfaceGrid::FromWorkpiece(own);
+    ASSERT_TRUE(grid.ok());
+    InMemoryBands whole(*grid);
+    auto scratch = SurfaceGrid::Band(Stock(), scheme, 0, 1);
+    ASSERT_TRUE(scratch.ok());
+    const int32_t nx = grid->nodes_x(), ny = Stock().ny;
+    ASSERT_GT(ny, 2 * kTileSize);
+    int untouched = 0;
+    for (int32_t t = 0; t < own.tiles_x() * own.tiles_y(); ++t) {
+      untouched += !own.TileAllocated(t);
+    }
+    for (const auto& [j0, j1] : std::vector<std::pair<int32_t, int32_t>>{
+             {0, ny}, {3, 70}, {64, 64}, {63, 128}, {ny - 1, ny}}) {
+      const size_t n = static_cast<size_t>(j1 - j0 + 1) * nx;
+      std::vector<double> want(n, -1), got(n, -2);
+      ASSERT_TRUE(whole.ReadHeights(j0, j1, &*scratch, want.data()).ok());
+      ReadNodeHeights(own, j0, j1, got.data());
+      EXPECT_TRUE(got == want) << "rows " << j0 << ".." << j1;
+    }
+    EXPECT_GT(untouched, 0) << "the test wants untouched tiles too";
   }
 }
 

@@ -23,19 +23,19 @@
 #include "client/cli/args.h"
 #include "client/cli/commands.h"
 #include "client/cli/connection.h"
-#include "client/outputs/json_writer.h"
 #include "client/cli/run_report.h"
 #include "client/cli/safety_report.h"
 #include "client/cli/server_program.h"
 #include "client/cli/tool_table.h"
 #include "client/cli/toolpath_flags.h"
+#include "client/outputs/json_writer.h"
+#include "client/viewer/viewer.h"
 #include "core/cutter/sweep.h"
 #include "core/move_index.h"
 #include "gcode/text.h"
 #include "gcode/toolpath.h"
 #include "server/convert.h"
 #include "server/session.h"
-#include "client/viewer/viewer.h"
 
 namespace swarf::cli {
 
@@ -70,7 +70,8 @@ const std::string kUsage =
     "  --stock x0,y0,x1,y1,top      stock (mm); default: the project's\n"
     "                               workpiece, else the toolpath's XY\n"
     "                               bounds plus the tool radius, top 0\n"
-    "  --spacing S | --mesh N       grid spacing (mm), or N elements along the\n"
+    "  --spacing S | --mesh N       grid spacing (mm), or N elements along "
+    "the\n"
     "                               longer side, kept at any size when the\n"
     "                               memory is there; default 0.1 mm (coarser\n"
     "                               if the grid would pass 16M nodes)\n"
@@ -133,7 +134,8 @@ const std::string kUsage =
     "                               on 127.0.0.1, kept up until Ctrl-C)\n"
     "  --view-port N                the page's port (default: a free one)\n"
     "  --view-wait                  start cutting once a page is open\n"
-    "G-code:\n" + std::string(kToolpathUsage);
+    "G-code:\n" +
+    std::string(kToolpathUsage);
 
 // The tool numbers a program uses, each with where it is first selected
 // (its T word or M6; with no T word, the first move): "FILE line N".
@@ -143,9 +145,9 @@ void AddToolUses(const Toolpath& path, const std::string& file,
   for (const ToolpathPoint& p : path.points()) {
     if (p.tool == last) continue;
     last = p.tool;
-    const bool seen = std::any_of(uses->begin(), uses->end(), [&](const ToolUse& u) {
-      return u.number == p.tool;
-    });
+    const bool seen =
+        std::any_of(uses->begin(), uses->end(),
+                    [&](const ToolUse& u) { return u.number == p.tool; });
     if (seen) continue;
     const int32_t line = path.ToolSelectedAt(p.tool).value_or(p.line);
     uses->push_back({p.tool, absl::StrCat(file, " line ", line)});
@@ -168,14 +170,24 @@ absl::StatusOr<StockSpec> ChooseStock(const Args& args, const Toolpath& path,
     s = {d[0], d[1], d[2], d[3], d[4], 0, 0};
   } else if (project != nullptr && !project->automatic) {
     // The project's workpiece as given (CAMotics ignores the margin then).
-    s = {project->min[0], project->min[1], project->max[0], project->max[1],
-         project->max[2], 0, 0};
+    s = {project->min[0],
+         project->min[1],
+         project->max[0],
+         project->max[1],
+         project->max[2],
+         0,
+         0};
   } else {
     // As CAMotics' automatic workpiece: the path's XY bounds, top at 0,
     // grown by a project's margin (percent of the size) on every side.
     const double m = max_radius;
-    s = {path.x_bounds().lo - m, path.y_bounds().lo - m,
-         path.x_bounds().hi + m, path.y_bounds().hi + m, 0, 0, 0};
+    s = {path.x_bounds().lo - m,
+         path.y_bounds().lo - m,
+         path.x_bounds().hi + m,
+         path.y_bounds().hi + m,
+         0,
+         0,
+         0};
     if (project != nullptr) {
       const double mx = (s.x1 - s.x0) * project->margin_percent / 100;
       const double my = (s.y1 - s.y0) * project->margin_percent / 100;
@@ -204,11 +216,12 @@ absl::StatusOr<StockSpec> ChooseStock(const Args& args, const Toolpath& path,
     constexpr double kMaxNodes = 16e6;
     spacing = std::max(0.1, std::sqrt(w * h / kMaxNodes));
   }
-  const double nx = std::ceil(w / spacing - 1e-9), ny = std::ceil(h / spacing - 1e-9);
+  const double nx = std::ceil(w / spacing - 1e-9),
+               ny = std::ceil(h / spacing - 1e-9);
   if (nx > kMaxElementsPerAxis || ny > kMaxElementsPerAxis) {
     return absl::InvalidArgumentError(
-        absl::StrCat("spacing ", spacing, " mm makes a grid of ", nx, " x ",
-                     ny, " elements: too many"));
+        absl::StrCat("spacing ", spacing, " mm makes a grid of ", nx, " x ", ny,
+                     " elements: too many"));
   }
   s.nx = static_cast<int32_t>(std::max(1.0, nx));
   s.ny = static_cast<int32_t>(std::max(1.0, ny));
@@ -245,8 +258,9 @@ int64_t MovesMemoryBytes(const Toolpath& path,
   uint32_t id = 0;
   for (size_t k = 1; k < points.size(); ++k) {
     if (points[k].starts_run) continue;
-    IndexMove(id++, Move(points[k - 1].position, points[k].position,
-                         tools.at(points[k].tool)),
+    IndexMove(id++,
+              Move(points[k - 1].position, points[k].position,
+                   tools.at(points[k].tool)),
               stock.z_top, &index);
   }
   *index_bytes = index.MemoryBytes();
@@ -259,8 +273,7 @@ int64_t MovesMemoryBytes(const Toolpath& path,
 // ResourceExhausted naming both when the session's grid (every tile cut,
 // as swarfd admits it) and the moves cannot fit, so that a job too large
 // is refused before anything runs.
-absl::StatusOr<int64_t> CheckRunMemory(const Args& args,
-                                       const StockSpec& stock,
+absl::StatusOr<int64_t> CheckRunMemory(const Args& args, const StockSpec& stock,
                                        SchemeKind scheme, const Toolpath& path,
                                        const std::map<int, Cutter>& tools) {
   int64_t allowed = 0;
@@ -275,8 +288,7 @@ absl::StatusOr<int64_t> CheckRunMemory(const Args& args,
     source = absl::StrCat("--max-memory allows ", allowed >> 20, " MiB");
   } else {
     allowed = AvailableMemoryBytes();
-    source = absl::StrCat("this machine has ", allowed >> 20,
-                          " MiB available");
+    source = absl::StrCat("this machine has ", allowed >> 20, " MiB available");
   }
   const int64_t grid = server::Session::EstimateMemoryBytes(stock, scheme);
   int64_t index = 0;
@@ -321,15 +333,16 @@ std::vector<PathRun> Runs(const Toolpath& path,
 class ProgressBar {
  public:
   explicit ProgressBar(bool quiet)
-      : tty_(!quiet && isatty(STDERR_FILENO)), quiet_(quiet),
+      : tty_(!quiet && isatty(STDERR_FILENO)),
+        quiet_(quiet),
         start_(std::chrono::steady_clock::now()) {}
 
   void Update(const StreamProgress& p) {
     const auto now = std::chrono::steady_clock::now();
     const double t = std::chrono::duration<double>(now - start_).count();
-    const double frac =
-        p.moves_total > 0 ? static_cast<double>(p.moves_done) / p.moves_total
-                          : 1;
+    const double frac = p.moves_total > 0
+                            ? static_cast<double>(p.moves_done) / p.moves_total
+                            : 1;
     const double rate = t > 0 ? p.moves_done / t : 0;
     const double eta = rate > 0 ? (p.moves_total - p.moves_done) / rate : 0;
     if (tty_) {
@@ -342,16 +355,17 @@ class ProgressBar {
       const int filled = static_cast<int>(frac * kWidth);
       std::string bar(filled, '=');
       if (filled < kWidth) bar += '>' + std::string(kWidth - filled - 1, ' ');
-      std::fprintf(stderr, "\r%3.0f%% [%s] %lld/%lld moves  %.2fM moves/s  ETA %.0fs ",
-                   100 * frac, bar.c_str(),
-                   static_cast<long long>(p.moves_done),
-                   static_cast<long long>(p.moves_total), rate / 1e6, eta);
+      std::fprintf(
+          stderr, "\r%3.0f%% [%s] %lld/%lld moves  %.2fM moves/s  ETA %.0fs ",
+          100 * frac, bar.c_str(), static_cast<long long>(p.moves_done),
+          static_cast<long long>(p.moves_total), rate / 1e6, eta);
       if (p.moves_done >= p.moves_total) std::fprintf(stderr, "\n");
     } else if (!quiet_) {
       const int quarter = static_cast<int>(frac * 4);
       if (quarter > last_quarter_) {
         last_quarter_ = quarter;
-        std::fprintf(stderr, "swarf: %d%% (%lld of %lld moves, %.2fM moves/s)\n",
+        std::fprintf(stderr,
+                     "swarf: %d%% (%lld of %lld moves, %.2fM moves/s)\n",
                      quarter * 25, static_cast<long long>(p.moves_done),
                      static_cast<long long>(p.moves_total), rate / 1e6);
       }
@@ -400,8 +414,8 @@ absl::Status StreamPrograms(
     pb::ProgramOptions o = ProgramOptionsFor(options, strict, batch_points, f);
     o.set_first_seq(first_seq);
     pb::ProgramDone done;
-    if (absl::Status s = StreamProgram(conn, session_id, *text, o, &p,
-                                       progress, on_ack, &done);
+    if (absl::Status s = StreamProgram(conn, session_id, *text, o, &p, progress,
+                                       on_ack, &done);
         !s.ok()) {
       return s;
     }
@@ -423,11 +437,10 @@ std::string NewSessionId() {
 }  // namespace
 
 int RunCommand(const std::vector<std::string>& argv) {
-  std::set<std::string> valued = {"tool",   "tools", "tools-units", "project",
-                                   "stock",         "spacing",
-                                   "mesh",   "scheme",        "arc-tolerance",
-                                   "server", "out",           "subdivide",
-                                   "batch",  "max-memory"};
+  std::set<std::string> valued = {
+      "tool",    "tools",     "tools-units", "project",       "stock",
+      "spacing", "mesh",      "scheme",      "arc-tolerance", "server",
+      "out",     "subdivide", "batch",       "max-memory"};
   valued.insert("interpret");
   valued.insert(std::begin(kConnectionFlags), std::end(kConnectionFlags));
   valued.insert(std::begin(kToolpathFlags), std::end(kToolpathFlags));
@@ -436,8 +449,8 @@ int RunCommand(const std::vector<std::string>& argv) {
   valued.insert(std::begin(kDesignFlags), std::end(kDesignFlags));
   valued.insert(std::begin(kSafetyFlags), std::end(kSafetyFlags));
   auto args = Args::Parse(argv, valued,
-                          {"json", "help", "quiet", kStrictFlag, kM6ForgetsFlag, "view",
-                           "view-wait", kCheckFlag});
+                          {"json", "help", "quiet", kStrictFlag, kM6ForgetsFlag,
+                           "view", "view-wait", kCheckFlag});
   auto fail = [](const absl::Status& s, int code) {
     std::cerr << "swarf run: " << s.message() << "\n";
     return code;
@@ -471,7 +484,8 @@ int RunCommand(const std::vector<std::string>& argv) {
     std::cerr << "swarf run: give one toolpath FILE\n" << kUsage;
     return 2;
   }
-  const std::string file = project.has_value() ? *args->Get("project") : files[0];
+  const std::string file =
+      project.has_value() ? *args->Get("project") : files[0];
   const bool json = args->Has("json");
   std::optional<ToolTable> table;
   if (project.has_value()) table = project->tools;
@@ -520,7 +534,8 @@ int RunCommand(const std::vector<std::string>& argv) {
   if (!batch.ok()) return fail(batch.status(), 2);
   if (!subdivide.ok()) return fail(subdivide.status(), 2);
   const int64_t batch_points = batch->value_or(20000);
-  if (batch_points < 2) return fail(absl::InvalidArgumentError("--batch must be >= 2"), 2);
+  if (batch_points < 2)
+    return fail(absl::InvalidArgumentError("--batch must be >= 2"), 2);
   OutputOptions output_flags;
   if (absl::Status s = ParseOutputFlags(*args, &output_flags); !s.ok()) {
     return fail(s, 2);
@@ -592,24 +607,24 @@ int RunCommand(const std::vector<std::string>& argv) {
           "swarf run: design %s: %d triangles, over %d nodes of the grid "
           "(%.2f s)\n",
           d.path, d.placed->mesh().triangles.size(),
-          d.placed->envelope().covered_nodes(),
-          d.seconds);
+          d.placed->envelope().covered_nodes(), d.seconds);
     }
   }
   RunReport report;
   {
     std::vector<std::string> warnings;
-    absl::Status checked =
-        CheckToolpath(*path, tflags.strict, args->Has("stock") ? &*stock : nullptr,
-                      &report, &warnings);
+    absl::Status checked = CheckToolpath(*path, tflags.strict,
+                                         args->Has("stock") ? &*stock : nullptr,
+                                         &report, &warnings);
     if (!checked.ok()) {
-      return fail(absl::InvalidArgumentError(
-                      absl::StrCat(files.size() == 1 ? files[0] : file, ": ",
-                                   checked.message())),
-                  1);
+      return fail(
+          absl::InvalidArgumentError(absl::StrCat(
+              files.size() == 1 ? files[0] : file, ": ", checked.message())),
+          1);
     }
     if (!json) {
-      for (const std::string& w : warnings) std::cerr << "swarf run: " << w << "\n";
+      for (const std::string& w : warnings)
+        std::cerr << "swarf run: " << w << "\n";
     }
   }
 
@@ -646,7 +661,8 @@ int RunCommand(const std::vector<std::string>& argv) {
   pb::Session session;
   {
     auto ctx = (*conn)->Context(id, 60);
-    grpc::Status st = (*conn)->stub().CreateSession(ctx.get(), create, &session);
+    grpc::Status st =
+        (*conn)->stub().CreateSession(ctx.get(), create, &session);
     if (!st.ok()) return fail(FromGrpc(st), 1);
   }
   if (!json) {
@@ -654,8 +670,7 @@ int RunCommand(const std::vector<std::string>& argv) {
         "swarf run: %s: %d moves, stock [%.3f, %.3f] x [%.3f, %.3f] top %.3f, "
         "%d x %d elements (%.4g mm), %s, on the %s\n",
         file, path->move_count(), stock->x0, stock->x1, stock->y0, stock->y1,
-        stock->z_top, stock->nx, stock->ny,
-        (stock->x1 - stock->x0) / stock->nx,
+        stock->z_top, stock->nx, stock->ny, (stock->x1 - stock->x0) / stock->nx,
         GetScheme(scheme).name(), (*conn)->target());
     for (const auto& [t, c] : *tools) {
       std::cerr << "swarf run: tool " << t << (t == 0 ? " (no T word)" : "")
@@ -696,7 +711,8 @@ int RunCommand(const std::vector<std::string>& argv) {
   const auto t_sim = std::chrono::steady_clock::now();
   ProgressBar bar(json || args->Has("quiet"));
   StreamProgress last;
-  SafetyCollector safety(*path, file_starts, files, assemblies, *safety_options);
+  SafetyCollector safety(*path, file_starts, files, assemblies,
+                         *safety_options);
   safety.Follow(viewer != nullptr);
   const auto on_progress = [&](const StreamProgress& p) {
     last = p;
@@ -712,20 +728,22 @@ int RunCommand(const std::vector<std::string>& argv) {
       for (const auto& [kind, it] : found.items) {
         const auto& files = safety.files();
         markers.push_back(
-            {{it.x, it.y, it.z}, SafetyCollector::kKindNames[kind],
+            {{it.x, it.y, it.z},
+             SafetyCollector::kKindNames[kind],
              it.file >= 0 && it.file < static_cast<int32_t>(files.size())
                  ? files[it.file]
                  : std::string(),
-             it.line, it.depth, it.volume_mm3});
+             it.line,
+             it.depth,
+             it.volume_mm3});
       }
       viewer->AddSafety(std::move(markers), std::move(found.air));
     }
   };
   absl::Status streamed =
       *interpret_server
-          ? StreamPrograms(**conn, id, files, gopt, tflags.strict,
-                           batch_points, path->move_count(), on_progress,
-                           on_ack)
+          ? StreamPrograms(**conn, id, files, gopt, tflags.strict, batch_points,
+                           path->move_count(), on_progress, on_ack)
           : StreamPath(**conn, id, runs, batch_points, on_progress, on_ack);
   const double sim_s = Since(t_sim);
   if (viewer) viewer->MarkFinished();
@@ -765,9 +783,11 @@ int RunCommand(const std::vector<std::string>& argv) {
     // that the outputs would have built again.
     auto pinned = (*conn)->PinEmbeddedSession(id);
     if (!pinned.ok()) return fail(pinned.status(), 1);
-    oopt.moves = std::shared_ptr<const MoveSource>(*pinned, &(*pinned)->moves());
+    oopt.moves =
+        std::shared_ptr<const MoveSource>(*pinned, &(*pinned)->moves());
     oopt.sweeps =
         std::shared_ptr<const MoveSweeps>(*pinned, &(*pinned)->sweeps());
+    oopt.workpiece = *pinned;
     runs.clear();
     runs.shrink_to_fit();
     *path = gcode::Toolpath();
@@ -779,6 +799,7 @@ int RunCommand(const std::vector<std::string>& argv) {
   // The pin goes before the session does.
   oopt.moves.reset();
   oopt.sweeps.reset();
+  oopt.workpiece.reset();
   report.output_seconds = Since(t_out);
   if (!written.ok()) return fail(written, 1);
   if (!oopt.dir.empty()) {

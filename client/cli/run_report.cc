@@ -3,28 +3,27 @@
 #include <malloc.h>
 
 #include <algorithm>
-#include <cmath>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
-#include <functional>
-#include <memory>
-#include <future>
-#include <utility>
-#include <thread>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <future>
 #include <iterator>
-#include <system_error>
-
+#include <memory>
 #include <nlohmann/json.hpp>
+#include <system_error>
+#include <thread>
+#include <utility>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_split.h"
+#include "client/outputs/grid_bands.h"
 #include "client/outputs/marks_stream.h"
 #include "client/outputs/run_outputs.h"
-#include "client/outputs/grid_bands.h"
 #include "client/outputs/surface_grid.h"
 #include "core/cutting_marks.h"
 #include "core/workpiece.h"
@@ -117,9 +116,8 @@ absl::Status FetchMarks(Connection& conn, const std::string& id,
 
 // Sets tile rows [t0, t1) of `band` from the session's tiles (every tile
 // of those rows, asked by index).
-absl::Status FetchTileRows(Connection& conn, const std::string& id,
-                           int32_t t0, int32_t t1, bool heights_only,
-                           SurfaceGrid* band) {
+absl::Status FetchTileRows(Connection& conn, const std::string& id, int32_t t0,
+                           int32_t t1, bool heights_only, SurfaceGrid* band) {
   auto ctx = conn.Context(id, 3600);
   pb::GetTilesRequest req;
   req.set_session_id(id);
@@ -143,10 +141,10 @@ absl::Status FetchTileRows(Connection& conn, const std::string& id,
     if (!status.ok()) continue;  // read to the end, then Finish
     const float* d[5] = {t.wx().data(), t.wy().data(), t.wxx().data(),
                          t.wxy().data(), t.wyy().data()};
-    status = band->SetNodes(t.i0(), t.j0(), t.nx(), t.ny(),
-                            t.heights_d().data(),
-                            req.include_derivatives() ? d : nullptr,
-                            req.include_owners() ? t.owners().data() : nullptr);
+    status =
+        band->SetNodes(t.i0(), t.j0(), t.nx(), t.ny(), t.heights_d().data(),
+                       req.include_derivatives() ? d : nullptr,
+                       req.include_owners() ? t.owners().data() : nullptr);
   }
   grpc::Status st = reader->Finish();
   if (!st.ok()) return FromGrpc(st);
@@ -167,8 +165,10 @@ absl::StatusOr<T> Retrying(const char* what,
       return r;
     }
     if (attempt == 0) {
-      std::fprintf(stderr, "swarf: the server is unavailable (%s); retrying "
-                   "%s\n", std::string(r.status().message()).c_str(), what);
+      std::fprintf(stderr,
+                   "swarf: the server is unavailable (%s); retrying "
+                   "%s\n",
+                   std::string(r.status().message()).c_str(), what);
     }
     std::this_thread::sleep_for(
         std::chrono::milliseconds(std::min(2000, 100 << std::min(attempt, 4))));
@@ -196,9 +196,8 @@ absl::Status ParseOutputFlags(const Args& args, OutputOptions* out) {
     const auto text = args.Get(flag);
     if (!text) return absl::OkStatus();
     if (!absl::SimpleAtod(*text, v) || !std::isfinite(*v) || *v < 0) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("--", flag, " must be a number >= 0, got \"", *text,
-                       "\""));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "--", flag, " must be a number >= 0, got \"", *text, "\""));
     }
     return absl::OkStatus();
   };
@@ -293,8 +292,9 @@ absl::Status LoadDesign(const StockSpec& stock, DesignInput* d) {
                                             GridGeometry(stock), d->path);
   if (!placed.ok()) return placed.status();
   d->placed = *std::move(placed);
-  d->seconds = std::chrono::duration<double>(
-                   std::chrono::steady_clock::now() - t0).count();
+  d->seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0)
+          .count();
   return absl::OkStatus();
 }
 
@@ -338,8 +338,8 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   // streamed (after the statistics, the marks and the deviation).
   std::error_code dir_error;
   bool dir_made = false;
-  if (files) dir_made = std::filesystem::create_directories(options.dir,
-                                                            dir_error);
+  if (files)
+    dir_made = std::filesystem::create_directories(options.dir, dir_error);
   // A directory made here and left empty by an error goes again.
   struct RemoveIfEmpty {
     std::string dir;
@@ -368,8 +368,8 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   if (GetScheme(report->scheme).stores_derivatives()) {
     marks_fetch = std::async(std::launch::async, [&] {
       const auto t0 = Clock::now();
-      auto m = Retrying<bool>(
-          "the cutting marks", [&]() -> absl::StatusOr<bool> {
+      auto m =
+          Retrying<bool>("the cutting marks", [&]() -> absl::StatusOr<bool> {
             if (absl::Status s = FetchMarks(conn, id, to_stream); !s.ok()) {
               return s;
             }
@@ -383,17 +383,29 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   // The session's grid, read band by band (tile rows) for each pass over it
   // (the deviation, the files): never a whole-grid copy.
   auto session_bands = [&] {
-    return std::make_unique<TileRowBands>(
+    auto bands = std::make_unique<TileRowBands>(
         stock, report->scheme,
         [&](SurfaceGrid* band, int32_t t0, int32_t t1, bool heights_only) {
-          return Retrying<bool>("the tiles", [&]() -> absl::StatusOr<bool> {
-            absl::Status s =
-                FetchTileRows(conn, id, t0, t1, heights_only, band);
-            if (!s.ok()) return s;
-            return true;
-          }).status();
+          if (options.workpiece != nullptr) {
+            return band->SetTileRows(*options.workpiece, t0, t1, heights_only);
+          }
+          return Retrying<bool>("the tiles",
+                                [&]() -> absl::StatusOr<bool> {
+                                  absl::Status s = FetchTileRows(
+                                      conn, id, t0, t1, heights_only, band);
+                                  if (!s.ok()) return s;
+                                  return true;
+                                })
+              .status();
         },
         options.moves, options.sweeps);
+    if (options.workpiece != nullptr) {
+      bands->SetHeightsFill([&](int32_t j0, int32_t j1, double* z) {
+        ReadNodeHeights(*options.workpiece, j0, j1, z);
+        return absl::OkStatus();
+      });
+    }
+    return bands;
   };
   const auto t0 = Clock::now();
   auto stats = Retrying<pb::ErrorStats>(
@@ -432,11 +444,11 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     const design::PlacedDesign& placed = *design->placed;
     std::unique_ptr<TileRowBands> bands = session_bands();
     DeviationPicture map(stock.nx + 1, stock.ny + 1);
-    auto dev = MeasureDeviation(
-        *bands, placed.envelope(), placed.index(), design->move_lines,
-        design->deviation, [&](int32_t j0, int32_t j1, const float* v) {
-          if (files) map.AddRows(j0, j1, v);
-        });
+    auto dev = MeasureDeviation(*bands, placed.envelope(), placed.index(),
+                                design->move_lines, design->deviation,
+                                [&](int32_t j0, int32_t j1, const float* v) {
+                                  if (files) map.AddRows(j0, j1, v);
+                                });
     if (!dev.ok()) return dev.status();
     report->design = design->path;
     report->design_triangles =
@@ -528,8 +540,12 @@ std::string StatsJson(const RunReport& r) {
       {"scheme", std::string(GetScheme(r.scheme).name())},
       {"tools", tools},
       {"stock",
-       {{"x0", r.stock.x0}, {"y0", r.stock.y0}, {"x1", r.stock.x1},
-        {"y1", r.stock.y1}, {"top", r.stock.z_top}, {"nx", r.stock.nx},
+       {{"x0", r.stock.x0},
+        {"y0", r.stock.y0},
+        {"x1", r.stock.x1},
+        {"y1", r.stock.y1},
+        {"top", r.stock.z_top},
+        {"nx", r.stock.nx},
         {"ny", r.stock.ny}}},
       {"seconds",
        {{"parse", r.parse_seconds},
@@ -576,38 +592,43 @@ std::string StatsJson(const RunReport& r) {
     auto lines = [&](const std::vector<LineDeviation>& v, const char* depth) {
       Json a = Json::array();
       for (const LineDeviation& l : v) {
-        a.push_back({{"file", source(l.file)}, {"line", l.line},
-                     {depth, l.depth}, {"x", l.x}, {"y", l.y},
+        a.push_back({{"file", source(l.file)},
+                     {"line", l.line},
+                     {depth, l.depth},
+                     {"x", l.x},
+                     {"y", l.y},
                      {"area_mm2", l.area_mm2}});
       }
       return a;
     };
-    Json gouge = {{"max", d.gouge_max}, {"x", d.gouge_x}, {"y", d.gouge_y},
-                  {"file", nullptr}, {"line", nullptr},
-                  {"volume_mm3", d.gouge_volume}};
+    Json gouge = {{"max", d.gouge_max}, {"x", d.gouge_x},
+                  {"y", d.gouge_y},     {"file", nullptr},
+                  {"line", nullptr},    {"volume_mm3", d.gouge_volume}};
     if (r.gouge_source) {
       gouge["file"] = source(r.gouge_source->file);
       gouge["line"] = r.gouge_source->line;
     }
-    j["deviation"] = {
-        {"design", r.design},
-        {"triangles", r.design_triangles},
-        {"nodes", d.nodes},
-        {"samples", d.samples},
-        {"gouge", gouge},
-        {"excess",
-         {{"max", d.excess_max}, {"x", d.excess_x}, {"y", d.excess_y},
-          {"mean", d.excess_mean}, {"volume_mm3", d.excess_volume},
-          {"lines", lines(d.excess_lines, "excess_max")}}},
-        {"normal",
-         {{"gouge_max", d.normal_gouge_max},
-          {"excess_max", d.normal_excess_max}}},
-        {"allowance", d.allowance},
-        {"tolerance", d.tolerance},
-        {"out_of_tolerance",
-         {{"area_mm2", d.out_area_mm2},
-          {"lines", lines(d.gouge_lines, "gouge_max")}}},
-        {"ok", d.ok}};
+    j["deviation"] = {{"design", r.design},
+                      {"triangles", r.design_triangles},
+                      {"nodes", d.nodes},
+                      {"samples", d.samples},
+                      {"gouge", gouge},
+                      {"excess",
+                       {{"max", d.excess_max},
+                        {"x", d.excess_x},
+                        {"y", d.excess_y},
+                        {"mean", d.excess_mean},
+                        {"volume_mm3", d.excess_volume},
+                        {"lines", lines(d.excess_lines, "excess_max")}}},
+                      {"normal",
+                       {{"gouge_max", d.normal_gouge_max},
+                        {"excess_max", d.normal_excess_max}}},
+                      {"allowance", d.allowance},
+                      {"tolerance", d.tolerance},
+                      {"out_of_tolerance",
+                       {{"area_mm2", d.out_area_mm2},
+                        {"lines", lines(d.gouge_lines, "gouge_max")}}},
+                      {"ok", d.ok}};
   }
   if (!r.ignored.empty()) j["ignored"] = r.ignored;
   j["dropped_moves"] = r.dropped_moves;
@@ -637,8 +658,8 @@ std::string Summary(const RunReport& r) {
       "  time     parse %.2f s, simulate %.2f s (%s), outputs %.2f s\n"
       "  error    max %.3g mm at (%.3f, %.3f), mean %.3g mm, rms %.3g mm "
       "(%d samples)\n",
-      r.file, r.moves, GetScheme(r.scheme).name(),
-      r.stock.nx, r.stock.ny, r.server, r.parse_seconds, r.simulate_seconds,
+      r.file, r.moves, GetScheme(r.scheme).name(), r.stock.nx, r.stock.ny,
+      r.server, r.parse_seconds, r.simulate_seconds,
       Rate(r.simulate_seconds > 0 ? r.moves / r.simulate_seconds : 0),
       r.output_seconds, r.error.max_error(), r.error.max_x(), r.error.max_y(),
       r.error.mean_error(), r.error.rms_error(), r.error.samples());
@@ -653,8 +674,7 @@ std::string Summary(const RunReport& r) {
     absl::StrAppendFormat(&s,
                           "  shown    %d marks polylines (%.1f mm) at %g "
                           "degrees and %g mm or more\n",
-                          r.marks_shown->polylines,
-                          r.marks_shown->total_length,
+                          r.marks_shown->polylines, r.marks_shown->total_length,
                           r.marks_display.min_angle_deg,
                           r.marks_display.min_length);
   }
@@ -668,9 +688,10 @@ std::string Summary(const RunReport& r) {
   if (r.deviation) {
     const DeviationReport& d = *r.deviation;
     auto where = [&](const LineDeviation& l) {
-      const std::string f = l.file >= 0 && l.file < static_cast<int32_t>(r.sources.size())
-                                ? r.sources[l.file]
-                                : std::string("?");
+      const std::string f =
+          l.file >= 0 && l.file < static_cast<int32_t>(r.sources.size())
+              ? r.sources[l.file]
+              : std::string("?");
       return absl::StrFormat("%s line %d", f, l.line);
     };
     absl::StrAppendFormat(
@@ -684,9 +705,9 @@ std::string Summary(const RunReport& r) {
     const size_t shown = std::min<size_t>(5, d.gouge_lines.size());
     for (size_t k = 0; k < shown; ++k) {
       const LineDeviation& l = d.gouge_lines[k];
-      absl::StrAppendFormat(&s,
-                            "    gouge %.4g mm by %s at (%.3f, %.3f), %.4g mm2\n",
-                            l.depth, where(l), l.x, l.y, l.area_mm2);
+      absl::StrAppendFormat(
+          &s, "    gouge %.4g mm by %s at (%.3f, %.3f), %.4g mm2\n", l.depth,
+          where(l), l.x, l.y, l.area_mm2);
     }
     if (d.gouge_lines.size() > shown) {
       absl::StrAppendFormat(&s, "    ... %d more lines gouge (stats.json)\n",

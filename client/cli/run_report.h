@@ -19,6 +19,7 @@
 #include "core/cutting_marks.h"
 #include "core/scheme.h"
 #include "core/stock.h"
+#include "core/workpiece.h"
 #include "design/design_mesh.h"
 #include "design/placed_design.h"
 
@@ -55,8 +56,8 @@ struct RunReport {
   std::optional<DeviationReport> deviation;
   std::optional<SourceLine> gouge_source;  // the deepest gouge's line
   std::vector<std::string> sources;  // the program files, SourceLine::file
-  bool tolerance_gate = false;  // --tolerance given: exit 3 when not ok
-  std::vector<std::string> files;  // written, in order
+  bool tolerance_gate = false;       // --tolerance given: exit 3 when not ok
+  std::vector<std::string> files;    // written, in order
   // Each output step and its wall time (s), in order: the error statistics,
   // the marks and the tiles fetched, then every file built and written.
   std::vector<std::pair<std::string, double>> output_steps;
@@ -83,8 +84,8 @@ struct DesignInput {
 // The design flags (documented in `swarf run`'s usage); nullopt without
 // --design. InvalidArgument naming the flag.
 inline constexpr const char* kDesignFlags[] = {
-    "design", "design-units", "design-offset", "allowance", "tolerance",
-    "deviation-samples"};
+    "design",    "design-units", "design-offset",
+    "allowance", "tolerance",    "deviation-samples"};
 absl::StatusOr<std::optional<DesignInput>> ParseDesignFlags(const Args& args);
 
 // Reads the design (NotFound / InvalidArgument / ResourceExhausted naming
@@ -102,8 +103,8 @@ absl::Status UploadDesign(Connection& conn, const std::string& id,
 inline constexpr int kDefaultPictureSize = 4096;
 
 struct OutputOptions {
-  std::string dir;    // empty: no files, statistics only
-  int subdivide = 1;  // STL: sub-elements per element side
+  std::string dir;                // empty: no files, statistics only
+  int subdivide = 1;              // STL: sub-elements per element side
   double mesh_tolerance = 0.005;  // mm; 0: the full lattice
   MarkDisplayFilter marks_display = kDefaultMarkDisplay;
   // Pixels along the pictures' longer side at most (--picture-size).
@@ -113,6 +114,11 @@ struct OutputOptions {
   // Their sweeps already indexed over the stock (the embedded session's
   // own, pinned); null: indexed here where the scheme needs them.
   std::shared_ptr<const MoveSweeps> sweeps;
+  // The embedded session's workpiece, pinned (Session::Pin): the passes
+  // over the grid read its tiles straight from it, on its threads, instead
+  // of through GetTiles (the same doubles, not serialized and parsed on
+  // one thread). Null: GetTiles.
+  std::shared_ptr<const Workpiece> workpiece;
   // The design to compare with (LoadDesign done); not owned, may be null.
   const DesignInput* design = nullptr;
 };

@@ -4,6 +4,7 @@
 #include <utility>
 
 #include "absl/strings/str_format.h"
+#include "core/thread_pool.h"
 #include "core/workpiece.h"
 
 namespace swarf::cli {
@@ -22,20 +23,47 @@ absl::Status InMemoryBands::ForEach(const BandVisitor& visit) {
     band->ResetBand(e0, e1 - e0 + 1);
     std::copy_n(grid_.jets.begin() + grid_.Index(0, e0), band->jets.size(),
                 band->jets.begin());
-    std::copy_n(grid_.owners.begin() + grid_.Index(0, e0),
-                band->owners.size(), band->owners.begin());
+    std::copy_n(grid_.owners.begin() + grid_.Index(0, e0), band->owners.size(),
+                band->owners.begin());
     (void)nx;
     if (absl::Status st = visit(*band, e0, e1); !st.ok()) return st;
   }
   return absl::OkStatus();
 }
 
-absl::Status InMemoryBands::ReadRows(int32_t j0, int32_t j1,
-                                     SurfaceGrid* band, bool) {
-  if (j0 < 0 || j1 < j0 || j1 > grid_.spec.ny) {
+absl::Status GridBands::ReadHeights(int32_t j0, int32_t j1,
+                                    SurfaceGrid* scratch, double* z) {
+  if (absl::Status st = ReadRows(j0, j1, scratch, /*heights_only=*/true);
+      !st.ok()) {
+    return st;
+  }
+  const int32_t nx = scratch->nodes_x();
+  const double z_top = scratch->spec.z_top;
+  ThreadPool::Default().ParallelFor(j1 - j0 + 1, [&](int64_t r) {
+    const int32_t j = j0 + static_cast<int32_t>(r);
+    for (int32_t i = 0; i < nx; ++i) {
+      z[r * nx + i] = std::min(scratch->jet(i, j).w, z_top);
+    }
+  });
+  return absl::OkStatus();
+}
+
+absl::Status TileRowBands::ReadHeights(int32_t j0, int32_t j1,
+                                       SurfaceGrid* scratch, double* z) {
+  if (heights_ == nullptr) return GridBands::ReadHeights(j0, j1, scratch, z);
+  if (j0 < 0 || j1 < j0 || j1 > spec_.ny) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "node rows [%d, %d] leave the grid's %d rows", j0, j1,
-        grid_.spec.ny + 1));
+        "node rows [%d, %d] leave the grid's %d rows", j0, j1, spec_.ny + 1));
+  }
+  return heights_(j0, j1, z);
+}
+
+absl::Status InMemoryBands::ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
+                                     bool) {
+  if (j0 < 0 || j1 < j0 || j1 > grid_.spec.ny) {
+    return absl::InvalidArgumentError(
+        absl::StrFormat("node rows [%d, %d] leave the grid's %d rows", j0, j1,
+                        grid_.spec.ny + 1));
   }
   band->ResetBand(j0, j1 - j0 + 1);
   std::copy_n(grid_.jets.begin() + grid_.Index(0, j0), band->jets.size(),
@@ -45,8 +73,8 @@ absl::Status InMemoryBands::ReadRows(int32_t j0, int32_t j1,
   return absl::OkStatus();
 }
 
-absl::Status TileRowBands::ReadRows(int32_t j0, int32_t j1,
-                                    SurfaceGrid* band, bool heights_only) {
+absl::Status TileRowBands::ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
+                                    bool heights_only) {
   if (j0 < 0 || j1 < j0 || j1 > spec_.ny) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "node rows [%d, %d] leave the grid's %d rows", j0, j1, spec_.ny + 1));
@@ -55,15 +83,13 @@ absl::Status TileRowBands::ReadRows(int32_t j0, int32_t j1,
   return fill_(band, j0 / kTileSize, j1 / kTileSize + 1, heights_only);
 }
 
-TileRowBands::TileRowBands(const StockSpec& spec, SchemeKind scheme,
-                           Fill fill,
+TileRowBands::TileRowBands(const StockSpec& spec, SchemeKind scheme, Fill fill,
                            std::shared_ptr<const MoveSource> moves,
                            int64_t max_band_nodes)
     : TileRowBands(spec, scheme, std::move(fill), std::move(moves), nullptr,
                    max_band_nodes) {}
 
-TileRowBands::TileRowBands(const StockSpec& spec, SchemeKind scheme,
-                           Fill fill,
+TileRowBands::TileRowBands(const StockSpec& spec, SchemeKind scheme, Fill fill,
                            std::shared_ptr<const MoveSource> moves,
                            std::shared_ptr<const MoveSweeps> sweeps,
                            int64_t max_band_nodes)
@@ -86,8 +112,8 @@ absl::Status TileRowBands::ForEach(const BandVisitor& visit) {
   const int32_t ny = spec_.ny, nodes_x = spec_.nx + 1;
   const int32_t tiles_y = (ny + 1 + kTileSize - 1) / kTileSize;
   const int64_t tile_row_nodes = int64_t{kTileSize} * nodes_x;
-  const int32_t per_band = static_cast<int32_t>(std::clamp<int64_t>(
-      max_band_nodes_ / tile_row_nodes, 1, tiles_y));
+  const int32_t per_band = static_cast<int32_t>(
+      std::clamp<int64_t>(max_band_nodes_ / tile_row_nodes, 1, tiles_y));
   std::vector<SurfaceJet> carry_jets;
   std::vector<int32_t> carry_owners;
   int32_t e0 = 0;
@@ -101,8 +127,7 @@ absl::Status TileRowBands::ForEach(const BandVisitor& visit) {
     band.ResetBand(first, last - first + 1);
     if (t0 > 0) {
       std::copy(carry_jets.begin(), carry_jets.end(), band.jets.begin());
-      std::copy(carry_owners.begin(), carry_owners.end(),
-                band.owners.begin());
+      std::copy(carry_owners.begin(), carry_owners.end(), band.owners.begin());
     }
     status = fill_(&band, t0, t1, /*heights_only=*/false);
     if (!status.ok()) break;
@@ -110,14 +135,13 @@ absl::Status TileRowBands::ForEach(const BandVisitor& visit) {
     if (e1 > e0) status = visit(band, e0, e1);
     e0 = e1;
     const int64_t at = band.Index(0, last);
-    carry_jets.assign(band.jets.begin() + at,
-                      band.jets.begin() + at + nodes_x);
+    carry_jets.assign(band.jets.begin() + at, band.jets.begin() + at + nodes_x);
     carry_owners.assign(band.owners.begin() + at,
                         band.owners.begin() + at + nodes_x);
   }
   if (status.ok() && e0 != ny) {
-    return absl::InternalError(absl::StrFormat(
-        "the bands ended at element row %d of %d", e0, ny));
+    return absl::InternalError(
+        absl::StrFormat("the bands ended at element row %d of %d", e0, ny));
   }
   return status;
 }

@@ -42,6 +42,13 @@ class GridBands {
   // derivatives and owners may be left out (zero, -1).
   virtual absl::Status ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
                                 bool heights_only = false) = 0;
+  // The heights of node rows [j0, j1], each min(w, the stock top),
+  // row-major (nx + 1 a row) into z: ReadRows(j0, j1, band, true)'s
+  // heights, bit for bit. This reads them through `scratch` (a band of
+  // this grid, left holding anything); sources that can read the heights
+  // alone (8 bytes a node, not a band's 52) do so.
+  virtual absl::Status ReadHeights(int32_t j0, int32_t j1, SurfaceGrid* scratch,
+                                   double* z);
 };
 
 // An in-memory whole grid: one band (band_rows 0), or bands of `band_rows`
@@ -89,6 +96,13 @@ class TileRowBands : public GridBands {
   // The tile rows over [j0, j1], filled.
   absl::Status ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
                         bool heights_only = false) override;
+  // Heights read by `heights(j0, j1, z)` where set (SetHeightsFill), which
+  // must write what ReadHeights' contract says; else through a band.
+  using HeightsFill =
+      std::function<absl::Status(int32_t j0, int32_t j1, double* z)>;
+  void SetHeightsFill(HeightsFill heights) { heights_ = std::move(heights); }
+  absl::Status ReadHeights(int32_t j0, int32_t j1, SurfaceGrid* scratch,
+                           double* z) override;
 
  private:
   StockSpec spec_;
@@ -97,6 +111,7 @@ class TileRowBands : public GridBands {
   std::shared_ptr<const MoveSource> moves_;
   std::shared_ptr<const MoveSweeps> sweeps_;  // null: the band indexes them
   int64_t max_band_nodes_;
+  HeightsFill heights_;
 };
 
 }  // namespace swarf::cli

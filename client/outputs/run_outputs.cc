@@ -1,12 +1,12 @@
 #include "client/outputs/run_outputs.h"
 
-#include <chrono>
-#include <cmath>
-#include <memory>
-#include <functional>
-#include <future>
 #include <algorithm>
 #include <array>
+#include <chrono>
+#include <cmath>
+#include <functional>
+#include <future>
+#include <memory>
 #include <optional>
 #include <utility>
 
@@ -14,6 +14,7 @@
 #include "absl/strings/str_format.h"
 #include "client/outputs/marks_files.h"
 #include "client/outputs/png_image.h"
+#include "core/thread_pool.h"
 #include "core/workpiece.h"
 
 namespace swarf::cli {
@@ -81,22 +82,15 @@ class GridRows : public LatticeWindows {
     const int32_t nx = band_.nodes_x();
     const int32_t j0 = static_cast<int32_t>(t * kTileSize);
     const int32_t j1 = std::min(band_.spec.ny, j0 + kTileSize - 1);
-    if (absl::Status st = grid_.ReadRows(j0, j1, &band_,
-                                         /*heights_only=*/true);
+    auto& [held, z] = held_[next_];
+    next_ = (next_ + 1) % held_.size();
+    held = -1;
+    z.resize(static_cast<size_t>(j1 - j0 + 1) * nx);
+    if (absl::Status st = grid_.ReadHeights(j0, j1, &band_, z.data());
         !st.ok()) {
       return st;
     }
-    auto& [held, z] = held_[next_];
-    next_ = (next_ + 1) % held_.size();
     held = t;
-    z.resize(static_cast<size_t>(j1 - j0 + 1) * nx);
-    const double z_top = band_.spec.z_top;
-    for (int32_t j = j0; j <= j1; ++j) {
-      for (int32_t i = 0; i < nx; ++i) {
-        z[static_cast<size_t>(j - j0) * nx + i] =
-            std::min(band_.jet(i, j).w, z_top);
-      }
-    }
     return &z;
   }
 
@@ -134,8 +128,8 @@ absl::StatusOr<std::vector<WrittenFile>> WriteAll(
   const std::string base = dir.empty() || dir.back() == '/' ? dir : dir + "/";
   const StockSpec spec = grid.spec();
   if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
-  if (absl::Status st = CheckPictureSides(options.relief.min_side,
-                                          options.relief.max_side);
+  if (absl::Status st =
+          CheckPictureSides(options.relief.min_side, options.relief.max_side);
       !st.ok()) {
     return st;
   }
@@ -170,8 +164,8 @@ absl::StatusOr<std::vector<WrittenFile>> WriteAll(
   }
   double relief_s = 0, marks_relief_s = 0, lattice_s = 0;
   const auto pass0 = Clock::now();
-  absl::Status pass = grid.ForEach(
-      [&](const SurfaceGrid& band, int32_t e0, int32_t e1) {
+  absl::Status pass =
+      grid.ForEach([&](const SurfaceGrid& band, int32_t e0, int32_t e1) {
         auto t = Clock::now();
         relief->AddBand(band, e0, e1);
         relief_s += Since(t);
@@ -212,14 +206,18 @@ absl::StatusOr<std::vector<WrittenFile>> WriteAll(
       const double z_bottom = options.mesh.z_bottom
                                   ? *options.mesh.z_bottom
                                   : DefaultZBottom(spec, z_min);
-      c.Then("surface.stl", [&](const std::string& path) {
-        if (!std::isfinite(z_bottom) || !(z_bottom < z_min)) {
-          return absl::InvalidArgumentError(absl::StrFormat(
-              "z_bottom %g must be finite and below the lowest top vertex %g",
-              z_bottom, z_min));
-        }
-        return WriteLatticeStl(*source, l, z_bottom, path);
-      }, lattice_s);
+      c.Then(
+          "surface.stl",
+          [&](const std::string& path) {
+            if (!std::isfinite(z_bottom) || !(z_bottom < z_min)) {
+              return absl::InvalidArgumentError(
+                  absl::StrFormat("z_bottom %g must be finite and below the "
+                                  "lowest top vertex %g",
+                                  z_bottom, z_min));
+            }
+            return WriteLatticeStl(*source, l, z_bottom, path);
+          },
+          lattice_s);
       c.Then("surface.wrl", [&](const std::string& path) {
         return WriteLatticeVrml(*source, l, z_bottom, spec.z_top,
                                 options.vrml_colors, path);
@@ -232,16 +230,19 @@ absl::StatusOr<std::vector<WrittenFile>> WriteAll(
       return c;
     }
     absl::StatusOr<TriangleMesh> mesh;
-    c.Then("surface.stl", [&](const std::string& path) {
-      mesh = MeshFromLattice(*std::move(lattice), spec, options.mesh,
-                             rows ? &*rows : nullptr);
-      if (!mesh.ok()) return mesh.status();
-      return WriteStl(*mesh, path);
-    }, lattice_s);
+    c.Then(
+        "surface.stl",
+        [&](const std::string& path) {
+          mesh = MeshFromLattice(*std::move(lattice), spec, options.mesh,
+                                 rows ? &*rows : nullptr);
+          if (!mesh.ok()) return mesh.status();
+          return WriteStl(*mesh, path);
+        },
+        lattice_s);
     c.Then("surface.wrl", [&](const std::string& path) {
-      const std::vector<Rgb> colors =
-          options.vrml_colors ? SurfaceColors(*mesh, spec.z_top)
-                              : std::vector<Rgb>();
+      const std::vector<Rgb> colors = options.vrml_colors
+                                          ? SurfaceColors(*mesh, spec.z_top)
+                                          : std::vector<Rgb>();
       return WriteVrml(*mesh, path, colors);
     });
     if (c.status().ok() && summary != nullptr) {
@@ -267,15 +268,18 @@ absl::StatusOr<std::vector<WrittenFile>> WriteAll(
   }
 
   Chain pictures(base);
-  pictures.Then("relief.png", [&](const std::string& path) {
-    // Row by row: the RGB picture is never held.
-    absl::Status st = WritePngRows(
-        relief->frame().width, relief->frame().height,
-        [&](int y, uint8_t* out) { relief->ColorRow(y, out); }, path);
-    // Sampled again at another size, or no marks: not needed any more.
-    if (!marks || marks_relief) relief.reset();
-    return st;
-  }, relief_s);
+  pictures.Then(
+      "relief.png",
+      [&](const std::string& path) {
+        // Row by row: the RGB picture is never held.
+        absl::Status st = WritePngRows(
+            relief->frame().width, relief->frame().height,
+            [&](int y, uint8_t* out) { relief->ColorRow(y, out); }, path);
+        // Sampled again at another size, or no marks: not needed any more.
+        if (!marks || marks_relief) relief.reset();
+        return st;
+      },
+      relief_s);
   if (error != nullptr) {
     pictures.Then("error.png", [&](const std::string& path) {
       absl::StatusOr<Image> map = RenderErrorMap(*error, options.error);
@@ -284,15 +288,18 @@ absl::StatusOr<std::vector<WrittenFile>> WriteAll(
     });
   }
   if (marks) {
-    pictures.Then("marks.png", [&](const std::string& path) {
-      // The relief already sampled serves when the frames agree.
-      absl::StatusOr<Image> picture = DrawMarks(
-          marks_relief ? *marks_relief : *relief, *marks, options.marks);
-      marks_relief.reset();
-      relief.reset();
-      if (!picture.ok()) return picture.status();
-      return WritePng(*picture, path);
-    }, marks_relief_s);
+    pictures.Then(
+        "marks.png",
+        [&](const std::string& path) {
+          // The relief already sampled serves when the frames agree.
+          absl::StatusOr<Image> picture = DrawMarks(
+              marks_relief ? *marks_relief : *relief, *marks, options.marks);
+          marks_relief.reset();
+          relief.reset();
+          if (!picture.ok()) return picture.status();
+          return WritePng(*picture, path);
+        },
+        marks_relief_s);
   }
 
   std::vector<Chain> chains;

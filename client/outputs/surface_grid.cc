@@ -15,8 +15,7 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::Uncut(const StockSpec& spec,
   const int64_t n = (int64_t{spec.nx} + 1) * (int64_t{spec.ny} + 1);
   if (n > kMaxGridNodes) {
     return absl::InvalidArgumentError(absl::StrFormat(
-        "grid of %d nodes exceeds the writers' limit of %d", n,
-        kMaxGridNodes));
+        "grid of %d nodes exceeds the writers' limit of %d", n, kMaxGridNodes));
   }
   SurfaceGrid g;
   g.spec = spec;
@@ -50,8 +49,17 @@ void SurfaceGrid::ResetBand(int32_t first, int32_t rows) {
   const size_t n = static_cast<size_t>(nodes_x()) * rows;
   SurfaceJet top;
   top.w = spec.z_top;
-  jets.assign(n, top);
-  owners.assign(n, -1);
+  // A tile row of a wide grid is tens of MB (52 bytes a node): filled on
+  // every thread, as the rows read into it are.
+  jets.resize(n);
+  owners.resize(n);
+  constexpr size_t kPiece = size_t{1} << 16;
+  ThreadPool::Default().ParallelFor(
+      static_cast<int64_t>((n + kPiece - 1) / kPiece), [&](int64_t p) {
+        const size_t a = p * kPiece, b = std::min(n, a + kPiece);
+        std::fill(jets.begin() + a, jets.begin() + b, top);
+        std::fill(owners.begin() + a, owners.begin() + b, -1);
+      });
 }
 
 absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
@@ -66,12 +74,6 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
 
 absl::Status SurfaceGrid::SetTileRows(const Workpiece& wp, int32_t t0,
                                       int32_t t1, bool heights_only) {
-  std::vector<double> w(kTileNodes);
-  std::vector<float> dbuf(heights_only ? 0 : 5 * kTileNodes);
-  std::vector<int32_t> owner(heights_only ? 0 : kTileNodes);
-  float* const d[5] = {
-      dbuf.data(), dbuf.data() + kTileNodes, dbuf.data() + 2 * kTileNodes,
-      dbuf.data() + 3 * kTileNodes, dbuf.data() + 4 * kTileNodes};
   // Unallocated tiles are untouched stock, which the grid already holds.
   std::vector<int32_t> tiles;
   t0 = std::max(t0, 0);
@@ -79,26 +81,69 @@ absl::Status SurfaceGrid::SetTileRows(const Workpiece& wp, int32_t t0,
   for (int32_t t = t0 * wp.tiles_x(); t < t1 * wp.tiles_x(); ++t) {
     if (wp.TileAllocated(t)) tiles.push_back(t);
   }
-  // A chunk's derivatives on the workpiece's threads, then its reads.
+  // A chunk's derivatives on the workpiece's threads, then its reads, also
+  // on its threads: a buffer a tile of the chunk (a row of a wide grid
+  // read on one thread was most of the adaptive mesh's time), and the
+  // tiles' nodes are disjoint, so each is set where it was read.
   constexpr size_t kChunk = 64;
   static_assert(kChunk <= Workpiece::kJetCacheTiles);
+  const size_t chunk_max = std::min(kChunk, tiles.size());
+  std::vector<double> w(chunk_max * kTileNodes);
+  std::vector<float> dbuf(heights_only ? 0 : 5 * chunk_max * kTileNodes);
+  std::vector<int32_t> owner(heights_only ? 0 : chunk_max * kTileNodes);
+  std::vector<absl::Status> status(chunk_max);
   for (size_t c = 0; c < tiles.size(); c += kChunk) {
-    const std::span<const int32_t> chunk(
-        tiles.data() + c, std::min(kChunk, tiles.size() - c));
+    const std::span<const int32_t> chunk(tiles.data() + c,
+                                         std::min(kChunk, tiles.size() - c));
     if (!heights_only) wp.PrepareJets(chunk);
-    for (const int32_t t : chunk) {
+    wp.pool().ParallelFor(static_cast<int64_t>(chunk.size()), [&](int64_t k) {
+      const int32_t t = chunk[k];
       const Workpiece::TileExtent e = wp.Extent(t);
-      wp.ReadTile(t, w.data(), heights_only ? nullptr : d,
-                  heights_only ? nullptr : owner.data());
-      if (absl::Status st = SetNodes(e.i0, e.j0, e.nx, e.ny, w.data(),
-                                     heights_only ? nullptr : d,
-                                     heights_only ? nullptr : owner.data());
-          !st.ok()) {
-        return st;
+      double* const tw = w.data() + k * kTileNodes;
+      float* d[5] = {};
+      int32_t* to = nullptr;
+      if (!heights_only) {
+        for (int q = 0; q < 5; ++q) {
+          d[q] = dbuf.data() + (5 * k + q) * kTileNodes;
+        }
+        to = owner.data() + k * kTileNodes;
       }
+      wp.ReadTile(t, tw, heights_only ? nullptr : d, to);
+      status[k] =
+          SetNodes(e.i0, e.j0, e.nx, e.ny, tw, heights_only ? nullptr : d, to);
+    });
+    for (size_t k = 0; k < chunk.size(); ++k) {
+      if (!status[k].ok()) return status[k];
     }
   }
   return absl::OkStatus();
+}
+
+void ReadNodeHeights(const Workpiece& wp, int32_t j0, int32_t j1, double* z) {
+  const int32_t nx = wp.grid().nodes_x();
+  const double z_top = wp.spec().z_top;
+  const int32_t ty0 = j0 / kTileSize, ty1 = j1 / kTileSize;
+  const int32_t tiles_x = wp.tiles_x();
+  wp.pool().ParallelFor(int64_t{ty1 - ty0 + 1} * tiles_x, [&](int64_t k) {
+    const int32_t t = (ty0 + static_cast<int32_t>(k / tiles_x)) * tiles_x +
+                      static_cast<int32_t>(k % tiles_x);
+    const Workpiece::TileExtent e = wp.Extent(t);
+    const int32_t ja = std::max(j0, e.j0);
+    const int32_t jb = std::min(j1, e.j0 + e.ny - 1);
+    if (!wp.TileAllocated(t)) {  // untouched stock
+      for (int32_t j = ja; j <= jb; ++j) {
+        std::fill_n(z + int64_t{j - j0} * nx + e.i0, e.nx, z_top);
+      }
+      return;
+    }
+    double w[kTileNodes];
+    wp.ReadTile(t, w, nullptr, nullptr);
+    for (int32_t j = ja; j <= jb; ++j) {
+      double* row = z + int64_t{j - j0} * nx + e.i0;
+      const double* in = w + int64_t{j - e.j0} * e.nx;
+      for (int32_t i = 0; i < e.nx; ++i) row[i] = std::min(in[i], z_top);
+    }
+  });
 }
 
 void SurfaceGrid::SetMoves(std::shared_ptr<const MoveSource> list) {
@@ -131,8 +176,8 @@ absl::Status SurfaceGrid::SetNodes(int32_t i0, int32_t j0, int32_t nx,
                                    int32_t ny, const double* w,
                                    const float* const d[5],
                                    const int32_t* owner) {
-  if (i0 < 0 || j0 < 0 || nx < 0 || ny < 0 ||
-      int64_t{i0} + nx > nodes_x() || int64_t{j0} + ny > nodes_y()) {
+  if (i0 < 0 || j0 < 0 || nx < 0 || ny < 0 || int64_t{i0} + nx > nodes_x() ||
+      int64_t{j0} + ny > nodes_y()) {
     return absl::InvalidArgumentError(absl::StrFormat(
         "node block at (%d, %d) of %d x %d nodes leaves the %d x %d grid", i0,
         j0, nx, ny, nodes_x(), nodes_y()));
@@ -211,8 +256,8 @@ double SurfaceGrid::Height(double x, double y) const {
   const GridGeometry g(spec);
   x = std::clamp(x, spec.x0, spec.x1);
   y = std::clamp(y, spec.y0, spec.y1);
-  return GetScheme(scheme).Reconstruct(Corners(g.ElementX(x), g.ElementY(y)),
-                                       x, y);
+  return GetScheme(scheme).Reconstruct(Corners(g.ElementX(x), g.ElementY(y)), x,
+                                       y);
 }
 
 void SurfaceGrid::Gradient(double x, double y, double* gx, double* gy) const {

@@ -101,7 +101,9 @@ struct SurfaceGrid {
   int64_t Index(int32_t i, int32_t j) const {
     return int64_t{j - row0} * nodes_x() + i;
   }
-  const SurfaceJet& jet(int32_t i, int32_t j) const { return jets[Index(i, j)]; }
+  const SurfaceJet& jet(int32_t i, int32_t j) const {
+    return jets[Index(i, j)];
+  }
   int32_t owner(int32_t i, int32_t j) const { return owners[Index(i, j)]; }
 
   // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny; prepared
@@ -118,6 +120,12 @@ struct SurfaceGrid {
   // Lowest node height held (z_top if uncut).
   double MinNodeHeight() const;
 };
+
+// The node heights of rows [j0, j1] of wp's grid, each min(w, the stock
+// top), row-major (nx + 1 a row) into z: what SetTileRows(wp, ...,
+// heights_only) and min(jet(i, j).w, spec.z_top) give, bit for bit, without
+// a band (8 bytes a node, not 52). The tiles are read on wp's threads.
+void ReadNodeHeights(const Workpiece& wp, int32_t j0, int32_t j1, double* z);
 
 // Reconstructs a grid at many points for one thread, as
 // SurfaceGrid::HeightAndGradient does bit for bit, keeping what neighbouring
