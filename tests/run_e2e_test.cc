@@ -4,21 +4,22 @@
 // absent, failed instead with SWARF_REQUIRE_SHARED: tests/shared_files.h):
 // they run unmodified, the machined heights stay within the stock, and the
 // pictures and the mesh read back valid (the STL watertight).
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
-#include <sstream>
 #include <map>
+#include <sstream>
 #include <string>
 #include <tuple>
 #include <vector>
 
-#include <unistd.h>
-
 #include "client/cli/commands.h"
+#include "client/cli/run_report.h"
 #include "client/outputs/png_image.h"
 #include "gcode/toolpath.h"
 #include "google/protobuf/struct.pb.h"
@@ -81,14 +82,18 @@ struct Job {
 
 void PrintTo(const Job& job, std::ostream* os) { *os << job.File(); }
 
-const Job kPocket{"pocket.nc", false,
+const Job kPocket{"pocket.nc",
+                  false,
                   {"--tool", "T1=flat:d=6", "--tool", "T2=flat:d=3", "--tool",
                    "T3=flat:d=1", "--stock", "0,0,100,80,0"},
                   false};
-const Job kVcarve{"vcarve.nc", false,
+const Job kVcarve{"vcarve.nc",
+                  false,
                   {"--tool", "vbit:d=6,angle=60", "--stock", "0,0,80,80,0"}};
-const Job kRelief{"relief.nc", false,
-                  {"--tool", "ball:d=2", "--stock", "0,0,60,60,0"}, true,
+const Job kRelief{"relief.nc",
+                  false,
+                  {"--tool", "ball:d=2", "--stock", "0,0,60,60,0"},
+                  true,
                   "0.2"};
 
 std::string JobTestName(const ::testing::TestParamInfo<Job>& info) {
@@ -108,8 +113,8 @@ TEST_P(RunE2eTest, JobRunsAndItsOutputsAreValid) {
        ("swarf-e2e-" + std::string(name) + "-" + std::to_string(::getpid())))
           .string();
   std::filesystem::remove_all(out);
-  std::vector<std::string> argv = {file, "--spacing", job.spacing, "--out",
-                                   out,  "--quiet"};
+  std::vector<std::string> argv = {file,    "--spacing", job.spacing,
+                                   "--out", out,         "--quiet"};
   argv.insert(argv.end(), job.args.begin(), job.args.end());
   ASSERT_EQ(RunCommand(argv), 0);
 
@@ -139,8 +144,12 @@ TEST_P(RunE2eTest, JobRunsAndItsOutputsAreValid) {
   EXPECT_LE(mesh.at("max_deviation").number_value(), 0.005);
   EXPECT_LT(mesh.at("triangles").number_value(),
             mesh.at("full_triangles").number_value());
-  const auto& steps = f.at("seconds").struct_value().fields().at(
-      "output_steps").struct_value().fields();
+  const auto& steps = f.at("seconds")
+                          .struct_value()
+                          .fields()
+                          .at("output_steps")
+                          .struct_value()
+                          .fields();
   for (const char* step : {"error_stats", "marks", "tiles", "relief.png",
                            "surface.stl", "surface.wrl"}) {
     EXPECT_GE(steps.at(step).number_value(), 0) << step;
@@ -219,6 +228,22 @@ std::string ReadFile(const std::string& path) {
 // points, indexed again.
 class RunE2eMarksTest : public ::testing::TestWithParam<Job> {};
 
+// swarf run asks for the marks streamed at once past 16 Mi nodes (4 bytes
+// a node against the 64 MiB message): cameo.nc at 0.05 mm (11.7 M nodes,
+// whose 1.5 M vertices fit one message) asks for one message first, the
+// 300 mm plate at 0.05 mm (36 M nodes, over the limit after 29 of its 47
+// windows) streamed.
+TEST(RunMarksRequestTest, LargeGridsAskForTheMarksStreamed) {
+  auto stock = [](int32_t nx, int32_t ny) {
+    return StockSpec{0, 0, 1, 1, 0, nx, ny};
+  };
+  EXPECT_TRUE(cli::MarksFitOneMessage(stock(3064, 3804)));
+  EXPECT_FALSE(cli::MarksFitOneMessage(stock(6000, 6000)));
+  EXPECT_FALSE(cli::MarksFitOneMessage(stock(20000, 20000)));
+  EXPECT_TRUE(cli::MarksFitOneMessage(stock(4095, 4095)));   // 16 Mi nodes
+  EXPECT_FALSE(cli::MarksFitOneMessage(stock(4095, 4096)));  // a row more
+}
+
 TEST_P(RunE2eMarksTest, OneMessageOrOnePerPolylineGiveTheSameMarks) {
   const Job& job = GetParam();
   const std::string file = job.File();
@@ -244,7 +269,8 @@ TEST_P(RunE2eMarksTest, OneMessageOrOnePerPolylineGiveTheSameMarks) {
   a = args;
   a.insert(a.end(), {"--out", embedded});
   ASSERT_EQ(RunCommand(a), 0);
-  const google::protobuf::Struct remote_stats = ReadJson(remote + "/stats.json");
+  const google::protobuf::Struct remote_stats =
+      ReadJson(remote + "/stats.json");
   const google::protobuf::Struct embedded_stats =
       ReadJson(embedded + "/stats.json");
   const auto& m = remote_stats.fields().at("marks").struct_value().fields();
@@ -301,12 +327,13 @@ class Surface {
 };
 
 Stl RunToStl(const Job& job, const std::string& tag) {
-  const std::string out = (std::filesystem::temp_directory_path() /
-                           ("swarf-e2e-" + tag + "-" + std::to_string(::getpid())))
-                              .string();
+  const std::string out =
+      (std::filesystem::temp_directory_path() /
+       ("swarf-e2e-" + tag + "-" + std::to_string(::getpid())))
+          .string();
   std::filesystem::remove_all(out);
-  std::vector<std::string> argv = {job.File(), "--spacing", "0.25", "--out",
-                                   out,        "--quiet"};
+  std::vector<std::string> argv = {job.File(), "--spacing", "0.25",
+                                   "--out",    out,         "--quiet"};
   argv.insert(argv.end(), job.args.begin(), job.args.end());
   EXPECT_EQ(RunCommand(argv), 0);
   Stl stl = ReadStl(out + "/surface.stl");
@@ -320,14 +347,20 @@ TEST(GeneratedJobsTest, PocketFloorsAtTheirProgrammedDepths) {
   const Surface s(stl);
   const double tol = 0.006;  // the mesh's 0.005 mm, and float coordinates
   // T1's round pocket (r 22 at (30, 40)): z = -6 to its wall.
-  for (auto [x, y] : {std::pair{30.0, 40.0}, {45.0, 40.0}, {30.0, 22.0},
-                      {51.0, 40.0}, {20.0, 55.0}}) {
+  for (auto [x, y] : {std::pair{30.0, 40.0},
+                      {45.0, 40.0},
+                      {30.0, 22.0},
+                      {51.0, 40.0},
+                      {20.0, 55.0}}) {
     EXPECT_NEAR(s.At(x, y), -6, tol) << x << ", " << y;
   }
   // T2's rounded rectangle (x 60..92, y 10..70, corners r 4): z = -4, in a
   // corner too; just outside the corner's arc the top.
-  for (auto [x, y] : {std::pair{76.0, 40.0}, {61.0, 40.0}, {90.5, 68.5},
-                      {61.5, 11.5}, {90.0, 12.0}}) {
+  for (auto [x, y] : {std::pair{76.0, 40.0},
+                      {61.0, 40.0},
+                      {90.5, 68.5},
+                      {61.5, 11.5},
+                      {90.0, 12.0}}) {
     EXPECT_NEAR(s.At(x, y), -4, tol) << x << ", " << y;
   }
   EXPECT_NEAR(s.At(60.5, 10.5), 0, tol);
@@ -337,8 +370,8 @@ TEST(GeneratedJobsTest, PocketFloorsAtTheirProgrammedDepths) {
   EXPECT_NEAR(s.At(30, 15), -0.5, tol);
   EXPECT_NEAR(s.At(50, 75), -0.5, tol);
   // Untouched stock.
-  for (auto [x, y] : {std::pair{2.0, 2.0}, {95.0, 5.0}, {57.5, 40.0},
-                      {30.0, 10.0}}) {
+  for (auto [x, y] :
+       {std::pair{2.0, 2.0}, {95.0, 5.0}, {57.5, 40.0}, {30.0, 10.0}}) {
     EXPECT_NEAR(s.At(x, y), 0, tol) << x << ", " << y;
   }
 }
@@ -352,10 +385,9 @@ TEST(GeneratedJobsTest, PocketProjectIsTheJobWithItsTools) {
                                     "--json", "--quiet"};
   flags.insert(flags.end(), kPocket.args.begin(), kPocket.args.end());
   const google::protobuf::Struct a = RunJson(flags);
-  const google::protobuf::Struct b =
-      RunJson({"--project",
-               std::string(SWARF_EXAMPLES_DIR) + "/pocket.camotics",
-               "--spacing", "0.5", "--json", "--quiet"});
+  const google::protobuf::Struct b = RunJson(
+      {"--project", std::string(SWARF_EXAMPLES_DIR) + "/pocket.camotics",
+       "--spacing", "0.5", "--json", "--quiet"});
   for (const char* k : {"moves", "tools", "stock", "error"}) {
     EXPECT_TRUE(google::protobuf::util::MessageDifferencer::Equals(
         a.fields().at(k), b.fields().at(k)))
@@ -449,8 +481,9 @@ TEST(RunE2eNeverSilentTest, DroppedMovesCutsOutsideAndErrors) {
   EXPECT_NE(err.str().find("swarf run: " + prog + ": dropped 2 feed moves"),
             std::string::npos)
       << err.str();
-  EXPECT_NE(err.str().find("swarf run: " + bad + ": line 2: division by zero\n"),
-            std::string::npos)
+  EXPECT_NE(
+      err.str().find("swarf run: " + bad + ": line 2: division by zero\n"),
+      std::string::npos)
       << err.str();
   EXPECT_EQ(err.str().find(bad + ": " + bad), std::string::npos) << err.str();
   std::filesystem::remove_all(dir);
@@ -499,12 +532,14 @@ class RunProjectTest : public ::testing::Test {
       "tools": {
         "1": {"units": "metric", "shape": "ballnose", "length": 10,
               "diameter": 2},
-        "2": {"units": "imperial", "shape": ")" + shape2 + R"(", "length": 1,
+        "2": {"units": "imperial", "shape": ")" +
+                        shape2 + R"(", "length": 1,
               "diameter": 0.125}
       },
       "workpiece": {"automatic": false, "margin": 5,
                     "bounds": {"min": [0, 0, -5], "max": [20, 10, 0]}},
-      "files": [)" + files + "]}");
+      "files": [)" + files +
+                        "]}");
     return path;
   }
 
@@ -572,9 +607,8 @@ TEST_F(RunProjectTest, AutomaticWorkpieceGrowsByTheMarginPercent) {
   std::stringstream out;
   std::streambuf* old = std::cout.rdbuf(out.rdbuf());
   std::string err;
-  const int rc = RunCapturing({"--project", project, "--spacing", "0.25",
-                               "--json", "--quiet"},
-                              &err);
+  const int rc = RunCapturing(
+      {"--project", project, "--spacing", "0.25", "--json", "--quiet"}, &err);
   std::cout.rdbuf(old);
   ASSERT_EQ(rc, 0) << err;
   google::protobuf::Struct stats;
@@ -590,12 +624,13 @@ TEST_F(RunProjectTest, AutomaticWorkpieceGrowsByTheMarginPercent) {
 }
 
 TEST_F(RunProjectTest, ToolErrorsNameTheLineAndTheTool) {
-  WriteFile(dir_ / "t3.nc", "G21\n(T3 is the tool)\nT3 M6\nG0 X1 Y1 Z5\nG1 Z-1\n");
+  WriteFile(dir_ / "t3.nc",
+            "G21\n(T3 is the tool)\nT3 M6\nG0 X1 Y1 Z5\nG1 Z-1\n");
   std::string err;
-  EXPECT_EQ(RunCapturing({"--project", Project(R"("part1.nc", "t3.nc")"),
-                          "--quiet"},
-                         &err),
-            2);
+  EXPECT_EQ(
+      RunCapturing({"--project", Project(R"("part1.nc", "t3.nc")"), "--quiet"},
+                   &err),
+      2);
   EXPECT_NE(err.find("t3.nc line 3: T3 is not in the tool table " +
                      (dir_ / "job.camotics").string() + " (T1, T2)"),
             std::string::npos)
@@ -634,17 +669,17 @@ TEST_F(RunProjectTest, LinuxCncToolTableAndNumberedTools) {
             "T2 M6\nG0 X2 Y6 Z5\nG1 Z-0.5\nX18\nG0 Z5\n");
   const std::string out = (dir_ / "out").string();
   std::string err;
-  ASSERT_EQ(RunCapturing({prog, "--tools", tbl, "--tools-units", "inch",
-                          "--tool", "T2=vbit:d=3,angle=60", "--stock",
-                          "0,0,20,10,0", "--spacing", "0.25", "--out", out,
-                          "--quiet"},
-                         &err),
-            0)
+  ASSERT_EQ(
+      RunCapturing({prog, "--tools", tbl, "--tools-units", "inch", "--tool",
+                    "T2=vbit:d=3,angle=60", "--stock", "0,0,20,10,0",
+                    "--spacing", "0.25", "--out", out, "--quiet"},
+                   &err),
+      0)
       << err;
   const google::protobuf::Struct stats = ReadJson(out + "/stats.json");
   const auto& tools = stats.fields().at("tools").struct_value().fields();
   ASSERT_EQ(tools.size(), 2u);
-  EXPECT_EQ(tools.at("1").string_value(), "bull d=101.6 r=1");  // D in inches
+  EXPECT_EQ(tools.at("1").string_value(), "bull d=101.6 r=1");   // D in inches
   EXPECT_EQ(tools.at("2").string_value(), "vbit d=3 angle=60");  // --tool wins
 
   // Cutter compensation takes the radius of the table's tool D names.
@@ -652,9 +687,9 @@ TEST_F(RunProjectTest, LinuxCncToolTableAndNumberedTools) {
   WriteFile(comp,
             "G21 G17\nT1 M6\nG0 X-5 Y-5 Z1\nG1 Z-1\nG41 D1\nG1 X0 Y0\nX10\n"
             "G40\nG1 X15 Y-5\n");
-  EXPECT_EQ(RunCapturing({comp, "--tools", tbl, "--spacing", "0.5", "--quiet"},
-                         &err),
-            0)
+  EXPECT_EQ(
+      RunCapturing({comp, "--tools", tbl, "--spacing", "0.5", "--quiet"}, &err),
+      0)
       << err;
   WriteFile(comp, "G21 G17\nT1 M6\nG0 X-5 Y-5 Z1\nG1 Z-1\nG41 D3\nG1 X0 Y0\n");
   EXPECT_EQ(RunCapturing({comp, "--tools", tbl, "--quiet"}, &err), 1);
@@ -674,10 +709,10 @@ TEST(RunCorpusProjectTest, FlowerMoldAndVcarve) {
         std::tuple{"flower_mold", "flower_mold.nc", "flat d=1"}}) {
     SCOPED_TRACE(name);
     const std::string dir = std::string(SWARF_CORPUS_DIR) + "/";
-    const std::string out =
-        (std::filesystem::temp_directory_path() /
-         ("swarf-e2e-" + std::string(name) + "-project-" + std::to_string(::getpid())))
-            .string();
+    const std::string out = (std::filesystem::temp_directory_path() /
+                             ("swarf-e2e-" + std::string(name) + "-project-" +
+                              std::to_string(::getpid())))
+                                .string();
     std::string err;
     ASSERT_EQ(RunCapturing({"--project", dir + name + ".camotics", "--spacing",
                             "0.5", "--out", out, "--quiet"},
@@ -689,7 +724,8 @@ TEST(RunCorpusProjectTest, FlowerMoldAndVcarve) {
     EXPECT_EQ(f.at("moves").number_value(),
               ReadToolpathFile(dir + program)->move_count());
     // No T word in these programs: the project's only tool.
-    EXPECT_EQ(f.at("tools").struct_value().fields().at("0").string_value(), tool);
+    EXPECT_EQ(f.at("tools").struct_value().fields().at("0").string_value(),
+              tool);
     EXPECT_TRUE(std::isfinite(
         f.at("error").struct_value().fields().at("max").number_value()));
     std::filesystem::remove_all(out);
@@ -745,16 +781,17 @@ TEST_P(CorpusPrecisionTest, DefaultSchemeNeverWorseThanTheZmap) {
       {"--project", project, "--spacing", spacing, "--json", "--quiet"});
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Corpus, CorpusPrecisionTest,
-    ::testing::Combine(::testing::Values("bear", "cameo", "flower_mold",
-                                         "vcarve"),
-                       ::testing::Values("0.1", "0.2")),
-    [](const auto& info) {
-      std::string s = std::get<1>(info.param);
-      s.replace(s.find('.'), 1, "_");
-      return std::string(std::get<0>(info.param)) + "_" + s;
-    });
+INSTANTIATE_TEST_SUITE_P(Corpus, CorpusPrecisionTest,
+                         ::testing::Combine(::testing::Values("bear", "cameo",
+                                                              "flower_mold",
+                                                              "vcarve"),
+                                            ::testing::Values("0.1", "0.2")),
+                         [](const auto& info) {
+                           std::string s = std::get<1>(info.param);
+                           s.replace(s.find('.'), 1, "_");
+                           return std::string(std::get<0>(info.param)) + "_" +
+                                  s;
+                         });
 
 // The generated jobs with their tools and stock: the default scheme's max,
 // mean and RMS errors at most the z-map's (the pocket's flat floors and
@@ -770,16 +807,16 @@ TEST_P(GeneratedPrecisionTest, DefaultSchemeNeverWorseThanTheZmap) {
   ExpectDefaultNeverWorseThanZmap(argv);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Generated, GeneratedPrecisionTest,
-    ::testing::Combine(::testing::Values(kRelief, kPocket, kVcarve),
-                       ::testing::Values("0.1", "0.2")),
-    [](const auto& info) {
-      std::string n = std::get<0>(info.param).name;
-      std::string s = std::get<1>(info.param);
-      s.replace(s.find('.'), 1, "_");
-      return n.substr(0, n.find('.')) + "_" + s;
-    });
+INSTANTIATE_TEST_SUITE_P(Generated, GeneratedPrecisionTest,
+                         ::testing::Combine(::testing::Values(kRelief, kPocket,
+                                                              kVcarve),
+                                            ::testing::Values("0.1", "0.2")),
+                         [](const auto& info) {
+                           std::string n = std::get<0>(info.param).name;
+                           std::string s = std::get<1>(info.param);
+                           s.replace(s.find('.'), 1, "_");
+                           return n.substr(0, n.find('.')) + "_" + s;
+                         });
 
 INSTANTIATE_TEST_SUITE_P(
     Jobs, RunE2eTest,

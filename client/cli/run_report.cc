@@ -182,6 +182,11 @@ std::string Rate(double per_s) {
 
 }  // namespace
 
+bool MarksFitOneMessage(const StockSpec& s) {
+  const int64_t nodes = (int64_t{s.nx} + 1) * (int64_t{s.ny} + 1);
+  return nodes * kMarksBytesPerNode <= kMarksMessageBytes;
+}
+
 void ErrorMapSize(const StockSpec& s, int32_t* cols, int32_t* rows) {
   // Cells, not pixels: a raster of more would not fit one message.
   constexpr int32_t kMaxSide = 1600;
@@ -370,9 +375,10 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
       const auto t0 = Clock::now();
       auto m =
           Retrying<bool>("the cutting marks", [&]() -> absl::StatusOr<bool> {
-            if (absl::Status s = FetchMarks(conn, id, to_stream); !s.ok()) {
-              return s;
-            }
+            absl::Status s = MarksFitOneMessage(stock)
+                                 ? FetchMarks(conn, id, to_stream)
+                                 : FetchMarksStreamed(conn, id, to_stream);
+            if (!s.ok()) return s;
             marks_stream->Finish();
             return true;
           });

@@ -128,6 +128,19 @@ struct OutputOptions {
 inline constexpr const char* kOutputFlags[] = {
     "mesh-tolerance", "marks-min-angle", "marks-min-length", "picture-size"};
 
+// Whether swarf run asks for the marks as one message first (a
+// MarksRequest: no thread wake-up per polyline) or streamed at once
+// (GetCuttingMarks). A one-message answer over the server's limit is
+// refused only once found, and the marks are then found again: the 300 mm
+// plate's first try found 29 of its 47 windows of bands for nothing. The
+// answer is about 32 bytes a vertex, and relief jobs have a vertex per 8
+// to 10 nodes (cameo.nc at 0.05 mm: 1.5 M vertices on 11.7 M nodes, the
+// 1000 mm plate 40 M on 400 M): expected over the limit (64 MiB, the
+// client's and swarfd's default) past 16 M nodes.
+inline constexpr int64_t kMarksBytesPerNode = 4;
+inline constexpr int64_t kMarksMessageBytes = int64_t{64} << 20;
+bool MarksFitOneMessage(const StockSpec& stock);
+
 // The error map swarf run asks for: one cell per element, at most 1600
 // along the longer side (cells then at least as large as elements).
 void ErrorMapSize(const StockSpec& stock, int32_t* cols, int32_t* rows);
