@@ -1,8 +1,8 @@
 #include "core/cutting_marks.h"
 
 #include <algorithm>
-#include <map>
 #include <cmath>
+#include <map>
 #include <memory>
 #include <numbers>
 #include <utility>
@@ -188,8 +188,7 @@ int EdgeCrossings(const NodeRef& ni, const NodeRef& nj, uint64_t edge_key,
     }
   };
   auto make = [&](double t, int32_t lo_owner, const NodeRef& lo_node,
-                  int32_t hi_owner, const NodeRef& hi_node, double z,
-                  int k) {
+                  int32_t hi_owner, const NodeRef& hi_node, double z, int k) {
     Crossing& c = out[k];
     c.t = t;
     c.before = lo_owner;
@@ -264,8 +263,7 @@ class ElementModel {
                ? z_top_
                : EvaluatePatch(p.node->jet, p.node->x, p.node->y, x, y);
   }
-  void PieceGradient(int k, double x, double y, double* gx,
-                     double* gy) const {
+  void PieceGradient(int k, double x, double y, double* gx, double* gy) const {
     const Piece& p = pieces_[k];
     if (p.node == nullptr) {
       *gx = *gy = 0;
@@ -275,9 +273,9 @@ class ElementModel {
   }
   Quad PieceQuad(int k, double px, double py, double ex, double ey) const {
     const Piece& p = pieces_[k];
-    return p.node == nullptr ? Constant(z_top_)
-                             : Restrict(p.node->jet, p.node->x, p.node->y, px,
-                                        py, ex, ey);
+    return p.node == nullptr
+               ? Constant(z_top_)
+               : Restrict(p.node->jet, p.node->x, p.node->y, px, py, ex, ey);
   }
 
   // The surface of group g at (x, y): the lowest of its pieces.
@@ -348,8 +346,7 @@ class ElementResolver {
     if (n == 0) return;
     bool consistent = n >= 2;
     for (int k = 0; k < n && consistent; ++k) {
-      consistent = x[k].right == x[(k + 1) % n].left &&
-                   x[k].left != x[k].right;
+      consistent = x[k].right == x[(k + 1) % n].left && x[k].left != x[k].right;
     }
     if (consistent) {
       if (n == 2) {
@@ -436,8 +433,8 @@ class ElementResolver {
       const double j11 = a.gx - b.gx, j12 = a.gy - b.gy;
       const double j21 = b.gx - c.gx, j22 = b.gy - c.gy;
       const double det = j11 * j22 - j12 * j21;
-      const double scale = (std::fabs(j11) + std::fabs(j12)) *
-                           (std::fabs(j21) + std::fabs(j22));
+      const double scale =
+          (std::fabs(j11) + std::fabs(j12)) * (std::fabs(j21) + std::fabs(j22));
       if (!(std::fabs(det) > 1e-12 * scale)) break;  // parallel creases
       double dx = -(j22 * f1 - j12 * f2) / det;
       double dy = -(-j21 * f1 + j11 * f2) / det;
@@ -507,10 +504,9 @@ class ElementResolver {
         continue;
       }
       // The group left out of each junction must lie above it.
-      const double margin =
-          std::fmin(m_.Group(g[(t + 3) % 4], ax, ay).w -
-                        m_.Group(g[t], ax, ay).w,
-                    m_.Group(g[t + 1], bx, by).w - m_.Group(g[t], bx, by).w);
+      const double margin = std::fmin(
+          m_.Group(g[(t + 3) % 4], ax, ay).w - m_.Group(g[t], ax, ay).w,
+          m_.Group(g[t + 1], bx, by).w - m_.Group(g[t], bx, by).w);
       if (margin > best_margin) {
         best_margin = margin;
         best_t = t;
@@ -613,8 +609,8 @@ class ElementResolver {
     if (first != gp) add(0, gp, first);
     for (size_t k = 0; k + 1 < runs.size(); ++k) {
       const int f = runs[k].piece, g = runs[k + 1].piece;
-      add(RootIn(q[f] - q[g], runs[k].mid, runs[k + 1].mid),
-          m_.piece(f).group, m_.piece(g).group);
+      add(RootIn(q[f] - q[g], runs[k].mid, runs[k + 1].mid), m_.piece(f).group,
+          m_.piece(g).group);
     }
     const int last = m_.piece(runs.back().piece).group;
     if (last != gq) add(1, last, gq);
@@ -709,9 +705,8 @@ class ElementResolver {
     add_cut(3, 2, 1, true);
     for (int q = 0; q < 4; ++q) {
       std::stable_sort(parts[q].begin(), parts[q].end(),
-                       [](const BoundaryCrossing& a, const BoundaryCrossing& b) {
-                         return a.s < b.s;
-                       });
+                       [](const BoundaryCrossing& a,
+                          const BoundaryCrossing& b) { return a.s < b.s; });
       Resolve(sub[q], std::move(parts[q]), depth + 1);
     }
   }
@@ -765,8 +760,8 @@ void ProcessElement(const NodeRef* const c[4], int32_t ei, int32_t ej,
   Crossing cr[4][2];
   int ncr[4];
   for (int k = 0; k < 4; ++k) {
-    ncr[k] = EdgeCrossings(*c[edges[k].from], *c[edges[k].to], edges[k].key,
-                           s, cr[k]);
+    ncr[k] = EdgeCrossings(*c[edges[k].from], *c[edges[k].to], edges[k].key, s,
+                           cr[k]);
   }
   // Owners meeting without a crease on any edge of this element (eq. 5
   // fails) are one surface here: consecutive moves of a pass, or the facets
@@ -806,12 +801,11 @@ void ProcessElement(const NodeRef* const c[4], int32_t ei, int32_t ej,
     group_of_corner[k] = labels.Find(labels.Index(c[k]->owner));
   }
   const ElementModel model(c, group_of_corner,
-                           labels.Find(labels.Index(kStockTopOwner)),
-                           s.z_top);
+                           labels.Find(labels.Index(kStockTopOwner)), s.z_top);
   ElementResolver resolver(model, s, uint64_t(ej) * nodes_x + ei, out);
-  resolver.Resolve({grid.NodeX(ei), grid.NodeY(ej), grid.NodeX(ei + 1),
-                    grid.NodeY(ej + 1)},
-                   std::move(bx), 0);
+  resolver.Resolve(
+      {grid.NodeX(ei), grid.NodeY(ej), grid.NodeX(ei + 1), grid.NodeY(ej + 1)},
+      std::move(bx), 0);
 }
 
 // ---------------------------------------------------------------------------
@@ -887,8 +881,7 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
       const double near_end = !p->closed && k == 1       ? std::hypot(ux, uy)
                               : !p->closed && k + 2 == n ? std::hypot(vx, vy)
                                                          : kInf;
-      const double shortest =
-          std::fmin(std::hypot(ux, uy), std::hypot(vx, vy));
+      const double shortest = std::fmin(std::hypot(ux, uy), std::hypot(vx, vy));
       if (shortest > fold && near_end > limit) continue;
       p->vertices.erase(p->vertices.begin() + k);
       p->angle_deg.erase(p->angle_deg.begin() + k);
@@ -907,8 +900,8 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
 // segment of index `grow_from` or more give no polyline (their segments
 // still get their chain_of): they may still grow.
 std::vector<MarkPolyline> Chain(
-    const std::vector<Segment>& segs, double tol, double fold,
-    double end_fold, ThreadPool& pool, std::vector<int64_t>* starts = nullptr,
+    const std::vector<Segment>& segs, double tol, double fold, double end_fold,
+    ThreadPool& pool, std::vector<int64_t>* starts = nullptr,
     std::vector<int64_t>* chain_of = nullptr,
     const absl::flat_hash_map<uint64_t, int32_t>* ghosts = nullptr,
     int64_t grow_from = INT64_MAX) {
@@ -1062,8 +1055,7 @@ absl::Status ValidateOptions(const Workpiece& wp, const MarkOptions& o,
         "window_segment_bytes must be >= 1, got ", o.window_segment_bytes));
   }
   if (o.screening_threshold.has_value() &&
-      !(std::isfinite(*o.screening_threshold) &&
-        *o.screening_threshold >= 0)) {
+      !(std::isfinite(*o.screening_threshold) && *o.screening_threshold >= 0)) {
     return absl::InvalidArgumentError(
         absl::StrCat("screening_threshold must be finite and >= 0, got ",
                      *o.screening_threshold));
@@ -1091,10 +1083,10 @@ absl::Status ValidateOptions(const Workpiece& wp, const MarkOptions& o,
           "region.y1 (", r.y1, ") must be >= region.y0 (", r.y0, ")"));
     }
     if (!r.Intersects(b)) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "region [", r.x0, ", ", r.x1, "] x [", r.y0, ", ", r.y1,
-          "] does not overlap the stock [", b.x0, ", ", b.x1, "] x [", b.y0,
-          ", ", b.y1, "]"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("region [", r.x0, ", ", r.x1, "] x [", r.y0, ", ", r.y1,
+                       "] does not overlap the stock [", b.x0, ", ", b.x1,
+                       "] x [", b.y0, ", ", b.y1, "]"));
     }
     *region = {std::fmax(r.x0, b.x0), std::fmax(r.y0, b.y0),
                std::fmin(r.x1, b.x1), std::fmin(r.y1, b.y1)};
@@ -1121,7 +1113,7 @@ double SlopeDifference(double ax, double ay, double bx, double by) {
 double NormalAngle(double ax, double ay, double bx, double by) {
   // Upward normals (-g, 1); atan2 of |cross| and dot stays accurate for
   // small angles, where acos of the dot would not.
-  const double cx = by - ay;       // (-ax,-ay,1) x (-bx,-by,1)
+  const double cx = by - ay;  // (-ax,-ay,1) x (-bx,-by,1)
   const double cy = ax - bx;
   const double cz = ax * by - ay * bx;
   const double dot = ax * bx + ay * by + 1;
@@ -1156,9 +1148,9 @@ int32_t LowestMove(const Workpiece& wp, double x, double y, double cap,
 }
 
 // Newton on (S_a - S_b, S_a - S_c) = 0: where three surfaces meet.
-bool TriplePoint(const Workpiece& wp, int32_t a_id, int32_t b_id,
-                 int32_t c_id, double max_step, double t1, double* x,
-                 double* y, SurfaceJet* a, SurfaceJet* b) {
+bool TriplePoint(const Workpiece& wp, int32_t a_id, int32_t b_id, int32_t c_id,
+                 double max_step, double t1, double* x, double* y,
+                 SurfaceJet* a, SurfaceJet* b) {
   SurfaceJet c;
   const double x0 = *x, y0 = *y;
   for (int it = 0; it < 16; ++it) {
@@ -1208,8 +1200,7 @@ void ProjectOntoExactCrease(const Workpiece& wp,
       // On the crease of a and b; where a third surface lies below it, the
       // vertex is a junction: where the three meet.
       double w;
-      const int32_t c =
-          LowestMove(wp, x, y, std::min(a.w, b.w) - t1, &w);
+      const int32_t c = LowestMove(wp, x, y, std::min(a.w, b.w) - t1, &w);
       if (w < std::min(a.w, b.w) - t1 && c != owners[0] && c != owners[1] &&
           !TriplePoint(wp, owners[0], owners[1], c, max_step, t1, &x, &y, &a,
                        &b)) {
@@ -1373,30 +1364,48 @@ absl::Status FindCuttingMarks(
   // not the crease's shape; next to a junction, up to the half element by
   // which a junction may leave its element.
   const double h = std::fmin(grid.dx(), grid.dy());
-  // A polyline chained: lifted and projected as its scheme's marks are.
-  auto finish = [&](MarkPolyline& p) {
+  // A vertex of a polyline chained: lifted and projected as its scheme's
+  // marks are. Vertices are independent, so a window's polylines are
+  // finished a run of vertices at a time: a few long creases (a plate's
+  // passes, thousands of vertices each) kept as many threads busy as
+  // there were polylines.
+  auto finish_vertex = [&](MarkPolyline& p, size_t k) {
     if (wp.scheme().kind() == SchemeKind::kGuarded) {
       // A crease lies on both owners' surfaces: never below either's lowest
       // point (patches met far from their nodes can cross lower): the
       // owner's lowest tip, ReachOf(...).z_low, without building its reach.
-      for (size_t k = 0; k < p.vertices.size(); ++k) {
-        for (int32_t id : p.vertex_owners[k]) {
-          if (id < 0 || id >= wp.move_count()) continue;
-          const Move m = wp.move(id);
-          p.vertices[k].z =
-              std::max(p.vertices[k].z, std::min(m.from.z, m.to.z));
-        }
+      for (int32_t id : p.vertex_owners[k]) {
+        if (id < 0 || id >= wp.move_count()) continue;
+        const Move m = wp.move(id);
+        p.vertices[k].z = std::max(p.vertices[k].z, std::min(m.from.z, m.to.z));
       }
     }
     // Sessions whose reconstruction uses the exact surfaces have their
     // marks on the exact creases too.
     if (wp.scheme().kind() == SchemeKind::kExact ||
         wp.scheme().kind() == SchemeKind::kGuarded) {
-      for (size_t k = 0; k < p.vertices.size(); ++k) {
-        ProjectOntoExactCrease(wp, p.vertex_owners[k], h, s.t1,
-                               &p.vertices[k], &p.angle_deg[k]);
+      ProjectOntoExactCrease(wp, p.vertex_owners[k], h, s.t1, &p.vertices[k],
+                             &p.angle_deg[k]);
+    }
+  };
+  auto finish_all = [&](std::vector<MarkPolyline>& chained) {
+    if (wp.scheme().kind() != SchemeKind::kExact &&
+        wp.scheme().kind() != SchemeKind::kGuarded) {
+      return;
+    }
+    // Runs of up to kRun vertices, none across two polylines.
+    constexpr size_t kRun = 64;
+    std::vector<std::pair<uint32_t, uint32_t>> runs;  // (polyline, first)
+    for (size_t q = 0; q < chained.size(); ++q) {
+      for (size_t k = 0; k < chained[q].vertices.size(); k += kRun) {
+        runs.emplace_back(static_cast<uint32_t>(q), static_cast<uint32_t>(k));
       }
     }
+    wp.pool().ParallelFor(static_cast<int64_t>(runs.size()), [&](int64_t r) {
+      MarkPolyline& p = chained[runs[r].first];
+      const size_t k1 = std::min(p.vertices.size(), runs[r].second + kRun);
+      for (size_t k = runs[r].second; k < k1; ++k) finish_vertex(p, k);
+    });
   };
 
   // The bands a window at a time, so that the segments of the whole grid
@@ -1417,10 +1426,10 @@ absl::Status FindCuttingMarks(
   const int32_t most_bands = std::max(8, 4 * threads);
   int32_t window = most_bands;
   std::vector<std::vector<Segment>> band_segments;
-  std::vector<Segment> open;      // kept segments not chained yet, in order
-  std::vector<int64_t> open_at;   // their index among every kept segment
-  uint64_t raw_before = 0;        // segments found in earlier windows
-  int64_t kept_before = 0;        // kept (clipped) in earlier windows
+  std::vector<Segment> open;     // kept segments not chained yet, in order
+  std::vector<int64_t> open_at;  // their index among every kept segment
+  uint64_t raw_before = 0;       // segments found in earlier windows
+  int64_t kept_before = 0;       // kept (clipped) in earlier windows
   // Polylines chained, by first segment, waiting for earlier open chains.
   std::map<int64_t, MarkPolyline> ready;
   // Segments handed on, per vertex key an open segment uses (Chain).
@@ -1428,9 +1437,8 @@ absl::Status FindCuttingMarks(
   for (int32_t w0 = 0, wn = 0; w0 < bands; w0 += wn) {
     wn = std::min(window, bands - w0);
     band_segments.assign(wn, {});
-    wp.pool().ParallelFor(wn, [&](int64_t b) {
-      find_band(w0 + b, &band_segments[b]);
-    });
+    wp.pool().ParallelFor(
+        wn, [&](int64_t b) { find_band(w0 + b, &band_segments[b]); });
     {
       int64_t found = 0;
       for (const std::vector<Segment>& band : band_segments) {
@@ -1473,10 +1481,9 @@ absl::Status FindCuttingMarks(
     // polyline is the one chaining every segment at once gives.
     const bool last = w0 + wn >= bands;
     std::vector<int64_t> starts, chain_of;
-    std::vector<MarkPolyline> chained =
-        Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts,
-              &chain_of, &ghosts,
-              last ? INT64_MAX : static_cast<int64_t>(window_first));
+    std::vector<MarkPolyline> chained = Chain(
+        open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts, &chain_of,
+        &ghosts, last ? INT64_MAX : static_cast<int64_t>(window_first));
     std::vector<bool> growing(open.size(), false);
     if (!last) {
       for (size_t k = window_first; k < open.size(); ++k) {
@@ -1484,8 +1491,7 @@ absl::Status FindCuttingMarks(
       }
     }
     // Chain gave polylines for the complete chains only.
-    wp.pool().ParallelFor(static_cast<int64_t>(chained.size()),
-                          [&](int64_t k) { finish(chained[k]); });
+    finish_all(chained);
     for (size_t k = 0; k < chained.size(); ++k) {
       ready.emplace(open_at[starts[k]], std::move(chained[k]));
     }
