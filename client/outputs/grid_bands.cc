@@ -9,6 +9,19 @@
 
 namespace swarf::cli {
 
+namespace {
+
+// The check every row read starts with: node rows [j0, j1] of the grid.
+absl::Status CheckNodeRows(const StockSpec& spec, int32_t j0, int32_t j1) {
+  if (j0 < 0 || j1 < j0 || j1 > spec.ny) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "node rows [%d, %d] leave the grid's %d rows", j0, j1, spec.ny + 1));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 absl::Status InMemoryBands::ForEach(const BandVisitor& visit) {
   if (absl::Status st = grid_.Validate(); !st.ok()) return st;
   const int32_t ny = grid_.spec.ny;
@@ -51,19 +64,14 @@ absl::Status GridBands::ReadHeights(int32_t j0, int32_t j1,
 absl::Status TileRowBands::ReadHeights(int32_t j0, int32_t j1,
                                        SurfaceGrid* scratch, double* z) {
   if (heights_ == nullptr) return GridBands::ReadHeights(j0, j1, scratch, z);
-  if (j0 < 0 || j1 < j0 || j1 > spec_.ny) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "node rows [%d, %d] leave the grid's %d rows", j0, j1, spec_.ny + 1));
-  }
+  if (absl::Status st = CheckNodeRows(spec_, j0, j1); !st.ok()) return st;
   return heights_(j0, j1, z);
 }
 
 absl::Status InMemoryBands::ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
                                      bool) {
-  if (j0 < 0 || j1 < j0 || j1 > grid_.spec.ny) {
-    return absl::InvalidArgumentError(
-        absl::StrFormat("node rows [%d, %d] leave the grid's %d rows", j0, j1,
-                        grid_.spec.ny + 1));
+  if (absl::Status st = CheckNodeRows(grid_.spec, j0, j1); !st.ok()) {
+    return st;
   }
   band->ResetBand(j0, j1 - j0 + 1);
   std::copy_n(grid_.jets.begin() + grid_.Index(0, j0), band->jets.size(),
@@ -75,10 +83,7 @@ absl::Status InMemoryBands::ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
 
 absl::Status TileRowBands::ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
                                     bool heights_only) {
-  if (j0 < 0 || j1 < j0 || j1 > spec_.ny) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "node rows [%d, %d] leave the grid's %d rows", j0, j1, spec_.ny + 1));
-  }
+  if (absl::Status st = CheckNodeRows(spec_, j0, j1); !st.ok()) return st;
   band->ResetBand(j0, j1 - j0 + 1);
   return fill_(band, j0 / kTileSize, j1 / kTileSize + 1, heights_only);
 }
