@@ -51,11 +51,19 @@ struct ThreadPool::Job {
   std::atomic<int64_t> next{0};
   int active = 0;  // workers inside Run(); guarded by the pool's mu_
 
-  // Claims indices, `grain` at a time, and runs them until none are left.
-  void Run() {
+  bool Exhausted() const { return next.load() >= n; }
+
+  // Claims indices, `grain` at a time, and runs them until none are left,
+  // or (with `started`) until it no longer reads `seen`.
+  void Run(const std::atomic<uint64_t>* started = nullptr,
+           uint64_t seen = 0) {
     for (int64_t i; (i = next.fetch_add(grain)) < n;) {
       const int64_t end = std::min(n, i + grain);
       for (; i < end; ++i) (*fn)(i);
+      if (started != nullptr && started->load(std::memory_order_relaxed) !=
+                                    seen) {
+        return;
+      }
     }
   }
 };
@@ -83,15 +91,19 @@ void ThreadPool::WorkerLoop() {
   for (;;) {
     cv_.wait(l, [this] { return stop_ || !jobs_.empty(); });
     if (stop_) return;
-    Job* job = jobs_.front();
-    // A job leaves the queue once all its indices are claimed.
-    if (job->next.load() >= job->n) {
-      jobs_.erase(jobs_.begin());
-      continue;
-    }
+    // A job leaves the list once all its indices are claimed.
+    std::erase_if(jobs_, [](const Job* j) { return j->Exhausted(); });
+    if (jobs_.empty()) continue;
+    // The loop with the fewest workers, the oldest of those. Taking the
+    // oldest alone left a loop started beside a long one (the marks
+    // beside the error statistics) on its calling thread.
+    Job* job = *std::min_element(
+        jobs_.begin(), jobs_.end(),
+        [](const Job* a, const Job* b) { return a->active < b->active; });
     ++job->active;
+    const uint64_t seen = started_.load(std::memory_order_relaxed);
     l.unlock();
-    job->Run();
+    job->Run(&started_, seen);
     l.lock();
     if (--job->active == 0) job_cv_.notify_all();
   }
@@ -117,11 +129,14 @@ void ThreadPool::ParallelFor(int64_t n, const std::function<void(int64_t)>& fn) 
   {
     std::lock_guard<std::mutex> l(mu_);
     jobs_.push_back(&job);
+    // Workers in other loops leave them after their current run of
+    // indices and choose again, this one among them.
+    started_.fetch_add(1, std::memory_order_relaxed);
   }
   cv_.notify_all();
   job.Run();
   // Every index is claimed; once no worker is inside the job, every index
-  // has also finished and the job can leave the stack.
+  // has also finished and the job can leave the list.
   std::unique_lock<std::mutex> l(mu_);
   jobs_.erase(std::remove(jobs_.begin(), jobs_.end(), &job), jobs_.end());
   job_cv_.wait(l, [&] { return job.active == 0; });

@@ -2,6 +2,7 @@
 #ifndef SWARF_CORE_THREAD_POOL_H_
 #define SWARF_CORE_THREAD_POOL_H_
 
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
@@ -32,7 +33,11 @@ absl::StatusOr<std::optional<int>> ThreadsFromEnvironment();
 int DefaultThreads();
 
 // ParallelFor may be called from several threads at once; each call blocks
-// until its loop is done, and the calling thread works on it too.
+// until its loop is done, and the calling thread works on it too. The
+// workers share themselves between the loops in flight: an idle worker
+// takes the loop with the fewest workers, and when a loop starts every
+// worker finishes its run of indices and chooses again, so a loop started
+// beside a long one gets its share of the threads at once.
 class ThreadPool {
  public:
   // threads <= 0: DefaultThreads() (one per core this process may run on,
@@ -60,6 +65,9 @@ class ThreadPool {
   std::condition_variable job_cv_;   // a worker left a job
   std::vector<Job*> jobs_;  // guarded by mu_
   bool stop_ = false;       // guarded by mu_
+  // Counts the loops started; a worker that sees it change leaves its
+  // loop to choose again. Written under mu_, read without it.
+  std::atomic<uint64_t> started_{0};
   std::vector<std::thread> workers_;
 };
 

@@ -167,6 +167,44 @@ TEST(ThreadPoolTest, FewItemsStillShared) {
   }
 }
 
+// A loop started while a long one holds every worker gets its share of
+// them at once, not when the long one ends: each item of the later loop
+// waits until two threads are inside it together. Taking the oldest loop
+// first left the later loop on its calling thread alone (the marks beside
+// the error statistics), and this waited out its 10 s.
+TEST(ThreadPoolTest, ALaterLoopGetsWorkersFromALongOne) {
+  ThreadPool pool(4);
+  std::atomic<bool> later_done{false};
+  std::atomic<bool> long_started{false};
+  std::thread long_caller([&] {
+    pool.ParallelFor(1 << 20, [&](int64_t) {
+      long_started = true;
+      if (!later_done.load()) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+    });
+  });
+  while (!long_started.load()) std::this_thread::yield();
+  // Let every worker settle into the long loop.
+  std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  std::atomic<int> inside{0};
+  std::atomic<int> most{0};
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  pool.ParallelFor(8, [&](int64_t) {
+    const int now = ++inside;
+    for (int m = most.load(); now > m && !most.compare_exchange_weak(m, now);) {
+    }
+    while (most.load() < 2 && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    --inside;
+  });
+  later_done = true;
+  long_caller.join();
+  EXPECT_GE(most.load(), 2);
+}
+
 // A loop body may itself call ParallelFor on the same pool (the caller
 // works on its own loop, so this cannot deadlock).
 TEST(ThreadPoolTest, NestedLoops) {
