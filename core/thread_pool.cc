@@ -46,12 +46,22 @@ int DefaultThreads() {
 
 struct ThreadPool::Job {
   const std::function<void(int64_t)>* fn;
+  // The loop whose item started this one (nullptr: none): it cannot end
+  // before this one, so the chain of parents is alive while this is.
+  const Job* parent = nullptr;
   int64_t n;
   int64_t grain;  // indices claimed at a time
   std::atomic<int64_t> next{0};
   int active = 0;  // workers inside Run(); guarded by the pool's mu_
 
   bool Exhausted() const { return next.load() >= n; }
+
+  bool Within(const Job* ancestor) const {
+    for (const Job* j = parent; j != nullptr; j = j->parent) {
+      if (j == ancestor) return true;
+    }
+    return false;
+  }
 
   // Claims indices, `grain` at a time, and runs them until none are left,
   // or (with `started`) until it no longer reads `seen`.
@@ -67,6 +77,23 @@ struct ThreadPool::Job {
     }
   }
 };
+
+namespace {
+// The loop whose item this thread is running, if any.
+thread_local const void* current_job = nullptr;
+
+// Sets current_job for a scope.
+class CurrentJob {
+ public:
+  explicit CurrentJob(const void* job) : saved_(current_job) {
+    current_job = job;
+  }
+  ~CurrentJob() { current_job = saved_; }
+
+ private:
+  const void* saved_;
+};
+}  // namespace
 
 ThreadPool::ThreadPool(int threads) {
   if (threads <= 0) {
@@ -103,7 +130,10 @@ void ThreadPool::WorkerLoop() {
     ++job->active;
     const uint64_t seen = started_.load(std::memory_order_relaxed);
     l.unlock();
-    job->Run(&started_, seen);
+    {
+      CurrentJob in(job);
+      job->Run(&started_, seen);
+    }
     l.lock();
     if (--job->active == 0) job_cv_.notify_all();
   }
@@ -118,6 +148,7 @@ void ThreadPool::ParallelFor(int64_t n, const std::function<void(int64_t)>& fn) 
   Job job;
   job.fn = &fn;
   job.n = n;
+  job.parent = static_cast<const Job*>(current_job);
   // Loops of many small items (a mesh's leaves) spent more on claiming
   // indices one by one than on the items, and threads writing
   // neighbouring items shared cache lines. Runs of indices fix both. Work
@@ -134,12 +165,41 @@ void ThreadPool::ParallelFor(int64_t n, const std::function<void(int64_t)>& fn) 
     started_.fetch_add(1, std::memory_order_relaxed);
   }
   cv_.notify_all();
+  job_cv_.notify_all();  // callers waiting for a loop this one is within
+  CurrentJob in(&job);
   job.Run();
   // Every index is claimed; once no worker is inside the job, every index
   // has also finished and the job can leave the list.
   std::unique_lock<std::mutex> l(mu_);
   jobs_.erase(std::remove(jobs_.begin(), jobs_.end(), &job), jobs_.end());
-  job_cv_.wait(l, [&] { return job.active == 0; });
+  // Meanwhile the caller works on the loops started by this one's items
+  // (and theirs): it waits for them anyway. Idle, it left a loop started
+  // beside a long item with one thread fewer (the marks' projection beside
+  // their chaining). Other loops it leaves to the workers: one of their
+  // items could keep it long after its own loop ended.
+  for (;;) {
+    if (job.active == 0) return;
+    Job* inner = nullptr;
+    for (Job* j : jobs_) {
+      if (!j->Exhausted() && j->Within(&job)) {
+        inner = j;
+        break;
+      }
+    }
+    if (inner == nullptr) {
+      job_cv_.wait(l);
+      continue;
+    }
+    ++inner->active;
+    const uint64_t seen = started_.load(std::memory_order_relaxed);
+    l.unlock();
+    {
+      CurrentJob helping(inner);
+      inner->Run(&started_, seen);
+    }
+    l.lock();
+    if (--inner->active == 0) job_cv_.notify_all();
+  }
 }
 
 ThreadPool& ThreadPool::Default() {

@@ -37,7 +37,9 @@ int DefaultThreads();
 // workers share themselves between the loops in flight: an idle worker
 // takes the loop with the fewest workers, and when a loop starts every
 // worker finishes its run of indices and chooses again, so a loop started
-// beside a long one gets its share of the threads at once.
+// beside a long one gets its share of the threads at once. A caller whose
+// own indices are all claimed works on the loops its loop's items started
+// until its loop is done.
 class ThreadPool {
  public:
   // threads <= 0: DefaultThreads() (one per core this process may run on,

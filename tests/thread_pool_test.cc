@@ -205,6 +205,43 @@ TEST(ThreadPoolTest, ALaterLoopGetsWorkersFromALongOne) {
   EXPECT_GE(most.load(), 2);
 }
 
+// A caller whose own indices are done helps with the loops its loop's
+// items started: here the caller's item ends at once, and the only worker
+// runs the other item, a loop whose items wait until two threads are
+// inside it together. An idle caller left that loop to the worker alone,
+// and this waited out its 10 s.
+TEST(ThreadPoolTest, AWaitingCallerHelpsTheLoopsItsItemsStarted) {
+  ThreadPool pool(2);
+  const std::thread::id caller = std::this_thread::get_id();
+  std::atomic<bool> inner_started{false};
+  std::atomic<int> inside{0};
+  std::atomic<int> most{0};
+  const auto deadline =
+      std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  pool.ParallelFor(2, [&](int64_t) {
+    if (std::this_thread::get_id() == caller) {
+      while (!inner_started.load() &&
+             std::chrono::steady_clock::now() < deadline) {
+        std::this_thread::yield();
+      }
+      return;
+    }
+    pool.ParallelFor(8, [&](int64_t) {
+      inner_started = true;
+      const int now = ++inside;
+      for (int m = most.load();
+           now > m && !most.compare_exchange_weak(m, now);) {
+      }
+      while (most.load() < 2 && std::chrono::steady_clock::now() < deadline) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+      --inside;
+    });
+  });
+  EXPECT_TRUE(inner_started.load());
+  EXPECT_GE(most.load(), 2);
+}
+
 // A loop body may itself call ParallelFor on the same pool (the caller
 // works on its own loop, so this cannot deadlock).
 TEST(ThreadPoolTest, NestedLoops) {
