@@ -1388,21 +1388,25 @@ absl::Status FindCuttingMarks(
                              &p.angle_deg[k]);
     }
   };
-  auto finish_all = [&](std::vector<MarkPolyline>& chained) {
-    if (wp.scheme().kind() != SchemeKind::kExact &&
-        wp.scheme().kind() != SchemeKind::kGuarded) {
-      return;
-    }
+  // A chained polyline waiting to be handed on, finished or not yet.
+  struct Ready {
+    MarkPolyline p;
+    bool finished = false;
+  };
+  const bool finishes = wp.scheme().kind() == SchemeKind::kExact ||
+                        wp.scheme().kind() == SchemeKind::kGuarded;
+  auto finish_all = [&](const std::vector<Ready*>& chained) {
+    if (!finishes) return;
     // Runs of up to kRun vertices, none across two polylines.
     constexpr size_t kRun = 64;
     std::vector<std::pair<uint32_t, uint32_t>> runs;  // (polyline, first)
     for (size_t q = 0; q < chained.size(); ++q) {
-      for (size_t k = 0; k < chained[q].vertices.size(); k += kRun) {
+      for (size_t k = 0; k < chained[q]->p.vertices.size(); k += kRun) {
         runs.emplace_back(static_cast<uint32_t>(q), static_cast<uint32_t>(k));
       }
     }
     wp.pool().ParallelFor(static_cast<int64_t>(runs.size()), [&](int64_t r) {
-      MarkPolyline& p = chained[runs[r].first];
+      MarkPolyline& p = chained[runs[r].first]->p;
       const size_t k1 = std::min(p.vertices.size(), runs[r].second + kRun);
       for (size_t k = runs[r].second; k < k1; ++k) finish_vertex(p, k);
     });
@@ -1430,8 +1434,15 @@ absl::Status FindCuttingMarks(
   std::vector<int64_t> open_at;  // their index among every kept segment
   uint64_t raw_before = 0;       // segments found in earlier windows
   int64_t kept_before = 0;       // kept (clipped) in earlier windows
-  // Polylines chained, by first segment, waiting for earlier open chains.
-  std::map<int64_t, MarkPolyline> ready;
+  // Polylines chained, by first segment, waiting for earlier open chains
+  // or to be finished.
+  std::map<int64_t, Ready> ready;
+  // The last window's polylines in `ready`, not finished yet: they are
+  // finished while the next window is chained (chaining is serial; on many
+  // cores it left the threads idle between windows' projections), and so
+  // handed on a window later. Polylines with nothing to finish (the
+  // taylor scheme's) are handed on at once.
+  std::vector<Ready*> unfinished;
   // Segments handed on, per vertex key an open segment uses (Chain).
   absl::flat_hash_map<uint64_t, int32_t> ghosts;
   for (int32_t w0 = 0, wn = 0; w0 < bands; w0 += wn) {
@@ -1478,56 +1489,78 @@ absl::Status FindCuttingMarks(
     // grow (not after the last): its segments stay open. Every other chain
     // is complete, every segment at its vertices known (a later window's
     // segments end on its own elements' edges and junctions only), so its
-    // polyline is the one chaining every segment at once gives.
+    // polyline is the one chaining every segment at once gives. The last
+    // window's polylines are finished meanwhile: they are only read and
+    // written through their own entries of `ready` (a std::map: inserting
+    // others moves no entry).
     const bool last = w0 + wn >= bands;
-    std::vector<int64_t> starts, chain_of;
-    std::vector<MarkPolyline> chained = Chain(
-        open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts, &chain_of,
-        &ghosts, last ? INT64_MAX : static_cast<int64_t>(window_first));
-    std::vector<bool> growing(open.size(), false);
-    if (!last) {
-      for (size_t k = window_first; k < open.size(); ++k) {
-        growing[chain_of[k]] = true;
+    std::vector<Ready*> finishing;
+    finishing.swap(unfinished);
+    wp.pool().ParallelFor(2, [&](int64_t half) {
+      if (half == 1) {
+        finish_all(finishing);
+        return;
       }
-    }
-    // Chain gave polylines for the complete chains only.
-    finish_all(chained);
-    for (size_t k = 0; k < chained.size(); ++k) {
-      ready.emplace(open_at[starts[k]], std::move(chained[k]));
-    }
-    // The complete chains' segments leave; where one ends at a vertex an
-    // open segment still uses, it stays counted there (a junction of three
-    // chains must not join the other two once the first is handed on).
-    absl::flat_hash_map<uint64_t, int32_t> kept_ghosts;
-    for (size_t k = 0; k < open.size(); ++k) {
-      if (!growing[chain_of[k]]) continue;
-      for (const End& e : open[k].e) kept_ghosts.try_emplace(e.key, 0);
-    }
-    for (auto& [key, count] : kept_ghosts) {
-      const auto g = ghosts.find(key);
-      if (g != ghosts.end()) count = g->second;
-    }
-    size_t n = 0;
-    for (size_t k = 0; k < open.size(); ++k) {
-      if (!growing[chain_of[k]]) {
-        for (const End& e : open[k].e) {
-          const auto g = kept_ghosts.find(e.key);
-          if (g != kept_ghosts.end()) ++g->second;
+      std::vector<int64_t> starts, chain_of;
+      std::vector<MarkPolyline> chained = Chain(
+          open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts,
+          &chain_of, &ghosts,
+          last ? INT64_MAX : static_cast<int64_t>(window_first));
+      std::vector<bool> growing(open.size(), false);
+      if (!last) {
+        for (size_t k = window_first; k < open.size(); ++k) {
+          growing[chain_of[k]] = true;
         }
-        continue;
       }
-      open[n] = open[k];
-      open_at[n++] = open_at[k];
+      // Chain gave polylines for the complete chains only.
+      for (size_t k = 0; k < chained.size(); ++k) {
+        const auto it = ready.emplace(
+            open_at[starts[k]], Ready{std::move(chained[k]), !finishes});
+        if (finishes) unfinished.push_back(&it.first->second);
+      }
+      // The complete chains' segments leave; where one ends at a vertex an
+      // open segment still uses, it stays counted there (a junction of
+      // three chains must not join the other two once the first is handed
+      // on).
+      absl::flat_hash_map<uint64_t, int32_t> kept_ghosts;
+      for (size_t k = 0; k < open.size(); ++k) {
+        if (!growing[chain_of[k]]) continue;
+        for (const End& e : open[k].e) kept_ghosts.try_emplace(e.key, 0);
+      }
+      for (auto& [key, count] : kept_ghosts) {
+        const auto g = ghosts.find(key);
+        if (g != ghosts.end()) count = g->second;
+      }
+      size_t n = 0;
+      for (size_t k = 0; k < open.size(); ++k) {
+        if (!growing[chain_of[k]]) {
+          for (const End& e : open[k].e) {
+            const auto g = kept_ghosts.find(e.key);
+            if (g != kept_ghosts.end()) ++g->second;
+          }
+          continue;
+        }
+        open[n] = open[k];
+        open_at[n++] = open_at[k];
+      }
+      open.resize(n);
+      open_at.resize(n);
+      absl::erase_if(kept_ghosts, [](const auto& g) { return g.second == 0; });
+      ghosts.swap(kept_ghosts);
+    });
+    for (Ready* r : finishing) r->finished = true;
+    if (last) {
+      finish_all(unfinished);
+      for (Ready* r : unfinished) r->finished = true;
+      unfinished.clear();
     }
-    open.resize(n);
-    open_at.resize(n);
-    absl::erase_if(kept_ghosts, [](const auto& g) { return g.second == 0; });
-    ghosts.swap(kept_ghosts);
     // Hand on what no open chain can come before (after the last window,
     // none is open).
     const int64_t before = open_at.empty() ? INT64_MAX : open_at.front();
-    while (!ready.empty() && ready.begin()->first < before) {
-      MarkPolyline p = std::move(ready.begin()->second);
+    // Nor what is not finished yet (this window's polylines).
+    while (!ready.empty() && ready.begin()->first < before &&
+           ready.begin()->second.finished) {
+      MarkPolyline p = std::move(ready.begin()->second.p);
       ready.erase(ready.begin());
       if (absl::Status st = emit(std::move(p)); !st.ok()) return st;
     }

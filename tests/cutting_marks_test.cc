@@ -883,6 +883,62 @@ TEST(CuttingMarksTest, PollStopsTheSearchBetweenWindows) {
   EXPECT_EQ(polls, 4);
 }
 
+// Guarded marks are projected onto the exact creases a window later, while
+// the next window is chained: they are handed on after the window that
+// follows the one that completed them, still before the search stops.
+TEST(CuttingMarksTest, PollStopsGuardedMarksAWindowLater) {
+  ThreadPool one(1), four(4);
+  std::vector<MarkPolyline> reference;
+  for (ThreadPool* pool : {&one, &four}) {
+    std::vector<Move> moves;
+    for (int k = -5; k <= 105; ++k) {
+      const double y = (k + 0.037) * 0.5;
+      moves.push_back({{-3, y, -0.5}, {13, y, -0.5}, 2});
+    }
+    auto wp = Cut({0, 0, 10, 50, 0, 100, 500}, moves, SchemeKind::kGuarded,
+                  pool);
+    const std::vector<MarkPolyline> all = Marks(*wp);
+    ASSERT_GE(all.size(), 90u);
+    // One thread: 500 rows are 32 bands in 4 windows of 8. After the
+    // second window, the first's chains are complete but not projected.
+    for (int stop_at : {2, 3}) {
+      if (pool == &four) break;
+      std::vector<MarkPolyline> got;
+      int polls = 0;
+      const absl::Status st = FindCuttingMarks(
+          *wp, {},
+          [&](MarkPolyline p) {
+            got.push_back(std::move(p));
+            return absl::OkStatus();
+          },
+          [&] {
+            return ++polls == stop_at ? absl::DeadlineExceededError("stop")
+                                      : absl::OkStatus();
+          });
+      EXPECT_EQ(st, absl::DeadlineExceededError("stop"));
+      if (stop_at == 2) {
+        EXPECT_EQ(got.size(), 0u);
+      } else {
+        EXPECT_GT(got.size(), 0u);
+        EXPECT_LT(got.size(), all.size() / 2);
+      }
+      for (size_t i = 0; i < got.size(); ++i) {
+        ExpectSamePolyline(got[i], all[i]);
+      }
+    }
+    // Four threads (other windows, finished beside other chaining): the
+    // same marks in the same order as one thread's.
+    if (pool == &one) {
+      reference = all;
+    } else {
+      ASSERT_EQ(all.size(), reference.size());
+      for (size_t i = 0; i < all.size(); ++i) {
+        ExpectSamePolyline(all[i], reference[i]);
+      }
+    }
+  }
+}
+
 TEST(CuttingMarksTest, UntouchedStockHasNoMarks) {
   auto wp = Cut({0, 0, 10, 10, 0, 50, 50}, {});
   EXPECT_TRUE(Marks(*wp).empty());
