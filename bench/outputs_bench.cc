@@ -41,7 +41,7 @@ struct Job {
   std::unique_ptr<SurfaceGrid> grid;
   std::unique_ptr<std::vector<MarkPolyline>> shown;  // FilterMarks'
   std::unique_ptr<ErrorRaster> raster;
-  std::unique_ptr<Image> relief;
+  std::unique_ptr<ReliefSampler> sampler;  // relief.png's, as swarf run's
   std::unique_ptr<TriangleMesh> mesh;
   std::string dir;
 };
@@ -141,10 +141,11 @@ absl::Status Prepare(Job& job) {
                     stats->map_rows,
                     std::move(stats->map)});
   }
-  if (job.relief == nullptr) {
-    auto relief = RenderRelief(*job.grid, RunOutputOptions{}.relief);
-    if (!relief.ok()) return relief.status();
-    job.relief = std::make_unique<Image>(*std::move(relief));
+  if (job.sampler == nullptr) {
+    const RunOutputOptions out;
+    job.sampler = std::make_unique<ReliefSampler>(
+        job.grid->spec, ReliefFrame(job.grid->spec, out.relief));
+    job.sampler->AddBand(*job.grid, 0, job.grid->spec.ny);
   }
   if (job.mesh == nullptr) {
     auto mesh = BuildSurfaceMesh(*job.grid, SwarfRunMesh());
@@ -190,9 +191,14 @@ absl::Status RunStep(Step step, Job& job, benchmark::State& state) {
       return absl::OkStatus();
     }
     case Step::kReliefPng: {
-      auto relief = RenderRelief(*job.grid, out.relief);
-      if (!relief.ok()) return relief.status();
-      return WritePng(*relief, base + "relief.png");
+      // Sampled, then its rows coloured as they are written (run_outputs).
+      ReliefSampler sampler(job.grid->spec,
+                            ReliefFrame(job.grid->spec, out.relief));
+      sampler.AddBand(*job.grid, 0, job.grid->spec.ny);
+      return WritePngRows(
+          sampler.frame().width, sampler.frame().height,
+          [&](int y, uint8_t* rgb) { sampler.ColorRow(y, rgb); },
+          base + "relief.png");
     }
     case Step::kErrorPng: {
       auto map = RenderErrorMap(*job.raster, out.error);
@@ -200,8 +206,8 @@ absl::Status RunStep(Step step, Job& job, benchmark::State& state) {
       return WritePng(*map, base + "error.png");
     }
     case Step::kMarksPng: {
-      auto picture = RenderMarks(*job.grid, *job.shown, out.marks,
-                                 job.relief.get(), out.relief);
+      // Over relief.png's sampled relief, as swarf run draws it.
+      auto picture = DrawMarks(*job.sampler, *job.shown, out.marks);
       if (!picture.ok()) return picture.status();
       return WritePng(*picture, base + "marks.png");
     }

@@ -195,6 +195,7 @@ ReliefSampler::ReliefSampler(const StockSpec& spec, const PixelFrame& frame)
   height_.assign(n, 0);
   shade_.assign(n, 1);
   row_min_.assign(frame.height, spec.z_top);
+  lowest_ = spec.z_top;
 }
 
 void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
@@ -232,14 +233,13 @@ void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
       row_min_[py] = lo;
     }
   });
+  // The tint needs the lowest height. Kept as the bands come, not found on
+  // the first ColorRow: rows are coloured on every thread.
+  for (const int py : rows) lowest_ = std::min(lowest_, row_min_[py]);
 }
 
 void ReliefSampler::ColorRow(int py, uint8_t* rgb) const {
-  if (depth_ < 0) {
-    // The tint needs the lowest height: known once every row is sampled.
-    depth_ = spec_.z_top - *std::min_element(row_min_.begin(), row_min_.end());
-  }
-  const double depth = depth_;
+  const double depth = spec_.z_top - lowest_;
   for (int px = 0; px < frame_.width; ++px) {
     const size_t k = static_cast<size_t>(py) * frame_.width + px;
     // Only what lies exactly at the top is untouched stock.
@@ -255,7 +255,6 @@ void ReliefSampler::ColorRow(int py, uint8_t* rgb) const {
 
 Image ReliefSampler::ToImage() const {
   Image image(frame_.width, frame_.height, 3);
-  ColorRow(0, image.row(0));  // sets depth_ before the threads read it
   ThreadPool::Default().ParallelFor(frame_.height, [&](int64_t py) {
     ColorRow(static_cast<int>(py), image.row(static_cast<int>(py)));
   });
@@ -486,7 +485,8 @@ void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
 
 namespace {
 
-// DrawMarks with the relief's pixel rows from relief_row(y, rgb).
+// DrawMarks with the relief's pixel rows from relief_row(y, rgb), called
+// from several threads at once.
 absl::StatusOr<Image> DrawMarksOver(
     const std::function<void(int, uint8_t*)>& relief_row,
     const PixelFrame& frame, const MarkSource& marks,
@@ -516,7 +516,11 @@ absl::StatusOr<Image> DrawMarksOver(
   Image image(legend_x0 + LegendWidth(legend, scale),
               std::max(frame.height, LegendMinHeight(legend, scale)), 3,
               kWhite);
-  for (int y = 0; y < frame.height; ++y) relief_row(y, image.row(y));
+  // The relief's rows on every thread: coloured one by one they were the
+  // picture's longest serial step.
+  ThreadPool::Default().ParallelFor(frame.height, [&](int64_t y) {
+    relief_row(static_cast<int>(y), image.row(static_cast<int>(y)));
+  });
   // All halos first, so that no halo covers an earlier line's colour: two
   // passes over the marks. Each pass takes a chunk of segments at a time,
   // bucketed by tiles of the picture drawn at once, each tile's segments in

@@ -58,8 +58,9 @@ absl::Status CheckPictureSides(int min_side, int max_side);
 // pixel row py samples element row ElementY(clamped Y(py)), so each row is
 // sampled from the one band that lists it, as from the whole grid. Holds a
 // height and a shade (float) per pixel: memory bounded by the frame, not
-// the grid. AddBand runs its rows on ThreadPool::Default(); not otherwise
-// thread-safe.
+// the grid. AddBand runs its rows on ThreadPool::Default(); calls to it
+// are not thread-safe. ColorRow is (the rows of a picture are coloured on
+// every thread).
 class ReliefSampler {
  public:
   ReliefSampler(const StockSpec& spec, const PixelFrame& frame);
@@ -67,7 +68,7 @@ class ReliefSampler {
   // Samples the pixel rows of element rows [e0, e1) from `band`.
   void AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1);
   // After every band: pixel row py as RGB (3 * width bytes), as
-  // RenderRelief colours it.
+  // RenderRelief colours it. May be called from several threads at once.
   void ColorRow(int py, uint8_t* rgb) const;
   Image ToImage() const;
 
@@ -77,7 +78,7 @@ class ReliefSampler {
   std::vector<int32_t> row_element_;  // per pixel row
   std::vector<float> height_, shade_;
   std::vector<double> row_min_;
-  mutable double depth_ = -1;  // computed on the first ColorRow
+  double lowest_;  // the lowest sampled height, z_top at least
 };
 
 // Hill-shaded relief: the reconstruction's normal lit from the upper left

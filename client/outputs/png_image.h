@@ -80,9 +80,12 @@ class Image {
 absl::Status WritePng(const Image& image, const std::string& path);
 
 // Writes a width x height 8-bit RGB PNG row by row (libpng's row writing):
-// `row(y, out)` fills the 3 * width bytes of row y (top first), called in
-// order from the calling thread. The same bytes as WritePng of the image
-// those rows make; errors as WritePng's. Holds one row, not the image.
+// `row(y, out)` fills the 3 * width bytes of row y, once for each y, from
+// several threads at once (ThreadPool::Default(): rows are made in blocks
+// of kPngRowBlock on every thread, then compressed in order). The same
+// bytes as WritePng of the image those rows make; errors as WritePng's.
+// Holds a block of rows, not the image.
+inline constexpr int kPngRowBlock = 64;
 absl::Status WritePngRows(int width, int height,
                           const std::function<void(int y, uint8_t* out)>& row,
                           const std::string& path);
