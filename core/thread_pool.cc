@@ -52,7 +52,8 @@ struct ThreadPool::Job {
   int64_t n;
   int64_t grain;  // indices claimed at a time
   std::atomic<int64_t> next{0};
-  int active = 0;  // workers inside Run(); guarded by the pool's mu_
+  // Threads inside Run(), its caller's included; guarded by the pool's mu_.
+  int active = 0;
 
   bool Exhausted() const { return next.load() >= n; }
 
@@ -65,13 +66,12 @@ struct ThreadPool::Job {
 
   // Claims indices, `grain` at a time, and runs them until none are left,
   // or (with `started`) until it no longer reads `seen`.
-  void Run(const std::atomic<uint64_t>* started = nullptr,
-           uint64_t seen = 0) {
+  void Run(const std::atomic<uint64_t>* started = nullptr, uint64_t seen = 0) {
     for (int64_t i; (i = next.fetch_add(grain)) < n;) {
       const int64_t end = std::min(n, i + grain);
       for (; i < end; ++i) (*fn)(i);
-      if (started != nullptr && started->load(std::memory_order_relaxed) !=
-                                    seen) {
+      if (started != nullptr &&
+          started->load(std::memory_order_relaxed) != seen) {
         return;
       }
     }
@@ -121,12 +121,14 @@ void ThreadPool::WorkerLoop() {
     // A job leaves the list once all its indices are claimed.
     std::erase_if(jobs_, [](const Job* j) { return j->Exhausted(); });
     if (jobs_.empty()) continue;
-    // The loop with the fewest workers, the oldest of those. Taking the
+    // The loop with the fewest threads, the newest of those. Taking the
     // oldest alone left a loop started beside a long one (the marks
-    // beside the error statistics) on its calling thread.
-    Job* job = *std::min_element(
-        jobs_.begin(), jobs_.end(),
-        [](const Job* a, const Job* b) { return a->active < b->active; });
+    // beside the error statistics) on its calling thread; on a tie the
+    // newer loop's caller is alone more often (one worker, two loops).
+    Job* job = jobs_.front();
+    for (Job* j : jobs_) {
+      if (j->active <= job->active) job = j;
+    }
     ++job->active;
     const uint64_t seen = started_.load(std::memory_order_relaxed);
     l.unlock();
@@ -139,7 +141,8 @@ void ThreadPool::WorkerLoop() {
   }
 }
 
-void ThreadPool::ParallelFor(int64_t n, const std::function<void(int64_t)>& fn) {
+void ThreadPool::ParallelFor(int64_t n,
+                             const std::function<void(int64_t)>& fn) {
   if (n <= 0) return;
   if (n == 1 || workers_.empty()) {
     for (int64_t i = 0; i < n; ++i) fn(i);
@@ -159,6 +162,7 @@ void ThreadPool::ParallelFor(int64_t n, const std::function<void(int64_t)>& fn) 
   job.grain = std::max<int64_t>(1, n / (1024 * size()));
   {
     std::lock_guard<std::mutex> l(mu_);
+    job.active = 1;  // the caller
     jobs_.push_back(&job);
     // Workers in other loops leave them after their current run of
     // indices and choose again, this one among them.
@@ -172,6 +176,7 @@ void ThreadPool::ParallelFor(int64_t n, const std::function<void(int64_t)>& fn) 
   // has also finished and the job can leave the list.
   std::unique_lock<std::mutex> l(mu_);
   jobs_.erase(std::remove(jobs_.begin(), jobs_.end(), &job), jobs_.end());
+  --job.active;
   // Meanwhile the caller works on the loops started by this one's items
   // (and theirs): it waits for them anyway. Idle, it left a loop started
   // beside a long item with one thread fewer (the marks' projection beside

@@ -173,36 +173,41 @@ TEST(ThreadPoolTest, FewItemsStillShared) {
 // first left the later loop on its calling thread alone (the marks beside
 // the error statistics), and this waited out its 10 s.
 TEST(ThreadPoolTest, ALaterLoopGetsWorkersFromALongOne) {
-  ThreadPool pool(4);
-  std::atomic<bool> later_done{false};
-  std::atomic<bool> long_started{false};
-  std::thread long_caller([&] {
-    pool.ParallelFor(1 << 20, [&](int64_t) {
-      long_started = true;
-      if (!later_done.load()) {
+  // Two threads: the only worker leaves the long loop to the later one's.
+  for (int threads : {2, 4}) {
+    SCOPED_TRACE(threads);
+    ThreadPool pool(threads);
+    std::atomic<bool> later_done{false};
+    std::atomic<bool> long_started{false};
+    std::thread long_caller([&] {
+      pool.ParallelFor(1 << 20, [&](int64_t) {
+        long_started = true;
+        if (!later_done.load()) {
+          std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        }
+      });
+    });
+    while (!long_started.load()) std::this_thread::yield();
+    // Let every worker settle into the long loop.
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    std::atomic<int> inside{0};
+    std::atomic<int> most{0};
+    const auto deadline =
+        std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    pool.ParallelFor(8, [&](int64_t) {
+      const int now = ++inside;
+      for (int m = most.load();
+           now > m && !most.compare_exchange_weak(m, now);) {
+      }
+      while (most.load() < 2 && std::chrono::steady_clock::now() < deadline) {
         std::this_thread::sleep_for(std::chrono::milliseconds(1));
       }
+      --inside;
     });
-  });
-  while (!long_started.load()) std::this_thread::yield();
-  // Let every worker settle into the long loop.
-  std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  std::atomic<int> inside{0};
-  std::atomic<int> most{0};
-  const auto deadline =
-      std::chrono::steady_clock::now() + std::chrono::seconds(10);
-  pool.ParallelFor(8, [&](int64_t) {
-    const int now = ++inside;
-    for (int m = most.load(); now > m && !most.compare_exchange_weak(m, now);) {
-    }
-    while (most.load() < 2 && std::chrono::steady_clock::now() < deadline) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    }
-    --inside;
-  });
-  later_done = true;
-  long_caller.join();
-  EXPECT_GE(most.load(), 2);
+    later_done = true;
+    long_caller.join();
+    EXPECT_GE(most.load(), 2);
+  }
 }
 
 // A caller whose own indices are done helps with the loops its loop's
