@@ -1162,7 +1162,8 @@ TEST(OutputsGoldenTest, GuardedSceneFiguresAreUnchanged) {
 }
 
 // The relief's sampler (corners and trust frames kept between points) is
-// SurfaceGrid::HeightAndGradient bit for bit, in rows and at random.
+// SurfaceGrid::HeightAndGradient bit for bit, in rows and at random, also
+// with its caches over a window of node columns.
 TEST(SurfaceSamplerTest, MatchesHeightAndGradientBitForBit) {
   for (SchemeKind scheme : {SchemeKind::kGuarded, SchemeKind::kTaylor,
                             SchemeKind::kZmap, SchemeKind::kExact}) {
@@ -1186,6 +1187,20 @@ TEST(SurfaceSamplerTest, MatchesHeightAndGradientBitForBit) {
       ASSERT_EQ(gx, hx) << x << ", " << y;
       ASSERT_EQ(gy, hy) << x << ", " << y;
       ASSERT_EQ(w, g.Height(x, y));
+    }
+    // A sampler whose caches span a few node columns (the relief's chunks
+    // of pixel columns), for points in those columns' elements.
+    const GridGeometry geometry(spec);
+    const int32_t i0 = geometry.ElementX(3.0), i1 = geometry.ElementX(7.0) + 1;
+    SurfaceSampler window(g, i0, i1);
+    for (const auto& [x, y] : points) {
+      if (x < 3.0 || x > 7.0) continue;
+      double gx, gy, hx, hy;
+      const double z = window.HeightAndGradient(x, y, &gx, &gy);
+      const double w = g.HeightAndGradient(x, y, &hx, &hy);
+      ASSERT_EQ(std::memcmp(&z, &w, 8), 0) << x << ", " << y;
+      ASSERT_EQ(gx, hx) << x << ", " << y;
+      ASSERT_EQ(gy, hy) << x << ", " << y;
     }
   }
 }

@@ -205,19 +205,34 @@ void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
   for (int py = 0; py < f.height; ++py) {
     if (row_element_[py] >= e0 && row_element_[py] < e1) rows.push_back(py);
   }
-  // Blocks of rows, each with one sampler: neighbouring rows share nodes.
+  // Blocks of rows by chunks of columns, each with one sampler:
+  // neighbouring rows share nodes. A band of tile rows has only a few
+  // blocks of rows (four at a pixel a node): whole rows left most of a
+  // many-core machine idle.
   constexpr int kBlockRows = 16;
+  constexpr int kChunkColumns = 512;
   const int64_t blocks =
       (static_cast<int64_t>(rows.size()) + kBlockRows - 1) / kBlockRows;
-  ThreadPool::Default().ParallelFor(blocks, [&](int64_t block) {
-    SurfaceSampler sampler(band);
+  const int chunks = (f.width + kChunkColumns - 1) / kChunkColumns;
+  const GridGeometry g(band.spec);
+  auto node_column = [&](int px) {  // as SurfaceSampler finds the element
+    return g.ElementX(std::clamp(f.X(px), band.spec.x0, band.spec.x1));
+  };
+  // Per row and chunk, the chunk's lowest height.
+  std::vector<double> chunk_min(rows.size() * chunks, z_top);
+  ThreadPool::Default().ParallelFor(blocks * chunks, [&](int64_t item) {
+    const int64_t block = item / chunks;
+    const int chunk = static_cast<int>(item % chunks);
+    const int px0 = chunk * kChunkColumns;
+    const int px1 = std::min(f.width, px0 + kChunkColumns);
+    SurfaceSampler sampler(band, node_column(px0), node_column(px1 - 1) + 1);
     const size_t r0 = static_cast<size_t>(block) * kBlockRows;
     const size_t r1 = std::min(rows.size(), r0 + kBlockRows);
     for (size_t r = r0; r < r1; ++r) {
       const int py = rows[r];
       const double y = f.Y(py);
       double lo = z_top;
-      for (int px = 0; px < f.width; ++px) {
+      for (int px = px0; px < px1; ++px) {
         double gx, gy;
         const double z = sampler.HeightAndGradient(f.X(px), y, &gx, &gy);
         const double dot = (-gx * kLightX - gy * kLightY + kLightZ) /
@@ -230,9 +245,13 @@ void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
             kAmbient + (1 - kAmbient) * std::max(dot, 0.0) / kLightZ);
         lo = std::min(lo, z);
       }
-      row_min_[py] = lo;
+      chunk_min[r * chunks + chunk] = lo;
     }
   });
+  for (size_t r = 0; r < rows.size(); ++r) {
+    row_min_[rows[r]] = *std::min_element(
+        chunk_min.begin() + r * chunks, chunk_min.begin() + (r + 1) * chunks);
+  }
   // The tint needs the lowest height. Kept as the bands come, not found on
   // the first ColorRow: rows are coloured on every thread.
   for (const int py : rows) lowest_ = std::min(lowest_, row_min_[py]);

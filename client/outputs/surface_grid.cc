@@ -274,7 +274,14 @@ double SurfaceGrid::HeightAndGradient(double x, double y, double* gx,
 }
 
 SurfaceSampler::SurfaceSampler(const SurfaceGrid& grid)
-    : grid_(grid), scheme_(GetScheme(grid.scheme)) {}
+    : SurfaceSampler(grid, 0, grid.nodes_x() - 1) {}
+
+SurfaceSampler::SurfaceSampler(const SurfaceGrid& grid, int32_t i0,
+                               int32_t i1)
+    : grid_(grid), scheme_(GetScheme(grid.scheme)) {
+  i0_ = std::clamp(i0, 0, grid.nodes_x() - 1);
+  columns_ = std::clamp(i1, i0_, grid.nodes_x() - 1) - i0_ + 1;
+}
 
 const PatchTrustRegion* SurfaceSampler::Region(int32_t i, int32_t j) {
   int k = 0;
@@ -284,14 +291,15 @@ const PatchTrustRegion* SurfaceSampler::Region(int32_t i, int32_t j) {
     k = next_;
     next_ = (next_ + 1) % kRows;
     row_[k] = j;
-    regions_[k].resize(grid_.nodes_x());
-    has_[k].assign(grid_.nodes_x(), 0);
+    regions_[k].resize(columns_);
+    has_[k].assign(columns_, 0);
   }
-  if (!has_[k][i]) {
-    regions_[k][i] = TrustRegion(grid_.jet(i, j));
-    has_[k][i] = 1;
+  const int32_t c = i - i0_;
+  if (!has_[k][c]) {
+    regions_[k][c] = TrustRegion(grid_.jet(i, j));
+    has_[k][c] = 1;
   }
-  return &regions_[k][i];
+  return &regions_[k][c];
 }
 
 double SurfaceSampler::HeightAndGradient(double x, double y, double* gx,

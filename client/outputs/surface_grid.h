@@ -137,6 +137,9 @@ void ReadNodeHeights(const Workpiece& wp, int32_t j0, int32_t j1, double* z);
 class SurfaceSampler {
  public:
   explicit SurfaceSampler(const SurfaceGrid& grid);
+  // Only for points whose elements' nodes lie in node columns [i0, i1]
+  // (clamped to the grid): its caches span those columns, not a row.
+  SurfaceSampler(const SurfaceGrid& grid, int32_t i0, int32_t i1);
   double HeightAndGradient(double x, double y, double* gx, double* gy);
   // The reconstruction of element (ei, ej) at n points of it (its closed
   // rectangle: points on its edges are taken from this element), as
@@ -150,7 +153,8 @@ class SurfaceSampler {
 
   const SurfaceGrid& grid_;
   const Scheme& scheme_;
-  int32_t ei_ = -1, ej_ = -1;  // the element e_ holds
+  int32_t i0_ = 0, columns_ = 0;  // the node columns the caches span
+  int32_t ei_ = -1, ej_ = -1;       // the element e_ holds
   ElementCorners e_;
   // Regions of node rows row_[k] (-1: none), computed where has_[k] says.
   static constexpr int kRows = 4;
