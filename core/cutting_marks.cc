@@ -1502,10 +1502,10 @@ absl::Status FindCuttingMarks(
         return;
       }
       std::vector<int64_t> starts, chain_of;
-      std::vector<MarkPolyline> chained = Chain(
-          open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts,
-          &chain_of, &ghosts,
-          last ? INT64_MAX : static_cast<int64_t>(window_first));
+      std::vector<MarkPolyline> chained =
+          Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts,
+                &chain_of, &ghosts,
+                last ? INT64_MAX : static_cast<int64_t>(window_first));
       std::vector<bool> growing(open.size(), false);
       if (!last) {
         for (size_t k = window_first; k < open.size(); ++k) {
@@ -1514,8 +1514,8 @@ absl::Status FindCuttingMarks(
       }
       // Chain gave polylines for the complete chains only.
       for (size_t k = 0; k < chained.size(); ++k) {
-        const auto it = ready.emplace(
-            open_at[starts[k]], Ready{std::move(chained[k]), !finishes});
+        const auto it = ready.emplace(open_at[starts[k]],
+                                      Ready{std::move(chained[k]), !finishes});
         if (finishes) unfinished.push_back(&it.first->second);
       }
       // The complete chains' segments leave; where one ends at a vertex an

@@ -895,8 +895,8 @@ TEST(CuttingMarksTest, PollStopsGuardedMarksAWindowLater) {
       const double y = (k + 0.037) * 0.5;
       moves.push_back({{-3, y, -0.5}, {13, y, -0.5}, 2});
     }
-    auto wp = Cut({0, 0, 10, 50, 0, 100, 500}, moves, SchemeKind::kGuarded,
-                  pool);
+    auto wp =
+        Cut({0, 0, 10, 50, 0, 100, 500}, moves, SchemeKind::kGuarded, pool);
     const std::vector<MarkPolyline> all = Marks(*wp);
     ASSERT_GE(all.size(), 90u);
     // One thread: 500 rows are 32 bands in 4 windows of 8. After the

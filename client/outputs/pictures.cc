@@ -249,8 +249,8 @@ void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
     }
   });
   for (size_t r = 0; r < rows.size(); ++r) {
-    row_min_[rows[r]] = *std::min_element(
-        chunk_min.begin() + r * chunks, chunk_min.begin() + (r + 1) * chunks);
+    row_min_[rows[r]] = *std::min_element(chunk_min.begin() + r * chunks,
+                                          chunk_min.begin() + (r + 1) * chunks);
   }
   // The tint needs the lowest height. Kept as the bands come, not found on
   // the first ColorRow: rows are coloured on every thread.

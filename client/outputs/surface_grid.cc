@@ -276,8 +276,7 @@ double SurfaceGrid::HeightAndGradient(double x, double y, double* gx,
 SurfaceSampler::SurfaceSampler(const SurfaceGrid& grid)
     : SurfaceSampler(grid, 0, grid.nodes_x() - 1) {}
 
-SurfaceSampler::SurfaceSampler(const SurfaceGrid& grid, int32_t i0,
-                               int32_t i1)
+SurfaceSampler::SurfaceSampler(const SurfaceGrid& grid, int32_t i0, int32_t i1)
     : grid_(grid), scheme_(GetScheme(grid.scheme)) {
   i0_ = std::clamp(i0, 0, grid.nodes_x() - 1);
   columns_ = std::clamp(i1, i0_, grid.nodes_x() - 1) - i0_ + 1;

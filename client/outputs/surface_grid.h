@@ -154,7 +154,7 @@ class SurfaceSampler {
   const SurfaceGrid& grid_;
   const Scheme& scheme_;
   int32_t i0_ = 0, columns_ = 0;  // the node columns the caches span
-  int32_t ei_ = -1, ej_ = -1;       // the element e_ holds
+  int32_t ei_ = -1, ej_ = -1;     // the element e_ holds
   ElementCorners e_;
   // Regions of node rows row_[k] (-1: none), computed where has_[k] says.
   static constexpr int kRows = 4;
