@@ -918,40 +918,100 @@ std::vector<MarkPolyline> Chain(
     inc.push_back({segs[k].e[0].key, k, 0});
     inc.push_back({segs[k].e[1].key, k, 1});
   }
-  // A total order, so the result is the same however it is sorted: two
-  // halves at once, then merged.
+  // A total order, so the result is the same however it is sorted.
   auto less = [](const Inc& a, const Inc& b) {
     return a.key != b.key ? a.key < b.key
                           : (a.seg != b.seg ? a.seg < b.seg : a.end < b.end);
   };
-  const auto middle = inc.begin() + static_cast<std::ptrdiff_t>(inc.size() / 2);
-  pool.ParallelFor(2, [&](int64_t h) {
-    if (h == 0) {
-      std::sort(inc.begin(), middle, less);
-    } else {
-      std::sort(middle, inc.end(), less);
+  // Sorted by buckets of keys on every thread: a window's chaining is
+  // serial, and two halves sorted at once, then merged, left all but two
+  // threads of a many-core machine idle. The buckets' bounds are keys (a
+  // sample's): a vertex's incidences fall in one bucket, whose ranges
+  // (`bounds`) then serve the pass below too.
+  const size_t m = inc.size();
+  std::vector<size_t> bounds = {0, m};
+  const int threads = pool.size();
+  if (threads == 1 || m < (size_t{1} << 15)) {
+    std::sort(inc.begin(), inc.end(), less);
+  } else {
+    const int buckets = 4 * threads;
+    constexpr int kOversample = 32;
+    std::vector<uint64_t> sample(static_cast<size_t>(buckets) * kOversample);
+    for (size_t k = 0; k < sample.size(); ++k) {
+      sample[k] = inc[k * m / sample.size()].key;
+    }
+    std::sort(sample.begin(), sample.end());
+    std::vector<uint64_t> split(buckets - 1);
+    for (int b = 1; b < buckets; ++b) split[b - 1] = sample[b * kOversample];
+    // Each chunk of `inc` counts its incidences per bucket, then moves them
+    // to their bucket's part for that chunk: the order within a bucket is
+    // the chunks' (then sorted anyway).
+    const int chunks = buckets;
+    std::vector<uint16_t> bucket(m);
+    std::vector<size_t> at(static_cast<size_t>(chunks) * buckets, 0);
+    auto chunk_range = [&](int64_t c) {
+      return std::pair<size_t, size_t>(c * m / chunks, (c + 1) * m / chunks);
+    };
+    pool.ParallelFor(chunks, [&](int64_t c) {
+      const auto [i0, i1] = chunk_range(c);
+      for (size_t i = i0; i < i1; ++i) {
+        const auto b = static_cast<uint16_t>(
+            std::upper_bound(split.begin(), split.end(), inc[i].key) -
+            split.begin());
+        bucket[i] = b;
+        ++at[c * buckets + b];
+      }
+    });
+    bounds.assign(buckets + 1, 0);
+    size_t total = 0;
+    for (int b = 0; b < buckets; ++b) {
+      bounds[b] = total;
+      for (int c = 0; c < chunks; ++c) {
+        const size_t count = at[c * buckets + b];
+        at[c * buckets + b] = total;
+        total += count;
+      }
+    }
+    bounds[buckets] = total;
+    std::vector<Inc> sorted(m);
+    pool.ParallelFor(chunks, [&](int64_t c) {
+      const auto [i0, i1] = chunk_range(c);
+      for (size_t i = i0; i < i1; ++i) {
+        sorted[at[c * buckets + bucket[i]]++] = inc[i];
+      }
+    });
+    pool.ParallelFor(buckets, [&](int64_t b) {
+      std::sort(sorted.begin() + static_cast<std::ptrdiff_t>(bounds[b]),
+                sorted.begin() + static_cast<std::ptrdiff_t>(bounds[b + 1]),
+                less);
+    });
+    inc.swap(sorted);
+  }
+  // For each segment end at a vertex of degree 2, the other incidence
+  // there; a bucket at a time (each writes its own incidences' entries).
+  std::vector<int64_t> other(2 * n, -1);  // seg * 2 + end
+  pool.ParallelFor(static_cast<int64_t>(bounds.size()) - 1, [&](int64_t b) {
+    const size_t end = bounds[b + 1];
+    for (size_t i = bounds[b]; i < end;) {
+      size_t j = i;
+      while (j < end && inc[j].key == inc[i].key) ++j;
+      int d = static_cast<int>(j - i);
+      if (ghosts != nullptr) {
+        const auto g = ghosts->find(inc[i].key);
+        if (g != ghosts->end()) d += g->second;
+      }
+      // Both incidences here: one open segment and one handed on cannot
+      // meet at a vertex of degree 2 (they would be one chain, handed on
+      // together).
+      if (d == 2 && j - i == 2) {
+        other[2 * inc[i].seg + inc[i].end] =
+            2 * inc[i + 1].seg + inc[i + 1].end;
+        other[2 * inc[i + 1].seg + inc[i + 1].end] =
+            2 * inc[i].seg + inc[i].end;
+      }
+      i = j;
     }
   });
-  std::inplace_merge(inc.begin(), middle, inc.end(), less);
-  // For each segment end: its vertex's degree and, at degree 2, the other
-  // incidence.
-  std::vector<int> degree(2 * n);
-  std::vector<int64_t> other(2 * n, -1);  // seg * 2 + end
-  for (size_t i = 0; i < inc.size();) {
-    size_t j = i;
-    while (j < inc.size() && inc[j].key == inc[i].key) ++j;
-    int d = static_cast<int>(j - i);
-    if (ghosts != nullptr) {
-      const auto g = ghosts->find(inc[i].key);
-      if (g != ghosts->end()) d += g->second;
-    }
-    for (size_t k = i; k < j; ++k) degree[2 * inc[k].seg + inc[k].end] = d;
-    if (d == 2) {
-      other[2 * inc[i].seg + inc[i].end] = 2 * inc[i + 1].seg + inc[i + 1].end;
-      other[2 * inc[i + 1].seg + inc[i + 1].end] = 2 * inc[i].seg + inc[i].end;
-    }
-    i = j;
-  }
   std::vector<bool> used(n, false);
   if (chain_of != nullptr) chain_of->assign(n, -1);
   std::vector<MarkPolyline> out;

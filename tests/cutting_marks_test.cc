@@ -883,6 +883,35 @@ TEST(CuttingMarksTest, PollStopsTheSearchBetweenWindows) {
   EXPECT_EQ(polls, 4);
 }
 
+// A window of tens of thousands of crease segments is chained with its
+// incidences sorted in buckets of keys on every thread (under 16 Ki
+// segments, on one): the same marks as one thread's plain sort. Raster
+// passes 0.3 mm apart across 1000 elements, and cross passes beside them
+// for junctions.
+TEST(CuttingMarksTest, ManySegmentsChainAsOnOneThread) {
+  ThreadPool one(1), four(4);
+  std::vector<Move> moves;
+  for (int k = -3; k <= 200; ++k) {
+    const double y = (k + 0.037) * 0.3;
+    moves.push_back({{-3, y, -0.4}, {103, y, -0.4}, 1.5});
+  }
+  for (int k = 0; k < 12; ++k) {
+    const double x = 4.1 + 8.3 * k;
+    moves.push_back({{x, -3, -0.6}, {x, 63, -0.6}, 1.5});
+  }
+  const StockSpec stock{0, 0, 100, 60, 0, 1000, 600};
+  auto wa = Cut(stock, moves, SchemeKind::kTaylor, &one);
+  auto wb = Cut(stock, moves, SchemeKind::kTaylor, &four);
+  const std::vector<MarkPolyline> a = Marks(*wa), b = Marks(*wb);
+  // Every pass but the first few meets its neighbours: about 200 creases
+  // across the stock, cut by the cross passes.
+  size_t vertices = 0;
+  for (const MarkPolyline& p : a) vertices += p.vertices.size();
+  EXPECT_GT(vertices, 100000u);
+  ASSERT_EQ(a.size(), b.size());
+  for (size_t i = 0; i < a.size(); ++i) ExpectSamePolyline(a[i], b[i]);
+}
+
 // Guarded marks are projected onto the exact creases a window later, while
 // the next window is chained: they are handed on after the window that
 // follows the one that completed them, still before the search stops.
