@@ -129,16 +129,20 @@ void ThreadPool::WorkerLoop() {
     for (Job* j : jobs_) {
       if (j->active <= job->active) job = j;
     }
-    ++job->active;
-    const uint64_t seen = started_.load(std::memory_order_relaxed);
-    l.unlock();
-    {
-      CurrentJob in(job);
-      job->Run(&started_, seen);
-    }
-    l.lock();
-    if (--job->active == 0) job_cv_.notify_all();
+    Work(job, &l);
   }
+}
+
+void ThreadPool::Work(Job* job, std::unique_lock<std::mutex>* l) {
+  ++job->active;
+  const uint64_t seen = started_.load(std::memory_order_relaxed);
+  l->unlock();
+  {
+    CurrentJob in(job);
+    job->Run(&started_, seen);
+  }
+  l->lock();
+  if (--job->active == 0) job_cv_.notify_all();
 }
 
 void ThreadPool::ParallelFor(int64_t n,
@@ -195,15 +199,7 @@ void ThreadPool::ParallelFor(int64_t n,
       job_cv_.wait(l);
       continue;
     }
-    ++inner->active;
-    const uint64_t seen = started_.load(std::memory_order_relaxed);
-    l.unlock();
-    {
-      CurrentJob helping(inner);
-      inner->Run(&started_, seen);
-    }
-    l.lock();
-    if (--inner->active == 0) job_cv_.notify_all();
+    Work(inner, &l);
   }
 }
 

@@ -61,6 +61,9 @@ class ThreadPool {
  private:
   struct Job;
   void WorkerLoop();
+  // Works on `job` (holding *l, which it releases meanwhile) until its
+  // indices are all claimed or another loop starts.
+  void Work(Job* job, std::unique_lock<std::mutex>* l);
 
   std::mutex mu_;
   std::condition_variable cv_;       // work arrived, or stop

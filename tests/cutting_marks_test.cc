@@ -840,6 +840,23 @@ TEST(CuttingMarksTest, SmallerWindowsGiveTheSameMarks) {
             absl::StatusCode::kInvalidArgument);
 }
 
+// The streamed marks into *got until the poll after window `stop_at`
+// stops the search with DeadlineExceeded("stop"); its status.
+absl::Status MarksUntilPoll(const Workpiece& wp, int stop_at,
+                            std::vector<MarkPolyline>* got) {
+  int polls = 0;
+  return FindCuttingMarks(
+      wp, {},
+      [&](MarkPolyline p) {
+        got->push_back(std::move(p));
+        return absl::OkStatus();
+      },
+      [&] {
+        return ++polls == stop_at ? absl::DeadlineExceededError("stop")
+                                  : absl::OkStatus();
+      });
+}
+
 TEST(CuttingMarksTest, PollStopsTheSearchBetweenWindows) {
   ThreadPool one(1);
   auto wp = LongRaster(&one);
@@ -848,25 +865,13 @@ TEST(CuttingMarksTest, PollStopsTheSearchBetweenWindows) {
   // passed without touching it: the poll after the second window stops the
   // search once the first window's marks are handed on.
   std::vector<MarkPolyline> got;
-  int polls = 0;
-  const absl::Status st = FindCuttingMarks(
-      *wp, {},
-      [&](MarkPolyline p) {
-        got.push_back(std::move(p));
-        return absl::OkStatus();
-      },
-      [&] {
-        return ++polls == 2 ? absl::DeadlineExceededError("no more time")
-                            : absl::OkStatus();
-      });
-  EXPECT_EQ(st, absl::DeadlineExceededError("no more time"));
-  EXPECT_EQ(polls, 2);
+  EXPECT_EQ(MarksUntilPoll(*wp, 2, &got), absl::DeadlineExceededError("stop"));
   // The marks of the first window's passes, and none of the rest.
   EXPECT_GT(got.size(), 0u);
   EXPECT_LT(got.size(), all.size() / 2);
   for (size_t i = 0; i < got.size(); ++i) ExpectSamePolyline(got[i], all[i]);
   // Without a stop, a poll after every window.
-  polls = 0;
+  int polls = 0;
   size_t n = 0;
   ASSERT_TRUE(FindCuttingMarks(
                   *wp, {},
@@ -933,18 +938,8 @@ TEST(CuttingMarksTest, PollStopsGuardedMarksAWindowLater) {
     for (int stop_at : {2, 3}) {
       if (pool == &four) break;
       std::vector<MarkPolyline> got;
-      int polls = 0;
-      const absl::Status st = FindCuttingMarks(
-          *wp, {},
-          [&](MarkPolyline p) {
-            got.push_back(std::move(p));
-            return absl::OkStatus();
-          },
-          [&] {
-            return ++polls == stop_at ? absl::DeadlineExceededError("stop")
-                                      : absl::OkStatus();
-          });
-      EXPECT_EQ(st, absl::DeadlineExceededError("stop"));
+      EXPECT_EQ(MarksUntilPoll(*wp, stop_at, &got),
+                absl::DeadlineExceededError("stop"));
       if (stop_at == 2) {
         EXPECT_EQ(got.size(), 0u);
       } else {

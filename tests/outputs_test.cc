@@ -1179,29 +1179,26 @@ TEST(SurfaceSamplerTest, MatchesHeightAndGradientBitForBit) {
       for (int i = 0; i <= 130; ++i) points.push_back({i * 0.093, j * 0.09});
     }
     for (int k = 0; k < 5000; ++k) points.push_back({ux(rng), uy(rng)});
-    for (const auto& [x, y] : points) {
-      double gx, gy, hx, hy;
-      const double z = sampler.HeightAndGradient(x, y, &gx, &gy);
-      const double w = g.HeightAndGradient(x, y, &hx, &hy);
-      ASSERT_EQ(std::memcmp(&z, &w, 8), 0) << x << ", " << y;
-      ASSERT_EQ(gx, hx) << x << ", " << y;
-      ASSERT_EQ(gy, hy) << x << ", " << y;
-      ASSERT_EQ(w, g.Height(x, y));
-    }
+    // The points in [x0, x1] through `s`, against the grid.
+    auto expect_same = [&](SurfaceSampler& s, double x0, double x1) {
+      for (const auto& [x, y] : points) {
+        if (x < x0 || x > x1) continue;
+        double gx, gy, hx, hy;
+        const double z = s.HeightAndGradient(x, y, &gx, &gy);
+        const double w = g.HeightAndGradient(x, y, &hx, &hy);
+        ASSERT_EQ(std::memcmp(&z, &w, 8), 0) << x << ", " << y;
+        ASSERT_EQ(gx, hx) << x << ", " << y;
+        ASSERT_EQ(gy, hy) << x << ", " << y;
+        ASSERT_EQ(w, g.Height(x, y));
+      }
+    };
+    expect_same(sampler, -1, 13);
     // A sampler whose caches span a few node columns (the relief's chunks
     // of pixel columns), for points in those columns' elements.
     const GridGeometry geometry(spec);
     const int32_t i0 = geometry.ElementX(3.0), i1 = geometry.ElementX(7.0) + 1;
     SurfaceSampler window(g, i0, i1);
-    for (const auto& [x, y] : points) {
-      if (x < 3.0 || x > 7.0) continue;
-      double gx, gy, hx, hy;
-      const double z = window.HeightAndGradient(x, y, &gx, &gy);
-      const double w = g.HeightAndGradient(x, y, &hx, &hy);
-      ASSERT_EQ(std::memcmp(&z, &w, 8), 0) << x << ", " << y;
-      ASSERT_EQ(gx, hx) << x << ", " << y;
-      ASSERT_EQ(gy, hy) << x << ", " << y;
-    }
+    expect_same(window, 3.0, 7.0);
   }
 }
 

@@ -37,6 +37,19 @@ void ExpectEachIndexOnce(ThreadPool& pool, int64_t n) {
   EXPECT_EQ(hits[n].load(), 0);
 }
 
+// A loop item that counts itself in `inside`, keeps in `most` the most
+// items inside at once, and waits (until `deadline`) for that to reach two.
+void WaitForCompany(std::atomic<int>& inside, std::atomic<int>& most,
+                    std::chrono::steady_clock::time_point deadline) {
+  const int now = ++inside;
+  for (int m = most.load(); now > m && !most.compare_exchange_weak(m, now);) {
+  }
+  while (most.load() < 2 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  --inside;
+}
+
 #ifdef __linux__
 // Held to one core (as `taskset -c N` does), a default pool has one
 // thread: the machine's other cores are not ours to contend for.
@@ -194,16 +207,8 @@ TEST(ThreadPoolTest, ALaterLoopGetsWorkersFromALongOne) {
     std::atomic<int> most{0};
     const auto deadline =
         std::chrono::steady_clock::now() + std::chrono::seconds(10);
-    pool.ParallelFor(8, [&](int64_t) {
-      const int now = ++inside;
-      for (int m = most.load();
-           now > m && !most.compare_exchange_weak(m, now);) {
-      }
-      while (most.load() < 2 && std::chrono::steady_clock::now() < deadline) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(1));
-      }
-      --inside;
-    });
+    pool.ParallelFor(8,
+                     [&](int64_t) { WaitForCompany(inside, most, deadline); });
     later_done = true;
     long_caller.join();
     EXPECT_GE(most.load(), 2);
@@ -233,14 +238,7 @@ TEST(ThreadPoolTest, AWaitingCallerHelpsTheLoopsItsItemsStarted) {
     }
     pool.ParallelFor(8, [&](int64_t) {
       inner_started = true;
-      const int now = ++inside;
-      for (int m = most.load();
-           now > m && !most.compare_exchange_weak(m, now);) {
-      }
-      while (most.load() < 2 && std::chrono::steady_clock::now() < deadline) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(1));
-      }
-      --inside;
+      WaitForCompany(inside, most, deadline);
     });
   });
   EXPECT_TRUE(inner_started.load());
