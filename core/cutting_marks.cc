@@ -1455,6 +1455,7 @@ absl::Status FindCuttingMarks(
   };
   const bool finishes = wp.scheme().kind() == SchemeKind::kExact ||
                         wp.scheme().kind() == SchemeKind::kGuarded;
+  // Finishes the polylines and marks them so.
   auto finish_all = [&](const std::vector<Ready*>& chained) {
     if (!finishes) return;
     // Runs of up to kRun vertices, none across two polylines.
@@ -1470,6 +1471,7 @@ absl::Status FindCuttingMarks(
       const size_t k1 = std::min(p.vertices.size(), runs[r].second + kRun);
       for (size_t k = runs[r].second; k < k1; ++k) finish_vertex(p, k);
     });
+    for (Ready* r : chained) r->finished = true;
   };
 
   // The bands a window at a time, so that the segments of the whole grid
@@ -1608,10 +1610,8 @@ absl::Status FindCuttingMarks(
       absl::erase_if(kept_ghosts, [](const auto& g) { return g.second == 0; });
       ghosts.swap(kept_ghosts);
     });
-    for (Ready* r : finishing) r->finished = true;
     if (last) {
       finish_all(unfinished);
-      for (Ready* r : unfinished) r->finished = true;
       unfinished.clear();
     }
     // Hand on what no open chain can come before (after the last window,

@@ -35,11 +35,11 @@ int DefaultThreads();
 // ParallelFor may be called from several threads at once; each call blocks
 // until its loop is done, and the calling thread works on it too. The
 // workers share themselves between the loops in flight: an idle worker
-// takes the loop with the fewest workers, and when a loop starts every
-// worker finishes its run of indices and chooses again, so a loop started
-// beside a long one gets its share of the threads at once. A caller whose
-// own indices are all claimed works on the loops its loop's items started
-// until its loop is done.
+// takes the loop with the fewest threads (its caller counted), the newest
+// of those, and when a loop starts every worker finishes its run of
+// indices and chooses again, so a loop started beside a long one gets its
+// share of the threads at once. A caller whose own indices are all claimed
+// works on the loops its loop's items started until its loop is done.
 class ThreadPool {
  public:
   // threads <= 0: DefaultThreads() (one per core this process may run on,
@@ -67,7 +67,7 @@ class ThreadPool {
 
   std::mutex mu_;
   std::condition_variable cv_;       // work arrived, or stop
-  std::condition_variable job_cv_;   // a worker left a job
+  std::condition_variable job_cv_;   // a thread left a job, or one started
   std::vector<Job*> jobs_;  // guarded by mu_
   bool stop_ = false;       // guarded by mu_
   // Counts the loops started; a worker that sees it change leaves its

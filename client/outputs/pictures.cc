@@ -194,7 +194,6 @@ ReliefSampler::ReliefSampler(const StockSpec& spec, const PixelFrame& frame)
   const size_t n = static_cast<size_t>(frame.width) * frame.height;
   height_.assign(n, 0);
   shade_.assign(n, 1);
-  row_min_.assign(frame.height, spec.z_top);
   lowest_ = spec.z_top;
 }
 
@@ -218,7 +217,7 @@ void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
   auto node_column = [&](int px) {  // as SurfaceSampler finds the element
     return g.ElementX(std::clamp(f.X(px), band.spec.x0, band.spec.x1));
   };
-  // Per row and chunk, the chunk's lowest height.
+  // Per row and chunk, the lowest height there.
   std::vector<double> chunk_min(rows.size() * chunks, z_top);
   ThreadPool::Default().ParallelFor(blocks * chunks, [&](int64_t item) {
     const int64_t block = item / chunks;
@@ -248,13 +247,9 @@ void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
       chunk_min[r * chunks + chunk] = lo;
     }
   });
-  for (size_t r = 0; r < rows.size(); ++r) {
-    row_min_[rows[r]] = *std::min_element(chunk_min.begin() + r * chunks,
-                                          chunk_min.begin() + (r + 1) * chunks);
-  }
   // The tint needs the lowest height. Kept as the bands come, not found on
   // the first ColorRow: rows are coloured on every thread.
-  for (const int py : rows) lowest_ = std::min(lowest_, row_min_[py]);
+  for (const double lo : chunk_min) lowest_ = std::min(lowest_, lo);
 }
 
 void ReliefSampler::ColorRow(int py, uint8_t* rgb) const {

@@ -77,7 +77,6 @@ class ReliefSampler {
   PixelFrame frame_;
   std::vector<int32_t> row_element_;  // per pixel row
   std::vector<float> height_, shade_;
-  std::vector<double> row_min_;
   double lowest_;  // the lowest sampled height, z_top at least
 };
 
