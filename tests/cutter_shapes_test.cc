@@ -26,6 +26,9 @@
 #include "absl/strings/str_cat.h"
 #include "core/cutter/cutter.h"
 #include "core/cutter/sweep.h"
+#include "core/move_list.h"
+#include "core/stock.h"
+#include "core/workpiece.h"
 #include "gtest/gtest.h"
 #include "tests/cutter_reference.h"
 
@@ -742,7 +745,8 @@ TEST(DegenerateShapeTest, ConeWithTipAsWideAsTheToolIsTheFlatEnd) {
   ExpectSameSurface(Cutter::Cone(3, 30, 3), Cutter::Flat(3));
 }
 // A tapered ball whose taper tends to zero, with its ball as wide as the
-// tool: the flank only spans R (1 - cos a) ~ 5e-22 mm.
+// tool: the flank only spans R (1 - cos a) ~ 5e-22 mm. (The sweep's
+// arithmetic; ValidateCutter refuses angles below kMinHalfAngleDeg.)
 TEST(DegenerateShapeTest, TaperedBallWithHalfAngleToZeroIsTheBall) {
   ExpectSameSurface(Cutter::TaperedBall(3, 3, 1e-9), Cutter::Ball(3));
 }
@@ -770,10 +774,11 @@ TEST(ValidateCutterTest, NamesTheField) {
             "tools[2].corner_radius must be finite and >= 0, got nan");
   EXPECT_EQ(Message(Cutter::BullNose(3, 3.5)),
             "tools[2].corner_radius must be at most the radius 3, got 3.5");
-  for (double angle : {0.0, 90.0, -10.0, 120.0, nan}) {
+  for (double angle : {0.0, 90.0, -10.0, 120.0, nan, 1e-200,
+                       0.999 * kMinHalfAngleDeg}) {
     for (const Cutter& c : {Cutter::Cone(3, angle, 0),
                             Cutter::TaperedBall(3, 0.5, angle)}) {
-      EXPECT_EQ(Message(c), "tools[2].half_angle_deg must be in (0, 90) "
+      EXPECT_EQ(Message(c), "tools[2].half_angle_deg must be in [0.001, 90) "
                             "degrees, got " + (std::isnan(angle) ? std::string("nan")
                                                : absl::StrCat(angle)))
           << CutterToString(c);
@@ -786,14 +791,66 @@ TEST(ValidateCutterTest, NamesTheField) {
   EXPECT_EQ(Message(Cutter::TaperedBall(3, 4, 10)),
             "tools[2].tip_radius must be at most the radius 3, got 4");
   EXPECT_EQ(Message(Cutter::TaperedBall(3, 0, 10)),
-            "tools[2].tip_radius of a tapered ball must be > 0, got 0");
+            "tools[2].tip_radius must be at least 0.0001 mm, got 0");
+  // A corner or tip radius that is not 0 is at least kMinRadius: one of
+  // 1e-200 mm made non-finite derivatives (the request fuzzer found it).
+  EXPECT_EQ(Message(Cutter::TaperedBall(3, 1e-200, 10)),
+            "tools[2].tip_radius must be at least 0.0001 mm, got 1e-200");
+  EXPECT_EQ(Message(Cutter::Cone(3, 45, 5.9e-303)),
+            "tools[2].tip_radius must be 0 or at least 0.0001 mm, got 5.9e-303");
+  EXPECT_EQ(Message(Cutter::BullNose(3, 0.5 * kMinRadius)),
+            "tools[2].corner_radius must be 0 or at least 0.0001 mm, got 5e-05");
   // The limits themselves are valid.
   for (const Cutter& c :
        {Cutter::Ball(kMinRadius), Cutter::Flat(kMaxRadius),
         Cutter::BullNose(3, 0), Cutter::BullNose(3, 3), Cutter::Cone(3, 45, 0),
         Cutter::Cone(3, 45, 3), Cutter::TaperedBall(3, 3, 10),
-        Cutter::Cone(3, 1e-9, 0), Cutter::Cone(3, 90 - 1e-9, 0)}) {
+        Cutter::Cone(3, kMinHalfAngleDeg, 0), Cutter::Cone(3, 90 - 1e-9, 0),
+        Cutter::Cone(3, 45, kMinRadius), Cutter::BullNose(3, kMinRadius),
+        Cutter::TaperedBall(3, kMinRadius, kMinHalfAngleDeg)}) {
     EXPECT_TRUE(ValidateCutter(c, "t").ok()) << CutterToString(c);
+  }
+}
+
+// The cutters at the limits cut nodes whose heights and (float) derivatives
+// are all finite: a plunge then a diagonal over a coarse stock, as the
+// request fuzzer cuts, on grids whose nodes fall on and off the path.
+TEST(ValidateCutterTest, CuttersAtTheLimitsCutFiniteNodes) {
+  for (const Cutter& c :
+       {Cutter::Cone(1, 45, kMinRadius), Cutter::Cone(1, kMinHalfAngleDeg, 0),
+        Cutter::Cone(1, kMinHalfAngleDeg, kMinRadius),
+        Cutter::BullNose(1, kMinRadius),
+        Cutter::TaperedBall(1, kMinRadius, 10),
+        Cutter::TaperedBall(1, kMinRadius, kMinHalfAngleDeg),
+        Cutter::Ball(kMinRadius)}) {
+    ASSERT_TRUE(ValidateCutter(c, "t").ok()) << CutterToString(c);
+    for (int32_t n : {11, 12, 19, 20}) {
+      SCOPED_TRACE(CutterToString(c) + ", " + std::to_string(n) + " elements");
+      const StockSpec stock{0, 0, 50, 30, 0, n, n};
+      auto wp = Workpiece::Create(stock, SchemeKind::kTaylor);
+      ASSERT_TRUE(wp.ok());
+      const double z = -0.5 * c.radius;
+      const std::vector<Move> moves = {Move({0, 0, 1}, {0, 0, z}, c),
+                                       Move({0, 0, z}, {50, 30, z}, c)};
+      ASSERT_TRUE((*wp)->Apply(moves).ok());
+      const Workpiece::TileExtent e = (*wp)->Extent(0);
+      const size_t nodes = static_cast<size_t>(e.nx) * e.ny;
+      std::vector<double> w(nodes);
+      std::vector<float> d(5 * nodes);
+      std::vector<int32_t> owner(nodes);
+      float* dp[5];
+      for (int k = 0; k < 5; ++k) dp[k] = d.data() + k * nodes;
+      (*wp)->ReadTile(0, w.data(), dp, owner.data());
+      int cut = 0;
+      for (size_t k = 0; k < nodes; ++k) {
+        ASSERT_TRUE(std::isfinite(w[k])) << "node " << k;
+        cut += owner[k] >= 0;
+      }
+      for (size_t k = 0; k < d.size(); ++k) {
+        ASSERT_TRUE(std::isfinite(d[k])) << "derivative " << k;
+      }
+      EXPECT_GT(cut, n / 2);
+    }
   }
 }
 

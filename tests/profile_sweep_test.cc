@@ -691,7 +691,7 @@ TEST(ProfileSweep, ExtremeMovesStayFinite) {
   std::mt19937_64 rng(7);
   std::uniform_real_distribution<double> unit(0, 1);
   const Cutter cutters[] = {
-      Cutter::Flat(1e-4),          Cutter::BullNose(1e-4, 5e-5),
+      Cutter::Flat(1e-4),          Cutter::BullNose(2e-4, 1e-4),
       Cutter::BullNose(1e5, 1),    Cutter::Cone(1e-4, 0.001, 0),
       Cutter::Cone(50, 89.999, 1), Cutter::TaperedBall(1e5, 1e-4, 45),
       Cutter::TaperedBall(3, 2.9, 0.01)};

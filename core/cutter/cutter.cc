@@ -24,6 +24,28 @@ double Flank(double rho0, double h0, double half_angle_deg, double rho) {
   return h0 + (rho - rho0) / std::tan(half_angle_deg * kDegree);
 }
 
+// A corner or tip radius: 0 where `zero_ok` (a flat end, a sharp cone),
+// else in [kMinRadius, c.radius].
+absl::Status ValidateInnerRadius(const Cutter& c, std::string_view field,
+                                 std::string_view name, double v,
+                                 bool zero_ok) {
+  if (!std::isfinite(v) || v < 0) {
+    return Bad(field, name, "must be finite and >= 0", v);
+  }
+  if (v > c.radius) {
+    return Bad(field, name, absl::StrCat("must be at most the radius ", c.radius),
+               v);
+  }
+  if (v == 0 && zero_ok) return absl::OkStatus();
+  if (!(v >= kMinRadius)) {
+    return Bad(field, name,
+               absl::StrCat(zero_ok ? "must be 0 or at least " : "must be at least ",
+                            kMinRadius, " mm"),
+               v);
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 std::string_view CutterKindName(CutterKind kind) {
@@ -72,37 +94,20 @@ absl::Status ValidateCutter(const Cutter& c, std::string_view field) {
     case CutterKind::kFlat:
       return absl::OkStatus();
     case CutterKind::kBullNose:
-      if (!std::isfinite(c.corner_radius) || c.corner_radius < 0) {
-        return Bad(field, "corner_radius", "must be finite and >= 0",
-                   c.corner_radius);
-      }
-      if (c.corner_radius > c.radius) {
-        return Bad(field, "corner_radius",
-                   absl::StrCat("must be at most the radius ", c.radius),
-                   c.corner_radius);
-      }
-      return absl::OkStatus();
+      return ValidateInnerRadius(c, field, "corner_radius", c.corner_radius,
+                                 /*zero_ok=*/true);
     case CutterKind::kCone:
     case CutterKind::kTaperedBall:
-      if (!std::isfinite(c.half_angle_deg) || !(c.half_angle_deg > 0) ||
+      if (!std::isfinite(c.half_angle_deg) ||
+          !(c.half_angle_deg >= kMinHalfAngleDeg) ||
           !(c.half_angle_deg < 90)) {
-        return Bad(field, "half_angle_deg", "must be in (0, 90) degrees",
+        return Bad(field, "half_angle_deg",
+                   absl::StrCat("must be in [", kMinHalfAngleDeg,
+                                ", 90) degrees"),
                    c.half_angle_deg);
       }
-      if (!std::isfinite(c.tip_radius) || c.tip_radius < 0) {
-        return Bad(field, "tip_radius", "must be finite and >= 0",
-                   c.tip_radius);
-      }
-      if (c.tip_radius > c.radius) {
-        return Bad(field, "tip_radius",
-                   absl::StrCat("must be at most the radius ", c.radius),
-                   c.tip_radius);
-      }
-      if (c.kind == CutterKind::kTaperedBall && !(c.tip_radius > 0)) {
-        return Bad(field, "tip_radius", "of a tapered ball must be > 0",
-                   c.tip_radius);
-      }
-      return absl::OkStatus();
+      return ValidateInnerRadius(c, field, "tip_radius", c.tip_radius,
+                                 /*zero_ok=*/c.kind == CutterKind::kCone);
   }
   return absl::InvalidArgumentError(absl::StrCat(std::string(field), ": unknown shape"));
 }

@@ -27,15 +27,19 @@ enum class CutterKind : uint8_t {
 };
 
 // Physical bounds on a cutter's dimensions (mm). They keep every
-// intermediate value of a sweep finite.
+// intermediate value of a sweep finite. kMinRadius also bounds a corner or
+// tip radius that is not 0, and kMinHalfAngleDeg a cone's or tapered ball's
+// half angle (degrees): a tip of 1e-200 mm or a flank at 1e-200 degrees
+// gives curvatures whose squares overflow.
 inline constexpr double kMinRadius = 1e-4;
 inline constexpr double kMaxRadius = 1e5;
+inline constexpr double kMinHalfAngleDeg = 1e-3;
 
 struct Cutter {
   CutterKind kind = CutterKind::kBall;
   double radius = 0;          // outer radius R (mm)
-  double corner_radius = 0;   // bull-nose torus radius rc, 0 <= rc <= R
-  double half_angle_deg = 0;  // cone / tapered ball: flank vs axis, (0, 90)
+  double corner_radius = 0;   // bull-nose torus radius rc: 0 or [1e-4, R]
+  double half_angle_deg = 0;  // cone / tapered ball: flank vs axis, [1e-3, 90)
   double tip_radius = 0;      // cone: flat tip; tapered ball: ball tip
 
   static Cutter Ball(double r) { return {CutterKind::kBall, r, 0, 0, 0}; }
@@ -62,9 +66,10 @@ std::string CutterToString(const Cutter& c);
 
 // InvalidArgument naming `field` + the dimension (e.g. "tools[0].radius")
 // for a dimension that is not finite, out of [kMinRadius, kMaxRadius] (the
-// radius), negative, or inconsistent: a corner radius above the radius, a
-// half angle outside (0, 90), a tip radius above the radius. The only
-// validation of a cutter; every layer calls it.
+// radius), negative, or inconsistent: a corner or tip radius neither 0 nor
+// in [kMinRadius, radius] (a tapered ball's tip not 0 either), a half angle
+// outside [kMinHalfAngleDeg, 90). The only validation of a cutter; every
+// layer calls it.
 absl::Status ValidateCutter(const Cutter& c, std::string_view field);
 
 // The cutter's lower surface: its height above the tip at horizontal
