@@ -2,6 +2,7 @@
 // directory and read back (PNG decoded, STL parsed, VRML/SVG/JSON scanned).
 #include <stdlib.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <array>
@@ -21,7 +22,8 @@
 #include <utility>
 #include <vector>
 
-#include "client/outputs/text.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "client/outputs/colormap.h"
 #include "client/outputs/json_writer.h"
 #include "client/outputs/marks_files.h"
@@ -30,13 +32,12 @@
 #include "client/outputs/run_outputs.h"
 #include "client/outputs/surface_grid.h"
 #include "client/outputs/surface_mesh.h"
+#include "client/outputs/text.h"
 #include "core/cutting_marks.h"
 #include "core/valuation.h"
 #include "core/workpiece.h"
 #include "google/protobuf/struct.pb.h"
 #include "google/protobuf/util/json_util.h"
-#include "absl/strings/str_cat.h"
-#include "absl/strings/str_format.h"
 #include "gtest/gtest.h"
 
 namespace swarf::cli {
@@ -191,6 +192,89 @@ TEST(PngTest, RoundTripsRgbAndRgba) {
     EXPECT_EQ(back->height(), 11);
     EXPECT_EQ(back->channels(), channels);
     EXPECT_EQ(back->pixels(), im.pixels());
+  }
+}
+
+// The file itself, read without libpng: the signature, IHDR first and
+// IEND last, every chunk's CRC, one zlib stream over the IDAT chunks (its
+// Adler-32 checked by zlib) whose rows are all Paeth-filtered and unfilter
+// to the pixels. Tall enough for many blocks of rows and several groups of
+// blocks; WritePngRows writes the same bytes.
+TEST(PngTest, FileIsValidWithoutLibpng) {
+  TempDir dir;
+  std::mt19937 rng(5);
+  for (int channels : {3, 4}) {
+    const int w = 53, h = 40 * kPngRowBlock + 7;
+    Image im(w, h, channels);
+    for (uint8_t& v : im.pixels()) v = rng() % 4 == 0 ? rng() : 200;
+    const std::string path = dir.File("v.png");
+    ASSERT_TRUE(WritePng(im, path).ok());
+    std::ifstream in(path, std::ios::binary);
+    const std::string f((std::istreambuf_iterator<char>(in)), {});
+    const auto* b = reinterpret_cast<const uint8_t*>(f.data());
+    auto u32 = [&](size_t at) {
+      return uint32_t{b[at]} << 24 | uint32_t{b[at + 1]} << 16 |
+             uint32_t{b[at + 2]} << 8 | b[at + 3];
+    };
+    ASSERT_EQ(f.substr(0, 8), std::string("\x89PNG\r\n\x1a\n", 8));
+    std::vector<std::string> types;
+    std::string idat;
+    size_t at = 8;
+    while (at + 12 <= f.size()) {
+      const uint32_t n = u32(at);
+      ASSERT_LE(at + 12 + n, f.size());
+      types.push_back(f.substr(at + 4, 4));
+      EXPECT_EQ(crc32(0, b + at + 4, 4 + n), u32(at + 8 + n)) << types.back();
+      if (types.back() == "IHDR") {
+        ASSERT_EQ(n, 13u);
+        EXPECT_EQ(u32(at + 8), uint32_t(w));
+        EXPECT_EQ(u32(at + 12), uint32_t(h));
+        EXPECT_EQ(b[at + 16], 8);
+        EXPECT_EQ(b[at + 17], channels == 4 ? 6 : 2);
+      }
+      if (types.back() == "IDAT") idat += f.substr(at + 8, n);
+      at += 12 + n;
+    }
+    EXPECT_EQ(at, f.size());
+    ASSERT_GE(types.size(), 3u);
+    EXPECT_EQ(types.front(), "IHDR");
+    EXPECT_EQ(types.back(), "IEND");
+    const size_t stride = size_t(w) * channels;
+    std::vector<uint8_t> raw(h * (stride + 1));
+    uLongf raw_size = raw.size();
+    ASSERT_EQ(
+        uncompress(raw.data(), &raw_size,
+                   reinterpret_cast<const Bytef*>(idat.data()), idat.size()),
+        Z_OK);
+    ASSERT_EQ(raw_size, raw.size());
+    std::vector<uint8_t> pixels, prev(stride, 0), line(stride);
+    for (int y = 0; y < h; ++y) {
+      const uint8_t* r = raw.data() + y * (stride + 1);
+      ASSERT_EQ(r[0], 4) << "row " << y;
+      for (size_t i = 0; i < stride; ++i) {
+        const int a = i >= size_t(channels) ? line[i - channels] : 0;
+        const int c = i >= size_t(channels) ? prev[i - channels] : 0;
+        const int p = a + prev[i] - c;
+        const int pa = std::abs(p - a), pb = std::abs(p - prev[i]),
+                  pc = std::abs(p - c);
+        const int pred = pa <= pb && pa <= pc ? a : pb <= pc ? prev[i] : c;
+        line[i] = uint8_t(r[1 + i] + pred);
+      }
+      pixels.insert(pixels.end(), line.begin(), line.end());
+      prev = line;
+    }
+    EXPECT_EQ(pixels, im.pixels());
+    if (channels == 3) {
+      const std::string rows_path = dir.File("rows.png");
+      ASSERT_TRUE(
+          WritePngRows(
+              w, h,
+              [&](int y, uint8_t* out) { std::memcpy(out, im.row(y), stride); },
+              rows_path)
+              .ok());
+      std::ifstream in2(rows_path, std::ios::binary);
+      EXPECT_EQ(std::string((std::istreambuf_iterator<char>(in2)), {}), f);
+    }
   }
 }
 

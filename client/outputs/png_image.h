@@ -1,4 +1,5 @@
-// 8-bit RGB / RGBA raster images and their PNG files (libpng).
+// 8-bit RGB / RGBA raster images and their PNG files (written with zlib,
+// read with libpng).
 #ifndef SWARF_CLIENT_PNG_IMAGE_H_
 #define SWARF_CLIENT_PNG_IMAGE_H_
 
@@ -74,17 +75,18 @@ class Image {
 };
 
 // Writes `image` as an 8-bit PNG (RGB or RGBA as the image has), replacing
-// the file. InvalidArgument for an empty image or pixel buffer of the wrong
-// size; PermissionDenied (cannot open) or Internal (libpng or I/O failure)
-// naming the path otherwise, and a partial file is removed.
+// the file: every row Paeth-filtered, deflated (zlib level 3, Z_RLE) in
+// blocks of kPngRowBlock rows on every thread of ThreadPool::Default().
+// InvalidArgument for an empty image or pixel buffer of the wrong size;
+// PermissionDenied (cannot open) or Internal (zlib or I/O failure) naming
+// the path otherwise, and a partial file is removed.
 absl::Status WritePng(const Image& image, const std::string& path);
 
-// Writes a width x height 8-bit RGB PNG row by row (libpng's row writing):
-// `row(y, out)` fills the 3 * width bytes of row y, once for each y, from
-// several threads at once (ThreadPool::Default(): rows are made in blocks
-// of kPngRowBlock on every thread, then compressed in order). The same
-// bytes as WritePng of the image those rows make; errors as WritePng's.
-// Holds a block of rows, not the image.
+// Writes a width x height 8-bit RGB PNG: `row(y, out)` fills the 3 * width
+// bytes of row y, once for each y, from several threads at once (rows are
+// made a few blocks of kPngRowBlock a thread at a time, then filtered and
+// deflated a block a thread). The same bytes as WritePng of the image those
+// rows make; errors as WritePng's. Holds those blocks, not the image.
 inline constexpr int kPngRowBlock = 64;
 absl::Status WritePngRows(int width, int height,
                           const std::function<void(int y, uint8_t* out)>& row,
