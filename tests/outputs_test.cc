@@ -25,6 +25,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "client/outputs/colormap.h"
+#include "client/outputs/file_writer.h"
 #include "client/outputs/json_writer.h"
 #include "client/outputs/marks_files.h"
 #include "client/outputs/pictures.h"
@@ -275,6 +276,37 @@ TEST(PngTest, FileIsValidWithoutLibpng) {
       std::ifstream in2(rows_path, std::ios::binary);
       EXPECT_EQ(std::string((std::istreambuf_iterator<char>(in2)), {}), f);
     }
+  }
+}
+
+// WriteChunks: the items' bytes in order, whatever the chunking (one item
+// a chunk, many groups of chunks, one chunk for all), as one thread would
+// write them; items of varying length, chunks formatted at once.
+TEST(FileWriterTest, ChunksAreWrittenInOrder) {
+  TempDir dir;
+  auto item = [](int64_t k) { return std::string(k % 7, 'a' + k % 26) + "|"; };
+  const int64_t n = 100003;
+  std::string serial;
+  for (int64_t k = 0; k < n; ++k) serial += item(k);
+  for (int64_t per_chunk : {int64_t{1}, int64_t{7}, int64_t{1000}, n, 2 * n}) {
+    const std::string path = dir.File("chunks.txt");
+    FileWriter out(path);
+    out.Write("head|");
+    out.WriteChunks(n, per_chunk,
+                    [&](int64_t first, int64_t last, std::string* piece) {
+                      EXPECT_TRUE(piece->empty());
+                      EXPECT_LE(last - first, per_chunk);
+                      for (int64_t k = first; k < last; ++k) *piece += item(k);
+                    });
+    out.WriteChunks(0, per_chunk, [](int64_t, int64_t, std::string*) {
+      ADD_FAILURE() << "no items, no chunks";
+    });
+    out.Write("tail");
+    ASSERT_TRUE(out.Close().ok());
+    std::ifstream in(path, std::ios::binary);
+    EXPECT_EQ(std::string((std::istreambuf_iterator<char>(in)), {}),
+              "head|" + serial + "tail")
+        << per_chunk;
   }
 }
 

@@ -1,10 +1,13 @@
 #include "client/outputs/file_writer.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "core/thread_pool.h"
 
 namespace swarf::cli {
 namespace {
@@ -32,8 +35,40 @@ FileWriter::~FileWriter() {
 
 void FileWriter::Write(std::string_view data) {
   if (!status_.ok()) return;
+  if (data.size() >= kBufferBytes) {
+    // Large pieces (WriteChunks') go out without a copy.
+    Flush();
+    if (status_.ok() &&
+        std::fwrite(data.data(), 1, data.size(), file_) != data.size()) {
+      status_ = absl::InternalError(
+          absl::StrCat("writing ", path_, " failed: ", std::strerror(errno)));
+    }
+    return;
+  }
   buffer_.append(data);
   if (buffer_.size() >= kBufferBytes) Flush();
+}
+
+void FileWriter::WriteChunks(
+    int64_t n, int64_t per_chunk,
+    const std::function<void(int64_t, int64_t, std::string*)>& format) {
+  if (n <= 0) return;
+  per_chunk = std::max<int64_t>(per_chunk, 1);
+  ThreadPool& pool = ThreadPool::Default();
+  const int64_t chunks = (n + per_chunk - 1) / per_chunk;
+  // Two chunks a thread at a time: formatting (the meshes' floats and
+  // normals) was their files' serial step; only the writes stay in order.
+  const int64_t group = std::min<int64_t>(chunks, 2 * pool.size());
+  std::vector<std::string> pieces(group);
+  for (int64_t c0 = 0; c0 < chunks && status_.ok(); c0 += group) {
+    const int64_t nc = std::min(group, chunks - c0);
+    pool.ParallelFor(nc, [&](int64_t k) {
+      const int64_t first = (c0 + k) * per_chunk;
+      pieces[k].clear();
+      format(first, std::min(n, first + per_chunk), &pieces[k]);
+    });
+    for (int64_t k = 0; k < nc; ++k) Write(pieces[k]);
+  }
 }
 
 void FileWriter::Flush() {

@@ -3,7 +3,9 @@
 #ifndef SWARF_CLIENT_FILE_WRITER_H_
 #define SWARF_CLIENT_FILE_WRITER_H_
 
+#include <cstdint>
 #include <cstdio>
+#include <functional>
 #include <string>
 #include <string_view>
 
@@ -21,6 +23,15 @@ class FileWriter {
 
   // Appends bytes (buffered). Errors are sticky and reported by Close.
   void Write(std::string_view data);
+  // Appends the bytes of n items, made on every thread of
+  // ThreadPool::Default() and written in order: format(first, last, out)
+  // appends the bytes of items [first, last) to *out (empty; a chunk of at
+  // most `per_chunk` items) and is called from several threads at once.
+  // The same bytes as formatting every item in order on one thread; a few
+  // chunks a thread are held at a time.
+  void WriteChunks(int64_t n, int64_t per_chunk,
+                   const std::function<void(int64_t first, int64_t last,
+                                            std::string* out)>& format);
   // Flushes and closes; the first error naming the path, or OK.
   absl::Status Close();
   const absl::Status& status() const { return status_; }

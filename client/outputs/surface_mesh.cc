@@ -22,11 +22,10 @@ static_assert(std::endian::native == std::endian::little,
 
 constexpr Rgb kWallColor = {110, 110, 110};
 
-// One binary STL record: the unit normal from the cross product (zero for
-// a degenerate triangle), the vertices as float32, a zero attribute word.
-void AppendStlRecord(const Vec3& p, const Vec3& q, const Vec3& r,
-                     FileWriter& out) {
-  char rec[50];
+// One binary STL record (50 bytes to `rec`): the unit normal from the
+// cross product (zero for a degenerate triangle), the vertices as float32,
+// a zero attribute word.
+void StlRecord(const Vec3& p, const Vec3& q, const Vec3& r, char* rec) {
   const double ux = q.x - p.x, uy = q.y - p.y, uz = q.z - p.z;
   const double vx = r.x - p.x, vy = r.y - p.y, vz = r.z - p.z;
   double nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
@@ -46,8 +45,21 @@ void AppendStlRecord(const Vec3& p, const Vec3& q, const Vec3& r,
                        static_cast<float>(r.y), static_cast<float>(r.z)};
   std::memcpy(rec, f, 48);
   rec[48] = rec[49] = 0;
-  out.Write(std::string_view(rec, 50));
 }
+
+constexpr size_t kStlRecordBytes = 50;
+
+void AppendStlRecord(const Vec3& p, const Vec3& q, const Vec3& r,
+                     FileWriter& out) {
+  char rec[kStlRecordBytes];
+  StlRecord(p, q, r, rec);
+  out.Write(std::string_view(rec, kStlRecordBytes));
+}
+
+// Items a chunk of the meshes' files is made of (WriteChunks): about 800
+// KB of STL records, 1 MB of VRML text.
+constexpr int64_t kStlChunk = 16384;
+constexpr int64_t kVrmlChunk = 32768;
 
 // A vertex of the full-resolution mesh: top lattice vertex (i, j), or the
 // bottom vertex under boundary vertex (i, j).
@@ -444,10 +456,17 @@ absl::Status WriteStl(const TriangleMesh& mesh, const std::string& path) {
   FileWriter out(path);
   if (!out.status().ok()) return out.status();
   WriteStlHeader(static_cast<uint32_t>(mesh.triangles.size()), out);
-  for (const auto& t : mesh.triangles) {
-    AppendStlRecord(mesh.vertices[t[0]], mesh.vertices[t[1]],
-                    mesh.vertices[t[2]], out);
-  }
+  out.WriteChunks(static_cast<int64_t>(mesh.triangles.size()), kStlChunk,
+                  [&](int64_t first, int64_t last, std::string* piece) {
+                    piece->resize((last - first) * kStlRecordBytes);
+                    char* rec = piece->data();
+                    for (int64_t k = first; k < last; ++k) {
+                      const auto& t = mesh.triangles[k];
+                      StlRecord(mesh.vertices[t[0]], mesh.vertices[t[1]],
+                                mesh.vertices[t[2]], rec);
+                      rec += kStlRecordBytes;
+                    }
+                  });
   return out.Close();
 }
 
@@ -457,10 +476,16 @@ std::vector<Rgb> SurfaceColors(const TriangleMesh& mesh, double z_top) {
   for (int64_t k = 0; k < mesh.top_vertices; ++k) {
     lo = std::min(lo, mesh.vertices[k].z);
   }
-  for (int64_t k = 0; k < mesh.top_vertices; ++k) {
-    const double z = mesh.vertices[k].z;
-    colors[k] = z < z_top ? HeightTint((z - lo) / (z_top - lo)) : kStockColor;
-  }
+  constexpr int64_t kChunk = 65536;
+  ThreadPool::Default().ParallelFor(
+      (mesh.top_vertices + kChunk - 1) / kChunk, [&](int64_t c) {
+        const int64_t end = std::min(mesh.top_vertices, (c + 1) * kChunk);
+        for (int64_t k = c * kChunk; k < end; ++k) {
+          const double z = mesh.vertices[k].z;
+          colors[k] =
+              z < z_top ? HeightTint((z - lo) / (z_top - lo)) : kStockColor;
+        }
+      });
   return colors;
 }
 
@@ -507,54 +532,56 @@ absl::Status WriteVrml(const TriangleMesh& mesh, const std::string& path,
   }
   FileWriter out(path);
   if (!out.status().ok()) return out.status();
-  std::string s = VrmlHeader(mesh.vertices.size(), mesh.triangles.size());
-  constexpr size_t kChunk = size_t{1} << 20;
-  for (const Vec3& v : mesh.vertices) {
-    AppendFloat(s, v.x);
-    s += ' ';
-    AppendFloat(s, v.y);
-    s += ' ';
-    AppendFloat(s, v.z);
-    s += '\n';
-    if (s.size() >= kChunk) {
-      out.Write(s);
-      s.clear();
-    }
-  }
-  s += "      ]\n    }\n";
+  out.Write(VrmlHeader(mesh.vertices.size(), mesh.triangles.size()));
+  out.WriteChunks(static_cast<int64_t>(mesh.vertices.size()), kVrmlChunk,
+                  [&](int64_t first, int64_t last, std::string* s) {
+                    for (int64_t k = first; k < last; ++k) {
+                      const Vec3& v = mesh.vertices[k];
+                      AppendFloat(*s, v.x);
+                      *s += ' ';
+                      AppendFloat(*s, v.y);
+                      *s += ' ';
+                      AppendFloat(*s, v.z);
+                      *s += '\n';
+                    }
+                  });
+  std::string s = "      ]\n    }\n";
   if (!vertex_colors.empty()) {
     s += "    colorPerVertex TRUE\n    color Color {\n      color [\n";
+    out.Write(s);
     char table[256][8];
     for (int k = 0; k < 256; ++k) {
       std::snprintf(table[k], sizeof table[k], "%.3f", k / 255.0);
     }
-    for (const Rgb& c : vertex_colors) {
-      s += table[c.r];
-      s += ' ';
-      s += table[c.g];
-      s += ' ';
-      s += table[c.b];
-      s += '\n';
-      if (s.size() >= kChunk) {
-        out.Write(s);
-        s.clear();
-      }
-    }
-    s += "      ]\n    }\n";
+    out.WriteChunks(static_cast<int64_t>(vertex_colors.size()), kVrmlChunk,
+                    [&](int64_t first, int64_t last, std::string* s) {
+                      for (int64_t k = first; k < last; ++k) {
+                        const Rgb& c = vertex_colors[k];
+                        *s += table[c.r];
+                        *s += ' ';
+                        *s += table[c.g];
+                        *s += ' ';
+                        *s += table[c.b];
+                        *s += '\n';
+                      }
+                    });
+    s = "      ]\n    }\n";
   }
   s += "    coordIndex [\n";
-  for (const auto& t : mesh.triangles) {
-    AppendInt(s, t[0]);
-    s += ' ';
-    AppendInt(s, t[1]);
-    s += ' ';
-    AppendInt(s, t[2]);
-    s += " -1\n";
-    if (s.size() >= kChunk) {
-      out.Write(s);
-      s.clear();
-    }
-  }
+  out.Write(s);
+  out.WriteChunks(static_cast<int64_t>(mesh.triangles.size()), kVrmlChunk,
+                  [&](int64_t first, int64_t last, std::string* s) {
+                    for (int64_t k = first; k < last; ++k) {
+                      const auto& t = mesh.triangles[k];
+                      AppendInt(*s, t[0]);
+                      *s += ' ';
+                      AppendInt(*s, t[1]);
+                      *s += ' ';
+                      AppendInt(*s, t[2]);
+                      *s += " -1\n";
+                    }
+                  });
+  s.clear();
   s += "    ]\n  }\n}\n";
   out.Write(s);
   return out.Close();
