@@ -49,26 +49,33 @@ void FileWriter::Write(std::string_view data) {
   if (buffer_.size() >= kBufferBytes) Flush();
 }
 
-void FileWriter::WriteChunks(
-    int64_t n, int64_t per_chunk,
-    const std::function<void(int64_t, int64_t, std::string*)>& format) {
+void FormatInOrder(
+    int64_t n, int64_t per_chunk, int64_t chunks_at_once,
+    const std::function<void(int64_t, int64_t, std::string*)>& format,
+    const std::function<void(std::string_view)>& put) {
   if (n <= 0) return;
   per_chunk = std::max<int64_t>(per_chunk, 1);
-  ThreadPool& pool = ThreadPool::Default();
   const int64_t chunks = (n + per_chunk - 1) / per_chunk;
-  // Two chunks a thread at a time: formatting (the meshes' floats and
-  // normals) was their files' serial step; only the writes stay in order.
-  const int64_t group = std::min<int64_t>(chunks, 2 * pool.size());
+  const int64_t group = std::min(chunks, std::max<int64_t>(chunks_at_once, 1));
   std::vector<std::string> pieces(group);
-  for (int64_t c0 = 0; c0 < chunks && status_.ok(); c0 += group) {
+  for (int64_t c0 = 0; c0 < chunks; c0 += group) {
     const int64_t nc = std::min(group, chunks - c0);
-    pool.ParallelFor(nc, [&](int64_t k) {
+    ThreadPool::Default().ParallelFor(nc, [&](int64_t k) {
       const int64_t first = (c0 + k) * per_chunk;
       pieces[k].clear();
       format(first, std::min(n, first + per_chunk), &pieces[k]);
     });
-    for (int64_t k = 0; k < nc; ++k) Write(pieces[k]);
+    for (int64_t k = 0; k < nc; ++k) put(pieces[k]);
   }
+}
+
+void FileWriter::WriteChunks(
+    int64_t n, int64_t per_chunk,
+    const std::function<void(int64_t, int64_t, std::string*)>& format) {
+  // Formatting (the meshes' floats and normals) was their files' serial
+  // step; only the writes stay in order.
+  FormatInOrder(n, per_chunk, 2 * ThreadPool::Default().size(), format,
+                [this](std::string_view piece) { Write(piece); });
 }
 
 void FileWriter::Flush() {

@@ -23,12 +23,8 @@ class FileWriter {
 
   // Appends bytes (buffered). Errors are sticky and reported by Close.
   void Write(std::string_view data);
-  // Appends the bytes of n items, made on every thread of
-  // ThreadPool::Default() and written in order: format(first, last, out)
-  // appends the bytes of items [first, last) to *out (empty; a chunk of at
-  // most `per_chunk` items) and is called from several threads at once.
-  // The same bytes as formatting every item in order on one thread; a few
-  // chunks a thread are held at a time.
+  // Appends the bytes of n items, made on every thread as FormatInOrder
+  // makes them (two chunks a thread at a time) and written in order.
   void WriteChunks(int64_t n, int64_t per_chunk,
                    const std::function<void(int64_t first, int64_t last,
                                             std::string* out)>& format);
@@ -43,6 +39,17 @@ class FileWriter {
   std::string buffer_;
   absl::Status status_;
 };
+
+// The bytes of n items, made in chunks of at most `per_chunk` items on every
+// thread of ThreadPool::Default() and handed to put(piece) in order:
+// format(first, last, out) appends the bytes of items [first, last) to *out
+// (empty) and is called from several threads at once; `chunks_at_once`
+// chunks (at least 1) are made, then put, at a time, which bounds the bytes
+// held. The same pieces in order as formatting every item on one thread.
+void FormatInOrder(int64_t n, int64_t per_chunk, int64_t chunks_at_once,
+                   const std::function<void(int64_t first, int64_t last,
+                                            std::string* out)>& format,
+                   const std::function<void(std::string_view piece)>& put);
 
 // Writes `data` to `path` whole.
 absl::Status WriteStringToFile(const std::string& path, std::string_view data);

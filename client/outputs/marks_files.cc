@@ -107,18 +107,15 @@ void EmitChunks(size_t n,
                 const std::function<void(size_t, std::string*)>& format,
                 const std::function<void(std::string_view)>& put,
                 size_t chunk_polylines = kChunkPolylines) {
-  const size_t chunks = (n + chunk_polylines - 1) / chunk_polylines;
-  std::vector<std::string> out(std::min(chunks, kChunksAtOnce));
-  for (size_t c0 = 0; c0 < chunks; c0 += kChunksAtOnce) {
-    const size_t m = std::min(kChunksAtOnce, chunks - c0);
-    ThreadPool::Default().ParallelFor(static_cast<int64_t>(m), [&](int64_t w) {
-      const size_t c = c0 + static_cast<size_t>(w);
-      out[w].clear();
-      const size_t end = std::min(n, (c + 1) * chunk_polylines);
-      for (size_t k = c * chunk_polylines; k < end; ++k) format(k, &out[w]);
-    });
-    for (size_t w = 0; w < m; ++w) put(out[w]);
-  }
+  FormatInOrder(
+      static_cast<int64_t>(n), static_cast<int64_t>(chunk_polylines),
+      kChunksAtOnce,
+      [&](int64_t first, int64_t last, std::string* out) {
+        for (int64_t k = first; k < last; ++k) {
+          format(static_cast<size_t>(k), out);
+        }
+      },
+      put);
 }
 
 // One polyline object as JsonWriter writes it inside the array (its
