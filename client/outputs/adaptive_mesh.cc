@@ -429,24 +429,52 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   // measuring them again.
   std::vector<double> fit_dev;
   {
-    std::vector<std::pair<int64_t, int32_t>> level, next;  // (tree, node)
-    for (int64_t b = 0; b < roots_x * roots_y; ++b) level.push_back({b, 0});
-    while (!level.empty()) {
-      next.clear();
-      for (const auto& [b, q] : level) {
-        TreeNode& n = trees[b][q];
-        if (n.kid[0] < 0) {
-          n.leaf = static_cast<int64_t>(leaves.size());
-          leaves.push_back(n.f);
-          fit_dev.push_back(n.dev);
-          continue;
-        }
+    // Listed on every thread: a tree is built as a queue, so its nodes lie
+    // level by level, and the listing takes level 0 of every tree, then
+    // level 1 of every tree... A leaf's index is the number of leaves of
+    // lower levels, then of the same level in earlier trees, then before it
+    // in its own.
+    const int64_t n_trees = roots_x * roots_y;
+    std::vector<std::vector<uint8_t>> depth(n_trees);
+    std::vector<int> tree_levels(n_trees, 0);
+    pool.ParallelFor(n_trees, [&](int64_t b) {
+      const std::vector<TreeNode>& t = trees[b];
+      std::vector<uint8_t>& d = depth[b];
+      d.assign(t.size(), 0);
+      for (size_t q = 0; q < t.size(); ++q) {
         for (int c = 0; c < 2; ++c) {
-          if (n.kid[c] >= 0) next.push_back({b, n.kid[c]});
+          if (t[q].kid[c] >= 0) d[t[q].kid[c]] = d[q] + 1;
         }
       }
-      std::swap(level, next);
-    }
+      tree_levels[b] = t.empty() ? 0 : d.back() + 1;
+    });
+    const int levels =
+        *std::max_element(tree_levels.begin(), tree_levels.end());
+    // first[level * n_trees + b]: the index of tree b's first leaf of that
+    // level (counts first, then their prefix).
+    std::vector<int64_t> first(static_cast<size_t>(levels) * n_trees + 1, 0);
+    pool.ParallelFor(n_trees, [&](int64_t b) {
+      const std::vector<TreeNode>& t = trees[b];
+      for (size_t q = 0; q < t.size(); ++q) {
+        if (t[q].kid[0] < 0) ++first[depth[b][q] * n_trees + b + 1];
+      }
+    });
+    for (size_t k = 1; k < first.size(); ++k) first[k] += first[k - 1];
+    leaves.resize(first.back());
+    fit_dev.resize(first.back());
+    pool.ParallelFor(n_trees, [&](int64_t b) {
+      std::vector<TreeNode>& t = trees[b];
+      std::vector<int64_t> next(levels);
+      for (int lv = 0; lv < levels; ++lv) next[lv] = first[lv * n_trees + b];
+      for (size_t q = 0; q < t.size(); ++q) {
+        if (t[q].kid[0] >= 0) continue;
+        const int64_t k = next[depth[b][q]]++;
+        t[q].leaf = k;
+        leaves[k] = t[q].f;
+        fit_dev[k] = t[q].dev;
+      }
+      std::vector<uint8_t>().swap(depth[b]);
+    });
   }
 
   // Conforming triangulation, measured; leaves over the tolerance are
@@ -597,21 +625,42 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   }
   trees = {};
 
-  // The final leaves, depth first from the roots.
-  std::vector<int64_t> final_leaves, stack;
-  for (int64_t r = 0; r < roots; ++r) {
-    stack.push_back(r);
-    while (!stack.empty()) {
-      const int64_t k = stack.back();
-      stack.pop_back();
-      if (kids[k] < 0) {
-        final_leaves.push_back(k);
-      } else {
-        stack.push_back(kids[k] + 1);
-        stack.push_back(kids[k]);
+  // The final leaves, depth first from the roots: runs of roots on every
+  // thread, counted, then listed where the runs before them end.
+  constexpr int64_t kRootRun = 4096;
+  const int64_t runs = (roots + kRootRun - 1) / kRootRun;
+  std::vector<int64_t> run_start(runs + 1, 0);
+  std::vector<int64_t> final_leaves;
+  auto depth_first = [&](int64_t run, auto&& visit) {
+    std::vector<int64_t> stack;
+    const int64_t end = std::min(roots, (run + 1) * kRootRun);
+    for (int64_t r = run * kRootRun; r < end; ++r) {
+      stack.push_back(r);
+      while (!stack.empty()) {
+        const int64_t k = stack.back();
+        stack.pop_back();
+        if (kids[k] < 0) {
+          visit(k);
+        } else {
+          stack.push_back(kids[k] + 1);
+          stack.push_back(kids[k]);
+        }
       }
     }
+  };
+  pool.ParallelFor(runs, [&](int64_t run) {
+    int64_t n = 0;
+    depth_first(run, [&n](int64_t) { ++n; });
+    run_start[run + 1] = n;
+  });
+  for (int64_t run = 0; run < runs; ++run) {
+    run_start[run + 1] += run_start[run];
   }
+  final_leaves.resize(run_start[runs]);
+  pool.ParallelFor(runs, [&](int64_t run) {
+    int64_t at = run_start[run];
+    depth_first(run, [&](int64_t k) { final_leaves[at++] = k; });
+  });
   // What only the passes needed goes before the mesh is listed: on the
   // 1000 mm plate's 6.4 M triangles, hundreds of MB (buffers this large go
   // back to the system when freed).
@@ -619,7 +668,6 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   std::vector<int64_t>().swap(kids);
   std::vector<double>().swap(fit_dev);
   std::vector<int64_t>().swap(work);
-  std::vector<int64_t>().swap(stack);
   std::vector<uint8_t>().swap(queued);
 
   // The used lattice vertices, row-major, are the new top vertices: their
