@@ -31,6 +31,7 @@
 #include "core/workpiece.h"
 #include "gtest/gtest.h"
 #include "tests/cutter_reference.h"
+#include "tests/tile_copy.h"
 
 namespace swarf {
 namespace {
@@ -833,21 +834,14 @@ TEST(ValidateCutterTest, CuttersAtTheLimitsCutFiniteNodes) {
       const std::vector<Move> moves = {Move({0, 0, 1}, {0, 0, z}, c),
                                        Move({0, 0, z}, {50, 30, z}, c)};
       ASSERT_TRUE((*wp)->Apply(moves).ok());
-      const Workpiece::TileExtent e = (*wp)->Extent(0);
-      const size_t nodes = static_cast<size_t>(e.nx) * e.ny;
-      std::vector<double> w(nodes);
-      std::vector<float> d(5 * nodes);
-      std::vector<int32_t> owner(nodes);
-      float* dp[5];
-      for (int k = 0; k < 5; ++k) dp[k] = d.data() + k * nodes;
-      (*wp)->ReadTile(0, w.data(), dp, owner.data());
+      const TileCopy tile = CopyTile(**wp, 0);
       int cut = 0;
-      for (size_t k = 0; k < nodes; ++k) {
-        ASSERT_TRUE(std::isfinite(w[k])) << "node " << k;
-        cut += owner[k] >= 0;
+      for (size_t k = 0; k < tile.w.size(); ++k) {
+        ASSERT_TRUE(std::isfinite(tile.w[k])) << "node " << k;
+        cut += tile.owner[k] >= 0;
       }
-      for (size_t k = 0; k < d.size(); ++k) {
-        ASSERT_TRUE(std::isfinite(d[k])) << "derivative " << k;
+      for (size_t k = 0; k < tile.d.size(); ++k) {
+        ASSERT_TRUE(std::isfinite(tile.d[k])) << "derivative " << k;
       }
       EXPECT_GT(cut, n / 2);
     }

@@ -31,14 +31,15 @@
 #include "core/valuation.h"
 #include "core/workpiece.h"
 #include "google/protobuf/io/coded_stream.h"
-#include "google/protobuf/stubs/logging.h"
 #include "google/protobuf/io/zero_copy_stream_impl_lite.h"
+#include "google/protobuf/stubs/logging.h"
 #include "server/convert.h"
 #include "server/program.h"
 #include "server/registry.h"
 #include "server/session.h"
 #include "swarf/v1/swarf.pb.h"
 #include "tests/fuzz/fuzz_check.h"
+#include "tests/tile_copy.h"
 
 namespace swarf::server {
 namespace {
@@ -121,22 +122,16 @@ bool SameState(const SessionState& a, const SessionState& b) {
 // Every node of tile t: finite, at or below the stock top, derivatives
 // finite, owners valid move ids.
 void CheckTile(const Workpiece& wp, int32_t t) {
-  const Workpiece::TileExtent e = wp.Extent(t);
+  const TileCopy tile = CopyTile(wp, t);
+  const Workpiece::TileExtent& e = tile.extent;
   FUZZ_CHECK(e.nx >= 1 && e.nx <= kTileSize && e.ny >= 1 &&
              e.ny <= kTileSize);
-  const size_t n = static_cast<size_t>(e.nx) * e.ny;
-  std::vector<double> w(n);
-  std::vector<float> d(5 * n);
-  std::vector<int32_t> owner(n);
-  float* dp[5];
-  for (int c = 0; c < 5; ++c) dp[c] = d.data() + c * n;
-  wp.ReadTile(t, w.data(), dp, owner.data());
-  for (size_t k = 0; k < n; ++k) {
-    FUZZ_CHECK(std::isfinite(w[k]) && w[k] <= wp.spec().z_top);
-    FUZZ_CHECK(owner[k] >= -1 && owner[k] < wp.move_count());
-    if (owner[k] == -1) FUZZ_CHECK(w[k] == wp.spec().z_top);
+  for (size_t k = 0; k < tile.w.size(); ++k) {
+    FUZZ_CHECK(std::isfinite(tile.w[k]) && tile.w[k] <= wp.spec().z_top);
+    FUZZ_CHECK(tile.owner[k] >= -1 && tile.owner[k] < wp.move_count());
+    if (tile.owner[k] == -1) FUZZ_CHECK(tile.w[k] == wp.spec().z_top);
   }
-  for (float v : d) FUZZ_CHECK(std::isfinite(v));
+  for (float v : tile.d) FUZZ_CHECK(std::isfinite(v));
 }
 
 // ---------------------------------------------------------------- requests
