@@ -42,6 +42,7 @@
 #include "swarf/v1/swarf.grpc.pb.h"
 #include "tests/server_test_util.h"
 #include "tests/sim_stream.h"
+#include "tests/tile_copy.h"
 
 namespace swarf::server {
 namespace {
@@ -169,27 +170,16 @@ Toolpath Raster(int lines, int points_per_line) {
 // ------------------------------------------------------------ reference
 
 // One tile of a core workpiece, as Workpiece::ReadTile gives it.
-struct CoreTile {
+struct CoreTile : TileCopy {
   int32_t t = 0;
   uint64_t version = 0;
-  Workpiece::TileExtent extent;
-  std::vector<double> w;
-  std::vector<float> d;  // wx, wy, wxx, wxy, wyy planes of w.size() each
-  std::vector<int32_t> owner;
 };
 
 CoreTile ReadCore(const Workpiece& wp, int32_t t) {
   CoreTile c;
+  static_cast<TileCopy&>(c) = CopyTile(wp, t);
   c.t = t;
   c.version = wp.TileVersion(t);
-  c.extent = wp.Extent(t);
-  const size_t n = static_cast<size_t>(c.extent.nx) * c.extent.ny;
-  c.w.resize(n);
-  c.d.resize(5 * n);
-  c.owner.resize(n);
-  float* d[5];
-  for (int k = 0; k < 5; ++k) d[k] = c.d.data() + k * n;
-  wp.ReadTile(t, c.w.data(), d, c.owner.data());
   return c;
 }
 
