@@ -16,11 +16,12 @@
 // this ends.
 #include <algorithm>
 #include <array>
-#include <cstddef>
 #include <atomic>
 #include <bit>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "absl/strings/str_format.h"
@@ -322,6 +323,17 @@ class HeldRows : public LatticeWindows {
  private:
   const LatticeHeights& h_;
 };
+
+// Where each of `chunks` runs starts in a list made of them in order:
+// count(c) (on every thread) is run c's length; starts[c] is the sum of
+// those before it, starts[chunks] the total.
+std::vector<int64_t> RunStarts(ThreadPool& pool, int64_t chunks,
+                               const std::function<int64_t(int64_t)>& count) {
+  std::vector<int64_t> starts(chunks + 1, 0);
+  pool.ParallelFor(chunks, [&](int64_t c) { starts[c + 1] = count(c); });
+  for (int64_t c = 0; c < chunks; ++c) starts[c + 1] += starts[c];
+  return starts;
+}
 
 }  // namespace
 
@@ -629,7 +641,6 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   // thread, counted, then listed where the runs before them end.
   constexpr int64_t kRootRun = 4096;
   const int64_t runs = (roots + kRootRun - 1) / kRootRun;
-  std::vector<int64_t> run_start(runs + 1, 0);
   std::vector<int64_t> final_leaves;
   auto depth_first = [&](int64_t run, auto&& visit) {
     std::vector<int64_t> stack;
@@ -648,14 +659,12 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
       }
     }
   };
-  pool.ParallelFor(runs, [&](int64_t run) {
-    int64_t n = 0;
-    depth_first(run, [&n](int64_t) { ++n; });
-    run_start[run + 1] = n;
-  });
-  for (int64_t run = 0; run < runs; ++run) {
-    run_start[run + 1] += run_start[run];
-  }
+  const std::vector<int64_t> run_start =
+      RunStarts(pool, runs, [&](int64_t run) {
+        int64_t n = 0;
+        depth_first(run, [&n](int64_t) { ++n; });
+        return n;
+      });
   final_leaves.resize(run_start[runs]);
   pool.ParallelFor(runs, [&](int64_t run) {
     int64_t at = run_start[run];
@@ -683,16 +692,16 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   constexpr int64_t kRankChunk = 4096;  // blocks of 64 vertices
   const int64_t rank_chunks =
       (static_cast<int64_t>(used_bits.size()) + kRankChunk - 1) / kRankChunk;
-  std::vector<int64_t> chunk_used(rank_chunks + 1, 0);
-  pool.ParallelFor(rank_chunks, [&](int64_t c) {
-    const size_t end = std::min(used_bits.size(), size_t(c + 1) * kRankChunk);
-    int64_t n = 0;
-    for (size_t b = size_t(c) * kRankChunk; b < end; ++b) {
-      n += std::popcount(used_bits[b]);
-    }
-    chunk_used[c + 1] = n;
-  });
-  for (int64_t c = 0; c < rank_chunks; ++c) chunk_used[c + 1] += chunk_used[c];
+  const std::vector<int64_t> chunk_used =
+      RunStarts(pool, rank_chunks, [&](int64_t c) {
+        const size_t end =
+            std::min(used_bits.size(), size_t(c + 1) * kRankChunk);
+        int64_t n = 0;
+        for (size_t b = size_t(c) * kRankChunk; b < end; ++b) {
+          n += std::popcount(used_bits[b]);
+        }
+        return n;
+      });
   const int64_t kept = chunk_used[rank_chunks];
   if (2 * kept + 1 > INT32_MAX) {
     return absl::InvalidArgumentError(absl::StrFormat(
@@ -726,15 +735,15 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   const int64_t n_leaves = static_cast<int64_t>(final_leaves.size());
   constexpr int64_t kLeafChunk = 4096;
   const int64_t leaf_chunks = (n_leaves + kLeafChunk - 1) / kLeafChunk;
-  std::vector<int64_t> first_triangle(leaf_chunks + 1, 0);
-  for (int64_t c = 0; c < leaf_chunks; ++c) {
-    int64_t n = 0;
-    const int64_t end = std::min(n_leaves, (c + 1) * kLeafChunk);
-    for (int64_t q = c * kLeafChunk; q < end; ++q) {
-      n += static_cast<int64_t>(tris[final_leaves[q]].size() / 3);
-    }
-    first_triangle[c + 1] = first_triangle[c] + n;
-  }
+  const std::vector<int64_t> first_triangle =
+      RunStarts(pool, leaf_chunks, [&](int64_t c) {
+        int64_t n = 0;
+        const int64_t end = std::min(n_leaves, (c + 1) * kLeafChunk);
+        for (int64_t q = c * kLeafChunk; q < end; ++q) {
+          n += static_cast<int64_t>(tris[final_leaves[q]].size() / 3);
+        }
+        return n;
+      });
   const int64_t top_triangles = first_triangle[leaf_chunks];
   TriangleMesh mesh;
   mesh.vertices.reserve(kept + walls + 1);
