@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstring>
 #include <optional>
+#include <string>
+#include <string_view>
 
 #include "absl/strings/str_format.h"
 #include "client/outputs/colormap.h"
@@ -504,6 +506,52 @@ void AppendInt(std::string& out, int64_t v) {
   out.append(buf, r.ptr);
 }
 
+// VRML's lines: a point, a colour (the bytes as "%.3f" of k / 255, from a
+// table), a triangle; and the text between the lists.
+void AppendVrmlPoint(std::string& s, double x, double y, double z) {
+  AppendFloat(s, x);
+  s += ' ';
+  AppendFloat(s, y);
+  s += ' ';
+  AppendFloat(s, z);
+  s += '\n';
+}
+
+class VrmlColorText {
+ public:
+  VrmlColorText() {
+    for (int k = 0; k < 256; ++k) {
+      std::snprintf(text_[k], sizeof text_[k], "%.3f", k / 255.0);
+    }
+  }
+  void Append(std::string& s, const Rgb& c) const {
+    s += text_[c.r];
+    s += ' ';
+    s += text_[c.g];
+    s += ' ';
+    s += text_[c.b];
+    s += '\n';
+  }
+
+ private:
+  char text_[256][8];
+};
+
+void AppendVrmlFace(std::string& s, int64_t a, int64_t b, int64_t c) {
+  AppendInt(s, a);
+  s += ' ';
+  AppendInt(s, b);
+  s += ' ';
+  AppendInt(s, c);
+  s += " -1\n";
+}
+
+constexpr std::string_view kVrmlListEnd = "      ]\n    }\n";
+constexpr std::string_view kVrmlColorsHead =
+    "    colorPerVertex TRUE\n    color Color {\n      color [\n";
+constexpr std::string_view kVrmlFacesHead = "    coordIndex [\n";
+constexpr std::string_view kVrmlTail = "    ]\n  }\n}\n";
+
 // The VRML file up to its first coordinate (WriteVrml, WriteLatticeVrml).
 std::string VrmlHeader(size_t vertices, size_t triangles) {
   return absl::StrFormat(
@@ -537,53 +585,30 @@ absl::Status WriteVrml(const TriangleMesh& mesh, const std::string& path,
                   [&](int64_t first, int64_t last, std::string* s) {
                     for (int64_t k = first; k < last; ++k) {
                       const Vec3& v = mesh.vertices[k];
-                      AppendFloat(*s, v.x);
-                      *s += ' ';
-                      AppendFloat(*s, v.y);
-                      *s += ' ';
-                      AppendFloat(*s, v.z);
-                      *s += '\n';
+                      AppendVrmlPoint(*s, v.x, v.y, v.z);
                     }
                   });
-  std::string s = "      ]\n    }\n";
+  out.Write(kVrmlListEnd);
   if (!vertex_colors.empty()) {
-    s += "    colorPerVertex TRUE\n    color Color {\n      color [\n";
-    out.Write(s);
-    char table[256][8];
-    for (int k = 0; k < 256; ++k) {
-      std::snprintf(table[k], sizeof table[k], "%.3f", k / 255.0);
-    }
+    out.Write(kVrmlColorsHead);
+    const VrmlColorText color_text;
     out.WriteChunks(static_cast<int64_t>(vertex_colors.size()), kVrmlChunk,
                     [&](int64_t first, int64_t last, std::string* s) {
                       for (int64_t k = first; k < last; ++k) {
-                        const Rgb& c = vertex_colors[k];
-                        *s += table[c.r];
-                        *s += ' ';
-                        *s += table[c.g];
-                        *s += ' ';
-                        *s += table[c.b];
-                        *s += '\n';
+                        color_text.Append(*s, vertex_colors[k]);
                       }
                     });
-    s = "      ]\n    }\n";
+    out.Write(kVrmlListEnd);
   }
-  s += "    coordIndex [\n";
-  out.Write(s);
+  out.Write(kVrmlFacesHead);
   out.WriteChunks(static_cast<int64_t>(mesh.triangles.size()), kVrmlChunk,
                   [&](int64_t first, int64_t last, std::string* s) {
                     for (int64_t k = first; k < last; ++k) {
                       const auto& t = mesh.triangles[k];
-                      AppendInt(*s, t[0]);
-                      *s += ' ';
-                      AppendInt(*s, t[1]);
-                      *s += ' ';
-                      AppendInt(*s, t[2]);
-                      *s += " -1\n";
+                      AppendVrmlFace(*s, t[0], t[1], t[2]);
                     }
                   });
-  s.clear();
-  s += "    ]\n  }\n}\n";
-  out.Write(s);
+  out.Write(kVrmlTail);
   return out.Close();
 }
 
@@ -653,12 +678,7 @@ absl::Status WriteLatticeVrml(LatticeWindows& rows,
     }
   };
   auto put_point = [&](double x, double y, double z) {
-    AppendFloat(s, x);
-    s += ' ';
-    AppendFloat(s, y);
-    s += ' ';
-    AppendFloat(s, z);
-    s += '\n';
+    AppendVrmlPoint(s, x, y, z);
     flush();
   };
   // Every top row once: rows [j0, j1) of windows of 64 (the last holds NY).
@@ -685,20 +705,12 @@ absl::Status WriteLatticeVrml(LatticeWindows& rows,
   for (int64_t i = 0; i <= big_nx; ++i) bottom_point(i, big_ny);
   for (int64_t j = 1; j < big_ny; ++j) bottom_point(0, j);
   for (int64_t j = 1; j < big_ny; ++j) bottom_point(big_nx, j);
-  s += "      ]\n    }\n";
+  s += kVrmlListEnd;
   if (colors) {
-    s += "    colorPerVertex TRUE\n    color Color {\n      color [\n";
-    char table[256][8];
-    for (int k = 0; k < 256; ++k) {
-      std::snprintf(table[k], sizeof table[k], "%.3f", k / 255.0);
-    }
+    s += kVrmlColorsHead;
+    const VrmlColorText color_text;
     auto put_color = [&](const Rgb& c) {
-      s += table[c.r];
-      s += ' ';
-      s += table[c.g];
-      s += ' ';
-      s += table[c.b];
-      s += '\n';
+      color_text.Append(s, c);
       flush();
     };
     // SurfaceColors: the lowest top vertex (or z_top) is each row's
@@ -713,21 +725,16 @@ absl::Status WriteLatticeVrml(LatticeWindows& rows,
     });
     if (!st.ok()) return st;
     for (int64_t k = 0; k < 2 * (big_nx + big_ny); ++k) put_color(kWallColor);
-    s += "      ]\n    }\n";
+    s += kVrmlListEnd;
   }
-  s += "    coordIndex [\n";
+  s += kVrmlFacesHead;
   auto index = [&](const MeshVertex& v) {
     return v.bottom ? BottomIndex(big_nx, big_ny, v.i, v.j)
                     : v.j * (big_nx + 1) + v.i;
   };
   auto put_face = [&](const MeshVertex& a, const MeshVertex& b,
                       const MeshVertex& c) {
-    AppendInt(s, index(a));
-    s += ' ';
-    AppendInt(s, index(b));
-    s += ' ';
-    AppendInt(s, index(c));
-    s += " -1\n";
+    AppendVrmlFace(s, index(a), index(b), index(c));
     flush();
   };
   BoundaryHeights boundary;
@@ -737,7 +744,7 @@ absl::Status WriteLatticeVrml(LatticeWindows& rows,
                     });
   if (!st.ok()) return st;
   EmitWallsAndBottom(big_nx, big_ny, put_face);
-  s += "    ]\n  }\n}\n";
+  s += kVrmlTail;
   out.Write(s);
   return out.Close();
 }
