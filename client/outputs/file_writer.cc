@@ -38,11 +38,7 @@ void FileWriter::Write(std::string_view data) {
   if (data.size() >= kBufferBytes) {
     // Large pieces (WriteChunks') go out without a copy.
     Flush();
-    if (status_.ok() &&
-        std::fwrite(data.data(), 1, data.size(), file_) != data.size()) {
-      status_ = absl::InternalError(
-          absl::StrCat("writing ", path_, " failed: ", std::strerror(errno)));
-    }
+    WriteNow(data);
     return;
   }
   buffer_.append(data);
@@ -78,13 +74,16 @@ void FileWriter::WriteChunks(
                 [this](std::string_view piece) { Write(piece); });
 }
 
-void FileWriter::Flush() {
-  if (!status_.ok() || buffer_.empty()) return;
-  if (std::fwrite(buffer_.data(), 1, buffer_.size(), file_) !=
-      buffer_.size()) {
+void FileWriter::WriteNow(std::string_view data) {
+  if (!status_.ok() || data.empty()) return;
+  if (std::fwrite(data.data(), 1, data.size(), file_) != data.size()) {
     status_ = absl::InternalError(
         absl::StrCat("writing ", path_, " failed: ", std::strerror(errno)));
   }
+}
+
+void FileWriter::Flush() {
+  WriteNow(buffer_);
   buffer_.clear();
 }
 

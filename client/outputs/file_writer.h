@@ -34,6 +34,8 @@ class FileWriter {
 
  private:
   void Flush();
+  // Writes `data` to the file past the buffer (a failure sets status_).
+  void WriteNow(std::string_view data);
   std::string path_;
   std::FILE* file_ = nullptr;
   std::string buffer_;
