@@ -493,28 +493,28 @@ std::vector<Rgb> SurfaceColors(const TriangleMesh& mesh, double z_top) {
 
 namespace {
 
-// Appends `v` as written in the STL (float32), shortest round-trip form.
-void AppendFloat(std::string& out, double v) {
+// VRML's lines: a point (its coordinates as float32, as the STL has them)
+// or a face ("a b c -1"): three numbers in their shortest round-trip form,
+// separated by spaces, then `end`. A colour's line comes from a table of
+// the bytes as "%.3f" of k / 255. Then the text between the lists.
+template <typename T>
+void AppendThree(std::string& s, T a, T b, T c, std::string_view end) {
   char buf[32];
-  const auto r = std::to_chars(buf, buf + sizeof buf, static_cast<float>(v));
-  out.append(buf, r.ptr);
+  const T v[3] = {a, b, c};
+  for (int k = 0; k < 3; ++k) {
+    if (k > 0) s += ' ';
+    s.append(buf, std::to_chars(buf, buf + sizeof buf, v[k]).ptr);
+  }
+  s += end;
 }
 
-void AppendInt(std::string& out, int64_t v) {
-  char buf[24];
-  const auto r = std::to_chars(buf, buf + sizeof buf, v);
-  out.append(buf, r.ptr);
-}
-
-// VRML's lines: a point, a colour (the bytes as "%.3f" of k / 255, from a
-// table), a triangle; and the text between the lists.
 void AppendVrmlPoint(std::string& s, double x, double y, double z) {
-  AppendFloat(s, x);
-  s += ' ';
-  AppendFloat(s, y);
-  s += ' ';
-  AppendFloat(s, z);
-  s += '\n';
+  AppendThree(s, static_cast<float>(x), static_cast<float>(y),
+              static_cast<float>(z), "\n");
+}
+
+void AppendVrmlFace(std::string& s, int64_t a, int64_t b, int64_t c) {
+  AppendThree(s, a, b, c, " -1\n");
 }
 
 class VrmlColorText {
@@ -536,15 +536,6 @@ class VrmlColorText {
  private:
   char text_[256][8];
 };
-
-void AppendVrmlFace(std::string& s, int64_t a, int64_t b, int64_t c) {
-  AppendInt(s, a);
-  s += ' ';
-  AppendInt(s, b);
-  s += ' ';
-  AppendInt(s, c);
-  s += " -1\n";
-}
 
 constexpr std::string_view kVrmlListEnd = "      ]\n    }\n";
 constexpr std::string_view kVrmlColorsHead =
