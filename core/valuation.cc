@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -52,15 +53,14 @@ double Highest(const double* v, int32_t n) {
   return at;
 }
 
-// The moves of a bin whose box meets a row of elements, in bin order, as
-// arrays: their footprint boxes across (x0, x1), lowest points, and
-// FootprintGap parts; `k` their index in the bin.
+// Moves of a bin, in bin order, as arrays: their footprint boxes, lowest
+// points, and FootprintGap parts; `k` their index in the bin.
 struct RowMoves {
-  std::vector<double> x0, x1, lowest, ball, gx0, gx1, gy0, gy1, z_r, r2;
+  std::vector<double> x0, x1, y0, y1, lowest, ball, gx0, gx1, gy0, gy1, z_r, r2;
   std::vector<int32_t> k;
   void Clear() {
-    for (auto* v :
-         {&x0, &x1, &lowest, &ball, &gx0, &gx1, &gy0, &gy1, &z_r, &r2}) {
+    for (auto* v : {&x0, &x1, &y0, &y1, &lowest, &ball, &gx0, &gx1, &gy0, &gy1,
+                    &z_r, &r2}) {
       v->clear();
     }
     k.clear();
@@ -68,6 +68,8 @@ struct RowMoves {
   void Add(const Rect& box, double low, const FootprintGap& g, int32_t at) {
     x0.push_back(box.x0);
     x1.push_back(box.x1);
+    y0.push_back(box.y0);
+    y1.push_back(box.y1);
     lowest.push_back(low);
     ball.push_back(g.ball);
     gx0.push_back(g.x0);
@@ -78,13 +80,20 @@ struct RowMoves {
     r2.push_back(g.r2);
     k.push_back(at);
   }
+  // Appends move q to *to.
+  void CopyFrom(int32_t q, RowMoves* to) const {
+    to->Add(
+        Rect{x0[q], y0[q], x1[q], y1[q]}, lowest[q],
+        FootprintGap{ball[q], gx0[q], gx1[q], gy0[q], gy1[q], z_r[q], r2[q]},
+        k[q]);
+  }
   int32_t size() const { return static_cast<int32_t>(k.size()); }
 };
 
-// pass[q] = 1 where row move q may cut into `box` below `cap`: its box meets
-// it across (the row's rows it meets already), its lowest point is below
-// cap, and FootprintGap does not rule it out; else 0. Selects only: one
-// vectorized loop.
+// pass[q] = 1 where move q may cut into `box` below `cap`: its box meets it,
+// its lowest point is below cap, and FootprintGap does not rule it out;
+// else 0. Each test only passes more moves for a larger box or a higher
+// cap. Selects only: one vectorized loop.
 SWARF_TARGET_CLONES
 void MovesThatMayCut(const RowMoves& row, const Rect& element, double cap,
                      double* __restrict pass) {
@@ -93,6 +102,8 @@ void MovesThatMayCut(const RowMoves& row, const Rect& element, double cap,
   const Rect box = element;
   const double* __restrict x0 = row.x0.data();
   const double* __restrict x1 = row.x1.data();
+  const double* __restrict y0 = row.y0.data();
+  const double* __restrict y1 = row.y1.data();
   const double* __restrict lowest = row.lowest.data();
   const double* __restrict ball = row.ball.data();
   const double* __restrict gx0 = row.gx0.data();
@@ -107,6 +118,8 @@ void MovesThatMayCut(const RowMoves& row, const Rect& element, double cap,
                                                gy1[q], z_r[q], r2[q], box, cap);
     double p = x0[q] <= box.x1 ? 1.0 : 0.0;
     p = box.x0 <= x1[q] ? p : 0.0;
+    p = y0[q] <= box.y1 ? p : 0.0;
+    p = box.y0 <= y1[q] ? p : 0.0;
     p = lowest[q] < cap ? p : 0.0;
     pass[q] = misses != 0 ? 0.0 : p;
   }
@@ -334,27 +347,41 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     };
     // The points of an element's lattice: n x n but the corners.
     const size_t lattice = static_cast<size_t>(n) * n - 4;
-    std::vector<double> xs(lattice), ys(lattice), est(lattice), h(lattice),
-        rec(lattice), err(lattice);
-    std::vector<int64_t> cells(lattice);
-    RowMoves row;
-    std::vector<double> pass;
+    // A row of the bin's elements is taken in two passes: each element's
+    // points and the upper bound of the exact surface its corners' owners
+    // give (its cap), then the bin's moves that may cut below the highest
+    // cap anywhere in the row, once, and each element's own test among
+    // those alone. A move that may cut into an element below its cap may
+    // cut into the row below the row's cap (the tests only widen with the
+    // box and the cap): the same moves lower each element as when every
+    // element tested the whole bin (on the plate job, about 400 moves an
+    // element, of which 5 passed).
+    struct RowElement {
+      ElementCorners e;
+      Rect box;
+      double cap = 0;
+      int32_t ei = 0, count = 0;
+      bool quarters = false;
+    };
+    std::vector<RowElement> elements(MoveIndex::kBinElements);
+    std::vector<double> row_xs(MoveIndex::kBinElements * lattice),
+        row_ys(row_xs.size()), row_est(row_xs.size());
+    std::vector<int64_t> row_cells(mapped ? row_xs.size() : 0);
+    std::vector<double> h(lattice), rec(lattice), err(lattice);
+    // The bin's moves, in bin order, and those that may cut into a row.
+    RowMoves bin_moves, near;
+    for (const Candidate& c : bin) bin_moves.Add(c.box, c.lowest, c.gap, c.k);
+    std::vector<double> pass(bin_moves.size());
     // The bin's sums in locals (registers), stored once at the end.
     Partial p = partials[b];
     for (int32_t ej = ej0; ej < ej1; ++ej) {
       const double ey0 = grid.NodeY(ej), ey1 = grid.NodeY(ej + 1);
       if (ey0 > region.y1 || ey1 < region.y0) continue;
-      row.Clear();
-      for (const Candidate& c : bin) {
-        if (c.box.y0 <= ey1 && ey0 <= c.box.y1) {
-          row.Add(c.box, c.lowest, c.gap, c.k);
-        }
-      }
-      const int32_t row_moves = row.size();
-      pass.resize(row_moves);
       const double* const row_y = &lattice_y[static_cast<size_t>(ej) * n];
       const int64_t* const row_cell =
           mapped ? &cell_of_y[static_cast<size_t>(ej) * n] : nullptr;
+      int32_t row_elements = 0;
+      double row_cap = -std::numeric_limits<double>::infinity();
       for (int32_t ei = ei0; ei < ei1; ++ei) {
         const double ex0 = grid.NodeX(ei), ex1 = grid.NodeX(ei + 1);
         if (ex0 > region.x1 || ex1 < region.x0) continue;
@@ -362,13 +389,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const NodeValue* const corner[4] = {&nodes[at], &nodes[at + 1],
                                             &nodes[at + region_w + 1],
                                             &nodes[at + region_w]};
-        ElementCorners e = wp.CornersOf(ei, ej, corner, /*prepare=*/!guarded);
-        if (guarded) {
-          const PatchTrustRegion* r = &regions[at];
-          const PatchTrustRegion* const trust[4] = {r, r + 1, r + region_w + 1,
-                                                    r + region_w};
-          PrepareGuarded(&e, trust);
-        }
         const double* const col_x = &lattice_x[static_cast<size_t>(ei) * n];
         const int64_t* const col_cell =
             mapped ? &cell_of_x[static_cast<size_t>(ei) * n] : nullptr;
@@ -376,44 +396,77 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         // lattice points bound them all.
         const bool all_in = region.Contains(col_x[0], row_y[0]) &&
                             region.Contains(col_x[n - 1], row_y[n - 1]);
-        // With every point in and at most two map cells across and two
-        // down (cells at least as large as elements, as swarf run asks),
-        // the max of each of the four quarters they make; else a cell per
-        // point.
-        const bool quarters = mapped && all_in &&
-                              col_cell[n - 1] - col_cell[0] <= 1 &&
-                              row_cell[n - 1] - row_cell[0] <= options.map_cols;
+        const size_t off = static_cast<size_t>(row_elements) * lattice;
+        double* const xs = &row_xs[off];
+        double* const ys = &row_ys[off];
         int32_t count = 0;
         for_each_point(col_x, row_y, all_in, [&](int32_t si, int32_t sj) {
           xs[count] = col_x[si];
           ys[count] = row_y[sj];
-          if (mapped && !quarters) cells[count] = row_cell[sj] + col_cell[si];
+          if (mapped) row_cells[off + count] = row_cell[sj] + col_cell[si];
           ++count;
         });
         if (count == 0) continue;
+        RowElement& el = elements[row_elements++];
+        el.e = wp.CornersOf(ei, ej, corner, /*prepare=*/!guarded);
+        if (guarded) {
+          const PatchTrustRegion* r = &regions[at];
+          const PatchTrustRegion* const trust[4] = {r, r + 1, r + region_w + 1,
+                                                    r + region_w};
+          PrepareGuarded(&el.e, trust);
+        }
+        el.ei = ei;
+        el.count = count;
+        // With every point in and at most two map cells across and two
+        // down (cells at least as large as elements, as swarf run asks),
+        // the max of each of the four quarters they make; else a cell per
+        // point.
+        el.quarters = mapped && all_in && col_cell[n - 1] - col_cell[0] <= 1 &&
+                      row_cell[n - 1] - row_cell[0] <= options.map_cols;
         // An upper bound of the exact surface at each sample: the sweeps
         // that own the corners (exact heights of real moves). Only moves
         // that dip below the element's highest bound inside the element
         // can lower a sample further; the rest of the bin is skipped.
         // Heights() is bit-identical to Height(), several samples at once.
-        std::fill_n(est.begin(), count, z_top);
-        const int32_t* owners = e.owner;
+        double* const est = &row_est[off];
+        std::fill_n(est, count, z_top);
+        const int32_t* owners = el.e.owner;
         for (int k = 0; k < 4; ++k) {
           bool seen = owners[k] < 0;
           for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
           if (seen) continue;
-          owner_sweep(owners[k]).Heights(xs.data(), ys.data(), count, h.data());
+          owner_sweep(owners[k]).Heights(xs, ys, count, h.data());
 #pragma omp simd
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
-        const double cap = Highest(est.data(), count);
-        const Rect box{e.x0, e.y0, e.x1, e.y1};
-        // The row's moves meet the element's rows already (its y0, y1):
-        // their boxes need testing across only.
-        MovesThatMayCut(row, box, cap, pass.data());
-        for (int32_t q = 0; q < row_moves; ++q) {
+        el.cap = Highest(est, count);
+        el.box = Rect{el.e.x0, el.e.y0, el.e.x1, el.e.y1};
+        row_cap = std::max(row_cap, el.cap);
+      }
+      if (row_elements == 0) continue;
+      // The elements' boxes share the row's y0 and y1.
+      const Rect row_box{elements[0].box.x0, ey0,
+                         elements[row_elements - 1].box.x1, ey1};
+      MovesThatMayCut(bin_moves, row_box, row_cap, pass.data());
+      near.Clear();
+      for (int32_t q = 0; q < bin_moves.size(); ++q) {
+        if (pass[q] != 0) bin_moves.CopyFrom(q, &near);
+      }
+      for (int32_t w = 0; w < row_elements; ++w) {
+        RowElement& el = elements[w];
+        const ElementCorners& e = el.e;
+        const int32_t count = el.count;
+        const size_t off = static_cast<size_t>(w) * lattice;
+        const double* const xs = &row_xs[off];
+        const double* const ys = &row_ys[off];
+        double* const est = &row_est[off];
+        const int32_t* owners = e.owner;
+        const double cap = el.cap;
+        const Rect& box = el.box;
+        MovesThatMayCut(near, box, cap, pass.data());
+        for (int32_t q = 0; q < near.size(); ++q) {
           if (pass[q] == 0) continue;
-          const int32_t ck = row.k[q];
+          const int32_t ck = near.k[q];
           // A corner's owner is in est already.
           const int32_t id = static_cast<int32_t>(ids[ck]);
           if (id == owners[0] || id == owners[1] || id == owners[2] ||
@@ -425,15 +478,17 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           const std::optional<Rect> f =
               FootprintBounds(m.from, m.to, m.cutter, cap);
           if (!f.has_value() || !f->Intersects(box)) continue;
-          sweeps[ck].Heights(xs.data(), ys.data(), count, h.data());
+          sweeps[ck].Heights(xs, ys, count, h.data());
 #pragma omp simd
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
         }
-        scheme.ReconstructMany(e, xs.data(), ys.data(), count, rec.data());
+        scheme.ReconstructMany(e, xs, ys, count, rec.data());
         for (int32_t q = 0; q < count; ++q) {
           err[q] = SampleError(rec[q], est[q]);
         }
-        if (quarters) {
+        const int64_t* const col_cell =
+            mapped ? &cell_of_x[static_cast<size_t>(el.ei) * n] : nullptr;
+        if (el.quarters) {
           // The first column and row in the second cell (n: none).
           int32_t sx = 1, sy = 1;
           while (sx < n && col_cell[sx] == col_cell[0]) ++sx;
@@ -473,6 +528,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           // An element's samples mostly share a map cell: their max goes
           // in once per run of one cell (the same max: cells start at 0
           // and take only larger values).
+          const int64_t* const cells = &row_cells[off];
           int64_t run_cell = -1;
           float run_max = 0;
           for (int32_t q = 0; q < count; ++q) {
