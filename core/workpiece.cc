@@ -164,6 +164,8 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   static_assert(kChunk >= kTileSize);
   alignas(64) double cx[kChunk], cy[kChunk], h[kChunk];
   int32_t ck[kChunk];
+  // Spans of a row at least this long are narrowed to the span's top.
+  constexpr int32_t kNarrowSpan = 16;
 
   // One move of one shape: S is the shape's sweep class (chosen once per
   // move), so that its row loops are inlined and vectorized. Only heights
@@ -233,6 +235,8 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     const Rect b = cap.Bounds();
     auto [j_lo, j_hi] = NodeRange(b.y0, b.y1, y0, inv_dy, j_max);
     j_lo = std::max(j_lo, j_base);
+    const double lowest = sweep.lowest();
+    const double zmax = tile->zmax;
     for (int32_t j = j_lo; j <= j_hi; ++j) {
       const double y = y0 + j * dy;  // as GridGeometry::NodeY
       const Interval span = cap.RowSpan(y);
@@ -240,6 +244,43 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       auto [i_lo, i_hi] = NodeRange(span.lo, span.hi, x0, inv_dx, i_max);
       i_lo = std::max(i_lo, i_base);
       if (i_lo > i_hi) continue;
+      // On a long span, the highest node of the span caps what the move
+      // can cut there, as zmax does for the tile but much lower on the
+      // rows a raster's passes have cut: nothing where the sweep's lowest
+      // point is not below it, and a ball's footprint shrinks to it (over
+      // the narrower span, the nodes it leaves out are at or below the
+      // span's top, and the sweep is not below it there). A short span is
+      // evaluated whole: the test would cost more than it saves. Heights
+      // are never NaN: a vectorized max, in any order.
+      if (i_hi - i_lo + 1 >= kNarrowSpan) {
+        const double* const row = w + (j - j_base) * kTileSize - i_base;
+        // Blocks of 8 until one reaches the tile's top (uncut stock, the
+        // rows ahead of a raster: the first block).
+        double top = -kInf;
+        for (int32_t i = i_lo; i <= i_hi && top < zmax; i += 8) {
+          const int32_t end = std::min(i + 8, i_hi + 1);
+          double block = row[i];
+#pragma omp simd reduction(max : block)
+          for (int32_t q = i + 1; q < end; ++q) {
+            block = std::max(block, row[q]);
+          }
+          top = std::max(top, block);
+        }
+        if (!(lowest < top)) continue;
+        if constexpr (std::is_same_v<S, BallSweep>) {
+          if (top < zmax) {
+            Capsule narrow = cap;
+            narrow.radius = std::min(cap.radius, sweep.FootprintRadius(top));
+            const Interval in = narrow.RowSpan(y);
+            if (in.empty()) continue;
+            const auto [n_lo, n_hi] =
+                NodeRange(in.lo, in.hi, x0, inv_dx, i_max);
+            i_lo = std::max(i_lo, n_lo);
+            i_hi = std::min(i_hi, n_hi);
+            if (i_lo > i_hi) continue;
+          }
+        }
+      }
       if (n + (i_hi - i_lo + 1) > kChunk) flush();
       const int32_t k0 = (j - j_base) * kTileSize - i_base;
       for (int32_t i = i_lo; i <= i_hi; ++i, ++n) {

@@ -369,21 +369,29 @@ BallSweep::Capsule BallSweep::FootprintEnds(const Vec3& a, const Vec3& b,
       t0 = std::max(0.0, t - 1e-12);
     }
   }
-  // Over the kept part, a ball at height zc reaches below cap within a
-  // horizontal radius sqrt(r^2 - (zc - cap)^2), largest at the lowest centre.
-  const double z_min = std::min(a.z, b.z);
-  double rho = r;
-  if (z_min > cap) {
-    const double h = z_min - cap;
-    rho = std::sqrt(std::max(0.0, r2 - h * h));
-  }
   c.empty = false;
   c.x0 = a.x + t0 * (b.x - a.x);
   c.y0 = a.y + t0 * (b.y - a.y);
   c.x1 = a.x + t1 * (b.x - a.x);
   c.y1 = a.y + t1 * (b.y - a.y);
-  c.radius = rho * (1 + 1e-12) + kFootprintMargin;
+  c.radius = FootprintRadiusAt(std::min(a.z, b.z), r, r2, cap);
   return c;
+}
+
+double BallSweep::FootprintRadiusAt(double z_min, double r, double r2,
+                                    double cap) {
+  // Over the kept part, a ball at height zc reaches below cap within a
+  // horizontal radius sqrt(r^2 - (zc - cap)^2), largest at the lowest centre.
+  double rho = r;
+  if (z_min > cap) {
+    const double h = z_min - cap;
+    rho = std::sqrt(std::max(0.0, r2 - h * h));
+  }
+  return rho * (1 + 1e-12) + kFootprintMargin;
+}
+
+double BallSweep::FootprintRadius(double cap) const {
+  return FootprintRadiusAt(std::min(a_.z, b_.z), r_, r2_, cap);
 }
 
 std::optional<Rect> BallSweep::FootprintBounds(const Vec3& tip_from,

@@ -218,6 +218,10 @@ class BallSweep {
   // radius).Footprint(cap), without building the sweep.
   static Capsule FootprintOf(const Vec3& tip_from, const Vec3& tip_to,
                              double radius, double cap);
+  // Footprint(cap)'s radius. Footprint(c)'s segment for any c >= cap,
+  // widened by this radius, also holds every point where the sweep is
+  // below cap (a lower cap only shortens the segment and the radius).
+  double FootprintRadius(double cap) const;
 
  private:
   friend struct BallSweepKernels;  // the kernels over many frames
@@ -257,6 +261,9 @@ class BallSweep {
   // a and b of radius r (r2 = r * r).
   static Capsule FootprintEnds(const Vec3& a, const Vec3& b, double r,
                                double r2, double cap);
+  // The footprint's radius below cap for a lowest centre at z_min.
+  static double FootprintRadiusAt(double z_min, double r, double r2,
+                                  double cap);
 
   Vec3 a_, b_;  // ball centres at the start and end
   double r_, r2_;
