@@ -165,7 +165,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   alignas(64) double cx[kChunk], cy[kChunk], h[kChunk];
   int32_t ck[kChunk];
   // Spans of a row at least this long are narrowed to the span's top.
-  constexpr int32_t kNarrowSpan = 8;
+  constexpr int32_t kNarrowSpan = 16;
 
   // One move of one shape: S is the shape's sweep class (chosen once per
   // move), so that its row loops are inlined and vectorized. Only heights

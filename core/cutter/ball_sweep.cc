@@ -15,11 +15,6 @@ namespace {
 // 1e-12 of the move, and its derivatives would not be representable.
 constexpr double kVerticalFraction = 1e-12;
 
-// The footprint is widened by this much (mm) so that it stays conservative
-// under rounding: a node whose swept height is below the cap is always
-// evaluated, whatever the cap, which keeps results independent of batching.
-constexpr double kFootprintMargin = 1e-9;
-
 }  // namespace
 
 double SphereHeight(const Vec3& c, double r, double x, double y) {
@@ -376,22 +371,6 @@ BallSweep::Capsule BallSweep::FootprintEnds(const Vec3& a, const Vec3& b,
   c.y1 = a.y + t1 * (b.y - a.y);
   c.radius = FootprintRadiusAt(std::min(a.z, b.z), r, r2, cap);
   return c;
-}
-
-double BallSweep::FootprintRadiusAt(double z_min, double r, double r2,
-                                    double cap) {
-  // Over the kept part, a ball at height zc reaches below cap within a
-  // horizontal radius sqrt(r^2 - (zc - cap)^2), largest at the lowest centre.
-  double rho = r;
-  if (z_min > cap) {
-    const double h = z_min - cap;
-    rho = std::sqrt(std::max(0.0, r2 - h * h));
-  }
-  return rho * (1 + 1e-12) + kFootprintMargin;
-}
-
-double BallSweep::FootprintRadius(double cap) const {
-  return FootprintRadiusAt(std::min(a_.z, b_.z), r_, r2_, cap);
 }
 
 std::optional<Rect> BallSweep::FootprintBounds(const Vec3& tip_from,

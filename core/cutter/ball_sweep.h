@@ -221,7 +221,9 @@ class BallSweep {
   // Footprint(cap)'s radius. Footprint(c)'s segment for any c >= cap,
   // widened by this radius, also holds every point where the sweep is
   // below cap (a lower cap only shortens the segment and the radius).
-  double FootprintRadius(double cap) const;
+  double FootprintRadius(double cap) const {
+    return FootprintRadiusAt(std::min(a_.z, b_.z), r_, r2_, cap);
+  }
 
  private:
   friend struct BallSweepKernels;  // the kernels over many frames
@@ -261,9 +263,24 @@ class BallSweep {
   // a and b of radius r (r2 = r * r).
   static Capsule FootprintEnds(const Vec3& a, const Vec3& b, double r,
                                double r2, double cap);
-  // The footprint's radius below cap for a lowest centre at z_min.
+  // The footprint's radius below cap for a lowest centre at z_min: over
+  // the kept part, a ball at height zc reaches below cap within a
+  // horizontal radius sqrt(r^2 - (zc - cap)^2), largest at the lowest
+  // centre; widened against rounding.
   static double FootprintRadiusAt(double z_min, double r, double r2,
-                                  double cap);
+                                  double cap) {
+    double rho = r;
+    if (z_min > cap) {
+      const double h = z_min - cap;
+      rho = std::sqrt(std::max(0.0, r2 - h * h));
+    }
+    return rho * (1 + 1e-12) + kFootprintMargin;
+  }
+  // The footprint is widened by this much (mm) so that it stays
+  // conservative under rounding: a node whose swept height is below the
+  // cap is always evaluated, whatever the cap, which keeps results
+  // independent of batching.
+  static constexpr double kFootprintMargin = 1e-9;
 
   Vec3 a_, b_;  // ball centres at the start and end
   double r_, r2_;
