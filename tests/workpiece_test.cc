@@ -14,6 +14,7 @@
 #include <sstream>
 #include <string>
 #include <thread>
+#include <utility>
 #include <vector>
 
 #include "absl/status/status.h"
@@ -144,6 +145,23 @@ std::unique_ptr<Workpiece> ApplyInBatches(const std::vector<Move>& moves,
   return wp;
 }
 
+// The lowest of `top` and every sweep at (x, y), and the lowest id giving
+// it (-1: the top).
+template <class S>
+std::pair<double, int32_t> LowestSweep(const std::vector<S>& sweeps,
+                                       double top, double x, double y) {
+  double w = top;
+  int32_t owner = -1;
+  for (size_t m = 0; m < sweeps.size(); ++m) {
+    const double h = sweeps[m].Height(x, y);
+    if (h < w) {
+      w = h;
+      owner = static_cast<int32_t>(m);
+    }
+  }
+  return {w, owner};
+}
+
 // Every node is the lowest of the stock top and every sweep at that node;
 // the owner is the lowest id reaching it; taylor nodes hold the owner's
 // derivatives in float.
@@ -160,15 +178,7 @@ TEST(WorkpieceTest, NodesAreTheLowestSweep) {
     for (int32_t j = 0; j < g.nodes_y(); ++j) {
       for (int32_t i = 0; i < g.nodes_x(); ++i) {
         const double x = g.NodeX(i), y = g.NodeY(j);
-        double w = MixedStock().z_top;
-        int32_t owner = -1;
-        for (size_t m = 0; m < sweeps.size(); ++m) {
-          const double h = sweeps[m].Height(x, y);
-          if (h < w) {
-            w = h;
-            owner = static_cast<int32_t>(m);
-          }
-        }
+        const auto [w, owner] = LowestSweep(sweeps, MixedStock().z_top, x, y);
         const NodeValue v = wp->Node(i, j);
         ASSERT_EQ(v.jet.w, w) << "node " << i << "," << j;
         ASSERT_EQ(v.owner, owner) << "node " << i << "," << j;
@@ -229,15 +239,7 @@ TEST(WorkpieceTest, RasterRowsAreTheLowestSweep) {
     for (int32_t j = 0; j < grid.nodes_y(); ++j) {
       for (int32_t i = 0; i < grid.nodes_x(); ++i) {
         const double x = grid.NodeX(i), y = grid.NodeY(j);
-        double w = spec.z_top;
-        int32_t owner = -1;
-        for (size_t m = 0; m < sweeps.size(); ++m) {
-          const double h = sweeps[m].Height(x, y);
-          if (h < w) {
-            w = h;
-            owner = static_cast<int32_t>(m);
-          }
-        }
+        const auto [w, owner] = LowestSweep(sweeps, spec.z_top, x, y);
         want_w.push_back(w);
         want_owner.push_back(owner);
         raster_owned += owner > 0;
