@@ -148,8 +148,8 @@ std::unique_ptr<Workpiece> ApplyInBatches(const std::vector<Move>& moves,
 // The lowest of `top` and every sweep at (x, y), and the lowest id giving
 // it (-1: the top).
 template <class S>
-std::pair<double, int32_t> LowestSweep(const std::vector<S>& sweeps,
-                                       double top, double x, double y) {
+std::pair<double, int32_t> LowestSweep(const std::vector<S>& sweeps, double top,
+                                       double x, double y) {
   double w = top;
   int32_t owner = -1;
   for (size_t m = 0; m < sweeps.size(); ++m) {
