@@ -397,8 +397,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const bool all_in = region.Contains(col_x[0], row_y[0]) &&
                             region.Contains(col_x[n - 1], row_y[n - 1]);
         const size_t off = static_cast<size_t>(row_elements) * lattice;
-        double* const xs = &row_xs[off];
-        double* const ys = &row_ys[off];
+        double* const xs = row_xs.data() + off;
+        double* const ys = row_ys.data() + off;
         int32_t count = 0;
         for_each_point(col_x, row_y, all_in, [&](int32_t si, int32_t sj) {
           xs[count] = col_x[si];
@@ -428,7 +428,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         // that dip below the element's highest bound inside the element
         // can lower a sample further; the rest of the bin is skipped.
         // Heights() is bit-identical to Height(), several samples at once.
-        double* const est = &row_est[off];
+        double* const est = row_est.data() + off;
         std::fill_n(est, count, z_top);
         const int32_t* owners = el.e.owner;
         for (int k = 0; k < 4; ++k) {
@@ -457,9 +457,9 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const ElementCorners& e = el.e;
         const int32_t count = el.count;
         const size_t off = static_cast<size_t>(w) * lattice;
-        const double* const xs = &row_xs[off];
-        const double* const ys = &row_ys[off];
-        double* const est = &row_est[off];
+        const double* const xs = row_xs.data() + off;
+        const double* const ys = row_ys.data() + off;
+        double* const est = row_est.data() + off;
         const int32_t* owners = e.owner;
         const double cap = el.cap;
         const Rect& box = el.box;
@@ -528,7 +528,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           // An element's samples mostly share a map cell: their max goes
           // in once per run of one cell (the same max: cells start at 0
           // and take only larger values).
-          const int64_t* const cells = &row_cells[off];
+          const int64_t* const cells = row_cells.data() + off;
           int64_t run_cell = -1;
           float run_max = 0;
           for (int32_t q = 0; q < count; ++q) {
