@@ -244,6 +244,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       auto [i_lo, i_hi] = NodeRange(span.lo, span.hi, x0, inv_dx, i_max);
       i_lo = std::max(i_lo, i_base);
       if (i_lo > i_hi) continue;
+      const int32_t k0 = (j - j_base) * kTileSize - i_base;  // node i's: k0 + i
       // On a long span, the highest node of the span caps what the move
       // can cut there, as zmax does for the tile but much lower on the
       // rows a raster's passes have cut: nothing where the sweep's lowest
@@ -253,16 +254,15 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       // evaluated whole: the test would cost more than it saves. Heights
       // are never NaN: a vectorized max, in any order.
       if (i_hi - i_lo + 1 >= kNarrowSpan) {
-        const double* const row = w + (j - j_base) * kTileSize - i_base;
         // Blocks of 8 until one reaches the tile's top (uncut stock, the
         // rows ahead of a raster: the first block).
         double top = -kInf;
         for (int32_t i = i_lo; i <= i_hi && top < zmax; i += 8) {
           const int32_t end = std::min(i + 8, i_hi + 1);
-          double block = row[i];
+          double block = w[k0 + i];
 #pragma omp simd reduction(max : block)
           for (int32_t q = i + 1; q < end; ++q) {
-            block = std::max(block, row[q]);
+            block = std::max(block, w[k0 + q]);
           }
           top = std::max(top, block);
         }
@@ -282,7 +282,6 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
         }
       }
       if (n + (i_hi - i_lo + 1) > kChunk) flush();
-      const int32_t k0 = (j - j_base) * kTileSize - i_base;
       for (int32_t i = i_lo; i <= i_hi; ++i, ++n) {
         cx[n] = x0 + i * dx;  // as GridGeometry::NodeX: bit-identical
         cy[n] = y;
