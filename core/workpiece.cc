@@ -5,10 +5,12 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <limits>
 #include <type_traits>
 
 #include "absl/strings/str_cat.h"
 #include "core/status_macros.h"
+#include "core/target_clones.h"
 
 namespace swarf {
 
@@ -950,25 +952,155 @@ CornerReach MoveSweeps::Reach(int32_t id, double z_top) const {
   return e.reach;
 }
 
+// A bin's moves as LowestAt first tests them, rounded outwards to float
+// (4-byte lanes, half the bytes): each move's tips' XY box, its lowest tip,
+// and FootprintGap's z_r and r2 (for other shapes than the ball, z_r is
+// -inf and r2 the square of the cutter's radius, widened: their footprint
+// lies within it of the move).
+struct MoveBinReach {
+  uint64_t serial = 0;
+  int32_t bin = -1;
+  int64_t moves = -1;  // the list's size when filled: the bins grow with it
+  std::vector<float> x0, x1, y0, y1, low, z_r, r2;
+  std::vector<uint32_t> ids;
+};
+
+namespace {
+
+// Bins whose reach is kept, per thread: a crease's vertices come in runs
+// that cross a few neighbouring bins. Larger bins are scanned as they are.
+constexpr int kReachBins = 8;
+constexpr size_t kMaxReachMoves = size_t{1} << 16;
+
+float FloatDown(double v) {
+  const float f = static_cast<float>(v);
+  return static_cast<double>(f) <= v
+             ? f
+             : std::nextafter(f, -std::numeric_limits<float>::infinity());
+}
+float FloatUp(double v) {
+  const float f = static_cast<float>(v);
+  return static_cast<double>(f) >= v
+             ? f
+             : std::nextafter(f, std::numeric_limits<float>::infinity());
+}
+
+// pass[q] = 0 where move q surely is not below cap at (x, y): its lowest
+// tip is not, or FootprintGap::Misses at cap (twice its slack against the
+// rounding of these values). The exact tests, at a cap w <= cap, pass no
+// move this rejects: a lower cap only rejects more.
+SWARF_TARGET_CLONES
+void MayBeBelow(const MoveBinReach& b, size_t q0, size_t n, double x, double y,
+                double cap, uint8_t* __restrict pass) {
+  constexpr double kSlack = 2e-6;
+  const float* __restrict x0 = b.x0.data() + q0;
+  const float* __restrict x1 = b.x1.data() + q0;
+  const float* __restrict y0 = b.y0.data() + q0;
+  const float* __restrict y1 = b.y1.data() + q0;
+  const float* __restrict low = b.low.data() + q0;
+  const float* __restrict z_r = b.z_r.data() + q0;
+  const float* __restrict r2 = b.r2.data() + q0;
+  auto max = [](double a, double b) { return a < b ? b : a; };
+#pragma omp simd
+  for (size_t q = 0; q < n; ++q) {
+    const double gap = max(max(double{x0[q]} - x, x - double{x1[q]}),
+                           max(double{y0[q]} - y, y - double{y1[q]})) -
+                       kSlack;
+    const double h = double{z_r[q]} - cap;
+    const double rho2 = h > 0 ? double{r2[q]} - h * h : double{r2[q]};
+    const bool misses = (gap > 0) & (gap * gap > rho2);
+    pass[q] = !misses & (double{low[q]} < cap) ? 1 : 0;
+  }
+}
+
+}  // namespace
+
+const MoveBinReach* MoveSweeps::BinReachOf(int32_t bin) const {
+  thread_local MoveBinReach cache[kReachBins];
+  thread_local int next = 0;
+  const int64_t moves = moves_->size();
+  for (MoveBinReach& b : cache) {
+    if (b.bin == bin && b.serial == serial_ && b.moves == moves) return &b;
+  }
+  MoveBinReach& b = cache[next];
+  next = (next + 1) % kReachBins;
+  for (auto* v : {&b.x0, &b.x1, &b.y0, &b.y1, &b.low, &b.z_r, &b.r2}) {
+    v->clear();
+  }
+  b.ids.clear();
+  b.serial = 0;  // not valid until filled
+  Move scratch;
+  for (const uint32_t k : index_->Bin(bin)) {
+    if (b.ids.size() == kMaxReachMoves) {
+      b.bin = -1;
+      return nullptr;
+    }
+    const MoveView m = ViewAt(k, &scratch);
+    const Vec3& p = *m.from;
+    const Vec3& q = *m.to;
+    const double r = m.cutter->radius;
+    b.x0.push_back(FloatDown(std::min(p.x, q.x)));
+    b.x1.push_back(FloatUp(std::max(p.x, q.x)));
+    b.y0.push_back(FloatDown(std::min(p.y, q.y)));
+    b.y1.push_back(FloatUp(std::max(p.y, q.y)));
+    b.low.push_back(FloatDown(std::min(p.z, q.z)));
+    if (SweptAsBall(*m.cutter)) {
+      b.z_r.push_back(FloatDown(std::min(p.z, q.z) + r));
+      b.r2.push_back(FloatUp(r * r));
+    } else {
+      // The footprint's axis is a part of the move and its radius at most
+      // the cutter's, which FootprintBounds widens by 1e-9 mm and 1e-12 of
+      // it.
+      const double reach = r * (1 + 1e-9) + 1e-6;
+      b.z_r.push_back(-std::numeric_limits<float>::infinity());
+      b.r2.push_back(FloatUp(reach * reach));
+    }
+    b.ids.push_back(k);
+  }
+  b.serial = serial_;
+  b.bin = bin;
+  b.moves = moves;
+  return &b;
+}
+
 double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
                             double cap, int32_t* id) const {
   double w = cap;
   int32_t lowest = -1;
   Move scratch;
-  for (const uint32_t k : index_->Bin(index_->BinOfElement(ei, ej))) {
+  // The exact tests, in the bin's order.
+  auto try_move = [&](uint32_t k) {
     const MoveView m = ViewAt(k, &scratch);
-    if (!(std::min(m.from->z, m.to->z) < w)) continue;
+    if (!(std::min(m.from->z, m.to->z) < w)) return;
     // Beyond its footprint below w a move is not below w.
     if (FootprintSurelyMisses(*m.from, *m.to, *m.cutter, {x, y, x, y}, w)) {
-      continue;
+      return;
     }
     const std::optional<Rect> b =
         FootprintBounds(*m.from, *m.to, *m.cutter, w);
-    if (!b.has_value() || !b->Contains(x, y)) continue;
+    if (!b.has_value() || !b->Contains(x, y)) return;
     const double h = Height(static_cast<int32_t>(k), x, y);
     if (h < w) {
       w = h;
       lowest = static_cast<int32_t>(k);
+    }
+  };
+  const int32_t bin = index_->BinOfElement(ei, ej);
+  const MoveBinReach* reach = BinReachOf(bin);
+  if (reach == nullptr) {
+    for (const uint32_t k : index_->Bin(bin)) try_move(k);
+  } else {
+    // Only the moves the widened boxes pass (w <= cap: the exact tests
+    // pass no others), in the same order: the same result.
+    constexpr size_t kChunk = 256;
+    uint8_t pass[kChunk];
+    const size_t n = reach->ids.size();
+    for (size_t q0 = 0; q0 < n; q0 += kChunk) {
+      const size_t c = std::min(kChunk, n - q0);
+      MayBeBelow(*reach, q0, c, x, y, cap, pass);
+      for (size_t q = 0; q < c; ++q) {
+        if (pass[q] != 0) try_move(reach->ids[q0 + q]);
+      }
     }
   }
   if (id != nullptr) *id = lowest;

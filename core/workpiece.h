@@ -54,6 +54,8 @@ CornerReach ReachOf(const Move& move, double z_top);
 // can reach: the exact scheme's MoveSurfaces. Thread-safe (each thread keeps
 // the sweeps it built last). `moves` and `index` (not owned) must outlive
 // it; they may grow between calls, not during them.
+struct MoveBinReach;  // a bin's moves as LowestAt first tests them
+
 class MoveSweeps final : public MoveSurfaces {
  public:
   // `index` lists the moves by the bins their footprints reach (as
@@ -89,6 +91,9 @@ class MoveSweeps final : public MoveSurfaces {
 
  private:
   const Sweep* SweepOf(int32_t id) const;
+  // This thread's MoveBinReach of `bin`, filled on first use; null for a
+  // bin too large to keep.
+  const MoveBinReach* BinReachOf(int32_t bin) const;
   // Move `id`: through MoveList's inline Get where the source is one (the
   // workpiece's own), without a virtual call per candidate.
   Move MoveAt(int64_t id) const {
