@@ -972,17 +972,14 @@ namespace {
 constexpr int kReachBins = 8;
 constexpr size_t kMaxReachMoves = size_t{1} << 16;
 
+// v rounded to a float not above (FloatDown) or below (FloatUp) it: moved
+// by 2^-22 of itself first, more than the half float ulp that rounding to
+// nearest can add (and 1e-30 for v near 0), without a call to nextafter.
 float FloatDown(double v) {
-  const float f = static_cast<float>(v);
-  return static_cast<double>(f) <= v
-             ? f
-             : std::nextafter(f, -std::numeric_limits<float>::infinity());
+  return static_cast<float>(v - (std::fabs(v) * 0x1p-22 + 1e-30));
 }
 float FloatUp(double v) {
-  const float f = static_cast<float>(v);
-  return static_cast<double>(f) >= v
-             ? f
-             : std::nextafter(f, std::numeric_limits<float>::infinity());
+  return static_cast<float>(v + (std::fabs(v) * 0x1p-22 + 1e-30));
 }
 
 // pass[q] = 0 where move q surely is not below cap at (x, y): its lowest
