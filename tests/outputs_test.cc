@@ -15,6 +15,7 @@
 #include <iterator>
 #include <map>
 #include <memory>
+#include <numbers>
 #include <optional>
 #include <random>
 #include <sstream>
@@ -626,6 +627,77 @@ TEST(MarksTest, PictureDrawsThePolylinesOverTheRelief) {
     }
   }
   EXPECT_GT(checked, 10);
+}
+
+// A polyline is blended once per pixel, with the largest coverage of its
+// segments (its distance from the polyline): the picture does not depend
+// on how finely a mark is sampled. A line retraced over itself is the line
+// drawn once; one of 400 vertices 0.1 px apart is the line of its two ends;
+// an arc sampled 20 times finer is the same arc within 0.05 px (vertices
+// that close are dropped). Blending segment by segment darkened the edges
+// once per segment passing near.
+TEST(MarksTest, PolylineIsBlendedOncePerPixel) {
+  PixelFrame f;
+  f.width = 120;
+  f.height = 80;
+  f.x0 = 0;
+  f.y1 = 80;
+  f.sx = f.sy = 1;  // a pixel a millimetre, y up
+  const Image ground(f.width, f.height, 3, Rgb{200, 200, 200});
+  MarksPictureOptions mo;
+  mo.line_width_px = 4;
+  auto draw = [&](const std::vector<MarkPolyline>& marks) {
+    auto im = DrawMarks(ground, f, marks, mo);
+    EXPECT_TRUE(im.ok()) << im.status();
+    return *std::move(im);
+  };
+  auto line = [](std::vector<Vec3> v) {
+    MarkPolyline p;
+    p.angle_deg.assign(v.size(), 30);
+    p.vertices = std::move(v);
+    return p;
+  };
+  auto max_diff = [&](const Image& a, const Image& b) {
+    int d = 0;
+    for (int y = 0; y < f.height; ++y) {
+      for (int x = 0; x < f.width; ++x) {
+        d = std::max(d, MaxChannelDiff(a.Get(x, y), b.Get(x, y)));
+      }
+    }
+    return d;
+  };
+  const Vec3 a{10.3, 20.7, 0}, b{100.6, 57.2, 0};
+  const Image once = draw({line({a, b})});
+  EXPECT_EQ(max_diff(once, draw({line({a, b, a})})), 0);
+  std::vector<Vec3> fine;
+  for (int k = 0; k <= 400; ++k) {
+    const double t = k / 400.0;
+    fine.push_back({a.x + t * (b.x - a.x), a.y + t * (b.y - a.y), 0});
+  }
+  EXPECT_EQ(max_diff(once, draw({line(fine)})), 0);
+  // The edge is anti-aliased: some pixels only partly take the line's
+  // colour over the halo.
+  int partial = 0;
+  for (int y = 0; y < f.height; ++y) {
+    for (int x = 0; x < f.width; ++x) {
+      const Rgb c = once.Get(x, y);
+      partial += MaxChannelDiff(c, AngleColor(30)) > 40 &&
+                 MaxChannelDiff(c, Rgb{200, 200, 200}) > 40 &&
+                 MaxChannelDiff(c, Rgb{0, 0, 0}) > 40;
+    }
+  }
+  EXPECT_GT(partial, 50);
+  auto arc = [&](int n) {
+    std::vector<Vec3> v;
+    for (int k = 0; k <= n; ++k) {
+      const double t = std::numbers::pi * k / n;
+      v.push_back({60 + 35 * std::cos(t), 20 + 35 * std::sin(t), 0});
+    }
+    return line(v);
+  };
+  // 100 vertices: 1.1 px apart; 2000: 0.055 px.
+  EXPECT_LE(max_diff(draw({arc(100)}), draw({arc(2000)})), 16);
+  EXPECT_GT(max_diff(once, draw({arc(100)})), 100);  // a different picture
 }
 
 TEST(MarksTest, SvgHasOnePathPerPolyline) {
@@ -1269,8 +1341,10 @@ TEST(OutputsGoldenTest, GuardedSceneFiguresAreUnchanged) {
   ASSERT_TRUE(picture.ok());
   EXPECT_EQ(picture->width(), 1141);
   EXPECT_EQ(picture->height(), 750);  // 24 bands of rows drawn at once
+  // Changed on purpose (each polyline blended once per pixel, sub-pixel
+  // vertices dropped: MarksTest.PolylineIsBlendedOncePerPixel).
   EXPECT_EQ(Fnv(picture->pixels().data(), picture->pixels().size()),
-            0xeee569a18ab7dfeau);
+            0xcf3756e8ca484bc4u);
 
   const std::string json = MarksJson(marks), svg = MarksSvg(spec, marks);
   EXPECT_EQ(Fnv(json.data(), json.size()), 0xf8e7a3c03ce96293u);

@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <functional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -406,15 +408,14 @@ absl::StatusOr<Image> RenderErrorMap(const ErrorRaster& raster,
 
 namespace {
 
-// A segment in pixel coordinates with the mark angle at both ends.
+// A segment in pixel coordinates with the mark angle at both ends, and the
+// polyline it belongs to (a serial number of the pass).
 struct PixelSegment {
   double ax, ay, bx, by;
   double angle_a, angle_b;
+  uint32_t polyline;
 };
 
-// Anti-aliased stroke: each pixel's coverage is how far its centre lies
-// inside the stroke's edge (a one-pixel ramp), which is cheap and good
-// enough for lines of a few pixels.
 // The rows a stroke of `width` may touch, [*y0, *y1] within [0, max_y).
 void StrokeRows(const PixelSegment& s, double width, int max_y, int* y0,
                 int* y1) {
@@ -440,11 +441,13 @@ struct PixelTile {
   int col0, col1, row0, row1;
 };
 
-// Draws the stroke's pixels within `tile` only: a pixel's blends happen in
-// segment order whichever tile draws it, so tiles can be drawn at once with
-// the same result.
-void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
-            double width, bool halo, const PixelTile& tile) {
+// Calls cover(px, py, coverage, angle) for each pixel of the stroke within
+// `tile`: coverage is how far the pixel's centre lies inside the stroke's
+// edge (a one-pixel ramp, > 0), angle the mark's angle interpolated at the
+// segment's point nearest to it.
+template <class Cover>
+void StrokeCoverage(int max_x, int max_y, const PixelSegment& s, double width,
+                    const PixelTile& tile, Cover&& cover) {
   const double half = width / 2;
   int x0, x1, y0, y1;
   StrokeColumns(s, width, max_x, &x0, &x1);
@@ -465,7 +468,7 @@ void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
     // The row's pixels that can be within r of the segment: within r of
     // its box, and of its line. A pixel more off than that fails the test
     // below anyway; the bounds are widened by a pixel against rounding, so
-    // the same pixels are drawn, in the same order, with fewer tests.
+    // the same pixels are covered with fewer tests.
     const double off_y = std::max({0.0, seg_y0 - py, py - seg_y1});
     if (off_y > r + 1) continue;
     const double reach = std::sqrt(std::max(0.0, r2 - off_y * off_y));
@@ -488,11 +491,102 @@ void Stroke(Image& image, int max_x, int max_y, const PixelSegment& s,
       if (d2 >= r2) continue;
       const double coverage = r - std::sqrt(d2);
       if (coverage <= 0) continue;
-      const Rgb c =
-          halo ? kHalo : AngleColor(s.angle_a + t * (s.angle_b - s.angle_a));
-      image.Blend(px, py, c, halo ? 0.75 * std::min(coverage, 1.0) : coverage);
+      cover(px, py, coverage, s.angle_a + t * (s.angle_b - s.angle_a));
     }
   }
+}
+
+// A polyline's strokes within a tile, blended once per pixel: each pixel
+// takes the largest coverage of any of the polyline's segments (its
+// distance from the polyline), with the angle where that is. Blending each
+// segment in turn darkened a pixel as many times as segments passed near
+// it: the line's edge depended on how finely the marks were sampled.
+class PolylineStroke {
+ public:
+  explicit PolylineStroke(const PixelTile& tile)
+      : tile_(tile), width_(tile.col1 - tile.col0) {
+    const size_t area =
+        static_cast<size_t>(width_) * std::max(0, tile.row1 - tile.row0);
+    coverage_.assign(area, 0);
+    angle_.resize(area);
+  }
+  void Add(int max_x, int max_y, const PixelSegment& s, double width) {
+    StrokeCoverage(max_x, max_y, s, width, tile_,
+                   [&](int px, int py, double coverage, double angle) {
+                     const size_t k =
+                         static_cast<size_t>(py - tile_.row0) * width_ +
+                         (px - tile_.col0);
+                     if (coverage_[k] == 0) touched_.push_back(k);
+                     // The first of equal coverages: the segments' order.
+                     if (coverage > coverage_[k]) {
+                       coverage_[k] = coverage;
+                       angle_[k] = angle;
+                     }
+                   });
+  }
+  // Blends the polyline's pixels (in the order first covered) and clears
+  // them for the next polyline.
+  void Blend(Image& image, bool halo) {
+    for (const size_t k : touched_) {
+      const int px = tile_.col0 + static_cast<int>(k % width_);
+      const int py = tile_.row0 + static_cast<int>(k / width_);
+      const double c = coverage_[k];
+      if (halo) {
+        image.Blend(px, py, kHalo, 0.75 * std::min(c, 1.0));
+      } else {
+        image.Blend(px, py, AngleColor(angle_[k]), c);
+      }
+      coverage_[k] = 0;
+    }
+    touched_.clear();
+  }
+
+ private:
+  const PixelTile tile_;
+  const int width_;
+  std::vector<double> coverage_, angle_;  // per pixel of the tile
+  std::vector<size_t> touched_;
+};
+
+// The vertices of a polyline of n vertices (in pixels: xs, ys, angles) to
+// stroke: each vertex dropped that lies within kDropPx of the segment
+// between the kept ones around it, with its angle within kDropDeg of the
+// angle interpolated there. A fine grid's marks have vertices a fraction of
+// a pixel apart in a picture of a few thousand pixels: each cost a stroke
+// and changed nothing to be seen. The first and last are kept; a vertex is
+// kept at least every kMaxRun.
+std::vector<size_t> KeptVertices(const std::vector<double>& xs,
+                                 const std::vector<double>& ys,
+                                 const std::vector<double>& angles) {
+  constexpr double kDropPx = 0.05, kDropDeg = 0.25;
+  constexpr size_t kMaxRun = 32;
+  const size_t n = xs.size();
+  std::vector<size_t> kept;
+  if (n == 0) return kept;
+  kept.push_back(0);
+  // Whether every vertex strictly between a and b lies near segment a-b.
+  auto spans = [&](size_t a, size_t b) {
+    const double dx = xs[b] - xs[a], dy = ys[b] - ys[a];
+    const double len2 = dx * dx + dy * dy;
+    for (size_t i = a + 1; i < b; ++i) {
+      double t =
+          len2 > 0 ? ((xs[i] - xs[a]) * dx + (ys[i] - ys[a]) * dy) / len2 : 0;
+      t = std::clamp(t, 0.0, 1.0);
+      const double ex = xs[a] + t * dx - xs[i], ey = ys[a] + t * dy - ys[i];
+      if (!(ex * ex + ey * ey <= kDropPx * kDropPx)) return false;
+      const double angle = angles[a] + t * (angles[b] - angles[a]);
+      if (!(std::fabs(angles[i] - angle) <= kDropDeg)) return false;
+    }
+    return true;
+  };
+  size_t a = 0;
+  while (a + 1 < n) {
+    size_t b = a + 1;
+    while (b + 1 < n && b + 1 - a <= kMaxRun && spans(a, b + 1)) ++b;
+    kept.push_back(b);
+    a = b;
+  }
+  return kept;
 }
 
 }  // namespace
@@ -574,8 +668,17 @@ absl::StatusOr<Image> DrawMarksOver(
           const PixelTile tile{
               tx * tile_cols, std::min(frame.width, (tx + 1) * tile_cols),
               ty * tile_rows, std::min(frame.height, (ty + 1) * tile_rows)};
-          for (uint32_t k : tile_segments[t]) {
-            Stroke(image, frame.width, frame.height, chunk[k], w, halo, tile);
+          // A chunk holds whole polylines, and a tile's segments are in
+          // their order: each polyline's run of them is blended at once.
+          PolylineStroke stroke(tile);
+          const std::vector<uint32_t>& list = tile_segments[t];
+          for (size_t q = 0; q < list.size();) {
+            const uint32_t polyline = chunk[list[q]].polyline;
+            for (; q < list.size() && chunk[list[q]].polyline == polyline;
+                 ++q) {
+              stroke.Add(frame.width, frame.height, chunk[list[q]], w);
+            }
+            stroke.Blend(image, halo);
           }
         });
     chunk.clear();
@@ -585,7 +688,9 @@ absl::StatusOr<Image> DrawMarksOver(
   // (a later polyline's angles take precedence), and nothing more is drawn
   // once either is seen (the picture is not returned).
   bool finite = true;
+  std::vector<double> xs, ys;
   for (const bool halo : {true, false}) {
+    uint32_t polyline = 0;
     absl::Status st = marks([&](const MarkPolyline& p) -> absl::Status {
       const size_t n = p.vertices.size();
       if (p.angle_deg.size() != n) {
@@ -593,23 +698,25 @@ absl::StatusOr<Image> DrawMarksOver(
             absl::StrFormat("mark polyline with %d vertices has %d angles", n,
                             p.angle_deg.size()));
       }
-      const size_t ends = p.closed && n > 2 ? n : (n > 0 ? n - 1 : 0);
-      for (size_t k = 0; k < ends || (n == 1 && k == 0); ++k) {
-        const size_t a = k, b = n == 1 ? 0 : (k + 1) % n;
-        const PixelSegment s{frame.PixelX(p.vertices[a].x),
-                             frame.PixelY(p.vertices[a].y),
-                             frame.PixelX(p.vertices[b].x),
-                             frame.PixelY(p.vertices[b].y),
-                             p.angle_deg[a],
-                             p.angle_deg[b]};
-        if (!(std::isfinite(s.ax) && std::isfinite(s.ay) &&
-              std::isfinite(s.bx) && std::isfinite(s.by))) {
-          finite = false;
-        }
-        if (!finite) continue;
-        chunk.push_back(s);
-        if (chunk.size() >= options.chunk_segments) draw_chunk(halo);
+      xs.resize(n);
+      ys.resize(n);
+      for (size_t k = 0; k < n; ++k) {
+        xs[k] = frame.PixelX(p.vertices[k].x);
+        ys[k] = frame.PixelY(p.vertices[k].y);
+        if (!(std::isfinite(xs[k]) && std::isfinite(ys[k]))) finite = false;
       }
+      if (!finite) return absl::OkStatus();
+      const std::vector<size_t> kept = KeptVertices(xs, ys, p.angle_deg);
+      const size_t m = kept.size();
+      const size_t ends = p.closed && n > 2 ? m : (m > 0 ? m - 1 : 0);
+      for (size_t k = 0; k < ends || (m == 1 && k == 0); ++k) {
+        const size_t a = kept[k], b = kept[m == 1 ? 0 : (k + 1) % m];
+        chunk.push_back({xs[a], ys[a], xs[b], ys[b], p.angle_deg[a],
+                         p.angle_deg[b], polyline});
+      }
+      ++polyline;
+      // Whole polylines only: each is blended at once within a chunk.
+      if (chunk.size() >= options.chunk_segments) draw_chunk(halo);
       return absl::OkStatus();
     });
     if (!st.ok()) return st;
