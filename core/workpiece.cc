@@ -952,16 +952,38 @@ CornerReach MoveSweeps::Reach(int32_t id, double z_top) const {
   return e.reach;
 }
 
-// A bin's moves as LowestAt first tests them, rounded outwards to float
+// Lanes of moves as LowestAt first tests them, rounded outwards to float
 // (4-byte lanes, half the bytes): each move's tips' XY box, its lowest tip,
 // and FootprintGap's z_r and r2 (for other shapes than the ball, z_r is
 // -inf and r2 the square of the cutter's radius, widened: their footprint
 // lies within it of the move).
+struct ReachLanes {
+  std::vector<float> x0, x1, y0, y1, low, z_r, r2;
+  void Clear() {
+    for (auto* v : {&x0, &x1, &y0, &y1, &low, &z_r, &r2}) v->clear();
+  }
+  void Add(float ax0, float ax1, float ay0, float ay1, float alow, float az_r,
+           float ar2) {
+    x0.push_back(ax0);
+    x1.push_back(ax1);
+    y0.push_back(ay0);
+    y1.push_back(ay1);
+    low.push_back(alow);
+    z_r.push_back(az_r);
+    r2.push_back(ar2);
+  }
+  size_t size() const { return x0.size(); }
+};
+
+// A bin's moves in its order, and blocks of kReachBlock of them, each the
+// union of its moves' lanes (box hull, least z_r and low, largest r2): a
+// block the test rejects holds no move it passes. A bin's moves follow the
+// path, so a block is a short stretch of it.
 struct MoveBinReach {
   uint64_t serial = 0;
   int32_t bin = -1;
   int64_t moves = -1;  // the list's size when filled: the bins grow with it
-  std::vector<float> x0, x1, y0, y1, low, z_r, r2;
+  ReachLanes move, block;
   std::vector<uint32_t> ids;
 };
 
@@ -971,6 +993,7 @@ namespace {
 // that cross a few neighbouring bins. Larger bins are scanned as they are.
 constexpr int kReachBins = 8;
 constexpr size_t kMaxReachMoves = size_t{1} << 16;
+constexpr size_t kReachBlock = 16;
 
 // v rounded to a float not above (FloatDown) or below (FloatUp) it: moved
 // by 2^-22 of itself first, more than the half float ulp that rounding to
@@ -982,12 +1005,14 @@ float FloatUp(double v) {
   return static_cast<float>(v + (std::fabs(v) * 0x1p-22 + 1e-30));
 }
 
-// pass[q] = 0 where move q surely is not below cap at (x, y): its lowest
-// tip is not, or FootprintGap::Misses at cap (twice its slack against the
-// rounding of these values). The exact tests, at a cap w <= cap, pass no
-// move this rejects: a lower cap only rejects more.
+// pass[q] = 0 where lane q0 + q surely is not below cap at (x, y): its
+// lowest tip is not, or FootprintGap::Misses at cap (twice its slack
+// against the rounding of these values). The exact tests, at a cap w <=
+// cap, pass no move this rejects: a lower cap only rejects more. A block's
+// union passes where any of its moves does: its gap is no larger, its
+// z_r - cap no larger and r2 no smaller, so its reach no smaller.
 SWARF_TARGET_CLONES
-void MayBeBelow(const MoveBinReach& b, size_t q0, size_t n, double x, double y,
+void MayBeBelow(const ReachLanes& b, size_t q0, size_t n, double x, double y,
                 double cap, uint8_t* __restrict pass) {
   constexpr double kSlack = 2e-6;
   const float* __restrict x0 = b.x0.data() + q0;
@@ -1021,9 +1046,8 @@ const MoveBinReach* MoveSweeps::BinReachOf(int32_t bin) const {
   }
   MoveBinReach& b = cache[next];
   next = (next + 1) % kReachBins;
-  for (auto* v : {&b.x0, &b.x1, &b.y0, &b.y1, &b.low, &b.z_r, &b.r2}) {
-    v->clear();
-  }
+  b.move.Clear();
+  b.block.Clear();
   b.ids.clear();
   b.serial = 0;  // not valid until filled
   Move scratch;
@@ -1036,23 +1060,33 @@ const MoveBinReach* MoveSweeps::BinReachOf(int32_t bin) const {
     const Vec3& p = *m.from;
     const Vec3& q = *m.to;
     const double r = m.cutter->radius;
-    b.x0.push_back(FloatDown(std::min(p.x, q.x)));
-    b.x1.push_back(FloatUp(std::max(p.x, q.x)));
-    b.y0.push_back(FloatDown(std::min(p.y, q.y)));
-    b.y1.push_back(FloatUp(std::max(p.y, q.y)));
-    b.low.push_back(FloatDown(std::min(p.z, q.z)));
+    float z_r, r2;
     if (SweptAsBall(*m.cutter)) {
-      b.z_r.push_back(FloatDown(std::min(p.z, q.z) + r));
-      b.r2.push_back(FloatUp(r * r));
+      z_r = FloatDown(std::min(p.z, q.z) + r);
+      r2 = FloatUp(r * r);
     } else {
       // The footprint's axis is a part of the move and its radius at most
       // the cutter's, which FootprintBounds widens by 1e-9 mm and 1e-12 of
       // it.
       const double reach = r * (1 + 1e-9) + 1e-6;
-      b.z_r.push_back(-std::numeric_limits<float>::infinity());
-      b.r2.push_back(FloatUp(reach * reach));
+      z_r = -std::numeric_limits<float>::infinity();
+      r2 = FloatUp(reach * reach);
     }
+    b.move.Add(FloatDown(std::min(p.x, q.x)), FloatUp(std::max(p.x, q.x)),
+               FloatDown(std::min(p.y, q.y)), FloatUp(std::max(p.y, q.y)),
+               FloatDown(std::min(p.z, q.z)), z_r, r2);
     b.ids.push_back(k);
+  }
+  const ReachLanes& m = b.move;
+  for (size_t q0 = 0; q0 < m.size(); q0 += kReachBlock) {
+    const size_t q1 = std::min(m.size(), q0 + kReachBlock);
+    b.block.Add(*std::min_element(&m.x0[q0], &m.x0[0] + q1),
+                *std::max_element(&m.x1[q0], &m.x1[0] + q1),
+                *std::min_element(&m.y0[q0], &m.y0[0] + q1),
+                *std::max_element(&m.y1[q0], &m.y1[0] + q1),
+                *std::min_element(&m.low[q0], &m.low[0] + q1),
+                *std::min_element(&m.z_r[q0], &m.z_r[0] + q1),
+                *std::max_element(&m.r2[q0], &m.r2[0] + q1));
   }
   b.serial = serial_;
   b.bin = bin;
@@ -1088,15 +1122,21 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
     for (const uint32_t k : index_->Bin(bin)) try_move(k);
   } else {
     // Only the moves the widened boxes pass (w <= cap: the exact tests
-    // pass no others), in the same order: the same result.
+    // pass no others), in the same order: the same result. Blocks first.
     constexpr size_t kChunk = 256;
-    uint8_t pass[kChunk];
-    const size_t n = reach->ids.size();
-    for (size_t q0 = 0; q0 < n; q0 += kChunk) {
-      const size_t c = std::min(kChunk, n - q0);
-      MayBeBelow(*reach, q0, c, x, y, cap, pass);
-      for (size_t q = 0; q < c; ++q) {
-        if (pass[q] != 0) try_move(reach->ids[q0 + q]);
+    uint8_t block_pass[kChunk], pass[kReachBlock];
+    const size_t blocks = reach->block.size();
+    for (size_t b0 = 0; b0 < blocks; b0 += kChunk) {
+      const size_t c = std::min(kChunk, blocks - b0);
+      MayBeBelow(reach->block, b0, c, x, y, cap, block_pass);
+      for (size_t b = 0; b < c; ++b) {
+        if (block_pass[b] == 0) continue;
+        const size_t q0 = (b0 + b) * kReachBlock;
+        const size_t n = std::min(kReachBlock, reach->ids.size() - q0);
+        MayBeBelow(reach->move, q0, n, x, y, cap, pass);
+        for (size_t q = 0; q < n; ++q) {
+          if (pass[q] != 0) try_move(reach->ids[q0 + q]);
+        }
       }
     }
   }
