@@ -992,7 +992,7 @@ namespace {
 // Bins whose reach is kept, per thread: a crease's vertices come in runs
 // that cross a few neighbouring bins. Larger bins are scanned as they are.
 constexpr int kReachBins = 8;
-constexpr size_t kMaxReachMoves = size_t{1} << 16;
+constexpr size_t kMaxReachMoves = size_t{1} << 14;
 constexpr size_t kReachBlock = 16;
 
 // v rounded to a float not above (FloatDown) or below (FloatUp) it: moved

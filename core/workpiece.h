@@ -50,12 +50,13 @@ inline constexpr int32_t kTileNodes = kTileSize * kTileSize;
 // Footprint, at the footprint's exact radius) and its lowest tip.
 CornerReach ReachOf(const Move& move, double z_top);
 
-// The exact swept surfaces of a list of moves, by index, and where each
-// can reach: the exact scheme's MoveSurfaces. Thread-safe (each thread keeps
-// the sweeps it built last). `moves` and `index` (not owned) must outlive
-// it; they may grow between calls, not during them.
 struct MoveBinReach;  // a bin's moves as LowestAt first tests them
 
+// The exact swept surfaces of a list of moves, by index, and where each
+// can reach: the exact scheme's MoveSurfaces. Thread-safe (each thread keeps
+// the sweeps it built last, and the moves of the last bins LowestAt read:
+// at most 8 bins of 2^14 moves, 32 bytes each). `moves` and `index` (not
+// owned) must outlive it; they may grow between calls, not during them.
 class MoveSweeps final : public MoveSurfaces {
  public:
   // `index` lists the moves by the bins their footprints reach (as

@@ -168,14 +168,14 @@ TEST(ExactSchemeTest, LowestAtIsTheLowestOfAllMoves) {
   }
 }
 
-// A bin of more moves than a thread keeps a copy of (2^16) is scanned
+// A bin of more moves than a thread keeps a copy of (2^14) is scanned
 // move by move: the same answers.
 TEST(ExactSchemeTest, LowestAtInABinOfManyMoves) {
   const StockSpec spec{0, 0, 20, 20, 0, 80, 80};  // bins of 4 x 4 mm
   std::mt19937_64 rng(7);
   std::uniform_real_distribution<double> xy(1, 3), z(-2, 0);
   std::vector<Move> moves;
-  for (int k = 0; k < 70000; ++k) {
+  for (int k = 0; k < 20000; ++k) {
     const Vec3 a{xy(rng), xy(rng), z(rng)};
     moves.push_back({a, a, Cutter::Ball(0.5)});
   }

@@ -140,8 +140,9 @@ struct MarksPictureOptions {
   ReliefOptions relief = {.max_side = 1600, .min_side = 1000};
   // Stroke width in pixels; 0: about 1/600 of the longer side, at least 2.
   double line_width_px = 0;
-  // Segments drawn at a time (bucketed by tiles of the picture, the tiles
-  // drawn at once): memory, not the picture, depends on it (>= 1).
+  // Segments drawn at a time, whole polylines (bucketed by tiles of the
+  // picture, the tiles drawn at once): memory, not the picture, depends on
+  // it (>= 1; a longer polyline is drawn whole).
   size_t chunk_segments = size_t{1} << 16;
   // The tiles' size in pixels (>= 1): the work each thread takes, not the
   // picture, depends on it. Marks come in the order they were found (by
@@ -162,7 +163,10 @@ MarkSource MarksOf(const std::vector<MarkPolyline>& marks);
 // The cutting marks drawn over a relief rendered in `frame` (anti-aliased,
 // with a dark halo so that they read on light and dark ground), coloured by
 // AngleColor of the angle interpolated along each segment, plus an angle
-// legend to the right of the relief (relief at the image's top-left).
+// legend to the right of the relief (relief at the image's top-left). Each
+// polyline is blended once per pixel, at its distance from the polyline
+// (vertices within 0.05 px of their neighbours' segment left out): the
+// picture does not depend on how finely a mark is sampled.
 // `relief` must have frame's size.
 absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
                                 const std::vector<MarkPolyline>& marks,
@@ -177,7 +181,7 @@ absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
 // The same from a source read in two passes (every halo, then every line),
 // options.chunk_segments segments at a time: the marks are never held. The
 // picture is the same whatever the chunk (a pixel's blends happen in the
-// same order: all halos in segment order, then all lines); the functions
+// same order: all halos in polyline order, then all lines); the functions
 // above are this over MarksOf. InvalidArgument for a polyline whose angles
 // do not match its vertices (the first such), else for a non-finite vertex;
 // or the source's error.
