@@ -473,11 +473,11 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
               id == owners[3]) {
             continue;
           }
-          const Move m = wp.move(id);
-          // Footprint(cap).Bounds(), without the capsule's direction.
-          const std::optional<Rect> f =
-              FootprintBounds(m.from, m.to, m.cutter, cap);
-          if (!f.has_value() || !f->Intersects(box)) continue;
+          // Not tested against its footprint below cap (FootprintBounds):
+          // that ruled out 0.2% (the 100 mm plate) to 5% (cameo) of the
+          // moves that pass here, for more than their heights cost. A move
+          // it rules out is nowhere in the box below cap, so not below est
+          // at any sample: its heights change none.
           sweeps[ck].Heights(xs, ys, count, h.data());
 #pragma omp simd
           for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
