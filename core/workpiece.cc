@@ -1006,15 +1006,17 @@ float FloatUp(double v) {
 }
 
 // pass[q] = 0 where lane q0 + q surely is not below cap at (x, y): its
-// lowest tip is not, or FootprintGap::Misses at cap (twice its slack
-// against the rounding of these values). The exact tests, at a cap w <=
-// cap, pass no move this rejects: a lower cap only rejects more. A block's
-// union passes where any of its moves does: its gap is no larger, its
-// z_r - cap no larger and r2 no smaller, so its reach no smaller.
+// lowest tip is not, or FootprintGap::Misses at cap, with the point
+// widened by Misses' own slack again against the rounding of these values.
+// The exact tests, at a cap w <= cap, pass no move this rejects: a lower
+// cap only rejects more. A block's union passes where any of its moves
+// does: its gap is no larger, its z_r - cap no larger and r2 no smaller,
+// so its reach no smaller.
 SWARF_TARGET_CLONES
 void MayBeBelow(const ReachLanes& b, size_t q0, size_t n, double x, double y,
                 double cap, uint8_t* __restrict pass) {
-  constexpr double kSlack = 2e-6;
+  constexpr double kSlack = 1e-6;
+  const Rect point{x - kSlack, y - kSlack, x + kSlack, y + kSlack};
   const float* __restrict x0 = b.x0.data() + q0;
   const float* __restrict x1 = b.x1.data() + q0;
   const float* __restrict y0 = b.y0.data() + q0;
@@ -1022,16 +1024,13 @@ void MayBeBelow(const ReachLanes& b, size_t q0, size_t n, double x, double y,
   const float* __restrict low = b.low.data() + q0;
   const float* __restrict z_r = b.z_r.data() + q0;
   const float* __restrict r2 = b.r2.data() + q0;
-  auto max = [](double a, double b) { return a < b ? b : a; };
 #pragma omp simd
   for (size_t q = 0; q < n; ++q) {
-    const double gap = max(max(double{x0[q]} - x, x - double{x1[q]}),
-                           max(double{y0[q]} - y, y - double{y1[q]})) -
-                       kSlack;
-    const double h = double{z_r[q]} - cap;
-    const double rho2 = h > 0 ? double{r2[q]} - h * h : double{r2[q]};
-    const bool misses = (gap > 0) & (gap * gap > rho2);
-    pass[q] = !misses & (double{low[q]} < cap) ? 1 : 0;
+    // As a ball for every shape: z_r -inf makes the reach r2 itself.
+    const double misses = FootprintGap::Misses(
+        1.0, double{x0[q]}, double{x1[q]}, double{y0[q]}, double{y1[q]},
+        double{z_r[q]}, double{r2[q]}, point, cap);
+    pass[q] = (misses == 0) & (double{low[q]} < cap) ? 1 : 0;
   }
 }
 

@@ -126,6 +126,20 @@ TEST(ExactSchemeTest, RandomScenesAreTheTrueSurface) {
   }
 }
 
+// The least of `cap` and of moves [0, count)'s heights at (x, y), the
+// first of equal ones in *id (-1: cap): what LowestAt must give, by brute
+// force.
+double LowestOfAll(const MoveSurfaces& s, size_t count, double x, double y,
+                   double cap, int32_t* id) {
+  double w = cap;
+  *id = -1;
+  for (size_t k = 0; k < count; ++k) {
+    const double h = s.Height(static_cast<int32_t>(k), x, y);
+    if (h < w) w = h, *id = static_cast<int32_t>(k);
+  }
+  return w;
+}
+
 // LowestAt, which the marks' junctions and the guarded scheme's hidden
 // points take, is the lowest of every move's surface below the cap, the
 // first of equal ones, for every shape and for caps at the top (the bins
@@ -149,12 +163,8 @@ TEST(ExactSchemeTest, LowestAtIsTheLowestOfAllMoves) {
       const MoveSurfaces& s = (*wp)->surfaces();
       int32_t lowered = 0;
       for (const auto& [x, y, c] : points) {
-        double want = c;
-        int32_t want_id = -1;
-        for (size_t k = 0; k < cut; ++k) {
-          const double h = s.Height(static_cast<int32_t>(k), x, y);
-          if (h < want) want = h, want_id = static_cast<int32_t>(k);
-        }
+        int32_t want_id;
+        const double want = LowestOfAll(s, cut, x, y, c, &want_id);
         int32_t id = -2;
         const double w = s.LowestAt((*wp)->grid().ElementX(x),
                                     (*wp)->grid().ElementY(y), x, y, c, &id);
@@ -186,12 +196,8 @@ TEST(ExactSchemeTest, LowestAtInABinOfManyMoves) {
   std::uniform_real_distribution<double> u(1.2, 2.8), cap(-2, 0);
   for (int q = 0; q < 40; ++q) {
     const double x = u(rng), y = u(rng), c = cap(rng);
-    double want = c;
-    int32_t want_id = -1;
-    for (size_t k = 0; k < moves.size(); ++k) {
-      const double h = s.Height(static_cast<int32_t>(k), x, y);
-      if (h < want) want = h, want_id = static_cast<int32_t>(k);
-    }
+    int32_t want_id;
+    const double want = LowestOfAll(s, moves.size(), x, y, c, &want_id);
     int32_t id = -2;
     EXPECT_EQ(s.LowestAt((*wp)->grid().ElementX(x), (*wp)->grid().ElementY(y),
                          x, y, c, &id),
