@@ -356,18 +356,46 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     // box and the cap): the same moves lower each element as when every
     // element tested the whole bin (on the plate job, about 400 moves an
     // element, of which 5 passed).
+    // An element's points on its left edge are its left neighbour's on its
+    // right edge, and those on its bottom edge the lower neighbour's on its
+    // top edge (n - 2 on each edge, of n * n - 4): where the coordinates
+    // are the same bits, the exact surface there is the same value (the
+    // smallest height of the bin's moves; each element's tests pass every
+    // move below its cap), taken from the neighbour instead of evaluated
+    // again. The rest, its own points, are packed for the heights.
     struct RowElement {
       ElementCorners e;
       Rect box;
       double cap = 0;
-      int32_t ei = 0, count = 0;
-      bool quarters = false;
+      int32_t ei = 0, count = 0, own = 0, own_padded = 0;
+      bool quarters = false, all_in = false, from_left = false,
+           from_below = false;
     };
+    // The own points are padded to a multiple of 8 (copies of the last):
+    // the heights' vector loops then have no scalar remainder, which cost
+    // as much as the rest of a call.
+    const size_t padded = (lattice + 7) & ~size_t{7};
     std::vector<RowElement> elements(MoveIndex::kBinElements);
     std::vector<double> row_xs(MoveIndex::kBinElements * lattice),
-        row_ys(row_xs.size()), row_est(row_xs.size());
+        row_ys(row_xs.size()), row_est(row_xs.size()),
+        row_oxs(MoveIndex::kBinElements * padded), row_oys(row_oxs.size()),
+        row_oest(row_oxs.size());
+    std::vector<int32_t> row_own_at(row_oxs.size());
+    // In the all-in order of for_each_point: the bottom edge's points are
+    // 0..n-3, row sj (1..n-2) starts at n - 2 + (sj - 1) * n with its left
+    // edge's point, and the top edge's starts at `top`.
+    const int32_t edge = n - 2;
+    const int32_t top = edge + edge * n;
+    auto on_left_edge = [edge, n](int32_t q) {
+      return q >= edge && q < edge + edge * n && (q - edge) % n == 0;
+    };
+    // The top edges' exact heights of the last row taken (row `top_row`),
+    // per element of the bin's row; top_ok where they were all in.
+    std::vector<double> top_est(static_cast<size_t>(ei1 - ei0) * edge);
+    std::vector<char> top_ok(ei1 - ei0, 0);
+    int32_t top_row = -1;
     std::vector<int64_t> row_cells(mapped ? row_xs.size() : 0);
-    std::vector<double> h(lattice), rec(lattice), err(lattice);
+    std::vector<double> h(padded), rec(lattice), err(lattice);
     // The bin's moves, in bin order, and those that may cut into a row.
     RowMoves bin_moves, near;
     for (const Candidate& c : bin) bin_moves.Add(c.box, c.lowest, c.gap, c.k);
@@ -408,6 +436,32 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         });
         if (count == 0) continue;
         RowElement& el = elements[row_elements++];
+        el.all_in = all_in;
+        el.from_left = all_in && row_elements > 1 &&
+                       elements[row_elements - 2].all_in &&
+                       elements[row_elements - 2].ei == ei - 1 &&
+                       col_x[0] == lattice_x[static_cast<size_t>(ei) * n - 1];
+        el.from_below = all_in && top_row == ej - 1 && top_ok[ei - ei0] &&
+                        row_y[0] == lattice_y[static_cast<size_t>(ej) * n - 1];
+        const size_t ooff = static_cast<size_t>(row_elements - 1) * padded;
+        double* const oxs = row_oxs.data() + ooff;
+        double* const oys = row_oys.data() + ooff;
+        int32_t* const own_at = row_own_at.data() + ooff;
+        int32_t own = 0;
+        for (int32_t q = 0; q < count; ++q) {
+          if ((el.from_below && q < edge) ||
+              (el.from_left && on_left_edge(q))) {
+            continue;
+          }
+          oxs[own] = xs[q];
+          oys[own] = ys[q];
+          own_at[own++] = q;
+        }
+        el.own = own;
+        // own >= 1: the right edge and the inside are never shared.
+        el.own_padded = (own + 7) & ~7;
+        std::fill(oxs + own, oxs + el.own_padded, oxs[own - 1]);
+        std::fill(oys + own, oys + el.own_padded, oys[own - 1]);
         el.e = wp.CornersOf(ei, ej, corner, /*prepare=*/!guarded);
         if (guarded) {
           const PatchTrustRegion* r = &regions[at];
@@ -428,18 +482,20 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         // that dip below the element's highest bound inside the element
         // can lower a sample further; the rest of the bin is skipped.
         // Heights() is bit-identical to Height(), several samples at once.
-        double* const est = row_est.data() + off;
-        std::fill_n(est, count, z_top);
+        // Own points only: the cap bounds the surface where this element
+        // evaluates it.
+        double* const oest = row_oest.data() + ooff;
+        std::fill_n(oest, own, z_top);
         const int32_t* owners = el.e.owner;
         for (int k = 0; k < 4; ++k) {
           bool seen = owners[k] < 0;
           for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
           if (seen) continue;
-          owner_sweep(owners[k]).Heights(xs, ys, count, h.data());
+          owner_sweep(owners[k]).Heights(oxs, oys, el.own_padded, h.data());
 #pragma omp simd
-          for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
+          for (int32_t q = 0; q < own; ++q) oest[q] = std::min(oest[q], h[q]);
         }
-        el.cap = Highest(est, count);
+        el.cap = Highest(oest, own);
         el.box = Rect{el.e.x0, el.e.y0, el.e.x1, el.e.y1};
         row_cap = std::max(row_cap, el.cap);
       }
@@ -448,6 +504,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       const Rect row_box{elements[0].box.x0, ey0,
                          elements[row_elements - 1].box.x1, ey1};
       MovesThatMayCut(bin_moves, row_box, row_cap, pass.data());
+      std::fill(top_ok.begin(), top_ok.end(), 0);
+      top_row = ej;
       near.Clear();
       for (int32_t q = 0; q < bin_moves.size(); ++q) {
         if (pass[q] != 0) bin_moves.CopyFrom(q, &near);
@@ -459,6 +517,11 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const size_t off = static_cast<size_t>(w) * lattice;
         const double* const xs = row_xs.data() + off;
         const double* const ys = row_ys.data() + off;
+        const size_t ooff = static_cast<size_t>(w) * padded;
+        const double* const oxs = row_oxs.data() + ooff;
+        const double* const oys = row_oys.data() + ooff;
+        double* const oest = row_oest.data() + ooff;
+        const int32_t own = el.own;
         double* const est = row_est.data() + off;
         const int32_t* owners = e.owner;
         const double cap = el.cap;
@@ -478,9 +541,25 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           // moves that pass here, for more than their heights cost. A move
           // it rules out is nowhere in the box below cap, so not below est
           // at any sample: its heights change none.
-          sweeps[ck].Heights(xs, ys, count, h.data());
+          sweeps[ck].Heights(oxs, oys, el.own_padded, h.data());
 #pragma omp simd
-          for (int32_t q = 0; q < count; ++q) est[q] = std::min(est[q], h[q]);
+          for (int32_t q = 0; q < own; ++q) oest[q] = std::min(oest[q], h[q]);
+        }
+        const int32_t* const own_at = row_own_at.data() + ooff;
+        for (int32_t q = 0; q < own; ++q) est[own_at[q]] = oest[q];
+        if (el.from_left) {
+          const double* const left = est - lattice;  // element w - 1
+          for (int32_t sj = 1; sj <= edge; ++sj) {
+            const int32_t q = edge + (sj - 1) * n;
+            est[q] = left[q + n - 1];
+          }
+        }
+        double* const top_of =
+            &top_est[static_cast<size_t>(el.ei - ei0) * edge];
+        if (el.from_below) std::copy_n(top_of, edge, est);
+        if (el.all_in) {
+          std::copy_n(est + top, edge, top_of);
+          top_ok[el.ei - ei0] = 1;
         }
         scheme.ReconstructMany(e, xs, ys, count, rec.data());
         for (int32_t q = 0; q < count; ++q) {

@@ -166,17 +166,20 @@ std::vector<Move> RandomMoves(uint64_t seed, int count, double x0, double x1,
   return moves;
 }
 
-// Calls f(x, y, error) for the 21 samples of element (ei, ej) in lattice
-// order, the exact surface taken plainly over every move.
+// Calls f(x, y, error) for the n * n - 4 samples of element (ei, ej) in
+// lattice order (those in `region` where given), the exact surface taken
+// plainly over every move.
 template <typename F>
 void ForEachSample(const Workpiece& wp, const std::vector<Move>& moves,
-                   int32_t ei, int32_t ej, F f) {
+                   int32_t ei, int32_t ej, F f, int n = 5,
+                   const Rect* region = nullptr) {
   const ElementCorners e = wp.Corners(ei, ej);
-  for (int sj = 0; sj < 5; ++sj) {
-    for (int si = 0; si < 5; ++si) {
-      if ((si == 0 || si == 4) && (sj == 0 || sj == 4)) continue;
-      const double x = e.x0 + (e.x1 - e.x0) * si / 4;
-      const double y = e.y0 + (e.y1 - e.y0) * sj / 4;
+  for (int sj = 0; sj < n; ++sj) {
+    for (int si = 0; si < n; ++si) {
+      if ((si == 0 || si == n - 1) && (sj == 0 || sj == n - 1)) continue;
+      const double x = e.x0 + (e.x1 - e.x0) * si / (n - 1);
+      const double y = e.y0 + (e.y1 - e.y0) * sj / (n - 1);
+      if (region != nullptr && !region->Contains(x, y)) continue;
       double exact = wp.spec().z_top;
       for (const Move& m : moves) {
         exact = std::min(exact,
@@ -262,9 +265,10 @@ std::vector<Move> Dabs() {
 // A plain serial loop that takes the exact surface over every move (no
 // corner-owner bound, no skipped moves, scalar Height) and sums the samples
 // in the order MeasureError's contract states: by bin, then element, then
-// sample. `opt` maps the whole stock.
+// sample. `opt` maps the whole stock (its lattice and region are taken).
 ErrorStats SerialReference(const Workpiece& wp, const std::vector<Move>& moves,
                            const StockSpec& spec, const ValuationOptions& opt) {
+  const Rect* region = opt.region.has_value() ? &*opt.region : nullptr;
   const int32_t bx = (spec.nx + 15) / 16, by = (spec.ny + 15) / 16;
   const double cell_x = (spec.x1 - spec.x0) / opt.map_cols;
   const double cell_y = (spec.y1 - spec.y0) / opt.map_rows;
@@ -277,22 +281,27 @@ ErrorStats SerialReference(const Workpiece& wp, const std::vector<Move>& moves,
          ++ej) {
       for (int32_t ei = b % bx * 16; ei < std::min(b % bx * 16 + 16, spec.nx);
            ++ei) {
-        ForEachSample(wp, moves, ei, ej, [&](double x, double y, double err) {
-          bsum += err;
-          bsum_sq += err * err;
-          ++n;
-          if (err > max) {
-            max = err;
-            max_x = x;
-            max_y = y;
-          }
-          const int cx = std::clamp(
-              static_cast<int>((x - spec.x0) / cell_x), 0, opt.map_cols - 1);
-          const int cy = std::clamp(
-              static_cast<int>((y - spec.y0) / cell_y), 0, opt.map_rows - 1);
-          float& cell = map[cy * opt.map_cols + cx];
-          cell = std::max(cell, static_cast<float>(err));
-        });
+        ForEachSample(
+            wp, moves, ei, ej,
+            [&](double x, double y, double err) {
+              bsum += err;
+              bsum_sq += err * err;
+              ++n;
+              if (err > max) {
+                max = err;
+                max_x = x;
+                max_y = y;
+              }
+              const int cx =
+                  std::clamp(static_cast<int>((x - spec.x0) / cell_x), 0,
+                             opt.map_cols - 1);
+              const int cy =
+                  std::clamp(static_cast<int>((y - spec.y0) / cell_y), 0,
+                             opt.map_rows - 1);
+              float& cell = map[cy * opt.map_cols + cx];
+              cell = std::max(cell, static_cast<float>(err));
+            },
+            opt.samples_per_edge, region);
       }
     }
     sum += bsum;
@@ -361,6 +370,44 @@ TEST(MeasureErrorTest, ParallelEqualsSerialBitForBit) {
         EXPECT_EQ(serial.map, ref.map);
         const double max = ref.max_error;
         EXPECT_GT(max, scene.least_max);
+      }
+    }
+  }
+}
+
+// An element takes the exact heights on its left and bottom edges from its
+// neighbours where the points are the same bits. Other lattices (whose
+// last point may not be the next element's first) and a region through
+// elements (whose clipped ones share nothing) give the serial reference's
+// bits, which evaluates every sample.
+TEST(MeasureErrorTest, SharedEdgeSamplesAreTheSerialReferences) {
+  // With 4 and 7 samples an edge, two elements' last points across and two
+  // up are not the next elements' first (a + (b - a) * 3 / 3 != b).
+  const StockSpec spec{-1.55, -1.28, 43.83, 21.48, 0, 53, 33};
+  const std::vector<Move> moves =
+      RandomMoves(7, 100, -3, 45, -3, 23, -1.5, 0.3, 0.3, 2);
+  for (SchemeKind scheme : {SchemeKind::kZmap, SchemeKind::kGuarded}) {
+    auto wp = Cut(spec, scheme, moves);
+    for (int n : {3, 4, 5, 7}) {
+      for (bool clipped : {false, true}) {
+        SCOPED_TRACE(absl::StrCat(std::string(GetScheme(scheme).name()), ", ",
+                                  n, " samples an edge",
+                                  clipped ? ", region" : ""));
+        ValuationOptions opt;
+        opt.samples_per_edge = n;
+        opt.map_cols = 37;
+        opt.map_rows = 23;
+        if (clipped) opt.region = Rect{3.1, 2.03, 33.3, 27.77};
+        const ErrorStats got = *MeasureError(*wp, opt);
+        const ErrorStats ref = SerialReference(*wp, moves, spec, opt);
+        EXPECT_EQ(got.samples, ref.samples);
+        EXPECT_EQ(got.max_error, ref.max_error);
+        EXPECT_EQ(got.max_x, ref.max_x);
+        EXPECT_EQ(got.max_y, ref.max_y);
+        EXPECT_EQ(got.mean_error, ref.mean_error);
+        EXPECT_EQ(got.rms_error, ref.rms_error);
+        EXPECT_GT(got.max_error, 0.05);
+        if (!clipped) EXPECT_EQ(got.map, ref.map);
       }
     }
   }
