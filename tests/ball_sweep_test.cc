@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <random>
 #include <string>
 #include <vector>
@@ -464,6 +465,71 @@ void ExpectRepresentable(const BallSweep& sweep, double x, double y,
     EXPECT_TRUE(std::isfinite(v)) << what << Where(x, y);
     EXPECT_LT(std::fabs(v), 3e38) << what << Where(x, y);
     EXPECT_TRUE(std::isfinite(static_cast<float>(v))) << what;
+  }
+}
+
+// The supporting plane at a point of the surface touches it there and lies
+// below it everywhere (the capsule is convex), less its slack for rounding:
+// near the touching point (where the two differ by less than the rounding),
+// across the footprint and off it. Moves of every kind, from 0.1 mm at 900
+// mm from the origin (a plate job's finishing pass) to 300 mm long.
+TEST(BallSweepSupportingPlaneTest, TouchesAndLiesBelowTheSurface) {
+  std::vector<MoveCase> moves = RandomMoves(43);
+  moves.push_back({"point", {1, 2, 3}, {1, 2, 3}, 2});
+  moves.push_back({"plunge", {1, 2, 3}, {1, 2, -3}, 2});
+  moves.push_back({"horizontal", {-3, 1, -1}, {5, 4, -1}, 1.5});
+  moves.push_back(
+      {"plate pass", {900.1, 873.45, -2.8941}, {900.2, 873.45, -2.8902}, 2});
+  moves.push_back({"long", {-150, -20, -1}, {150, 30, -4}, 3});
+  std::mt19937_64 rng(17);
+  std::uniform_real_distribution<double> unit(0, 1);
+  for (const MoveCase& mc : moves) {
+    SCOPED_TRACE(mc.name);
+    const BallSweep sweep(mc.from, mc.to, mc.radius);
+    const double r = mc.radius;
+    int planes = 0;
+    for (int k = 0; k < 300; ++k) {
+      const double t = unit(rng), phi = 2 * M_PI * unit(rng);
+      const double rho = 1.05 * r * std::sqrt(unit(rng));  // some off it
+      const double x =
+          mc.from.x + t * (mc.to.x - mc.from.x) + rho * std::cos(phi);
+      const double y =
+          mc.from.y + t * (mc.to.y - mc.from.y) + rho * std::sin(phi);
+      const std::optional<BallSweep::SupportPlane> plane =
+          sweep.SupportingPlane(x, y);
+      const SweepPoint at = sweep.Locate(x, y);
+      if (at.piece == SweepPoint::kNone || at.depth < 0.05 * r) {
+        EXPECT_FALSE(plane.has_value()) << Where(x, y);
+      }
+      if (!plane.has_value()) continue;
+      ++planes;
+      EXPECT_EQ(plane->w, sweep.Height(x, y)) << Where(x, y);
+      EXPECT_GT(plane->slack, 0);
+      EXPECT_LT(plane->slack, 1e-4);
+      auto check = [&](double u, double v) {
+        const double below =
+            plane->w + plane->wx * (u - x) + plane->wy * (v - y) - plane->slack;
+        EXPECT_GE(sweep.Height(u, v), below)
+            << Where(x, y) << " to " << Where(u, v);
+      };
+      for (int m = 0; m < 60; ++m) {
+        // Scales from 1e-9 mm to twice the radius, in every direction.
+        const double s = 2 * r * std::pow(10.0, -9 * unit(rng));
+        const double psi = 2 * M_PI * unit(rng);
+        check(x + s * std::cos(psi), y + s * std::sin(psi));
+      }
+      // Along the move, past its ends.
+      for (double f : {-0.3, 0.0, 0.5, 1.0, 1.3}) {
+        check(mc.from.x + f * (mc.to.x - mc.from.x),
+              mc.from.y + f * (mc.to.y - mc.from.y));
+      }
+    }
+    // The near-vertical moves are steeper than the plane allows.
+    if (mc.name.rfind("near-vertical", 0) == 0) {
+      EXPECT_EQ(planes, 0);
+    } else {
+      EXPECT_GT(planes, 150);
+    }
   }
 }
 

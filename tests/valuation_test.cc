@@ -413,6 +413,43 @@ TEST(MeasureErrorTest, SharedEdgeSamplesAreTheSerialReferences) {
   }
 }
 
+// A finishing raster of short moves (0.1 mm, as CAM posts write them) with
+// the tips on a sloped, wavy floor: on the slopes the balls cut below the
+// tips' path, and the moves beside an element's owners come within
+// rounding to a thousandth of a millimetre of its samples (the tangent
+// planes that skip most of them must skip none that lowers one).
+std::vector<Move> SlopedFinishing() {
+  auto z = [](double x, double y) {
+    return -1 + 0.4 * std::sin(x / 1.3) * std::cos(y / 1.7) + 0.1 * x;
+  };
+  std::vector<Move> moves;
+  for (double y = -2.1; y <= 4.1; y += 0.15) {
+    for (double x = -2.1; x < 4.1; x += 0.1) {
+      moves.push_back({{x, y, z(x, y)}, {x + 0.1, y, z(x + 0.1, y)}, 2.0});
+    }
+  }
+  return moves;
+}
+
+TEST(MeasureErrorTest, SlopedFinishingIsTheSerialReferences) {
+  const StockSpec spec{0, 0, 2, 2, 0, 40, 40};
+  const std::vector<Move> moves = SlopedFinishing();
+  auto wp = Cut(spec, SchemeKind::kZmap, moves);
+  ValuationOptions opt;
+  opt.map_cols = 7;
+  opt.map_rows = 5;
+  const ErrorStats got = *MeasureError(*wp, opt);
+  const ErrorStats ref = SerialReference(*wp, moves, spec, opt);
+  EXPECT_EQ(got.samples, ref.samples);
+  EXPECT_EQ(got.max_error, ref.max_error);
+  EXPECT_EQ(got.max_x, ref.max_x);
+  EXPECT_EQ(got.max_y, ref.max_y);
+  EXPECT_EQ(got.mean_error, ref.mean_error);
+  EXPECT_EQ(got.rms_error, ref.rms_error);
+  EXPECT_EQ(got.map, ref.map);
+  EXPECT_GT(got.max_error, 1e-4);
+}
+
 // A big stock cut in one corner: the bins no move reaches, on tiles never
 // cut, are counted without being sampled (their errors are exactly 0); the
 // figures and the map are still the serial reference's, bit for bit.

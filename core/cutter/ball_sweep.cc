@@ -53,6 +53,41 @@ BallSweep::BallSweep(const Vec3& tip_from, const Vec3& tip_to, double radius)
   h2_ = dy / dxy;
 }
 
+std::optional<BallSweep::SupportPlane> BallSweep::SupportingPlane(
+    double x, double y) const {
+  // Rounding: a computed height's root sqrt(r^2 - d^2) is off by at most
+  // sqrt(ulp) * r where the root vanishes (about 2e-8 r; where the cylinder
+  // is taken, with n from coordinates up to r + len, 3e-8 sqrt(r (r +
+  // len))), divided by g on the cylinder. The slack is that 30 times over,
+  // for the heights and the plane's own height; its slopes are taken away
+  // from the rim (depth >= 5% of r), where they are accurate to about
+  // 1e-13 of their size.
+  constexpr double kMinDepth = 0.05;
+  constexpr double kMaxInvG = 20;
+  const SweepPoint p = Locate(x, y);
+  if (p.piece == SweepPoint::kNone || !(p.depth >= kMinDepth * r_)) {
+    return std::nullopt;
+  }
+  const double inv_g = kind_ == kGeneral ? inv_g_ : 1;
+  if (!(inv_g <= kMaxInvG)) return std::nullopt;
+  SupportPlane plane;
+  plane.w = p.w;
+  plane.slack = 1e-6 * (1 + r_ + 0.1 * len_) * inv_g;
+  if (p.piece == SweepPoint::kCylinder) {
+    // The cylinder's gradient (as CylinderJet).
+    const double n = h1_ * p.py - h2_ * p.px;
+    const double along = k3_ * inv_g_;
+    const double across = n / p.depth * inv_g_;
+    plane.wx = along * h1_ - across * h2_;
+    plane.wy = along * h2_ + across * h1_;
+  } else {
+    // The sphere's (eq. 8).
+    plane.wx = p.px / p.depth;
+    plane.wy = p.py / p.depth;
+  }
+  return plane;
+}
+
 SWARF_TARGET_CLONES
 void BallSweep::Heights(const double* x, const double* y, int32_t n,
                         double* out) const {

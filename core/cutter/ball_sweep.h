@@ -84,6 +84,18 @@ class BallSweep {
   // passes over that point.
   double Height(double x, double y) const { return Locate(x, y).w; }
 
+  // A plane below the swept surface that touches it at (x, y): for every
+  // (u, v), Height(u, v) >= w + wx (u - x) + wy (v - y) - slack, Height as
+  // computed. The swept solid (a capsule) is convex, so its lower surface
+  // lies above each of its tangent planes (and is +inf off the footprint);
+  // `slack` covers the rounding of the heights and of the plane. nullopt
+  // where (x, y) is off the surface or within 5% of the radius of its rim,
+  // or the move is steeper than about 87 degrees (no plane there to help).
+  struct SupportPlane {
+    double w, wx, wy, slack;
+  };
+  std::optional<SupportPlane> SupportingPlane(double x, double y) const;
+
   // Locates (x, y) on the swept surface.
   [[gnu::always_inline]] SweepPoint Locate(double x, double y) const {
     return kind_ == kGeneral ? LocateGeneral(frame(), x, y)

@@ -89,6 +89,8 @@ class Sweep {
   SurfaceJet JetAt(double x, double y) const {
     return std::visit([&](const auto& s) { return s.JetAt(x, y); }, v_);
   }
+  // The ball's sweep, or null for the other shapes.
+  const BallSweep* ball() const { return std::get_if<BallSweep>(&v_); }
   // Calls f(const ShapeSweep&) with the shape's own class.
   template <class F>
   decltype(auto) Visit(F&& f) const {
