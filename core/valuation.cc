@@ -54,31 +54,42 @@ double Highest(const double* v, int32_t n) {
 }
 
 // Moves of a bin, in bin order, as arrays: their footprint boxes, lowest
-// points, and FootprintGap parts; `k` their index in the bin.
+// points, and FootprintGap parts; `k` their index in the bin. Holds at most
+// `capacity` moves (arrays of that size, written in place: no push_back on
+// thirteen arrays a move).
 struct RowMoves {
+  explicit RowMoves(int32_t capacity)
+      : x0(capacity),
+        x1(capacity),
+        y0(capacity),
+        y1(capacity),
+        lowest(capacity),
+        ball(capacity),
+        gx0(capacity),
+        gx1(capacity),
+        gy0(capacity),
+        gy1(capacity),
+        z_r(capacity),
+        r2(capacity),
+        k(capacity) {}
   std::vector<double> x0, x1, y0, y1, lowest, ball, gx0, gx1, gy0, gy1, z_r, r2;
   std::vector<int32_t> k;
-  void Clear() {
-    for (auto* v : {&x0, &x1, &y0, &y1, &lowest, &ball, &gx0, &gx1, &gy0, &gy1,
-                    &z_r, &r2}) {
-      v->clear();
-    }
-    k.clear();
-  }
+  int32_t n = 0;
+  void Clear() { n = 0; }
   void Add(const Rect& box, double low, const FootprintGap& g, int32_t at) {
-    x0.push_back(box.x0);
-    x1.push_back(box.x1);
-    y0.push_back(box.y0);
-    y1.push_back(box.y1);
-    lowest.push_back(low);
-    ball.push_back(g.ball);
-    gx0.push_back(g.x0);
-    gx1.push_back(g.x1);
-    gy0.push_back(g.y0);
-    gy1.push_back(g.y1);
-    z_r.push_back(g.z_r);
-    r2.push_back(g.r2);
-    k.push_back(at);
+    x0[n] = box.x0;
+    x1[n] = box.x1;
+    y0[n] = box.y0;
+    y1[n] = box.y1;
+    lowest[n] = low;
+    ball[n] = g.ball;
+    gx0[n] = g.x0;
+    gx1[n] = g.x1;
+    gy0[n] = g.y0;
+    gy1[n] = g.y1;
+    z_r[n] = g.z_r;
+    r2[n] = g.r2;
+    k[n++] = at;
   }
   // Appends move q to *to.
   void CopyFrom(int32_t q, RowMoves* to) const {
@@ -87,7 +98,7 @@ struct RowMoves {
         FootprintGap{ball[q], gx0[q], gx1[q], gy0[q], gy1[q], z_r[q], r2[q]},
         k[q]);
   }
-  int32_t size() const { return static_cast<int32_t>(k.size()); }
+  int32_t size() const { return n; }
 };
 
 // Whether plane (touching its surface at (xc, yc)) less its slack is at or
@@ -273,16 +284,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         grid.NodeY(ej0) > region.y1 || grid.NodeY(ej1) < region.y0) {
       return;
     }
-    // The bin's moves, with the XY box where each can cut below the top.
-    // Each test of an element reads only `box` and `lowest`: kept apart
-    // from the sweeps (over 300 bytes each), so that the scan stays in
-    // cache.
-    struct Candidate {
-      Rect box;
-      double lowest;
-      FootprintGap gap;  // FootprintSurelyMisses, the move's parts taken
-      int32_t k;         // into ids and sweeps
-    };
     std::vector<uint32_t> ids;
     index.BinIds(static_cast<int32_t>(b), &ids);
     // Untouched stock: no move reaches the bin and its nodes' tiles were
@@ -325,14 +326,20 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         return;
       }
     }
-    std::vector<Candidate> bin;
+    // The bin's moves, in bin order, with the XY box where each can cut
+    // below the top, its lowest point and FootprintGap parts: the tests
+    // read these arrays alone, apart from the sweeps (over 300 bytes each),
+    // so that the scan stays in cache. `near`: those that may cut into a
+    // row.
+    const int32_t bin_size = static_cast<int32_t>(ids.size());
+    RowMoves bin_moves(bin_size), near(bin_size);
     std::vector<Sweep> sweeps;
-    for (uint32_t id : ids) {
-      const Sweep& s = sweeps.emplace_back(wp.MoveSweep(id));
-      const Move m = wp.move(static_cast<int32_t>(id));
-      bin.push_back({s.Footprint(z_top).Bounds(), s.lowest(),
-                     FootprintGap::Of(m.from, m.to, m.cutter),
-                     static_cast<int32_t>(bin.size())});
+    sweeps.reserve(ids.size());
+    for (int32_t k = 0; k < bin_size; ++k) {
+      const Sweep& s = sweeps.emplace_back(wp.MoveSweep(ids[k]));
+      const Move m = wp.move(static_cast<int32_t>(ids[k]));
+      bin_moves.Add(s.Footprint(z_top).Bounds(), s.lowest(),
+                    FootprintGap::Of(m.from, m.to, m.cutter), k);
     }
     // The bin's nodes, each read once instead of once per element it is a
     // corner of, and the guarded scheme's trust regions (TrustRegion, a
@@ -420,9 +427,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     int32_t top_row = -1;
     std::vector<int64_t> row_cells(mapped ? row_xs.size() : 0);
     std::vector<double> h(padded), rec(lattice), err(lattice);
-    // The bin's moves, in bin order, and those that may cut into a row.
-    RowMoves bin_moves, near;
-    for (const Candidate& c : bin) bin_moves.Add(c.box, c.lowest, c.gap, c.k);
     std::vector<double> pass(bin_moves.size());
     // The bin's sums in locals (registers), stored once at the end.
     Partial p = partials[b];
