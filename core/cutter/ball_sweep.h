@@ -89,8 +89,9 @@ class BallSweep {
   // computed. The swept solid (a capsule) is convex, so its lower surface
   // lies above each of its tangent planes (and is +inf off the footprint);
   // `slack` covers the rounding of the heights and of the plane. nullopt
-  // where (x, y) is off the surface or within 5% of the radius of its rim,
-  // or the move is steeper than about 87 degrees (no plane there to help).
+  // where (x, y) is off the surface or near its rim (the depth below the
+  // centre under 5% of the radius), or the move is steeper than about 87
+  // degrees (no plane there to help).
   struct SupportPlane {
     double w, wx, wy, slack;
   };
