@@ -416,10 +416,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     // scalar remainder, which cost as much as the rest of a call.
     const size_t padded = (lattice + 7) & ~size_t{7};
     std::vector<RowElement> elements(MoveIndex::kBinElements);
-    std::vector<double> row_xs(MoveIndex::kBinElements * lattice),
-        row_ys(row_xs.size()), row_est(row_xs.size()),
-        row_oxs(MoveIndex::kBinElements * padded), row_oys(row_oxs.size()),
-        row_oest(row_oxs.size());
+    // Every per-element array of a row has `padded` entries an element.
+    std::vector<double> row_xs(MoveIndex::kBinElements * padded),
+        row_ys(row_xs.size()), row_est(row_xs.size()), row_oxs(row_xs.size()),
+        row_oys(row_xs.size()), row_oest(row_xs.size());
     // The top edges' exact heights of the last row taken (row `top_row`),
     // per element of the bin's row; top_ok where they were all in.
     std::vector<double> top_est(static_cast<size_t>(ei1 - ei0) * edge);
@@ -427,6 +427,13 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     int32_t top_row = -1;
     std::vector<int64_t> row_cells(mapped ? row_xs.size() : 0);
     std::vector<double> h(padded), rec(lattice), err(lattice);
+    // est[q] = min(est[q], the sweep's height at (x[q], y[q])), q < n.
+    auto lower_by = [&h](const Sweep& sweep, const double* x, const double* y,
+                         int32_t n, double* est) {
+      sweep.Heights(x, y, n, h.data());
+#pragma omp simd
+      for (int32_t q = 0; q < n; ++q) est[q] = std::min(est[q], h[q]);
+    };
     std::vector<double> pass(bin_moves.size());
     // The bin's sums in locals (registers), stored once at the end.
     Partial p = partials[b];
@@ -452,7 +459,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         // lattice points bound them all.
         const bool all_in = region.Contains(col_x[0], row_y[0]) &&
                             region.Contains(col_x[n - 1], row_y[n - 1]);
-        const size_t off = static_cast<size_t>(row_elements) * lattice;
+        const size_t off = static_cast<size_t>(row_elements) * padded;
         double* const xs = row_xs.data() + off;
         double* const ys = row_ys.data() + off;
         int32_t count = 0;
@@ -471,9 +478,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
                        col_x[0] == lattice_x[static_cast<size_t>(ei) * n - 1];
         el.from_below = all_in && top_row == ej - 1 && top_ok[ei - ei0] &&
                         row_y[0] == lattice_y[static_cast<size_t>(ej) * n - 1];
-        const size_t ooff = static_cast<size_t>(row_elements - 1) * padded;
-        double* const oxs = row_oxs.data() + ooff;
-        double* const oys = row_oys.data() + ooff;
+        double* const oxs = row_oxs.data() + off;
+        double* const oys = row_oys.data() + off;
         const std::vector<int32_t>& list =
             own_lists[(el.from_left ? 1 : 0) | (el.from_below ? 2 : 0)];
         el.own_list = list.data();
@@ -509,18 +515,14 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         // Heights() is bit-identical to Height(), several samples at once.
         // Own points only: the cap bounds the surface where this element
         // evaluates it.
-        double* const oest = row_oest.data() + ooff;
+        double* const oest = row_oest.data() + off;
         std::fill_n(oest, el.own_padded, z_top);
         const int32_t* owners = el.e.owner;
         for (int k = 0; k < 4; ++k) {
           bool seen = owners[k] < 0;
           for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
           if (seen) continue;
-          owner_sweep(owners[k]).Heights(oxs, oys, el.own_padded, h.data());
-#pragma omp simd
-          for (int32_t q = 0; q < el.own_padded; ++q) {
-            oest[q] = std::min(oest[q], h[q]);
-          }
+          lower_by(owner_sweep(owners[k]), oxs, oys, el.own_padded, oest);
         }
         el.cap = Highest(oest, own);
         el.box = Rect{el.e.x0, el.e.y0, el.e.x1, el.e.y1};
@@ -541,13 +543,12 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         RowElement& el = elements[w];
         const ElementCorners& e = el.e;
         const int32_t count = el.count;
-        const size_t off = static_cast<size_t>(w) * lattice;
+        const size_t off = static_cast<size_t>(w) * padded;
         const double* const xs = row_xs.data() + off;
         const double* const ys = row_ys.data() + off;
-        const size_t ooff = static_cast<size_t>(w) * padded;
-        const double* const oxs = row_oxs.data() + ooff;
-        const double* const oys = row_oys.data() + ooff;
-        double* const oest = row_oest.data() + ooff;
+        const double* const oxs = row_oxs.data() + off;
+        const double* const oys = row_oys.data() + off;
+        double* const oest = row_oest.data() + off;
         const int32_t own = el.own;
         double* const est = row_est.data() + off;
         const int32_t* owners = e.owner;
@@ -572,8 +573,9 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           // A ball's tangent plane at the element's centre is below its
           // surface: where that plane is above est at every own point, so
           // are its heights (about 9 of 10 moves that pass here on the
-          // plate job, 8 of 10 on cameo; a point and a plane cost a third
-          // of the heights).
+          // plate job, 8 of 10 on cameo; a point and a plane take a third
+          // of the heights' instructions, but two roots and two divisions
+          // in a row: fewer of their cycles).
           if (const BallSweep* ball = sweeps[ck].ball()) {
             const std::optional<BallSweep::SupportPlane> plane =
                 ball->SupportingPlane(xc, yc);
@@ -582,15 +584,11 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
               continue;
             }
           }
-          sweeps[ck].Heights(oxs, oys, el.own_padded, h.data());
-#pragma omp simd
-          for (int32_t q = 0; q < el.own_padded; ++q) {
-            oest[q] = std::min(oest[q], h[q]);
-          }
+          lower_by(sweeps[ck], oxs, oys, el.own_padded, oest);
         }
         for (int32_t q = 0; q < own; ++q) est[el.own_list[q]] = oest[q];
         if (el.from_left) {
-          const double* const left = est - lattice;  // element w - 1
+          const double* const left = est - padded;  // element w - 1
           for (int32_t sj = 1; sj <= edge; ++sj) {
             const int32_t q = edge + (sj - 1) * n;
             est[q] = left[q + n - 1];
