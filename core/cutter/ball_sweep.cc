@@ -24,6 +24,46 @@ double SphereHeight(const Vec3& c, double r, double x, double y) {
   return c.z - std::sqrt(d2);
 }
 
+double BallHeightLowerBound(const Vec3& tip_from, const Vec3& tip_to, double r,
+                            double x, double y) {
+  const double ux = tip_to.x - tip_from.x, uy = tip_to.y - tip_from.y;
+  const double uz = tip_to.z - tip_from.z;
+  const double l2 = ux * ux + uy * uy;
+  const double len2 = l2 + uz * uz;
+  if (400 * l2 < len2) return -kInf;  // g < 1/20, and vertical moves
+  const double r2 = r * r;
+  // sqrt(r^2 - d2), widened: d2 is off by a few ulps of r^2, which moves
+  // the root most (by about 1e-8 r) where it vanishes. +inf beyond r.
+  auto root = [r2](double d2) {
+    return d2 > r2 * (1 + 1e-9) ? kInf
+                                : std::sqrt(std::max(0.0, r2 - d2) + 1e-9 * r2);
+  };
+  const double px = x - tip_from.x, py = y - tip_from.y;
+  if (len2 == 0)
+    return tip_from.z + r - root(px * px + py * py) - 2e-6 * (1 + r);
+  // Eq. (10)-(14) by another road: over the line's balls the height at
+  // (x, y) is convex in t, least at t* (the cylinder's contact); on the
+  // move, at t* or else at the nearer end (a sphere).
+  const double inv_g = std::sqrt(len2 / l2);
+  const double tu = (px * ux + py * uy) / l2;
+  const double nx = px - tu * ux, ny = py - tu * uy;
+  const double rho = root(nx * nx + ny * ny);
+  if (rho == kInf) return kInf;
+  const double ts = tu - uz * rho / (l2 * inv_g);
+  double h;
+  if (ts >= 0 && ts <= 1) {
+    h = tip_from.z + r + uz * tu - rho * inv_g;
+  } else {
+    const Vec3& e = ts < 0 ? tip_from : tip_to;
+    const double ex = x - e.x, ey = y - e.y;
+    h = e.z + r - root(ex * ex + ey * ey);
+  }
+  // As SupportingPlane's slack: the sweep's heights are off by up to about
+  // sqrt(ulp) sqrt(r (r + len)) / g near a rim; 60 times that, for them
+  // and for this bound's own roots.
+  return h - 2e-6 * (1 + r + 0.1 * std::sqrt(len2)) * inv_g;
+}
+
 BallSweep::BallSweep(const Vec3& tip_from, const Vec3& tip_to, double radius)
     : a_{tip_from.x, tip_from.y, tip_from.z + radius},
       b_{tip_to.x, tip_to.y, tip_to.z + radius},

@@ -63,6 +63,15 @@ inline SurfaceJet SphereJet(double z, double dx, double dy, double depth) {
   return j;
 }
 
+// A value at most BallSweep(tip_from, tip_to, r).Height(x, y) as that
+// computes it (r > 0, mm), and within about 1e-5 mm of it away from the
+// rims: the height from the move's data alone (the cylinder's contact or
+// the nearer end's sphere), less a slack for both roundings; no sweep
+// built. -inf (no bound) for moves steeper than about 87 degrees, where
+// the sweep's rounding grows with the slope; +inf only off the footprint.
+double BallHeightLowerBound(const Vec3& tip_from, const Vec3& tip_to, double r,
+                            double x, double y);
+
 // Where (x, y) lies on the swept surface, and the intermediate values needed
 // to differentiate there.
 struct SweepPoint {
