@@ -419,7 +419,11 @@ PatchTrustRegion TrustRegion(const SurfaceJet& j) {
   return r;
 }
 
-PatchTrust Trust(const PatchTrustRegion& r, double dx, double dy) {
+namespace {
+
+// Trust, inlined where an element's twelve corner pairs are tested.
+[[gnu::always_inline]] inline PatchTrust TrustAt(const PatchTrustRegion& r,
+                                                 double dx, double dy) {
   if (r.everywhere) return PatchTrust::kFull;
   if (dx * dx + dy * dy > r.reach * r.reach) return PatchTrust::kNone;
   if (r.s > 0 && (dx * r.gx + dy * r.gy) / r.s > kPatchUphill * r.delta) {
@@ -428,6 +432,12 @@ PatchTrust Trust(const PatchTrustRegion& r, double dx, double dy) {
   const double along = (dx * r.ex + dy * r.ey) * (r.se < 0 ? -1 : 1);
   if (r.se != 0 && along > kPatchUphill * r.de) return PatchTrust::kLowerBound;
   return PatchTrust::kFull;
+}
+
+}  // namespace
+
+PatchTrust Trust(const PatchTrustRegion& r, double dx, double dy) {
+  return TrustAt(r, dx, dy);
 }
 
 PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy) {
@@ -439,6 +449,26 @@ double GuardedHeight(const ElementCorners& e, double x, double y) {
 }
 
 namespace {
+
+// out[q] = r.Contains(c.x[q], c.y[q]), the segment's terms computed once
+// (the same operations as Capsule::Contains).
+void ReachHolds(const CornerReach& r, const CornerXY& c, bool out[4]) {
+  if (!r.bounded || r.empty) {
+    for (int q = 0; q < 4; ++q) out[q] = !r.bounded;
+    return;
+  }
+  const CornerReach::Capsule& k = r.capsule;
+  const double ux = k.bx - k.ax, uy = k.by - k.ay;
+  const double len2 = ux * ux + uy * uy;
+  const double r2 = k.radius * k.radius;
+  for (int q = 0; q < 4; ++q) {
+    const double px = c.x[q] - k.ax, py = c.y[q] - k.ay;
+    const double t =
+        len2 > 0 ? std::clamp((px * ux + py * uy) / len2, 0.0, 1.0) : 0.0;
+    const double dx = px - t * ux, dy = py - t * uy;
+    out[q] = dx * dx + dy * dy <= r2;
+  }
+}
 
 // Whether a.Contains and b.Contains are one function.
 bool SameReach(const CornerReach& a, const CornerReach& b) {
@@ -465,22 +495,30 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
     for (int p = 0; p < k && same == k; ++p) {
       if (SameReach(e->reach[p], e->reach[k])) same = p;
     }
-    for (int q = 0; q < 4; ++q) {
-      holds[k][q] =
-          same != k ? holds[same][q] : e->reach[k].Contains(c.x[q], c.y[q]);
+    if (same != k) {
+      for (int q = 0; q < 4; ++q) holds[k][q] = holds[same][q];
+    } else {
+      ReachHolds(e->reach[k], c, holds[k]);
     }
   }
   for (int k = 0; k < 4; ++k) {
     // The trust region is convex: trusted at the other corners, the patch
-    // is trusted over the whole element.
-    const PatchTrustRegion region =
-        !smooth ? PatchTrustRegion{}
-        : trust != nullptr ? *trust[k]
-                           : TrustRegion(e->c[k]);
+    // is trusted over the whole element. Read in place (not copied), and
+    // computed only where not given.
+    PatchTrustRegion computed;
+    const PatchTrustRegion* region = nullptr;
+    if (smooth) {
+      if (trust != nullptr) {
+        region = trust[k];
+      } else {
+        computed = TrustRegion(e->c[k]);
+        region = &computed;
+      }
+    }
     for (int q = 0; q < 4; ++q) {
       if (q == k) continue;
       const double dx = c.x[q] - c.x[k], dy = c.y[q] - c.y[k];
-      if (smooth && Trust(region, dx, dy) != PatchTrust::kFull) {
+      if (smooth && TrustAt(*region, dx, dy) != PatchTrust::kFull) {
         smooth = false;
       }
       // A node outside the owner's reach says nothing of its surface.
