@@ -95,6 +95,8 @@ struct GuardedValue {
 // fractions (s, t).
 double LiftAt(const ElementCorners& e, int k, double s, double t) {
   const double* d = e.guard.lift[k];
+  // No shortfalls (most corners): each lerp is +0 at any finite point.
+  if (d[0] == 0 && d[1] == 0 && d[2] == 0 && d[3] == 0) return 0.0;
   return std::lerp(std::lerp(d[0], d[1], s), std::lerp(d[3], d[2], s), t);
 }
 
@@ -276,10 +278,23 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x,
     }
     // The lift (LiftAt): lerps of the shortfalls, the first two over s.
     const double* d = e.guard.lift[k];
-    LerpInvariant(d[0], d[1], s, n, l0);
-    LerpInvariant(d[3], d[2], s, n, l1);
     const SurfaceJet& j = e.c[k];
     const double xk = c.x[k], yk = c.y[k], z_low = r.z_low;
+    if (d[0] == 0 && d[1] == 0 && d[2] == 0 && d[3] == 0) {
+      // No shortfalls (most corners): every lerp of them is +0 at any
+      // finite point, and the patch plus +0 is what it adds.
+#pragma omp simd
+      for (int32_t q = 0; q < n; ++q) {
+        const double raw = EvaluatePatch(j, xk, yk, x[q], y[q]) + 0.0;
+        const double p = raw < z_low ? z_low : raw;
+        const bool holds = inside[q] != 0;
+        any[q] = holds ? 1.0 : any[q];
+        w[q] = holds & (p < w[q]) ? p : w[q];
+      }
+      continue;
+    }
+    LerpInvariant(d[0], d[1], s, n, l0);
+    LerpInvariant(d[3], d[2], s, n, l1);
 #pragma omp simd
     for (int32_t q = 0; q < n; ++q) {
       const double lift = LerpSelect(l0[q], l1[q], t[q]);
