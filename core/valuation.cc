@@ -55,26 +55,27 @@ double Highest(const double* v, int32_t n) {
 
 // Moves of a bin, in bin order, as arrays: their footprint boxes, lowest
 // points, and FootprintGap parts; `k` their index in the bin. Holds at most
-// `capacity` moves (arrays of that size, written in place: no push_back on
-// thirteen arrays a move).
+// `capacity` moves (Reset: arrays of at least that size, written in place:
+// no push_back on thirteen arrays a move).
 struct RowMoves {
-  explicit RowMoves(int32_t capacity)
-      : x0(capacity),
-        x1(capacity),
-        y0(capacity),
-        y1(capacity),
-        lowest(capacity),
-        ball(capacity),
-        gx0(capacity),
-        gx1(capacity),
-        gy0(capacity),
-        gy1(capacity),
-        z_r(capacity),
-        r2(capacity),
-        k(capacity) {}
   std::vector<double> x0, x1, y0, y1, lowest, ball, gx0, gx1, gy0, gy1, z_r, r2;
   std::vector<int32_t> k;
   int32_t n = 0;
+  // Empty, with room for `capacity` moves. The arrays only grow: a thread
+  // reuses them from bin to bin instead of allocating and zeroing them.
+  void Reset(int32_t capacity) {
+    n = 0;
+    if (static_cast<int32_t>(k.size()) >= capacity) return;
+    for (std::vector<double>* v : {&x0, &x1, &y0, &y1, &lowest, &ball, &gx0,
+                                   &gx1, &gy0, &gy1, &z_r, &r2}) {
+      v->resize(capacity);
+    }
+    k.resize(capacity);
+  }
+  // Gives the arrays back where they grew past `keep` moves.
+  void Trim(int32_t keep) {
+    if (static_cast<int32_t>(k.size()) > keep) *this = RowMoves();
+  }
   void Clear() { n = 0; }
   void Add(const Rect& box, double low, const FootprintGap& g, int32_t at) {
     x0[n] = box.x0;
@@ -332,7 +333,11 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     // so that the scan stays in cache. `near`: those that may cut into a
     // row.
     const int32_t bin_size = static_cast<int32_t>(ids.size());
-    RowMoves bin_moves(bin_size), near(bin_size);
+    // This thread's, reused (a bin's moves are about 1,250 on the plate
+    // job; larger arrays are given back once the bin is done).
+    thread_local RowMoves bin_moves, near;
+    bin_moves.Reset(bin_size);
+    near.Reset(bin_size);
     std::vector<Sweep> sweeps;
     sweeps.reserve(ids.size());
     for (int32_t k = 0; k < bin_size; ++k) {
@@ -672,6 +677,9 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       }
     }
     partials[b] = p;
+    constexpr int32_t kKeptMoves = 1 << 16;
+    bin_moves.Trim(kKeptMoves);
+    near.Trim(kKeptMoves);
   });
 
   ErrorStats stats;
