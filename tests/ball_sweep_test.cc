@@ -468,19 +468,26 @@ void ExpectRepresentable(const BallSweep& sweep, double x, double y,
   }
 }
 
-// The supporting plane at a point of the surface touches it there and lies
-// below it everywhere (the capsule is convex), less its slack for rounding:
-// near the touching point (where the two differ by less than the rounding),
-// across the footprint and off it. Moves of every kind, from 0.1 mm at 900
-// mm from the origin (a plate job's finishing pass) to 300 mm long.
-TEST(BallSweepSupportingPlaneTest, TouchesAndLiesBelowTheSurface) {
-  std::vector<MoveCase> moves = RandomMoves(43);
+// RandomMoves(seed), and a point, a plunge, a level move, a plate job's
+// finishing pass (0.1 mm, 900 mm from the origin) and a 300 mm move.
+std::vector<MoveCase> EveryKindOfMove(uint64_t seed) {
+  std::vector<MoveCase> moves = RandomMoves(seed);
   moves.push_back({"point", {1, 2, 3}, {1, 2, 3}, 2});
   moves.push_back({"plunge", {1, 2, 3}, {1, 2, -3}, 2});
   moves.push_back({"horizontal", {-3, 1, -1}, {5, 4, -1}, 1.5});
   moves.push_back(
       {"plate pass", {900.1, 873.45, -2.8941}, {900.2, 873.45, -2.8902}, 2});
   moves.push_back({"long", {-150, -20, -1}, {150, 30, -4}, 3});
+  return moves;
+}
+
+// The supporting plane at a point of the surface touches it there and lies
+// below it everywhere (the capsule is convex), less its slack for rounding:
+// near the touching point (where the two differ by less than the rounding),
+// across the footprint and off it. Moves of every kind, from 0.1 mm at 900
+// mm from the origin (a plate job's finishing pass) to 300 mm long.
+TEST(BallSweepSupportingPlaneTest, TouchesAndLiesBelowTheSurface) {
+  std::vector<MoveCase> moves = EveryKindOfMove(43);
   std::mt19937_64 rng(17);
   std::uniform_real_distribution<double> unit(0, 1);
   for (const MoveCase& mc : moves) {
@@ -538,13 +545,7 @@ TEST(BallSweepSupportingPlaneTest, TouchesAndLiesBelowTheSurface) {
 // ends), +inf only where the height is, and close to the height on a
 // finishing pass (else it would filter nothing).
 TEST(BallHeightLowerBoundTest, AtOrBelowTheHeight) {
-  std::vector<MoveCase> moves = RandomMoves(44);
-  moves.push_back({"point", {1, 2, 3}, {1, 2, 3}, 2});
-  moves.push_back({"plunge", {1, 2, 3}, {1, 2, -3}, 2});
-  moves.push_back({"horizontal", {-3, 1, -1}, {5, 4, -1}, 1.5});
-  moves.push_back(
-      {"plate pass", {900.1, 873.45, -2.8941}, {900.2, 873.45, -2.8902}, 2});
-  moves.push_back({"long", {-150, -20, -1}, {150, 30, -4}, 3});
+  std::vector<MoveCase> moves = EveryKindOfMove(44);
   moves.push_back({"short steep", {4, 4, 0}, {4.0001, 4, -0.01}, 1});
   std::mt19937_64 rng(19);
   std::uniform_real_distribution<double> unit(0, 1);
