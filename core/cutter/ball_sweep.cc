@@ -39,19 +39,24 @@ double BallHeightLowerBound(const Vec3& tip_from, const Vec3& tip_to, double r,
                                 : std::sqrt(std::max(0.0, r2 - d2) + 1e-9 * r2);
   };
   const double px = x - tip_from.x, py = y - tip_from.y;
-  if (len2 == 0)
+  if (len2 == 0) {
     return tip_from.z + r - root(px * px + py * py) - 2e-6 * (1 + r);
+  }
   // Eq. (10)-(14) by another road: over the line's balls the height at
-  // (x, y) is convex in t, least at t* (the cylinder's contact); on the
-  // move, at t* or else at the nearer end (a sphere).
+  // (x, y) is convex in t, least at t* (the cylinder's contact), where it
+  // is the least over the whole line: at most the move's. Beyond the move
+  // it is the nearer end's sphere; t* is taken as within the move up to a
+  // margin for its rounding and the widened root (there the line's least
+  // is still a bound, the sphere would not be).
   const double inv_g = std::sqrt(len2 / l2);
   const double tu = (px * ux + py * uy) / l2;
   const double nx = px - tu * ux, ny = py - tu * uy;
   const double rho = root(nx * nx + ny * ny);
   if (rho == kInf) return kInf;
   const double ts = tu - uz * rho / (l2 * inv_g);
+  const double margin = 1e-4 * r / std::sqrt(l2) + 1e-9;
   double h;
-  if (ts >= 0 && ts <= 1) {
+  if (ts >= -margin && ts <= 1 + margin) {
     h = tip_from.z + r + uz * tu - rho * inv_g;
   } else {
     const Vec3& e = ts < 0 ? tip_from : tip_to;
