@@ -24,15 +24,25 @@ double BilinearHeight(const ElementCorners& e, double x, double y) {
                    std::lerp(e.c[3].w, e.c[2].w, s), t);
 }
 
-bool CornerReach::Capsule::Contains(double x, double y) const {
-  // Distance from the segment, clamped to its ends.
-  const double ux = bx - ax, uy = by - ay;
-  const double px = x - ax, py = y - ay;
+namespace {
+
+// The squared distance from (x, y) to a capsule's segment, clamped to its
+// ends: what CornerReach::Capsule::Contains compares with the radius.
+[[gnu::always_inline]] inline double CapsuleDistance2(
+    const CornerReach::Capsule& c, double x, double y) {
+  const double ux = c.bx - c.ax, uy = c.by - c.ay;
+  const double px = x - c.ax, py = y - c.ay;
   const double len2 = ux * ux + uy * uy;
   const double t =
       len2 > 0 ? std::clamp((px * ux + py * uy) / len2, 0.0, 1.0) : 0.0;
   const double dx = px - t * ux, dy = py - t * uy;
-  return dx * dx + dy * dy <= radius * radius;
+  return dx * dx + dy * dy;
+}
+
+}  // namespace
+
+bool CornerReach::Capsule::Contains(double x, double y) const {
+  return CapsuleDistance2(*this, x, y) <= radius * radius;
 }
 
 bool CornerReach::Contains(double x, double y) const {
@@ -93,10 +103,16 @@ struct GuardedValue {
 
 // The bilinear interpolation of corner k's shortfalls, at the element's
 // fractions (s, t).
-double LiftAt(const ElementCorners& e, int k, double s, double t) {
+// Whether corner k has no shortfalls (most corners): then each lerp of
+// them is +0 at any finite point.
+bool Unlifted(const ElementCorners& e, int k) {
   const double* d = e.guard.lift[k];
-  // No shortfalls (most corners): each lerp is +0 at any finite point.
-  if (d[0] == 0 && d[1] == 0 && d[2] == 0 && d[3] == 0) return 0.0;
+  return d[0] == 0 && d[1] == 0 && d[2] == 0 && d[3] == 0;
+}
+
+double LiftAt(const ElementCorners& e, int k, double s, double t) {
+  if (Unlifted(e, k)) return 0.0;
+  const double* d = e.guard.lift[k];
   return std::lerp(std::lerp(d[0], d[1], s), std::lerp(d[3], d[2], s), t);
 }
 
@@ -109,18 +125,6 @@ void TakeLowest(const ElementCorners& e, double x, double y, GuardedValue* v) {
     v->corner = -1;
     v->move = id;
   }
-}
-
-// The squared distance from (x, y) to a capsule's segment exactly as
-// CornerReach::Capsule::Contains computes it.
-double CapsuleDistance2(const CornerReach::Capsule& c, double x, double y) {
-  const double ux = c.bx - c.ax, uy = c.by - c.ay;
-  const double px = x - c.ax, py = y - c.ay;
-  const double len2 = ux * ux + uy * uy;
-  const double t =
-      len2 > 0 ? std::clamp((px * ux + py * uy) / len2, 0.0, 1.0) : 0.0;
-  const double dx = px - t * ux, dy = py - t * uy;
-  return dx * dx + dy * dy;
 }
 
 // Whether Contains, as computed, holds at every point of the finite box
@@ -187,6 +191,39 @@ inline void LerpInvariant(double a, double b, const double* __restrict t,
       const double x = a + t[q] * (b - a);
       out[q] = t[q] == 1 ? b : t[q] > 1 ? (b > x ? x : b) : (b < x ? x : b);
     }
+  }
+}
+
+// SmoothChunk's arrays for one corner's pass.
+struct CornerPoints {
+  const double *x, *y, *inside, *l0, *l1, *t;
+  double *any, *w;
+};
+
+// A corner's lifted patch (lifted by LerpSelect(l0, l1, t) where kLifted,
+// else by +0) over SmoothChunk's points, and the running minimum where the
+// corner holds them. One loop for both, vectorized in its caller's clone.
+template <bool kLifted>
+[[gnu::always_inline]] inline void LowerByCorner(const SurfaceJet& j, double xk,
+                                                 double yk, double z_low,
+                                                 const CornerPoints& pts,
+                                                 int32_t n) {
+  const double* __restrict x = pts.x;
+  const double* __restrict y = pts.y;
+  const double* __restrict inside = pts.inside;
+  const double* __restrict l0 = pts.l0;
+  const double* __restrict l1 = pts.l1;
+  const double* __restrict t = pts.t;
+  double* __restrict any = pts.any;
+  double* __restrict w = pts.w;
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) {
+    const double lift = kLifted ? LerpSelect(l0[q], l1[q], t[q]) : 0.0;
+    const double raw = EvaluatePatch(j, xk, yk, x[q], y[q]) + lift;
+    const double p = raw < z_low ? z_low : raw;  // std::max(raw, z_low)
+    const bool holds = inside[q] != 0;
+    any[q] = holds ? 1.0 : any[q];
+    w[q] = holds & (p < w[q]) ? p : w[q];
   }
 }
 
@@ -280,29 +317,13 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x,
     const double* d = e.guard.lift[k];
     const SurfaceJet& j = e.c[k];
     const double xk = c.x[k], yk = c.y[k], z_low = r.z_low;
-    if (d[0] == 0 && d[1] == 0 && d[2] == 0 && d[3] == 0) {
-      // No shortfalls (most corners): every lerp of them is +0 at any
-      // finite point, and the patch plus +0 is what it adds.
-#pragma omp simd
-      for (int32_t q = 0; q < n; ++q) {
-        const double raw = EvaluatePatch(j, xk, yk, x[q], y[q]) + 0.0;
-        const double p = raw < z_low ? z_low : raw;
-        const bool holds = inside[q] != 0;
-        any[q] = holds ? 1.0 : any[q];
-        w[q] = holds & (p < w[q]) ? p : w[q];
-      }
-      continue;
-    }
-    LerpInvariant(d[0], d[1], s, n, l0);
-    LerpInvariant(d[3], d[2], s, n, l1);
-#pragma omp simd
-    for (int32_t q = 0; q < n; ++q) {
-      const double lift = LerpSelect(l0[q], l1[q], t[q]);
-      const double raw = EvaluatePatch(j, xk, yk, x[q], y[q]) + lift;
-      const double p = raw < z_low ? z_low : raw;  // std::max(raw, z_low)
-      const bool holds = inside[q] != 0;
-      any[q] = holds ? 1.0 : any[q];
-      w[q] = holds & (p < w[q]) ? p : w[q];
+    const CornerPoints pts{x, y, inside, l0, l1, t, any, w};
+    if (Unlifted(e, k)) {
+      LowerByCorner<false>(j, xk, yk, z_low, pts, n);  // no lerps to take
+    } else {
+      LerpInvariant(d[0], d[1], s, n, l0);
+      LerpInvariant(d[3], d[2], s, n, l1);
+      LowerByCorner<true>(j, xk, yk, z_low, pts, n);
     }
   }
   // Hidden points (no corner holds them, or a corner out of its reach is
@@ -465,23 +486,16 @@ double GuardedHeight(const ElementCorners& e, double x, double y) {
 
 namespace {
 
-// out[q] = r.Contains(c.x[q], c.y[q]), the segment's terms computed once
-// (the same operations as Capsule::Contains).
+// out[q] = r.Contains(c.x[q], c.y[q]), inlined: the segment's terms are
+// the same for the four points.
 void ReachHolds(const CornerReach& r, const CornerXY& c, bool out[4]) {
   if (!r.bounded || r.empty) {
     for (int q = 0; q < 4; ++q) out[q] = !r.bounded;
     return;
   }
-  const CornerReach::Capsule& k = r.capsule;
-  const double ux = k.bx - k.ax, uy = k.by - k.ay;
-  const double len2 = ux * ux + uy * uy;
-  const double r2 = k.radius * k.radius;
+  const double r2 = r.capsule.radius * r.capsule.radius;
   for (int q = 0; q < 4; ++q) {
-    const double px = c.x[q] - k.ax, py = c.y[q] - k.ay;
-    const double t =
-        len2 > 0 ? std::clamp((px * ux + py * uy) / len2, 0.0, 1.0) : 0.0;
-    const double dx = px - t * ux, dy = py - t * uy;
-    out[q] = dx * dx + dy * dy <= r2;
+    out[q] = CapsuleDistance2(r.capsule, c.x[q], c.y[q]) <= r2;
   }
 }
 
