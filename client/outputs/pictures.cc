@@ -229,24 +229,36 @@ void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
     SurfaceSampler sampler(band, node_column(px0), node_column(px1 - 1) + 1);
     const size_t r0 = static_cast<size_t>(block) * kBlockRows;
     const size_t r1 = std::min(rows.size(), r0 + kBlockRows);
-    for (size_t r = r0; r < r1; ++r) {
-      const int py = rows[r];
-      const double y = f.Y(py);
-      double lo = z_top;
-      for (int px = px0; px < px1; ++px) {
-        double gx, gy;
-        const double z = sampler.HeightAndGradient(f.X(px), y, &gx, &gy);
-        const double dot = (-gx * kLightX - gy * kLightY + kLightZ) /
-                           std::sqrt(gx * gx + gy * gy + 1);
-        const size_t k = static_cast<size_t>(py) * f.width + px;
-        // Stored relative to the top in float: depth resolution ~1e-7 of
-        // it.
-        height_[k] = static_cast<float>(z - z_top);
-        shade_[k] = static_cast<float>(
-            kAmbient + (1 - kAmbient) * std::max(dot, 0.0) / kLightZ);
-        lo = std::min(lo, z);
+    double lo[kBlockRows];
+    std::fill_n(lo, kBlockRows, z_top);
+    // Rows in one row of elements are taken a column at a time: where
+    // pixels are finer than the grid (the marks picture of a small job), an
+    // element is prepared once for all its pixels, not once per row.
+    for (size_t g0 = r0, g1; g0 < r1; g0 = g1) {
+      g1 = g0 + 1;
+      while (g1 < r1 && row_element_[rows[g1]] == row_element_[rows[g0]]) {
+        ++g1;
       }
-      chunk_min[r * chunks + chunk] = lo;
+      for (int px = px0; px < px1; ++px) {
+        const double x = f.X(px);
+        for (size_t r = g0; r < g1; ++r) {
+          const int py = rows[r];
+          double gx, gy;
+          const double z = sampler.HeightAndGradient(x, f.Y(py), &gx, &gy);
+          const double dot = (-gx * kLightX - gy * kLightY + kLightZ) /
+                             std::sqrt(gx * gx + gy * gy + 1);
+          const size_t k = static_cast<size_t>(py) * f.width + px;
+          // Stored relative to the top in float: depth resolution ~1e-7
+          // of it.
+          height_[k] = static_cast<float>(z - z_top);
+          shade_[k] = static_cast<float>(
+              kAmbient + (1 - kAmbient) * std::max(dot, 0.0) / kLightZ);
+          lo[r - r0] = std::min(lo[r - r0], z);
+        }
+      }
+    }
+    for (size_t r = r0; r < r1; ++r) {
+      chunk_min[r * chunks + chunk] = lo[r - r0];
     }
   });
   // The tint needs the lowest height. Kept as the bands come, not found on
