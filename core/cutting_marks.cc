@@ -5,7 +5,9 @@
 #include <map>
 #include <memory>
 #include <numbers>
+#include <tuple>
 #include <utility>
+#include <vector>
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
@@ -1458,19 +1460,54 @@ absl::Status FindCuttingMarks(
   // Finishes the polylines and marks them so.
   auto finish_all = [&](const std::vector<Ready*>& chained) {
     if (!finishes) return;
-    // Runs of up to kRun vertices, none across two polylines.
-    constexpr size_t kRun = 64;
-    std::vector<std::pair<uint32_t, uint32_t>> runs;  // (polyline, first)
+    // The vertices a move bin at a time: the junction test (LowestAt)
+    // keeps the moves of a thread's last few bins, and taken along each
+    // polyline, a bin was filled again for every crease that crossed it.
+    // Runs of up to kRun vertices of one polyline in one bin, sorted by
+    // bin; an item is a bin's runs, up to kItem vertices.
+    constexpr uint32_t kRun = 64;
+    constexpr uint32_t kItem = 1024;
+    struct Run {
+      int32_t bin;
+      uint32_t polyline, first, end;
+    };
+    const GridGeometry& grid = wp.grid();
+    auto bin_of = [&](const Vec3& v) {
+      return wp.index().BinOfElement(grid.ElementX(v.x), grid.ElementY(v.y));
+    };
+    std::vector<Run> runs;
     for (size_t q = 0; q < chained.size(); ++q) {
-      for (size_t k = 0; k < chained[q]->p.vertices.size(); k += kRun) {
-        runs.emplace_back(static_cast<uint32_t>(q), static_cast<uint32_t>(k));
+      const std::vector<Vec3>& v = chained[q]->p.vertices;
+      const uint32_t n = static_cast<uint32_t>(v.size());
+      for (uint32_t k = 0, k1; k < n; k = k1) {
+        const int32_t bin = bin_of(v[k]);
+        k1 = k + 1;
+        while (k1 < n && k1 - k < kRun && bin_of(v[k1]) == bin) ++k1;
+        runs.push_back(Run{bin, static_cast<uint32_t>(q), k, k1});
       }
     }
-    wp.pool().ParallelFor(static_cast<int64_t>(runs.size()), [&](int64_t r) {
-      MarkPolyline& p = chained[runs[r].first]->p;
-      const size_t k1 = std::min(p.vertices.size(), runs[r].second + kRun);
-      for (size_t k = runs[r].second; k < k1; ++k) finish_vertex(p, k);
+    std::sort(runs.begin(), runs.end(), [](const Run& a, const Run& b) {
+      return std::tie(a.bin, a.polyline, a.first) <
+             std::tie(b.bin, b.polyline, b.first);
     });
+    std::vector<size_t> items;  // each item's first run, then runs.size()
+    for (size_t r = 0, size = 0; r < runs.size(); ++r) {
+      if (r == 0 || runs[r].bin != runs[r - 1].bin || size >= kItem) {
+        items.push_back(r);
+        size = 0;
+      }
+      size += runs[r].end - runs[r].first;
+    }
+    items.push_back(runs.size());
+    wp.pool().ParallelFor(
+        static_cast<int64_t>(items.size()) - 1, [&](int64_t i) {
+          for (size_t r = items[i]; r < items[i + 1]; ++r) {
+            MarkPolyline& p = chained[runs[r].polyline]->p;
+            for (uint32_t k = runs[r].first; k < runs[r].end; ++k) {
+              finish_vertex(p, k);
+            }
+          }
+        });
     for (Ready* r : chained) r->finished = true;
   };
 
