@@ -283,12 +283,18 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
           }
         }
       }
-      if (n + (i_hi - i_lo + 1) > kChunk) flush();
-      for (int32_t i = i_lo; i <= i_hi; ++i, ++n) {
-        cx[n] = x0 + i * dx;  // as GridGeometry::NodeX: bit-identical
-        cy[n] = y;
-        ck[n] = k0 + i;
+      const int32_t count = i_hi - i_lo + 1;
+      if (n + count > kChunk) flush();
+      double* __restrict const px = cx + n;
+      double* __restrict const py = cy + n;
+      int32_t* __restrict const pk = ck + n;
+#pragma omp simd
+      for (int32_t q = 0; q < count; ++q) {
+        px[q] = x0 + (i_lo + q) * dx;  // as GridGeometry::NodeX: bit-identical
+        py[q] = y;
+        pk[q] = k0 + i_lo + q;
       }
+      n += count;
     }
     if (n > 0) flush();
     if (cuts != nullptr && max_k >= 0) {
