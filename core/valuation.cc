@@ -103,16 +103,17 @@ struct RowMoves {
 };
 
 // Whether plane (touching its surface at (xc, yc)) less its slack is at or
-// above est[q] at each point q < n: then that surface lowers none of them.
+// above est[q] at each point q < n, given as its offsets from (xc, yc)
+// (dx[q], dy[q]): then that surface lowers none of them.
 SWARF_TARGET_CLONES
-bool PlaneAtOrAbove(const BallSweep::SupportPlane& plane, double xc, double yc,
-                    const double* __restrict x, const double* __restrict y,
+bool PlaneAtOrAbove(const BallSweep::SupportPlane& plane,
+                    const double* __restrict dx, const double* __restrict dy,
                     int32_t n, const double* __restrict est) {
   const double w = plane.w - plane.slack, wx = plane.wx, wy = plane.wy;
   double below = 0;
 #pragma omp simd reduction(max : below)
   for (int32_t q = 0; q < n; ++q) {
-    const double l = w + wx * (x[q] - xc) + wy * (y[q] - yc);
+    const double l = w + wx * dx[q] + wy * dy[q];
     below = std::max(below, l >= est[q] ? 0.0 : 1.0);
   }
   return below == 0;
@@ -431,7 +432,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     std::vector<char> top_ok(ei1 - ei0, 0);
     int32_t top_row = -1;
     std::vector<int64_t> row_cells(mapped ? row_xs.size() : 0);
-    std::vector<double> h(padded), rec(lattice), err(lattice);
+    std::vector<double> h(padded), rec(lattice), err(lattice), offset_x(padded),
+        offset_y(padded);
     // est[q] = min(est[q], the sweep's height at (x[q], y[q])), q < n.
     auto lower_by = [&h](const Sweep& sweep, const double* x, const double* y,
                          int32_t n, double* est) {
@@ -560,6 +562,15 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const double cap = el.cap;
         const Rect& box = el.box;
         const double xc = 0.5 * (box.x0 + box.x1), yc = 0.5 * (box.y0 + box.y1);
+        // The own points' offsets from the centre, for the tangent planes
+        // there (taken once, not for every plane).
+        double* const odx = offset_x.data();
+        double* const ody = offset_y.data();
+#pragma omp simd
+        for (int32_t q = 0; q < el.own_padded; ++q) {
+          odx[q] = oxs[q] - xc;
+          ody[q] = oys[q] - yc;
+        }
         MovesThatMayCut(near, box, cap, pass.data());
         for (int32_t q = 0; q < near.size(); ++q) {
           if (pass[q] == 0) continue;
@@ -585,7 +596,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             const std::optional<BallSweep::SupportPlane> plane =
                 ball->SupportingPlane(xc, yc);
             if (plane.has_value() &&
-                PlaneAtOrAbove(*plane, xc, yc, oxs, oys, el.own_padded, oest)) {
+                PlaneAtOrAbove(*plane, odx, ody, el.own_padded, oest)) {
               continue;
             }
           }
