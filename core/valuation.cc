@@ -339,14 +339,24 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     thread_local RowMoves bin_moves, near;
     bin_moves.Reset(bin_size);
     near.Reset(bin_size);
-    std::vector<Sweep> sweeps;
-    sweeps.reserve(ids.size());
     for (int32_t k = 0; k < bin_size; ++k) {
-      const Sweep& s = sweeps.emplace_back(wp.MoveSweep(ids[k]));
       const Move m = wp.move(static_cast<int32_t>(ids[k]));
-      bin_moves.Add(s.Footprint(z_top).Bounds(), s.lowest(),
+      bin_moves.Add(FootprintCapsule(m.from, m.to, m.cutter, z_top).Bounds(),
+                    SweepLowest(m.from, m.to, m.cutter),
                     FootprintGap::Of(m.from, m.to, m.cutter), k);
     }
+    // A bin move's sweep, built when an element first needs its heights
+    // (on the plate job about 1 in 8 of the bin's moves is).
+    std::vector<Sweep> sweeps;
+    sweeps.reserve(ids.size());  // no reallocation: references stay valid
+    std::vector<int32_t> sweep_of(ids.size(), -1);
+    auto bin_sweep = [&](int32_t k) -> const Sweep& {
+      if (sweep_of[k] < 0) {
+        sweep_of[k] = static_cast<int32_t>(sweeps.size());
+        sweeps.emplace_back(wp.MoveSweep(ids[k]));
+      }
+      return sweeps[sweep_of[k]];
+    };
     // The bin's nodes, each read once instead of once per element it is a
     // corner of, and the guarded scheme's trust regions (TrustRegion, a
     // function of each node's jet) likewise.
@@ -592,7 +602,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           // plate job, 8 of 10 on cameo; a point and a plane take a third
           // of the heights' instructions, but two roots and two divisions
           // in a row: fewer of their cycles).
-          if (const BallSweep* ball = sweeps[ck].ball()) {
+          const Sweep& sweep = bin_sweep(ck);
+          if (const BallSweep* ball = sweep.ball()) {
             const std::optional<BallSweep::SupportPlane> plane =
                 ball->SupportingPlane(xc, yc);
             if (plane.has_value() &&
@@ -600,7 +611,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
               continue;
             }
           }
-          lower_by(sweeps[ck], oxs, oys, el.own_padded, oest);
+          lower_by(sweep, oxs, oys, el.own_padded, oest);
         }
         for (int32_t q = 0; q < own; ++q) est[el.own_list[q]] = oest[q];
         if (el.from_left) {

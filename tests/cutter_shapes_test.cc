@@ -612,10 +612,11 @@ TEST_P(ReferenceTest, SweepContract) {
 
 // FootprintCapsule and FootprintBounds, which do not build the sweep, give
 // the sweep's own footprint bit for bit, at every cap (above the move, at
-// its tips, through it, below it).
+// its tips, through it, below it); SweepLowest its lowest height.
 TEST_P(ReferenceTest, FootprintWithoutTheSweep) {
   const Sweep sweep = MakeSweep();
   const MoveCase& m = move();
+  EXPECT_EQ(SweepLowest(m.from, m.to, cutter()), sweep.lowest());
   const double lo = std::min(m.from.z, m.to.z);
   const double hi = std::max(m.from.z, m.to.z);
   for (double cap : {lo - 1, lo, 0.5 * (lo + hi), hi, hi + 0.1, hi + 50}) {

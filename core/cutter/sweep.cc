@@ -38,6 +38,17 @@ Capsule FootprintCapsule(const Vec3& tip_from, const Vec3& tip_to,
   return TipFootprint(tip_from, tip_to, s, cap);
 }
 
+double SweepLowest(const Vec3& tip_from, const Vec3& tip_to,
+                   const Cutter& cutter) {
+  const Cutter s = SweptCutter(cutter);
+  if (s.kind == CutterKind::kBall) {
+    // BallSweep's: its balls' lowest centre less the radius (the centres
+    // are the tips raised by it, so not always the lowest tip's bits).
+    return std::min(tip_from.z + s.radius, tip_to.z + s.radius) - s.radius;
+  }
+  return std::min(tip_from.z, tip_to.z);  // ProfileSweep's
+}
+
 std::optional<Rect> FootprintBounds(const Vec3& tip_from, const Vec3& tip_to,
                                     const Cutter& cutter, double cap) {
   if (SweptAsBall(cutter)) {

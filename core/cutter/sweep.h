@@ -164,6 +164,10 @@ std::optional<Rect> FootprintBounds(const Vec3& tip_from, const Vec3& tip_to,
 // cutter).Footprint(cap), without building the sweep.
 Capsule FootprintCapsule(const Vec3& tip_from, const Vec3& tip_to,
                          const Cutter& cutter, double cap);
+// The lowest height the tool reaches on the move, bit-identical to
+// Sweep(tip_from, tip_to, cutter).lowest(), without building the sweep.
+double SweepLowest(const Vec3& tip_from, const Vec3& tip_to,
+                   const Cutter& cutter);
 
 }  // namespace swarf
 
