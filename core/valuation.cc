@@ -383,9 +383,12 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       c0 = c1 + 1;
     }
     // The sweeps of recent corner owners: neighbouring elements share most.
+    // An owner is mostly one of the bin's moves (it reached the bin's
+    // nodes), whose sweep the bin builds once; else the slot holds it.
     struct Owner {
       int32_t id = -1;
-      std::optional<Sweep> sweep;
+      const Sweep* sweep = nullptr;
+      std::optional<Sweep> own;
     };
     constexpr int kOwnerCache = 8;
     Owner cache[kOwnerCache];
@@ -397,7 +400,15 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       Owner& o = cache[next_slot];
       next_slot = (next_slot + 1) % kOwnerCache;
       o.id = id;
-      o.sweep.emplace(wp.MoveSweep(id));
+      // The bin's ids ascend (moves are indexed in order).
+      const auto it =
+          std::lower_bound(ids.begin(), ids.end(), static_cast<uint32_t>(id));
+      if (it != ids.end() && *it == static_cast<uint32_t>(id)) {
+        o.sweep = &bin_sweep(static_cast<int32_t>(it - ids.begin()));
+      } else {
+        o.own.emplace(wp.MoveSweep(id));
+        o.sweep = &*o.own;
+      }
       return *o.sweep;
     };
     // The points of an element's lattice: n x n but the corners.
