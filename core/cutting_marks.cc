@@ -1473,6 +1473,9 @@ absl::Status FindCuttingMarks(
     };
     const GridGeometry& grid = wp.grid();
     auto bin_of = [&](const Vec3& v) {
+      // A vertex that is not finite (none is expected) takes bin -1: the
+      // element lookup converts to int.
+      if (!std::isfinite(v.x) || !std::isfinite(v.y)) return -1;
       return wp.index().BinOfElement(grid.ElementX(v.x), grid.ElementY(v.y));
     };
     std::vector<Run> runs;

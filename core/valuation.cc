@@ -400,7 +400,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       Owner& o = cache[next_slot];
       next_slot = (next_slot + 1) % kOwnerCache;
       o.id = id;
-      // The bin's ids ascend (moves are indexed in order).
+      // The bin's ids ascend (moves are indexed in order); were they not,
+      // the search could only miss, and the slot would build the sweep.
       const auto it =
           std::lower_bound(ids.begin(), ids.end(), static_cast<uint32_t>(id));
       if (it != ids.end() && *it == static_cast<uint32_t>(id)) {
