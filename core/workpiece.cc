@@ -283,16 +283,18 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
           }
         }
       }
-      const int32_t count = i_hi - i_lo + 1;
+      // A copy: clang's simd region may not capture a structured binding.
+      const int32_t first = i_lo;
+      const int32_t count = i_hi - first + 1;
       if (n + count > kChunk) flush();
       double* __restrict const px = cx + n;
       double* __restrict const py = cy + n;
       int32_t* __restrict const pk = ck + n;
 #pragma omp simd
       for (int32_t q = 0; q < count; ++q) {
-        px[q] = x0 + (i_lo + q) * dx;  // as GridGeometry::NodeX: bit-identical
+        px[q] = x0 + (first + q) * dx;  // as GridGeometry::NodeX: bit-identical
         py[q] = y;
-        pk[q] = k0 + i_lo + q;
+        pk[q] = k0 + first + q;
       }
       n += count;
     }
