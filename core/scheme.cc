@@ -101,8 +101,6 @@ struct GuardedValue {
   int32_t move = -1;
 };
 
-// The bilinear interpolation of corner k's shortfalls, at the element's
-// fractions (s, t).
 // Whether corner k has no shortfalls (most corners): then each lerp of
 // them is +0 at any finite point.
 bool Unlifted(const ElementCorners& e, int k) {
@@ -110,6 +108,8 @@ bool Unlifted(const ElementCorners& e, int k) {
   return d[0] == 0 && d[1] == 0 && d[2] == 0 && d[3] == 0;
 }
 
+// The bilinear interpolation of corner k's shortfalls, at the element's
+// fractions (s, t).
 double LiftAt(const ElementCorners& e, int k, double s, double t) {
   if (Unlifted(e, k)) return 0.0;
   const double* d = e.guard.lift[k];
