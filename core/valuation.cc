@@ -502,11 +502,19 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const size_t off = static_cast<size_t>(row_elements) * padded;
         double* const xs = row_xs.data() + off;
         double* const ys = row_ys.data() + off;
+        // With every point in and at most two map cells across and two
+        // down (cells at least as large as elements, as swarf run asks),
+        // the max of each of the four quarters they make; else a cell per
+        // point.
+        const bool quarters = mapped && all_in &&
+                              col_cell[n - 1] - col_cell[0] <= 1 &&
+                              row_cell[n - 1] - row_cell[0] <= options.map_cols;
+        const bool per_point = mapped && !quarters;
         int32_t count = 0;
         for_each_point(col_x, row_y, all_in, [&](int32_t si, int32_t sj) {
           xs[count] = col_x[si];
           ys[count] = row_y[sj];
-          if (mapped) row_cells[off + count] = row_cell[sj] + col_cell[si];
+          if (per_point) row_cells[off + count] = row_cell[sj] + col_cell[si];
           ++count;
         });
         if (count == 0) continue;
@@ -542,12 +550,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         }
         el.ei = ei;
         el.count = count;
-        // With every point in and at most two map cells across and two
-        // down (cells at least as large as elements, as swarf run asks),
-        // the max of each of the four quarters they make; else a cell per
-        // point.
-        el.quarters = mapped && all_in && col_cell[n - 1] - col_cell[0] <= 1 &&
-                      row_cell[n - 1] - row_cell[0] <= options.map_cols;
+        el.quarters = quarters;
         // An upper bound of the exact surface at each sample: the sweeps
         // that own the corners (exact heights of real moves). Only moves
         // that dip below the element's highest bound inside the element
@@ -600,11 +603,29 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         // there (taken once, not for every plane).
         double* const odx = offset_x.data();
         double* const ody = offset_y.data();
-#pragma omp simd
+        double dx_lo = oxs[0] - xc, dx_hi = dx_lo;
+        double dy_lo = oys[0] - yc, dy_hi = dy_lo;
+#pragma omp simd reduction(min : dx_lo, dy_lo) reduction(max : dx_hi, dy_hi)
         for (int32_t q = 0; q < el.own_padded; ++q) {
           odx[q] = oxs[q] - xc;
           ody[q] = oys[q] - yc;
+          dx_lo = std::min(dx_lo, odx[q]);
+          dx_hi = std::max(dx_hi, odx[q]);
+          dy_lo = std::min(dy_lo, ody[q]);
+          dy_hi = std::max(dy_hi, ody[q]);
         }
+        // Whether a plane through (xc, yc) is at or above every own point's
+        // est. First at the corners of the offsets' box, where it is lowest
+        // (products and sums round monotonically), against the cap, which
+        // no est exceeds (they only go down): most planes are shown above
+        // there, without the points.
+        auto plane_above = [&](const BallSweep::SupportPlane& plane) {
+          const double lowest = plane.w - plane.slack +
+                                std::min(plane.wx * dx_lo, plane.wx * dx_hi) +
+                                std::min(plane.wy * dy_lo, plane.wy * dy_hi);
+          return lowest >= cap ||
+                 PlaneAtOrAbove(plane, odx, ody, el.own_padded, oest);
+        };
         MovesThatMayCut(near, box, cap, pass.data());
         for (int32_t q = 0; q < near.size(); ++q) {
           if (pass[q] == 0) continue;
@@ -634,17 +655,13 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
               // the slack).
               BallSweep::SupportPlane moved = hp.plane;
               moved.w += moved.wx * (xc - hp.x) + moved.wy * (yc - hp.y);
-              if (PlaneAtOrAbove(moved, odx, ody, el.own_padded, oest)) {
-                continue;
-              }
+              if (plane_above(moved)) continue;
             }
             const std::optional<BallSweep::SupportPlane> plane =
                 ball->SupportingPlane(xc, yc);
             if (plane.has_value()) {
               hp = {xc, yc, *plane, true};
-              if (PlaneAtOrAbove(*plane, odx, ody, el.own_padded, oest)) {
-                continue;
-              }
+              if (plane_above(*plane)) continue;
             }
           }
           lower_by(sweep, oxs, oys, el.own_padded, oest);
