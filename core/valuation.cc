@@ -616,9 +616,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         }
         // Whether a plane through (xc, yc) is at or above every own point's
         // est. First at the corners of the offsets' box, where it is lowest
-        // (products and sums round monotonically), against the cap, which
-        // no est exceeds (they only go down): most planes are shown above
-        // there, without the points.
+        // (products and sums round monotonically; any other rounding is far
+        // inside the slack), against the cap, which no est exceeds (they
+        // only go down): about half the planes on the plate job are shown
+        // above there, without the points.
         auto plane_above = [&](const BallSweep::SupportPlane& plane) {
           const double lowest = plane.w - plane.slack +
                                 std::min(plane.wx * dx_lo, plane.wx * dx_hi) +
