@@ -1425,6 +1425,14 @@ absl::Status Workpiece::LoadState(
         absl::StrCat("state: saved after ", h.moves,
                      " moves, the workpiece has ", moves_.size()));
   }
+  // Each batch that cuts bumps the version once and holds at least one
+  // move: a larger version is damage (and near 2^64 it would wrap to 0, the
+  // version of a tile never cut, as the workpiece goes on cutting).
+  if (h.version > h.moves) {
+    return absl::DataLossError(absl::StrCat("state: version ", h.version,
+                                            " after only ", h.moves,
+                                            " moves"));
+  }
   if (h.tiles > static_cast<uint32_t>(tile_count())) {
     return absl::DataLossError(absl::StrCat(
         "state: ", h.tiles, " tiles, the grid has ", tile_count()));
