@@ -225,6 +225,11 @@ struct PatchTrustRegion {
 };
 PatchTrustRegion TrustRegion(const SurfaceJet& j);
 PatchTrust Trust(const PatchTrustRegion& region, double dx, double dy);
+// Whether Trust(region, dx, dy) is surely kFull at every dx in {0, +-hx}
+// and dy in {0, +-hy} (hx, hy >= 0: an element's corners seen from one of
+// them), in one test. False only says that the offsets must be tested one
+// by one.
+bool SurelyTrusted(const PatchTrustRegion& region, double hx, double hy);
 
 // The exact reconstruction (kExact): the minimum of the stock top and of
 // the exact swept surfaces of the element's candidates at (x, y). The

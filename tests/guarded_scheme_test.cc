@@ -252,6 +252,46 @@ TEST(CornerReachTest, FootprintOfAMove) {
   EXPECT_FALSE(above.Contains(2, 0));
 }
 
+// SurelyTrusted, the one test PrepareGuarded makes for a patch at the
+// element's three other corners, never passes where Trust would not give
+// kFull at one of them (nor at any sign of the offsets), over random jets
+// and element sizes; and it passes where the region clearly holds the
+// element (a ball's sphere under a fine grid), so it saves the tests.
+TEST(GuardedSchemeTest, SurelyTrustedImpliesTrustAtEveryCorner) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> slope(-4, 4), curv(-6, 6),
+      size(0.001, 1.5);
+  int trusted = 0, sure = 0;
+  for (int n = 0; n < 200000; ++n) {
+    SurfaceJet j{0, slope(rng), slope(rng), curv(rng), curv(rng), curv(rng)};
+    if (n % 7 == 0) j.wy = 0;    // axis-aligned gradients
+    if (n % 11 == 0) j.wxy = 0;  // and curvatures
+    const PatchTrustRegion r = TrustRegion(j);
+    const double hx = size(rng), hy = n % 5 == 0 ? hx : size(rng);
+    bool all = true;
+    for (double dx : {-hx, 0.0, hx}) {
+      for (double dy : {-hy, 0.0, hy}) {
+        if (dx != 0 || dy != 0) all &= Trust(r, dx, dy) == PatchTrust::kFull;
+      }
+    }
+    const bool s = SurelyTrusted(r, hx, hy);
+    ASSERT_TRUE(!s || all) << "jet " << j.wx << " " << j.wy << " " << j.wxx
+                           << " " << j.wxy << " " << j.wyy << ", element " << hx
+                           << " x " << hy;
+    trusted += all;
+    sure += s;
+  }
+  EXPECT_GT(trusted, 20000);
+  EXPECT_GT(sure, trusted * 3 / 4);  // it decides most of them at once
+  // A ball of radius 1, 0.3 from its centre (its rim 0.7 away): a 0.05 mm
+  // element is trusted at once, a 1 mm one (past the rim) is not.
+  const double x = 0.3, z = std::sqrt(1 - x * x);
+  const SurfaceJet ball{1 - z, x / z, 0, 1 / (z * z * z), 0, 1 / z};
+  EXPECT_TRUE(SurelyTrusted(TrustRegion(ball), 0.05, 0.05));
+  EXPECT_FALSE(SurelyTrusted(TrustRegion(ball), 1.0, 1.0));
+  EXPECT_EQ(Trust(TrustRegion(ball), 1.0, 0), PatchTrust::kLowerBound);
+}
+
 // The points of an element at once (ReconstructMany: smooth elements in
 // vectorized loops, capsules decided for the whole element where they can
 // be) and the height with its gradient (HeightAndGradient) are Reconstruct
