@@ -835,12 +835,14 @@ TEST(WorkpieceStateTest, ForeignOrDamagedStatesAreRejected) {
   expect_rejected(bad_height, "height");
   // A version beyond the moves (each batch that cuts has one): at 2^64 - 1
   // it would wrap to 0 with the next cut.
+  // (after the magic, the scheme, nx, ny and five f64s).
+  const size_t version_at = 8 + 4 + 8 + 5 * 8;
   std::string bad_version = state;
   const uint64_t last_version = ~uint64_t{0};
-  std::memcpy(bad_version.data() + 8 + 4 + 8 + 5 * 8, &last_version, 8);
+  std::memcpy(bad_version.data() + version_at, &last_version, 8);
   expect_rejected(bad_version, "version 18446744073709551615 after only 200");
   const uint64_t one_too_many = 201;
-  std::memcpy(bad_version.data() + 8 + 4 + 8 + 5 * 8, &one_too_many, 8);
+  std::memcpy(bad_version.data() + version_at, &one_too_many, 8);
   expect_rejected(bad_version, "version 201 after only 200 moves");
   // A tile index beyond the grid.
   std::string bad_tile = state;
