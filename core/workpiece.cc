@@ -9,6 +9,7 @@
 #include <type_traits>
 
 #include "absl/strings/str_cat.h"
+#include "core/flag_words.h"
 #include "core/status_macros.h"
 #include "core/target_clones.h"
 
@@ -64,6 +65,55 @@ std::pair<int32_t, int32_t> NodeRange(double a, double b, double origin,
   hi = std::min(hi, max);
   if (!(fa == fa) || !(fb == fb) || lo > hi) return {1, 0};  // NaN: none
   return {lo, hi};
+}
+
+// The highest of w[0..n) (heights, never NaN), or a value at or above cap
+// as soon as a block of 8 reaches it: callers need the exact top only
+// below cap. Without NaNs, maxima in any order are the same.
+// std::max by value: on references, the lanes' maxima were branches.
+inline double Max(double a, double b) { return a < b ? b : a; }
+
+SWARF_TARGET_CLONES
+double SpanTop(const double* __restrict w, int32_t n, double cap) {
+  double top = -kInf;
+  int32_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    // Two vectors of 4 and their lanes: not a reduction loop, which the
+    // vectorizer takes for doubles only with finite math.
+    double m[4];
+#pragma omp simd
+    for (int32_t q = 0; q < 4; ++q) m[q] = std::max(w[i + q], w[i + q + 4]);
+    top = Max(top, Max(Max(m[0], m[1]), Max(m[2], m[3])));
+    if (!(top < cap)) return top;
+  }
+  for (; i < n; ++i) top = Max(top, w[i]);
+  return top;
+}
+
+// A row's nodes i_lo .. i_lo + count - 1 into a chunk: their coordinates
+// (x as GridGeometry::NodeX: the same bits), tile index k0 + i and height.
+SWARF_TARGET_CLONES
+void GatherRow(double x0, double dx, int32_t i_lo, int32_t count, double y,
+               int32_t k0, const double* __restrict w, double* __restrict px,
+               double* __restrict py, int32_t* __restrict pk,
+               double* __restrict pw) {
+#pragma omp simd
+  for (int32_t q = 0; q < count; ++q) {
+    px[q] = x0 + (i_lo + q) * dx;
+    py[q] = y;
+    pk[q] = k0 + i_lo + q;
+    pw[q] = w[k0 + i_lo + q];
+  }
+}
+
+// flag[q] = 1 where h[q] <= old[q], else 0 (q < n): the nodes a move may
+// lower (below, or level with a later owner). Vectorized; the caller
+// decides each flagged node exactly.
+SWARF_TARGET_CLONES
+void MayLower(const double* __restrict h, const double* __restrict old,
+              int32_t n, uint8_t* __restrict flag) {
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) flag[q] = h[q] <= old[q] ? 1 : 0;
 }
 
 // Distinct for every workpiece state that jets may be cached for.
@@ -164,8 +214,9 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
   // moves (a few nodes per row) still fill the vector units.
   constexpr int32_t kChunk = 256;
   static_assert(kChunk >= kTileSize);
-  alignas(64) double cx[kChunk], cy[kChunk], h[kChunk];
+  alignas(64) double cx[kChunk], cy[kChunk], h[kChunk], cw[kChunk];
   int32_t ck[kChunk];
+  alignas(8) uint8_t flag[FlagBytes(kChunk)];  // MayLower's
   // Spans of a row at least this long are narrowed to the span's top.
   constexpr int32_t kNarrowSpan = 16;
 
@@ -185,16 +236,26 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     double drop_sum = 0, max_drop = 0, max_z = 0, over = 0;
     int32_t max_k = -1;
     const double limit = drop_limit.empty() ? kInf : drop_limit[m];
-    // The chunk's sweep heights (vectorized), then lowering.
+    // The chunk's sweep heights (vectorized), then lowering: the nodes a
+    // move lowers are a fraction of its chunks (about 1 in 7 on a raster
+    // of short moves), so they are flagged in a vectorized pass against
+    // the heights copied at gathering (cw: no node is in a move's chunks
+    // twice), and only the flagged ones, in order, are decided and lowered
+    // (a word of 8 flags at a time: most words are zero).
+    auto for_each_flagged = [&](auto&& lower_at) {
+      MayLower(h, cw, n, flag);
+      ClearFlagTail(flag, n);
+      ForEachFlagged(flag, n, lower_at);
+    };
     auto flush = [&] {
       sweep.Heights(cx, cy, n, h);
       int32_t low = 0;
       if (cuts != nullptr) {
-        // Lowering as below, summing the drops of the nodes lowered (a
-        // fraction of the chunk) as they go.
+        // Lowering as below, summing the drops of the nodes lowered in
+        // chunk order as they go.
         double sum = 0, top = 0, excess = 0;
         int32_t top_q = -1;
-        for (int32_t q = 0; q < n; ++q) {
+        for_each_flagged([&](int32_t q) {
           const int32_t k = ck[q];
           const double old = w[k];
           const bool lower = h[q] < old || (h[q] == old && id < owner[k]);
@@ -210,7 +271,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
             owner[k] = id;
             ++low;
           }
-        }
+        });
         drop_sum += sum;
         over += excess;
         if (top > max_drop) {
@@ -222,7 +283,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
         n = 0;
         return;
       }
-      for (int32_t q = 0; q < n; ++q) {
+      for_each_flagged([&](int32_t q) {
         const int32_t k = ck[q];
         const bool lower = h[q] < w[k] || (h[q] == w[k] && id < owner[k]);
         if (lower) {
@@ -230,7 +291,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
           owner[k] = id;
           ++low;
         }
-      }
+      });
       lowered += low;
       n = 0;
     };
@@ -258,16 +319,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       if (i_hi - i_lo + 1 >= kNarrowSpan) {
         // Blocks of 8 until one reaches the tile's top (uncut stock, the
         // rows ahead of a raster: the first block).
-        double top = -kInf;
-        for (int32_t i = i_lo; i <= i_hi && top < zmax; i += 8) {
-          const int32_t end = std::min(i + 8, i_hi + 1);
-          double block = w[k0 + i];
-#pragma omp simd reduction(max : block)
-          for (int32_t q = i + 1; q < end; ++q) {
-            block = std::max(block, w[k0 + q]);
-          }
-          top = std::max(top, block);
-        }
+        const double top = SpanTop(w + k0 + i_lo, i_hi - i_lo + 1, zmax);
         if (!(lowest < top)) continue;
         if constexpr (std::is_same_v<S, BallSweep>) {
           if (top < zmax) {
@@ -283,19 +335,9 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
           }
         }
       }
-      // A copy: clang's simd region may not capture a structured binding.
-      const int32_t first = i_lo;
-      const int32_t count = i_hi - first + 1;
+      const int32_t count = i_hi - i_lo + 1;
       if (n + count > kChunk) flush();
-      double* __restrict const px = cx + n;
-      double* __restrict const py = cy + n;
-      int32_t* __restrict const pk = ck + n;
-#pragma omp simd
-      for (int32_t q = 0; q < count; ++q) {
-        px[q] = x0 + (first + q) * dx;  // as GridGeometry::NodeX: bit-identical
-        py[q] = y;
-        pk[q] = k0 + first + q;
-      }
+      GatherRow(x0, dx, i_lo, count, y, k0, w, cx + n, cy + n, ck + n, cw + n);
       n += count;
     }
     if (n > 0) flush();

@@ -19,6 +19,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "core/flag_words.h"
 #include "core/thread_pool.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -350,6 +351,27 @@ TEST(WorkpieceTest, OrderAndBatchIndependent) {
 // Exact ties: the same move applied twice keeps the lower id as owner,
 // whether the copies share a batch or not, and a batch that changes nothing
 // leaves versions alone.
+// CutTile lowers only the nodes ForEachFlagged visits: each set flag once,
+// in order, at every length and density (words of 8, partial words).
+TEST(FlagWordsTest, VisitsEachSetFlagInOrder) {
+  std::mt19937 rng(7);
+  for (int32_t n : {0, 1, 7, 8, 9, 63, 64, 65, 256}) {
+    for (double density : {0.0, 0.05, 0.5, 1.0}) {
+      std::vector<uint8_t> flag(FlagBytes(n), 0xff);
+      std::vector<int32_t> want;
+      std::bernoulli_distribution set(density);
+      for (int32_t q = 0; q < n; ++q) {
+        flag[q] = set(rng) ? 1 : 0;
+        if (flag[q] != 0) want.push_back(q);
+      }
+      ClearFlagTail(flag.data(), n);
+      std::vector<int32_t> got;
+      ForEachFlagged(flag.data(), n, [&](int32_t q) { got.push_back(q); });
+      EXPECT_EQ(got, want) << "n " << n << ", density " << density;
+    }
+  }
+}
+
 TEST(WorkpieceTest, ExactTieKeepsLowerId) {
   const Move groove{{2, 3, 8.5}, {30, 20, 9}, 2};
   const Move other{{35, 5, 9.5}, {35, 5, 9.5}, 1};
