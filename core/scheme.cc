@@ -278,13 +278,19 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x,
     // inside[q]: e.guard.inside[k] || r.Contains(x[q], y[q]).
     const bool all = e.guard.inside[k] || !r.bounded;
     const bool none = !all && r.empty;
-    std::fill_n(inside, n, all ? 1.0 : 0.0);
+    const double fill = all ? 1.0 : 0.0;
+    // A simd loop: std::fill_n's scalar stores were a tenth of this call.
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) inside[q] = fill;
     BoxSide side = all ? BoxSide::kInside : none ? BoxSide::kOutside
                                                   : BoxSide::kMixed;
     if (side == BoxSide::kMixed && box < 0) take_box();
     if (side == BoxSide::kMixed && box == 1) {
       side = CapsuleBoxSide(r.capsule, box_x0, box_y0, box_x1, box_y1);
-      if (side == BoxSide::kInside) std::fill_n(inside, n, 1.0);
+      if (side == BoxSide::kInside) {
+#pragma omp simd
+        for (int32_t q = 0; q < n; ++q) inside[q] = 1.0;
+      }
     }
     if (side == BoxSide::kMixed) {
       const CornerReach::Capsule& cs = r.capsule;
