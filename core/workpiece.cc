@@ -47,26 +47,6 @@ struct Workpiece::TileJets {
 
 namespace {
 
-// Node index range [lo, hi] within [0, max] of the nodes origin + k * step
-// that lie in [a, b] (inv_step = 1 / step; the ranges only need to be
-// conservative, footprints carry a margin); lo > hi if none.
-std::pair<int32_t, int32_t> NodeRange(double a, double b, double origin,
-                                      double inv_step, int32_t max) {
-  // Clamped to [-1, max + 1] first, so that the integer conversions below
-  // are exact ceil/floor without libm calls.
-  const double top = max + 1.0;
-  const double fa = std::min(std::max((a - origin) * inv_step, -1.0), top);
-  const double fb = std::min(std::max((b - origin) * inv_step, -1.0), top);
-  int32_t lo = static_cast<int32_t>(fa);  // truncation: ceil for fa <= 0
-  if (lo < fa) ++lo;
-  int32_t hi = static_cast<int32_t>(fb);  // floor for fb >= 0
-  if (hi > fb) --hi;
-  lo = std::max(lo, 0);
-  hi = std::min(hi, max);
-  if (!(fa == fa) || !(fb == fb) || lo > hi) return {1, 0};  // NaN: none
-  return {lo, hi};
-}
-
 // The highest of w[0..n) (heights, never NaN), or a value at or above cap
 // as soon as a block of 8 reaches it: callers need the exact top only
 // below cap. Without NaNs, maxima in any order are the same.
@@ -300,11 +280,17 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     j_lo = std::max(j_lo, j_base);
     const double lowest = sweep.lowest();
     const double zmax = tile->zmax;
+    // The footprint's node range on each row, rows at a time (j_lo is in
+    // the tile: at most a tile's rows).
+    int32_t row_lo[kTileSize], row_hi[kTileSize];
+    if (j_hi >= j_lo) {
+      RowNodeRanges(cap, y0, dy, j_lo, j_hi - j_lo + 1, x0, inv_dx, i_max,
+                    row_lo, row_hi);
+    }
     for (int32_t j = j_lo; j <= j_hi; ++j) {
       const double y = y0 + j * dy;  // as GridGeometry::NodeY
-      const Interval span = cap.RowSpan(y);
-      if (span.empty()) continue;
-      auto [i_lo, i_hi] = NodeRange(span.lo, span.hi, x0, inv_dx, i_max);
+      int32_t i_lo = row_lo[j - j_lo], i_hi = row_hi[j - j_lo];
+      if (i_lo > i_hi) continue;
       i_lo = std::max(i_lo, i_base);
       if (i_lo > i_hi) continue;
       const int32_t k0 = (j - j_base) * kTileSize - i_base;  // node i's: k0 + i

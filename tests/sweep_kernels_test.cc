@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "core/cutter/ball_sweep.h"
+#include "core/cutter/capsule.h"
 #include "core/cutter/hypot.h"
 #include "gtest/gtest.h"
 
@@ -85,6 +86,57 @@ TEST(SweepKernelsTest, HeightsMatchHeightBitForBit) {
     }
   }
   EXPECT_GT(points, 100000);
+}
+
+// CutTile's rows: RowNodeRanges is RowSpan and NodeRange, row by row, for
+// capsules in every direction (along x, along y, diagonal, points), rows
+// that miss, and spans clipped at the grid's ends.
+TEST(SweepKernelsTest, RowNodeRangesMatchRowSpanAndNodeRange) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> pos(-2, 12), rad(0.01, 3);
+  const double x0 = 0.05, dx = 0.1, y0 = -0.3, dy = 0.07;
+  const int32_t i_max = 100;
+  int32_t rows_hit = 0, rows_missed = 0;
+  for (int k = 0; k < 4000; ++k) {
+    Capsule c;
+    c.empty = false;
+    c.x0 = pos(rng);
+    c.y0 = pos(rng);
+    switch (k % 4) {
+      case 0:
+        c.x1 = pos(rng), c.y1 = pos(rng);
+        break;  // diagonal
+      case 1:
+        c.x1 = c.x0, c.y1 = pos(rng);
+        break;  // along y
+      case 2:
+        c.x1 = pos(rng), c.y1 = c.y0;
+        break;  // along x
+      default:
+        c.x1 = c.x0, c.y1 = c.y0;
+        break;  // a point
+    }
+    c.radius = rad(rng);
+    FillDirection(&c);
+    const int32_t j0 = static_cast<int32_t>(rng() % 40) - 5;
+    const int32_t n = 1 + static_cast<int32_t>(rng() % 200);
+    std::vector<int32_t> lo(n), hi(n);
+    RowNodeRanges(c, y0, dy, j0, n, x0, 1 / dx, i_max, lo.data(), hi.data());
+    for (int32_t q = 0; q < n; ++q) {
+      const Interval span = c.RowSpan(y0 + (j0 + q) * dy);
+      auto [want_lo, want_hi] = NodeRange(span.lo, span.hi, x0, 1 / dx, i_max);
+      if (span.empty() || want_lo > want_hi) {
+        ++rows_missed;
+        EXPECT_GT(lo[q], hi[q]) << "capsule " << k << ", row " << q;
+      } else {
+        ++rows_hit;
+        EXPECT_EQ(lo[q], want_lo) << "capsule " << k << ", row " << q;
+        EXPECT_EQ(hi[q], want_hi) << "capsule " << k << ", row " << q;
+      }
+    }
+  }
+  EXPECT_GT(rows_hit, 10000);
+  EXPECT_GT(rows_missed, 10000);
 }
 
 TEST(SweepKernelsTest, LocateAndJetsMatchTheScalarPath) {

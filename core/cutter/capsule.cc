@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/target_clones.h"
+
 namespace swarf {
 namespace {
 
@@ -10,7 +12,110 @@ namespace {
 // that results do not depend on batching.
 constexpr double kFootprintMargin = 1e-9;
 
+// std::max(a, b) and std::min(a, b) by value (selects in a loop, where
+// the references were branches).
+[[gnu::always_inline]] inline double MaxOf(double a, double b) {
+  return a < b ? b : a;
+}
+[[gnu::always_inline]] inline double MinOf(double a, double b) {
+  return b < a ? b : a;
+}
+
+// Interval::Hull of [lo, hi] with [o_lo, o_hi] where `take`, as selects,
+// with the empty interval as [+inf, -inf] (Interval's is [1, 0]): the
+// first hull is then the minimum and maximum with infinities, the same
+// bits as taking the other interval (the vectorizer did not take the test
+// for an empty one).
+[[gnu::always_inline]] inline void HullWhere(bool take, double o_lo,
+                                             double o_hi, double& lo,
+                                             double& hi) {
+  const bool apply = take & (o_lo <= o_hi);  // o is not empty
+  lo = apply ? MinOf(lo, o_lo) : lo;
+  hi = apply ? MaxOf(hi, o_hi) : hi;
+}
+
+// The band's clips of Capsule::RowSpan, by which of them are degenerate
+// (a direction component 0: a test instead of a clip): decided per capsule
+// outside the loop, so that the loop is selects only.
+enum Strip { kNoStrip, kBothClips, kUxZero, kUyZero };
+
+// RowNodeRanges for one kind of band.
+template <Strip kStrip>
+[[gnu::always_inline]] inline void RowNodeRangesOf(const Capsule& c, double y0,
+                                                   double dy, int32_t j0,
+                                                   int32_t n, double x0,
+                                                   double inv_dx, int32_t i_max,
+                                                   int32_t* __restrict out_lo,
+                                                   int32_t* __restrict out_hi) {
+  const double r2 = c.radius * c.radius;
+  const double ax = c.x0, ay = c.y0, bx = c.x1, by = c.y1;
+  const double ux = c.ux, uy = c.uy, length = c.length, radius = c.radius;
+  // ClipLinear's bounds, swapped where its slope is negative.
+  const double inv_a1 = c.inv_ux, inv_a2 = -c.inv_uy;
+  const double c1_lo = ux < 0 ? length : 0, c1_hi = ux < 0 ? 0 : length;
+  const double c2_lo = -uy < 0 ? radius : -radius;
+  const double c2_hi = -uy < 0 ? -radius : radius;
+  const double top = i_max + 1.0;
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) {
+    const double y = y0 + (j0 + q) * dy;
+    const double dy0 = y - ay, dy1 = y - by;
+    const double q0 = r2 - dy0 * dy0, q1 = r2 - dy1 * dy1;
+    double lo = kInf, hi = -kInf;                         // empty (HullWhere)
+    const double w0 = std::sqrt(q0), w1 = std::sqrt(q1);  // NaN: not taken
+    HullWhere(q0 >= 0, ax - w0, ax + w0, lo, hi);
+    HullWhere(q1 >= 0, bx - w1, bx + w1, lo, hi);
+    if constexpr (kStrip != kNoStrip) {
+      double s_lo = -kInf, s_hi = kInf;
+      bool none = false;
+      const double b1 = dy0 * uy - ax * ux;
+      if constexpr (kStrip == kUxZero) {
+        none = none | (b1 < 0) | (b1 > length);
+      } else {
+        s_lo = MaxOf(s_lo, (c1_lo - b1) * inv_a1);
+        s_hi = MinOf(s_hi, (c1_hi - b1) * inv_a1);
+      }
+      const double b2 = ax * uy + dy0 * ux;
+      if constexpr (kStrip == kUyZero) {
+        none = none | (b2 < -radius) | (b2 > radius);
+      } else {
+        s_lo = MaxOf(s_lo, (c2_lo - b2) * inv_a2);
+        s_hi = MinOf(s_hi, (c2_hi - b2) * inv_a2);
+      }
+      HullWhere(!none, s_lo, s_hi, lo, hi);
+    }
+    // NodeRange(lo, hi, x0, inv_dx, i_max), none where the span is empty.
+    const double fa = MinOf(MaxOf((lo - x0) * inv_dx, -1.0), top);
+    const double fb = MinOf(MaxOf((hi - x0) * inv_dx, -1.0), top);
+    // NodeRange's truncations and steps are ceil(fa) and floor(fb) on
+    // [-1, i_max + 1]; as doubles, so that every select is on a double's
+    // comparison (its integer conversions were branches).
+    const bool nan = !(fa == fa) | !(fb == fb);
+    const double c = std::ceil(fa), f = std::floor(fb);
+    const double i_lo = c < 0 ? 0.0 : c;
+    const double i_hi = top - 1 < f ? top - 1 : f;
+    const bool empty = !(lo <= hi) | nan | (i_lo > i_hi);
+    out_lo[q] = static_cast<int32_t>(empty ? 1.0 : i_lo);
+    out_hi[q] = static_cast<int32_t>(empty ? 0.0 : i_hi);
+  }
+}
+
 }  // namespace
+
+SWARF_TARGET_CLONES
+void RowNodeRanges(const Capsule& c, double y0, double dy, int32_t j0,
+                   int32_t n, double x0, double inv_dx, int32_t i_max,
+                   int32_t* lo, int32_t* hi) {
+  if (!(c.length > 0)) {
+    RowNodeRangesOf<kNoStrip>(c, y0, dy, j0, n, x0, inv_dx, i_max, lo, hi);
+  } else if (c.ux == 0) {
+    RowNodeRangesOf<kUxZero>(c, y0, dy, j0, n, x0, inv_dx, i_max, lo, hi);
+  } else if (c.uy == 0) {
+    RowNodeRangesOf<kUyZero>(c, y0, dy, j0, n, x0, inv_dx, i_max, lo, hi);
+  } else {
+    RowNodeRangesOf<kBothClips>(c, y0, dy, j0, n, x0, inv_dx, i_max, lo, hi);
+  }
+}
 
 void FillDirection(Capsule* c) {
   c->length = std::hypot(c->x1 - c->x0, c->y1 - c->y0);

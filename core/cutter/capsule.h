@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <limits>
 #include <utility>
 
@@ -68,6 +69,34 @@ struct Capsule {
 // Fills c's direction fields (ux, uy, length, inv_ux, inv_uy) from its
 // ends.
 void FillDirection(Capsule* c);
+
+// Node index range [lo, hi] within [0, max] of the nodes origin + k * step
+// that lie in [a, b] (inv_step = 1 / step; the ranges only need to be
+// conservative, footprints carry a margin); lo > hi if none.
+inline std::pair<int32_t, int32_t> NodeRange(double a, double b, double origin,
+                                             double inv_step, int32_t max) {
+  // Clamped to [-1, max + 1] first, so that the integer conversions below
+  // are exact ceil/floor without libm calls.
+  const double top = max + 1.0;
+  const double fa = std::min(std::max((a - origin) * inv_step, -1.0), top);
+  const double fb = std::min(std::max((b - origin) * inv_step, -1.0), top);
+  int32_t lo = static_cast<int32_t>(fa);  // truncation: ceil for fa <= 0
+  if (lo < fa) ++lo;
+  int32_t hi = static_cast<int32_t>(fb);  // floor for fb >= 0
+  if (hi > fb) --hi;
+  lo = std::max(lo, 0);
+  hi = std::min(hi, max);
+  if (!(fa == fa) || !(fb == fb) || lo > hi) return {1, 0};  // NaN: none
+  return {lo, hi};
+}
+
+// For the rows y = y0 + j * dy (as GridGeometry::NodeY), j0 <= j < j0 + n:
+// lo[q], hi[q] (q = j - j0) = NodeRange(c.RowSpan(y)'s ends, x0, inv_dx,
+// i_max), and lo > hi where RowSpan is empty: the same values as those
+// calls, rows at a time (vectorized). c is not empty.
+void RowNodeRanges(const Capsule& c, double y0, double dy, int32_t j0,
+                   int32_t n, double x0, double inv_dx, int32_t i_max,
+                   int32_t* lo, int32_t* hi);
 
 // The footprint below `cap` of a straight move of cutter `c` between two
 // tool tips: the part of the segment where the tip is below cap, widened by
