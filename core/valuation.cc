@@ -20,14 +20,45 @@ struct Partial {
   int64_t n = 0;
 };
 
+// std::max and std::min by value: on references, reductions were
+// branches the vectorizer did not take.
+inline double Max(double a, double b) { return a < b ? b : a; }
+inline double Min(double a, double b) { return b < a ? b : a; }
+
 // The largest of v[0..n), n >= 1. Heights are never NaN (minima that start
 // at the stock top), so the order of comparison does not matter: a
 // vectorized reduction, in registers.
+SWARF_TARGET_CLONES
 double Highest(const double* v, int32_t n) {
   double m = v[0];
 #pragma omp simd reduction(max : m)
-  for (int32_t q = 1; q < n; ++q) m = std::max(m, v[q]);
+  for (int32_t q = 1; q < n; ++q) m = Max(m, v[q]);
   return m;
+}
+
+// dx[q] = x[q] - xc and dy[q] = y[q] - yc for q < n (n >= 1), and their
+// ranges: range = {min dx, max dx, min dy, max dy}. The coordinates are
+// finite and a difference is never -0, so the order of the comparisons
+// does not matter: vectorized reductions.
+SWARF_TARGET_CLONES
+void OffsetsFrom(const double* __restrict x, const double* __restrict y,
+                 int32_t n, double xc, double yc, double* __restrict dx,
+                 double* __restrict dy, double range[4]) {
+  double dx_lo = x[0] - xc, dx_hi = dx_lo;
+  double dy_lo = y[0] - yc, dy_hi = dy_lo;
+#pragma omp simd reduction(min : dx_lo, dy_lo) reduction(max : dx_hi, dy_hi)
+  for (int32_t q = 0; q < n; ++q) {
+    dx[q] = x[q] - xc;
+    dy[q] = y[q] - yc;
+    dx_lo = Min(dx_lo, dx[q]);
+    dx_hi = Max(dx_hi, dx[q]);
+    dy_lo = Min(dy_lo, dy[q]);
+    dy_hi = Max(dy_hi, dy[q]);
+  }
+  range[0] = dx_lo;
+  range[1] = dx_hi;
+  range[2] = dy_lo;
+  range[3] = dy_hi;
 }
 
 // Adds err[0..n) to the sums in sample order (the same additions as one
@@ -559,7 +590,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         // Own points only: the cap bounds the surface where this element
         // evaluates it.
         double* const oest = row_oest.data() + off;
-        std::fill_n(oest, el.own_padded, z_top);
+#pragma omp simd
+        for (int32_t q = 0; q < el.own_padded; ++q) oest[q] = z_top;
         const int32_t* owners = el.e.owner;
         for (int k = 0; k < 4; ++k) {
           bool seen = owners[k] < 0;
@@ -603,17 +635,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         // there (taken once, not for every plane).
         double* const odx = offset_x.data();
         double* const ody = offset_y.data();
-        double dx_lo = oxs[0] - xc, dx_hi = dx_lo;
-        double dy_lo = oys[0] - yc, dy_hi = dy_lo;
-#pragma omp simd reduction(min : dx_lo, dy_lo) reduction(max : dx_hi, dy_hi)
-        for (int32_t q = 0; q < el.own_padded; ++q) {
-          odx[q] = oxs[q] - xc;
-          ody[q] = oys[q] - yc;
-          dx_lo = std::min(dx_lo, odx[q]);
-          dx_hi = std::max(dx_hi, odx[q]);
-          dy_lo = std::min(dy_lo, ody[q]);
-          dy_hi = std::max(dy_hi, ody[q]);
-        }
+        double range[4];
+        OffsetsFrom(oxs, oys, el.own_padded, xc, yc, odx, ody, range);
+        const double dx_lo = range[0], dx_hi = range[1], dy_lo = range[2],
+                     dy_hi = range[3];
         // Whether a plane through (xc, yc) is at or above every own point's
         // est. First at the corners of the offsets' box, where it is lowest
         // (products and sums round monotonically; any other rounding is far
