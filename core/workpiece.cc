@@ -47,12 +47,12 @@ struct Workpiece::TileJets {
 
 namespace {
 
-// The highest of w[0..n) (heights, never NaN), or a value at or above cap
-// as soon as a block of 8 reaches it: callers need the exact top only
-// below cap. Without NaNs, maxima in any order are the same.
 // std::max by value: on references, the lanes' maxima were branches.
 inline double Max(double a, double b) { return a < b ? b : a; }
 
+// The highest of w[0..n) (heights, never NaN), or a value at or above cap
+// as soon as a block of 8 reaches it: callers need the exact top only
+// below cap. Without NaNs, maxima in any order are the same.
 SWARF_TARGET_CLONES
 double SpanTop(const double* __restrict w, int32_t n, double cap) {
   double top = -kInf;
