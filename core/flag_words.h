@@ -15,7 +15,8 @@ inline constexpr int32_t FlagBytes(int32_t n) { return (n + 7) & ~7; }
 
 // Zeroes the bytes past n up to FlagBytes(n).
 inline void ClearFlagTail(uint8_t* flag, int32_t n) {
-  std::memset(flag + n, 0, FlagBytes(n) - n);
+  // Nothing past a whole word (an empty array may have no storage).
+  if (FlagBytes(n) > n) std::memset(flag + n, 0, FlagBytes(n) - n);
 }
 
 // Calls f(q) for each q < n whose flag is 1, in ascending order. `flag`
