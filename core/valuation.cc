@@ -11,6 +11,7 @@
 #include "absl/strings/str_cat.h"
 #include "core/cutter/sweep.h"
 #include "core/target_clones.h"
+#include "core/value_minmax.h"
 
 namespace swarf {
 namespace {
@@ -20,11 +21,6 @@ struct Partial {
   int64_t n = 0;
 };
 
-// std::max and std::min by value: on references, reductions were
-// branches the vectorizer did not take.
-inline double Max(double a, double b) { return a < b ? b : a; }
-inline double Min(double a, double b) { return b < a ? b : a; }
-
 // The largest of v[0..n), n >= 1. Heights are never NaN (minima that start
 // at the stock top), so the order of comparison does not matter: a
 // vectorized reduction, in registers.
@@ -32,7 +28,7 @@ SWARF_TARGET_CLONES
 double Highest(const double* v, int32_t n) {
   double m = v[0];
 #pragma omp simd reduction(max : m)
-  for (int32_t q = 1; q < n; ++q) m = Max(m, v[q]);
+  for (int32_t q = 1; q < n; ++q) m = MaxOf(m, v[q]);
   return m;
 }
 
@@ -50,10 +46,10 @@ void OffsetsFrom(const double* __restrict x, const double* __restrict y,
   for (int32_t q = 0; q < n; ++q) {
     dx[q] = x[q] - xc;
     dy[q] = y[q] - yc;
-    dx_lo = Min(dx_lo, dx[q]);
-    dx_hi = Max(dx_hi, dx[q]);
-    dy_lo = Min(dy_lo, dy[q]);
-    dy_hi = Max(dy_hi, dy[q]);
+    dx_lo = MinOf(dx_lo, dx[q]);
+    dx_hi = MaxOf(dx_hi, dx[q]);
+    dy_lo = MinOf(dy_lo, dy[q]);
+    dy_hi = MaxOf(dy_hi, dy[q]);
   }
   range[0] = dx_lo;
   range[1] = dx_hi;

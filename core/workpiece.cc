@@ -12,6 +12,7 @@
 #include "core/flag_words.h"
 #include "core/status_macros.h"
 #include "core/target_clones.h"
+#include "core/value_minmax.h"
 
 namespace swarf {
 
@@ -47,9 +48,6 @@ struct Workpiece::TileJets {
 
 namespace {
 
-// std::max by value: on references, the lanes' maxima were branches.
-inline double Max(double a, double b) { return a < b ? b : a; }
-
 // The highest of w[0..n) (heights, never NaN), or a value at or above cap
 // as soon as a block of 8 reaches it: callers need the exact top only
 // below cap. Without NaNs, maxima in any order are the same.
@@ -63,10 +61,10 @@ double SpanTop(const double* __restrict w, int32_t n, double cap) {
     double m[4];
 #pragma omp simd
     for (int32_t q = 0; q < 4; ++q) m[q] = std::max(w[i + q], w[i + q + 4]);
-    top = Max(top, Max(Max(m[0], m[1]), Max(m[2], m[3])));
+    top = MaxOf(top, MaxOf(MaxOf(m[0], m[1]), MaxOf(m[2], m[3])));
     if (!(top < cap)) return top;
   }
-  for (; i < n; ++i) top = Max(top, w[i]);
+  for (; i < n; ++i) top = MaxOf(top, w[i]);
   return top;
 }
 

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/target_clones.h"
+#include "core/value_minmax.h"
 
 namespace swarf {
 namespace {
@@ -11,15 +12,6 @@ namespace {
 // As the ball sweep's: keeps the footprint conservative under rounding, so
 // that results do not depend on batching.
 constexpr double kFootprintMargin = 1e-9;
-
-// std::max(a, b) and std::min(a, b) by value (selects in a loop, where
-// the references were branches).
-[[gnu::always_inline]] inline double MaxOf(double a, double b) {
-  return a < b ? b : a;
-}
-[[gnu::always_inline]] inline double MinOf(double a, double b) {
-  return b < a ? b : a;
-}
 
 // Interval::Hull of [lo, hi] with [o_lo, o_hi] where `take`, as selects,
 // with the empty interval as [+inf, -inf] (Interval's is [1, 0]): the
