@@ -227,19 +227,32 @@ template <bool kLifted>
   }
 }
 
-// Points per call of SmoothChunk.
+// Points per call of SmoothChunk (a multiple of 8).
 constexpr int32_t kGuardedChunk = 64;
 
-// Guarded() at n <= kGuardedChunk points of a smooth element with surfaces,
-// corner by corner in vectorized loops: each point sees the same operations
-// in the same order (its reach test, each lifted patch and the running
-// minimum, the hidden test). A capsule that holds all the points or none is
-// decided once (CapsuleBoxSide). Points where a corner is hidden take the
-// true surface one by one (TakeLowest), as Guarded does.
+// Guarded() at 1 <= n_in <= kGuardedChunk points of a smooth element with
+// surfaces, corner by corner in vectorized loops: each point sees the same
+// operations in the same order (its reach test, each lifted patch and the
+// running minimum, the hidden test). A capsule that holds all the points or
+// none is decided once (CapsuleBoxSide). Points where a corner is hidden
+// take the true surface one by one (TakeLowest), as Guarded does.
 SWARF_TARGET_CLONES
-void SmoothChunk(const ElementCorners& e, const double* __restrict x,
-                 const double* __restrict y, int32_t n,
+void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
+                 const double* __restrict y_in, int32_t n_in,
                  double* __restrict out) {
+  // The points padded to a multiple of 8 with copies of the last: the
+  // vector loops then have no scalar remainder (with the valuation's 21
+  // points an element, the remainders took a third of this call). A copy's
+  // values are the last point's and are not written out; it does not widen
+  // the points' box.
+  double x[kGuardedChunk], y[kGuardedChunk];
+  const int32_t n = (n_in + 7) & ~7;
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) {
+    const int32_t from = q < n_in ? q : n_in - 1;
+    x[q] = x_in[from];
+    y[q] = y_in[from];
+  }
   // Flags as doubles (0 or 1) beside the doubles, and loop-invariant tests
   // outside the loops, so that every loop is selects the vectorizer takes.
   double in[4][kGuardedChunk], s[kGuardedChunk], t[kGuardedChunk];
@@ -262,7 +275,7 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x,
     box_x0 = box_x1 = x[0];
     box_y0 = box_y1 = y[0];
     bool finite = true;
-    for (int32_t q = 0; q < n; ++q) {
+    for (int32_t q = 0; q < n_in; ++q) {
       finite &= std::isfinite(x[q]) & std::isfinite(y[q]);
       box_x0 = std::min(box_x0, x[q]);
       box_x1 = std::max(box_x1, x[q]);
@@ -336,17 +349,21 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x,
   // below them) as flags in one vectorized loop; then those take the true
   // surface.
   double hidden[kGuardedChunk];
+  double hidden_count = 0;  // exact: a sum of at most 64 ones
   const double c0 = e.c[0].w, c1 = e.c[1].w, c2 = e.c[2].w, c3 = e.c[3].w;
-#pragma omp simd
+#pragma omp simd reduction(+ : hidden_count)
   for (int32_t q = 0; q < n; ++q) {
     const bool h = (any[q] == 0) | ((in[0][q] == 0) & (c0 < w[q])) |
                    ((in[1][q] == 0) & (c1 < w[q])) |
                    ((in[2][q] == 0) & (c2 < w[q])) |
                    ((in[3][q] == 0) & (c3 < w[q]));
     hidden[q] = h ? 1.0 : 0.0;
-    out[q] = w[q];
+    hidden_count += hidden[q];
   }
-  for (int32_t q = 0; q < n; ++q) {
+#pragma omp simd
+  for (int32_t q = 0; q < n_in; ++q) out[q] = w[q];
+  if (hidden_count == 0) return;
+  for (int32_t q = 0; q < n_in; ++q) {
     if (hidden[q] == 0) continue;
     GuardedValue v;
     v.w = w[q];

@@ -16,6 +16,10 @@
 namespace swarf {
 namespace {
 
+// Elements of a row (at most MoveIndex::kBinElements) whose near moves are
+// taken together before each element's own test.
+constexpr int32_t kBlockElements = 4;
+
 struct Partial {
   double sum = 0, sum_sq = 0, max = -1, max_x = 0, max_y = 0;
   int64_t n = 0;
@@ -30,6 +34,14 @@ double Highest(const double* v, int32_t n) {
 #pragma omp simd reduction(max : m)
   for (int32_t q = 1; q < n; ++q) m = MaxOf(m, v[q]);
   return m;
+}
+
+// est[q] = std::min(est[q], h[q]) for q < n: cloned (in the traversal's
+// lambda the loop took two lanes at a time).
+SWARF_TARGET_CLONES
+void LowerTo(const double* __restrict h, int32_t n, double* __restrict est) {
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) est[q] = MinOf(est[q], h[q]);
 }
 
 // dx[q] = x[q] - xc and dy[q] = y[q] - yc for q < n (n >= 1), and their
@@ -82,8 +94,10 @@ void OffsetsFrom(const double* __restrict x, const double* __restrict y,
 
 // Moves of a bin, in bin order, as arrays: their footprint boxes, lowest
 // points, and FootprintGap parts; `k` their index in the bin. Holds at most
-// `capacity` moves (Reset: arrays of at least that size, written in place:
-// no push_back on thirteen arrays a move).
+// `capacity` moves (Reset: arrays of at least that size rounded up to 8,
+// written in place: no push_back on thirteen arrays a move). The entries
+// from size() to padded() hold stale values: vector loops run over them
+// (no scalar remainder) and their results are ignored.
 struct RowMoves {
   std::vector<double> x0, x1, y0, y1, lowest, ball, gx0, gx1, gy0, gy1, z_r, r2;
   std::vector<int32_t> k;
@@ -92,19 +106,22 @@ struct RowMoves {
   // reuses them from bin to bin instead of allocating and zeroing them.
   void Reset(int32_t capacity) {
     n = 0;
-    if (static_cast<int32_t>(k.size()) >= capacity) return;
+    const int32_t size = Padded(capacity);
+    if (static_cast<int32_t>(k.size()) >= size) return;
     for (std::vector<double>* v : {&x0, &x1, &y0, &y1, &lowest, &ball, &gx0,
                                    &gx1, &gy0, &gy1, &z_r, &r2}) {
-      v->resize(capacity);
+      v->resize(size);
     }
-    k.resize(capacity);
+    k.resize(size);
   }
+  static int32_t Padded(int32_t n) { return (n + 7) & ~7; }
   // Gives the arrays back where they grew past `keep` moves.
   void Trim(int32_t keep) {
     if (static_cast<int32_t>(k.size()) > keep) *this = RowMoves();
   }
   void Clear() { n = 0; }
-  void Add(const Rect& box, double low, const FootprintGap& g, int32_t at) {
+  [[gnu::always_inline]] void Add(const Rect& box, double low,
+                                  const FootprintGap& g, int32_t at) {
     x0[n] = box.x0;
     x1[n] = box.x1;
     y0[n] = box.y0;
@@ -119,14 +136,15 @@ struct RowMoves {
     r2[n] = g.r2;
     k[n++] = at;
   }
-  // Appends move q to *to.
-  void CopyFrom(int32_t q, RowMoves* to) const {
+  // Appends move q to *to. Inlined: the calls cost more than the copies.
+  [[gnu::always_inline]] void CopyFrom(int32_t q, RowMoves* to) const {
     to->Add(
         Rect{x0[q], y0[q], x1[q], y1[q]}, lowest[q],
         FootprintGap{ball[q], gx0[q], gx1[q], gy0[q], gy1[q], z_r[q], r2[q]},
         k[q]);
   }
   int32_t size() const { return n; }
+  int32_t padded() const { return Padded(n); }
 };
 
 // Whether plane (touching its surface at (xc, yc)) less its slack is at or
@@ -149,11 +167,12 @@ bool PlaneAtOrAbove(const BallSweep::SupportPlane& plane,
 // pass[q] = 1 where move q may cut into `box` below `cap`: its box meets it,
 // its lowest point is below cap, and FootprintGap does not rule it out;
 // else 0. Each test only passes more moves for a larger box or a higher
-// cap. Selects only: one vectorized loop.
+// cap. Selects only: one vectorized loop, over row.padded() entries (those
+// past size() to be ignored).
 SWARF_TARGET_CLONES
 void MovesThatMayCut(const RowMoves& row, const Rect& element, double cap,
                      double* __restrict pass) {
-  const int32_t n = row.size();
+  const int32_t n = row.padded();
   // A copy: read through the reference, the loop did not vectorize.
   const Rect box = element;
   const double* __restrict x0 = row.x0.data();
@@ -363,9 +382,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     const int32_t bin_size = static_cast<int32_t>(ids.size());
     // This thread's, reused (a bin's moves are about 1,250 on the plate
     // job; larger arrays are given back once the bin is done).
-    thread_local RowMoves bin_moves, near;
+    thread_local RowMoves bin_moves, near, block;
     bin_moves.Reset(bin_size);
     near.Reset(bin_size);
+    block.Reset(bin_size);
     for (int32_t k = 0; k < bin_size; ++k) {
       const Move m = wp.move(static_cast<int32_t>(ids[k]));
       bin_moves.Add(FootprintCapsule(m.from, m.to, m.cutter, z_top).Bounds(),
@@ -487,15 +507,14 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     auto lower_by = [&h](const Sweep& sweep, const double* x, const double* y,
                          int32_t n, double* est) {
       sweep.Heights(x, y, n, h.data());
-#pragma omp simd
-      for (int32_t q = 0; q < n; ++q) est[q] = std::min(est[q], h[q]);
+      LowerTo(h.data(), n, est);
     };
-    std::vector<double> pass(bin_moves.size());
-    // The tangent plane last taken for each of a row's near moves, and the
-    // point it touches. A plane is below the whole sweep (SupportingPlane's
-    // contract), so it serves the row's next elements too, moved to their
-    // centres, until it fails to show the move above one: about a third of
-    // the planes are taken on the plate job.
+    std::vector<double> pass(bin_moves.padded());
+    // The tangent plane last taken for each of a row's near moves (by index
+    // in the bin), and the point it touches. A plane is below the whole
+    // sweep (SupportingPlane's contract), so it serves the row's next
+    // elements too, moved to their centres, until it fails to show the move
+    // above one: about a third of the planes are taken on the plate job.
     struct HeldPlane {
       double x = 0, y = 0;
       BallSweep::SupportPlane plane{};
@@ -610,8 +629,27 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       for (int32_t q = 0; q < bin_moves.size(); ++q) {
         if (pass[q] != 0) bin_moves.CopyFrom(q, &near);
       }
-      for (int32_t q = 0; q < near.size(); ++q) held[q].held = false;
+      for (int32_t q = 0; q < near.size(); ++q) held[near.k[q]].held = false;
       for (int32_t w = 0; w < row_elements; ++w) {
+        // A block of the row's elements takes the near moves that may cut
+        // into it below its highest cap, and each element tests those alone
+        // (the tests only widen with the box and the cap, so the same moves
+        // pass an element's own test; a row's near moves are about 220 on
+        // the plate job).
+        if (w % kBlockElements == 0) {
+          const int32_t w1 = std::min(w + kBlockElements, row_elements);
+          double block_cap = elements[w].cap;
+          for (int32_t v = w + 1; v < w1; ++v) {
+            block_cap = std::max(block_cap, elements[v].cap);
+          }
+          const Rect block_box{elements[w].box.x0, ey0, elements[w1 - 1].box.x1,
+                               ey1};
+          MovesThatMayCut(near, block_box, block_cap, pass.data());
+          block.Clear();
+          for (int32_t q = 0; q < near.size(); ++q) {
+            if (pass[q] != 0) near.CopyFrom(q, &block);
+          }
+        }
         RowElement& el = elements[w];
         const ElementCorners& e = el.e;
         const int32_t count = el.count;
@@ -648,10 +686,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           return lowest >= cap ||
                  PlaneAtOrAbove(plane, odx, ody, el.own_padded, oest);
         };
-        MovesThatMayCut(near, box, cap, pass.data());
-        for (int32_t q = 0; q < near.size(); ++q) {
+        MovesThatMayCut(block, box, cap, pass.data());
+        for (int32_t q = 0; q < block.size(); ++q) {
           if (pass[q] == 0) continue;
-          const int32_t ck = near.k[q];
+          const int32_t ck = block.k[q];
           // A corner's owner is in est already.
           const int32_t id = static_cast<int32_t>(ids[ck]);
           if (id == owners[0] || id == owners[1] || id == owners[2] ||
@@ -671,7 +709,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           // in a row: fewer of their cycles).
           const Sweep& sweep = bin_sweep(ck);
           if (const BallSweep* ball = sweep.ball()) {
-            HeldPlane& hp = held[q];
+            HeldPlane& hp = held[ck];
             if (hp.held) {
               // Its height at this element's centre (rounding far inside
               // the slack).
@@ -777,6 +815,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     constexpr int32_t kKeptMoves = 1 << 16;
     bin_moves.Trim(kKeptMoves);
     near.Trim(kKeptMoves);
+    block.Trim(kKeptMoves);
   });
 
   ErrorStats stats;

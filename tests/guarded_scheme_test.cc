@@ -297,8 +297,8 @@ TEST(GuardedSchemeTest, SurelyTrustedImpliesTrustAtEveryCorner) {
 // be) and the height with its gradient (HeightAndGradient) are Reconstruct
 // and Gradient bit for bit: on every element of random scenes, at the
 // valuation's 5 x 5 lattice, random points, the edges and corners, and just
-// outside the element. Preparing an element from its nodes' trust regions
-// gives the same element.
+// outside the element, and a few points at a time. Preparing an element from
+// its nodes' trust regions gives the same element.
 TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
   std::mt19937_64 rng(27);
   std::uniform_real_distribution<double> u(0, 1);
@@ -352,6 +352,15 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
         std::vector<double> many(xs.size());
         guarded.ReconstructMany(e, xs.data(), ys.data(),
                                 static_cast<int32_t>(xs.size()), many.data());
+        // Fewer points than a chunk, not a multiple of its vector width
+        // (the kernel pads them): the first 1, 5, 21 and 61.
+        for (int32_t m : {1, 5, 21, 61}) {
+          std::vector<double> few(m);
+          guarded.ReconstructMany(e, xs.data(), ys.data(), m, few.data());
+          for (int32_t q = 0; q < m; ++q) {
+            ASSERT_EQ(std::memcmp(&few[q], &many[q], 8), 0) << m << ": " << q;
+          }
+        }
         for (size_t q = 0; q < xs.size(); ++q) {
           const double w = guarded.Reconstruct(e, xs[q], ys[q]);
           ASSERT_EQ(std::memcmp(&many[q], &w, 8), 0) << xs[q] << ", " << ys[q];
