@@ -1,6 +1,7 @@
 #include "core/scheme.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <string>
 
@@ -194,6 +195,9 @@ inline void LerpInvariant(double a, double b, const double* __restrict t,
   }
 }
 
+// Points per call of SmoothChunk (a multiple of 8).
+constexpr int32_t kGuardedChunk = 64;
+
 // SmoothChunk's arrays for one corner's pass.
 struct CornerPoints {
   const double *x, *y, *inside, *l0, *l1, *t;
@@ -202,8 +206,9 @@ struct CornerPoints {
 
 // A corner's lifted patch (lifted by LerpSelect(l0, l1, t) where kLifted,
 // else by +0) over SmoothChunk's points, and the running minimum where the
-// corner holds them. One loop for both, vectorized in its caller's clone.
-template <bool kLifted>
+// corner holds them (kAll: it holds them all, `inside` is not read). One
+// loop for both, vectorized in its caller's clone.
+template <bool kLifted, bool kAll>
 [[gnu::always_inline]] inline void LowerByCorner(const SurfaceJet& j, double xk,
                                                  double yk, double z_low,
                                                  const CornerPoints& pts,
@@ -221,14 +226,28 @@ template <bool kLifted>
     const double lift = kLifted ? LerpSelect(l0[q], l1[q], t[q]) : 0.0;
     const double raw = EvaluatePatch(j, xk, yk, x[q], y[q]) + lift;
     const double p = raw < z_low ? z_low : raw;  // std::max(raw, z_low)
-    const bool holds = inside[q] != 0;
-    any[q] = holds ? 1.0 : any[q];
-    w[q] = holds & (p < w[q]) ? p : w[q];
+    if constexpr (kAll) {
+      any[q] = 1.0;
+      w[q] = p < w[q] ? p : w[q];
+    } else {
+      const bool holds = inside[q] != 0;
+      any[q] = holds ? 1.0 : any[q];
+      w[q] = holds & (p < w[q]) ? p : w[q];
+    }
   }
 }
 
-// Points per call of SmoothChunk (a multiple of 8).
-constexpr int32_t kGuardedChunk = 64;
+// A chunk's worth of ones and of zeros: the reach flags of a corner that
+// holds every point or none.
+constexpr std::array<double, kGuardedChunk> Filled(double v) {
+  std::array<double, kGuardedChunk> a{};
+  for (double& x : a) x = v;
+  return a;
+}
+alignas(64) constexpr std::array<double, kGuardedChunk> kAllInside =
+    Filled(1.0);
+alignas(64) constexpr std::array<double, kGuardedChunk> kNoneInside =
+    Filled(0.0);
 
 // Guarded() at 1 <= n_in <= kGuardedChunk points of a smooth element with
 // surfaces, corner by corner in vectorized loops: each point sees the same
@@ -248,14 +267,18 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
   double x[kGuardedChunk], y[kGuardedChunk];
   const int32_t n = (n_in + 7) & ~7;
 #pragma omp simd
-  for (int32_t q = 0; q < n; ++q) {
-    const int32_t from = q < n_in ? q : n_in - 1;
-    x[q] = x_in[from];
-    y[q] = y_in[from];
+  for (int32_t q = 0; q < n_in; ++q) {
+    x[q] = x_in[q];
+    y[q] = y_in[q];
+  }
+  for (int32_t q = n_in; q < n; ++q) {
+    x[q] = x_in[n_in - 1];
+    y[q] = y_in[n_in - 1];
   }
   // Flags as doubles (0 or 1) beside the doubles, and loop-invariant tests
   // outside the loops, so that every loop is selects the vectorizer takes.
-  double in[4][kGuardedChunk], s[kGuardedChunk], t[kGuardedChunk];
+  double in_store[4][kGuardedChunk], s[kGuardedChunk], t[kGuardedChunk];
+  const double* in[4];  // corner k's flags: in_store[k], or all 1 or all 0
   double w[kGuardedChunk], any[kGuardedChunk], l0[kGuardedChunk],
       l1[kGuardedChunk];
   const double lx = e.x1 - e.x0, ly = e.y1 - e.y0;
@@ -287,25 +310,23 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
   const CornerXY c = CornersOf(e);
   for (int k = 0; k < 4; ++k) {
     const CornerReach& r = e.reach[k];
-    double* __restrict inside = in[k];
-    // inside[q]: e.guard.inside[k] || r.Contains(x[q], y[q]).
+    // in[k][q]: e.guard.inside[k] || r.Contains(x[q], y[q]); decided for
+    // all the points at once where it can be (no flags to fill).
     const bool all = e.guard.inside[k] || !r.bounded;
     const bool none = !all && r.empty;
-    const double fill = all ? 1.0 : 0.0;
-    // A simd loop: std::fill_n's scalar stores were a tenth of this call.
-#pragma omp simd
-    for (int32_t q = 0; q < n; ++q) inside[q] = fill;
     BoxSide side = all ? BoxSide::kInside : none ? BoxSide::kOutside
                                                   : BoxSide::kMixed;
     if (side == BoxSide::kMixed && box < 0) take_box();
     if (side == BoxSide::kMixed && box == 1) {
       side = CapsuleBoxSide(r.capsule, box_x0, box_y0, box_x1, box_y1);
-      if (side == BoxSide::kInside) {
-#pragma omp simd
-        for (int32_t q = 0; q < n; ++q) inside[q] = 1.0;
-      }
     }
+    in[k] = side == BoxSide::kInside    ? kAllInside.data()
+            : side == BoxSide::kOutside ? kNoneInside.data()
+                                        : in_store[k];
+    // A corner that holds no point lowers none.
+    if (side == BoxSide::kOutside) continue;
     if (side == BoxSide::kMixed) {
+      double* __restrict inside = in_store[k];
       const CornerReach::Capsule& cs = r.capsule;
       const double ax = cs.ax, ay = cs.ay;
       const double ux = cs.bx - ax, uy = cs.by - ay;
@@ -336,13 +357,22 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
     const double* d = e.guard.lift[k];
     const SurfaceJet& j = e.c[k];
     const double xk = c.x[k], yk = c.y[k], z_low = r.z_low;
-    const CornerPoints pts{x, y, inside, l0, l1, t, any, w};
-    if (Unlifted(e, k)) {
-      LowerByCorner<false>(j, xk, yk, z_low, pts, n);  // no lerps to take
+    const CornerPoints pts{x, y, in[k], l0, l1, t, any, w};
+    const bool every = side == BoxSide::kInside;
+    if (Unlifted(e, k)) {  // no lerps to take
+      if (every) {
+        LowerByCorner<false, true>(j, xk, yk, z_low, pts, n);
+      } else {
+        LowerByCorner<false, false>(j, xk, yk, z_low, pts, n);
+      }
     } else {
       LerpInvariant(d[0], d[1], s, n, l0);
       LerpInvariant(d[3], d[2], s, n, l1);
-      LowerByCorner<true>(j, xk, yk, z_low, pts, n);
+      if (every) {
+        LowerByCorner<true, true>(j, xk, yk, z_low, pts, n);
+      } else {
+        LowerByCorner<true, false>(j, xk, yk, z_low, pts, n);
+      }
     }
   }
   // Hidden points (no corner holds them, or a corner out of its reach is
