@@ -36,6 +36,12 @@ double Highest(const double* v, int32_t n) {
   return m;
 }
 
+// At least n entries in *v (the existing ones kept, not zeroed).
+template <typename T>
+void Grow(std::vector<T>* v, size_t n) {
+  if (v->size() < n) v->resize(n);
+}
+
 // est[q] = std::min(est[q], h[q]) for q < n: cloned (in the traversal's
 // lambda the loop took two lanes at a time).
 SWARF_TARGET_CLONES
@@ -410,8 +416,13 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     const bool guarded = scheme.kind() == SchemeKind::kGuarded;
     const int32_t region_w = ei1 - ei0 + 1;
     const size_t region_nodes = static_cast<size_t>(region_w) * (ej1 - ej0 + 1);
-    std::vector<NodeValue> nodes(region_nodes);
-    std::vector<PatchTrustRegion> regions(guarded ? region_nodes : 0);
+    // This thread's scratch arrays, like the rest below, reused from bin to
+    // bin (Grow): each entry is written before it is read, and zeroing them
+    // for each bin cost more than the elements' own steps.
+    thread_local std::vector<NodeValue> nodes;
+    thread_local std::vector<PatchTrustRegion> regions;
+    Grow(&nodes, region_nodes);
+    if (guarded) Grow(&regions, region_nodes);
     // A tile's columns at a time: a bin's last column may be the next
     // tile's first, and a row's reads alternating between the two would
     // each look the tile up in the cache.
@@ -490,26 +501,38 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     // their heights then the last's): the vector loops over them have no
     // scalar remainder, which cost as much as the rest of a call.
     const size_t padded = (lattice + 7) & ~size_t{7};
-    std::vector<RowElement> elements(MoveIndex::kBinElements);
+    thread_local std::vector<RowElement> elements;
+    Grow(&elements, MoveIndex::kBinElements);
     // Every per-element array of a row has `padded` entries an element.
-    std::vector<double> row_xs(MoveIndex::kBinElements * padded),
-        row_ys(row_xs.size()), row_est(row_xs.size()), row_oxs(row_xs.size()),
-        row_oys(row_xs.size()), row_oest(row_xs.size());
+    const size_t row_size = MoveIndex::kBinElements * padded;
+    thread_local std::vector<double> row_xs, row_ys, row_est, row_oxs, row_oys,
+        row_oest;
+    for (std::vector<double>* v :
+         {&row_xs, &row_ys, &row_est, &row_oxs, &row_oys, &row_oest}) {
+      Grow(v, row_size);
+    }
     // The top edges' exact heights of the last row taken (row `top_row`),
     // per element of the bin's row; top_ok where they were all in.
-    std::vector<double> top_est(static_cast<size_t>(ei1 - ei0) * edge);
-    std::vector<char> top_ok(ei1 - ei0, 0);
+    thread_local std::vector<double> top_est;
+    thread_local std::vector<char> top_ok;
+    Grow(&top_est, static_cast<size_t>(ei1 - ei0) * edge);
+    Grow(&top_ok, ei1 - ei0);
     int32_t top_row = -1;
-    std::vector<int64_t> row_cells(mapped ? row_xs.size() : 0);
-    std::vector<double> h(padded), rec(lattice), err(lattice), offset_x(padded),
-        offset_y(padded);
+    thread_local std::vector<int64_t> row_cells;
+    if (mapped) Grow(&row_cells, row_size);
+    thread_local std::vector<double> h, rec, err, offset_x, offset_y;
+    for (std::vector<double>* v : {&h, &rec, &err, &offset_x, &offset_y}) {
+      Grow(v, padded);
+    }
     // est[q] = min(est[q], the sweep's height at (x[q], y[q])), q < n.
-    auto lower_by = [&h](const Sweep& sweep, const double* x, const double* y,
-                         int32_t n, double* est) {
-      sweep.Heights(x, y, n, h.data());
-      LowerTo(h.data(), n, est);
+    double* const heights = h.data();
+    auto lower_by = [heights](const Sweep& sweep, const double* x,
+                              const double* y, int32_t n, double* est) {
+      sweep.Heights(x, y, n, heights);
+      LowerTo(heights, n, est);
     };
-    std::vector<double> pass(bin_moves.padded());
+    thread_local std::vector<double> pass;
+    Grow(&pass, bin_moves.padded());
     // The tangent plane last taken for each of a row's near moves (by index
     // in the bin), and the point it touches. A plane is below the whole
     // sweep (SupportingPlane's contract), so it serves the row's next
@@ -520,7 +543,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       BallSweep::SupportPlane plane{};
       bool held = false;
     };
-    std::vector<HeldPlane> held(bin_moves.size());
+    thread_local std::vector<HeldPlane> held;
+    Grow(&held, bin_moves.size());
     // The bin's sums in locals (registers), stored once at the end.
     Partial p = partials[b];
     for (int32_t ej = ej0; ej < ej1; ++ej) {
@@ -623,7 +647,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       const Rect row_box{elements[0].box.x0, ey0,
                          elements[row_elements - 1].box.x1, ey1};
       MovesThatMayCut(bin_moves, row_box, row_cap, pass.data());
-      std::fill(top_ok.begin(), top_ok.end(), 0);
+      std::fill_n(top_ok.begin(), ei1 - ei0, 0);
       top_row = ej;
       near.Clear();
       for (int32_t q = 0; q < bin_moves.size(); ++q) {
@@ -816,6 +840,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     bin_moves.Trim(kKeptMoves);
     near.Trim(kKeptMoves);
     block.Trim(kKeptMoves);
+    if (bin_size > kKeptMoves) {
+      pass = std::vector<double>();
+      held = std::vector<HeldPlane>();
+    }
   });
 
   ErrorStats stats;
