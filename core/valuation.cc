@@ -36,6 +36,21 @@ double Highest(const double* v, int32_t n) {
   return m;
 }
 
+// err[q] = SampleError(rec[q], est[q]) for q < n, and the largest of them
+// and 0 (a NaN error is passed over, as std::max(m, err) passes it over:
+// the largest of the rest in any order).
+SWARF_TARGET_CLONES
+double ErrorsOf(const double* __restrict rec, const double* __restrict est,
+                int32_t n, double* __restrict err) {
+  double m = 0;
+#pragma omp simd reduction(max : m)
+  for (int32_t q = 0; q < n; ++q) {
+    err[q] = SampleError(rec[q], est[q]);
+    m = MaxOf(m, err[q]);
+  }
+  return m;
+}
+
 // At least n entries in *v (the existing ones kept, not zeroed).
 template <typename T>
 void Grow(std::vector<T>* v, size_t n) {
@@ -766,16 +781,19 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           top_ok[el.ei - ei0] = 1;
         }
         scheme.ReconstructMany(e, xs, ys, count, rec.data());
-        for (int32_t q = 0; q < count; ++q) {
-          err[q] = SampleError(rec[q], est[q]);
-        }
+        const double element_max = ErrorsOf(rec.data(), est, count, err.data());
         const int64_t* const col_cell =
             mapped ? &cell_of_x[static_cast<size_t>(el.ei) * n] : nullptr;
+        // The first column and row in the second cell (n: none).
+        int32_t sx = 1, sy = 1;
         if (el.quarters) {
-          // The first column and row in the second cell (n: none).
-          int32_t sx = 1, sy = 1;
           while (sx < n && col_cell[sx] == col_cell[0]) ++sx;
           while (sy < n && row_cell[sy] == row_cell[0]) ++sy;
+        }
+        if (el.quarters && sx == n && sy == n) {
+          // One cell (the usual case: cells larger than elements).
+          map_max(row_cell[0] + col_cell[0], static_cast<float>(element_max));
+        } else if (el.quarters) {
           // Each row's points left and right of sx are runs: their maxima
           // in registers, a row at a time.
           double m0 = 0, m1 = 0, m2 = 0, m3 = 0;
