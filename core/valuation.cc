@@ -427,7 +427,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     };
     // The bin's nodes, each read once instead of once per element it is a
     // corner of, and the guarded scheme's trust regions (TrustRegion, a
-    // function of each node's jet) likewise.
+    // function of each node's jet) and reaches (its owner's) likewise.
     const bool guarded = scheme.kind() == SchemeKind::kGuarded;
     const int32_t region_w = ei1 - ei0 + 1;
     const size_t region_nodes = static_cast<size_t>(region_w) * (ej1 - ej0 + 1);
@@ -436,8 +436,12 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     // for each bin cost more than the elements' own steps.
     thread_local std::vector<NodeValue> nodes;
     thread_local std::vector<PatchTrustRegion> regions;
+    thread_local std::vector<CornerReach> reaches;
     Grow(&nodes, region_nodes);
-    if (guarded) Grow(&regions, region_nodes);
+    if (guarded) {
+      Grow(&regions, region_nodes);
+      Grow(&reaches, region_nodes);
+    }
     // A tile's columns at a time: a bin's last column may be the next
     // tile's first, and a row's reads alternating between the two would
     // each look the tile up in the cache.
@@ -450,6 +454,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           nodes[at] = wp.Node(i, j, jets.get());
           if (guarded && nodes[at].owner >= 0) {
             regions[at] = TrustRegion(nodes[at].jet);
+            reaches[at] = wp.sweeps().Reach(nodes[at].owner, z_top);
           }
         }
       }
@@ -626,7 +631,14 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         el.own_padded = (own + 7) & ~7;
         std::fill(oxs + own, oxs + el.own_padded, oxs[own - 1]);
         std::fill(oys + own, oys + el.own_padded, oys[own - 1]);
-        el.e = wp.CornersOf(ei, ej, corner, /*prepare=*/!guarded);
+        if (guarded) {
+          const CornerReach* r = &reaches[at];
+          const CornerReach* const reach[4] = {r, r + 1, r + region_w + 1,
+                                               r + region_w};
+          wp.FillCorners(ei, ej, corner, reach, &el.e);
+        } else {
+          el.e = wp.CornersOf(ei, ej, corner);
+        }
         if (guarded) {
           const PatchTrustRegion* r = &regions[at];
           const PatchTrustRegion* const trust[4] = {r, r + 1, r + region_w + 1,

@@ -1250,25 +1250,39 @@ ElementCorners Workpiece::CornersOf(int32_t ei, int32_t ej,
                                     const NodeValue* const nodes[4],
                                     bool prepare) const {
   ElementCorners e;
-  e.ei = ei;
-  e.ej = ej;
-  e.x0 = grid_.NodeX(ei);
-  e.x1 = grid_.NodeX(ei + 1);
-  e.y0 = grid_.NodeY(ej);
-  e.y1 = grid_.NodeY(ej + 1);
-  e.z_top = spec().z_top;
-  for (int k = 0; k < 4; ++k) {
-    const NodeValue& n = *nodes[k];
-    e.c[k] = n.jet;
-    e.owner[k] = n.owner;
-    if (n.owner >= 0 && scheme_->uses_reach()) {
-      e.reach[k] = surfaces_.Reach(n.owner, e.z_top);
-    }
-  }
-  if (scheme_->uses_candidates()) surfaces_.FillCandidates(&e);
-  if (scheme_->uses_reach()) e.surfaces = &surfaces_;
+  FillCorners(ei, ej, nodes, nullptr, &e);
   if (prepare) scheme_->Prepare(&e);
   return e;
+}
+
+void Workpiece::FillCorners(int32_t ei, int32_t ej,
+                            const NodeValue* const nodes[4],
+                            const CornerReach* const reaches[4],
+                            ElementCorners* e) const {
+  e->ei = ei;
+  e->ej = ej;
+  e->x0 = grid_.NodeX(ei);
+  e->x1 = grid_.NodeX(ei + 1);
+  e->y0 = grid_.NodeY(ej);
+  e->y1 = grid_.NodeY(ej + 1);
+  e->z_top = spec().z_top;
+  const bool reach = scheme_->uses_reach();
+  for (int k = 0; k < 4; ++k) {
+    const NodeValue& n = *nodes[k];
+    e->c[k] = n.jet;
+    e->owner[k] = n.owner;
+    if (n.owner >= 0 && reach) {
+      e->reach[k] =
+          reaches != nullptr ? *reaches[k] : surfaces_.Reach(n.owner, e->z_top);
+    } else {
+      e->reach[k] = CornerReach();
+    }
+  }
+  e->candidates.clear();
+  e->surfaces = nullptr;
+  e->guard = ElementCorners::Guard();
+  if (scheme_->uses_candidates()) surfaces_.FillCandidates(e);
+  if (reach) e->surfaces = &surfaces_;
 }
 
 double Workpiece::Reconstruct(double x, double y) const {

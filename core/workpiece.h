@@ -291,6 +291,13 @@ class Workpiece {
   ElementCorners CornersOf(int32_t ei, int32_t ej,
                            const NodeValue* const nodes[4],
                            bool prepare = true) const;
+  // CornersOf(ei, ej, nodes, false) written over *e (every field), for a
+  // caller that reuses one ElementCorners from element to element. `reaches`
+  // (may be null): the corners' reaches already taken (read only for cut
+  // corners, where the scheme uses_reach()), as sweeps().Reach gives them.
+  void FillCorners(int32_t ei, int32_t ej, const NodeValue* const nodes[4],
+                   const CornerReach* const reaches[4],
+                   ElementCorners* e) const;
   // The scheme's reconstructed surface at a point of the stock (clamped to
   // the stock rectangle).
   double Reconstruct(double x, double y) const;
