@@ -51,6 +51,29 @@ double ErrorsOf(const double* __restrict rec, const double* __restrict est,
   return m;
 }
 
+// The largest of err[q] and 0 for q < n in each quarter of an element's
+// lattice, m[(si >= sx) + 2 (sj >= sy)], the points' si and sj given as
+// doubles. A NaN error is passed over, as std::max(m, err) passes it over.
+SWARF_TARGET_CLONES
+void QuarterMaxima(const double* __restrict err, const double* __restrict si,
+                   const double* __restrict sj, int32_t n, double sx, double sy,
+                   double m[4]) {
+  double m0 = 0, m1 = 0, m2 = 0, m3 = 0;
+#pragma omp simd reduction(max : m0, m1, m2, m3)
+  for (int32_t q = 0; q < n; ++q) {
+    const double e = err[q];
+    const bool right = si[q] >= sx, up = sj[q] >= sy;
+    m0 = MaxOf(m0, !right & !up ? e : 0.0);
+    m1 = MaxOf(m1, right & !up ? e : 0.0);
+    m2 = MaxOf(m2, !right & up ? e : 0.0);
+    m3 = MaxOf(m3, right & up ? e : 0.0);
+  }
+  m[0] = m0;
+  m[1] = m1;
+  m[2] = m2;
+  m[3] = m3;
+}
+
 // At least n entries in *v (the existing ones kept, not zeroed).
 template <typename T>
 void Grow(std::vector<T>* v, size_t n) {
@@ -341,6 +364,13 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       own_lists[c].push_back(q);
     }
   }
+  // Each point's column and row in the lattice, in the all-in order.
+  std::vector<double> point_si, point_sj;
+  for_each_point(lattice_x.data(), lattice_y.data(), /*all_in=*/true,
+                 [&](int32_t si, int32_t sj) {
+                   point_si.push_back(si);
+                   point_sj.push_back(sj);
+                 });
   pool.ParallelFor(bins, [&](int64_t b) {
     const int32_t bx = static_cast<int32_t>(b % index.bins_x());
     const int32_t by = static_cast<int32_t>(b / index.bins_x());
@@ -806,33 +836,14 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           // One cell (the usual case: cells larger than elements).
           map_max(row_cell[0] + col_cell[0], static_cast<float>(element_max));
         } else if (el.quarters) {
-          // Each row's points left and right of sx are runs: their maxima
-          // in registers, a row at a time.
-          double m0 = 0, m1 = 0, m2 = 0, m3 = 0;
-          int32_t q = 0;
-          for (int32_t sj = 0; sj < n; ++sj) {
-            const bool end_row = sj == 0 || sj == n - 1;
-            const int32_t si0 = end_row ? 1 : 0, si1 = end_row ? n - 1 : n;
-            const int32_t split = std::clamp(sx, si0, si1);
-            double left = 0, right = 0;
-            for (int32_t k = si0; k < split; ++k) {
-              left = std::max(left, err[q++]);
-            }
-            for (int32_t k = split; k < si1; ++k) {
-              right = std::max(right, err[q++]);
-            }
-            if (sj < sy) {
-              m0 = std::max(m0, left);
-              m1 = std::max(m1, right);
-            } else {
-              m2 = std::max(m2, left);
-              m3 = std::max(m3, right);
-            }
-          }
+          double q_max[4];
+          QuarterMaxima(err.data(), point_si.data(), point_sj.data(), count, sx,
+                        sy, q_max);
           // The float of the largest error is the largest of the floats
           // (the conversion keeps the order).
-          const float m[4] = {static_cast<float>(m0), static_cast<float>(m1),
-                              static_cast<float>(m2), static_cast<float>(m3)};
+          const float m[4] = {
+              static_cast<float>(q_max[0]), static_cast<float>(q_max[1]),
+              static_cast<float>(q_max[2]), static_cast<float>(q_max[3])};
           map_max(row_cell[0] + col_cell[0], m[0]);
           if (sx < n) map_max(row_cell[0] + col_cell[sx], m[1]);
           if (sy < n) map_max(row_cell[sy] + col_cell[0], m[2]);
