@@ -585,6 +585,24 @@ bool SameReach(const CornerReach& a, const CornerReach& b) {
          a.capsule.radius == b.capsule.radius;
 }
 
+// r[k][q] = e.c[q].w - EvaluatePatch(e.c[k], corner k, corner q): each
+// corner's patch's shortfall at every corner (r[k][k] unused), the same
+// operations four corners at a time.
+SWARF_TARGET_CLONES
+void CornerResiduals(const ElementCorners& e, const CornerXY& c,
+                     double r[4][4]) {
+  const double w[4] = {e.c[0].w, e.c[1].w, e.c[2].w, e.c[3].w};
+  for (int k = 0; k < 4; ++k) {
+    const SurfaceJet j = e.c[k];
+    const double xk = c.x[k], yk = c.y[k];
+    double* __restrict rk = r[k];
+#pragma omp simd
+    for (int q = 0; q < 4; ++q) {
+      rk[q] = w[q] - EvaluatePatch(j, xk, yk, c.x[q], c.y[q]);
+    }
+  }
+}
+
 }  // namespace
 
 void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
@@ -609,6 +627,8 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
       ReachHolds(e->reach[k], c, holds[k]);
     }
   }
+  double shortfall[4][4];
+  CornerResiduals(*e, c, shortfall);
   for (int k = 0; k < 4; ++k) {
     // The trust region is convex: trusted at the other corners, the patch
     // is trusted over the whole element. Read in place (not copied), and
@@ -633,8 +653,7 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
       }
       // A node outside the owner's reach says nothing of its surface.
       if (!holds[k][q]) continue;
-      const double r =
-          e->c[q].w - EvaluatePatch(e->c[k], c.x[k], c.y[k], c.x[q], c.y[q]);
+      const double r = shortfall[k][q];
       if (r > 0) e->guard.lift[k][q] = r;
       if (r > tau) smooth = false;
     }
