@@ -605,7 +605,8 @@ void CornerResiduals(const ElementCorners& e, const CornerXY& c,
 
 }  // namespace
 
-void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
+void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4],
+                    const bool* sure) {
   const CornerXY c = CornersOf(*e);
   e->guard = {};
   const double hx = e->x1 - e->x0, hy = e->y1 - e->y0;
@@ -643,8 +644,11 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4]) {
         region = &computed;
       }
     }
-    // Most regions hold the whole element: one test for the three corners.
-    const bool each = smooth && !SurelyTrustedAt(*region, hx, hy);
+    // Most regions hold the whole element: one test for the three corners
+    // (a test the caller may have taken for the node).
+    const bool each = smooth && !(trust != nullptr && sure != nullptr
+                                      ? sure[k]
+                                      : SurelyTrustedAt(*region, hx, hy));
     for (int q = 0; q < 4; ++q) {
       if (q == k) continue;
       const double dx = c.x[q] - c.x[k], dy = c.y[q] - c.y[k];

@@ -181,10 +181,14 @@ double GuardedHeight(const ElementCorners& e, double x, double y);
 // The per-element part of the guarded reconstruction (ElementCorners::
 // guard), from e's corners, reach and surfaces. `trust`, if given, holds
 // TrustRegion(e->c[k]) for the cut corners (a node's region serves its four
-// elements).
+// elements). `sure`, if given with `trust`, holds for each cut corner
+// SurelyTrusted(*trust[k], hx, hy) for some hx and hy at least the
+// element's width and height (a node's serves the elements of a region);
+// false only means that the corner's trust is tested one offset at a time.
 struct PatchTrustRegion;
 void PrepareGuarded(ElementCorners* e,
-                    const PatchTrustRegion* const trust[4] = nullptr);
+                    const PatchTrustRegion* const trust[4] = nullptr,
+                    const bool* sure = nullptr);
 // Patches that disagree with a corner in their reach by more than this
 // fraction of the element's size mark the element as not smooth.
 inline constexpr double kGuardConsistency = 0.05;

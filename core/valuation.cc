@@ -467,10 +467,21 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     thread_local std::vector<NodeValue> nodes;
     thread_local std::vector<PatchTrustRegion> regions;
     thread_local std::vector<CornerReach> reaches;
+    // Whether a node's region surely holds any element of the bin
+    // (SurelyTrusted at the bin's widest and tallest element), once a node.
+    thread_local std::vector<char> sure_trust;
     Grow(&nodes, region_nodes);
+    double widest = 0, tallest = 0;
     if (guarded) {
       Grow(&regions, region_nodes);
       Grow(&reaches, region_nodes);
+      Grow(&sure_trust, region_nodes);
+      for (int32_t i = ei0; i < ei1; ++i) {
+        widest = std::max(widest, grid.NodeX(i + 1) - grid.NodeX(i));
+      }
+      for (int32_t j = ej0; j < ej1; ++j) {
+        tallest = std::max(tallest, grid.NodeY(j + 1) - grid.NodeY(j));
+      }
     }
     // A tile's columns at a time: a bin's last column may be the next
     // tile's first, and a row's reads alternating between the two would
@@ -485,6 +496,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           if (guarded && nodes[at].owner >= 0) {
             regions[at] = TrustRegion(nodes[at].jet);
             reaches[at] = wp.sweeps().Reach(nodes[at].owner, z_top);
+            sure_trust[at] = SurelyTrusted(regions[at], widest, tallest);
           }
         }
       }
@@ -673,7 +685,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           const PatchTrustRegion* r = &regions[at];
           const PatchTrustRegion* const trust[4] = {r, r + 1, r + region_w + 1,
                                                     r + region_w};
-          PrepareGuarded(&el.e, trust);
+          const bool sure[4] = {sure_trust[at] != 0, sure_trust[at + 1] != 0,
+                                sure_trust[at + region_w + 1] != 0,
+                                sure_trust[at + region_w] != 0};
+          PrepareGuarded(&el.e, trust, sure);
         }
         el.ei = ei;
         el.count = count;

@@ -297,8 +297,9 @@ TEST(GuardedSchemeTest, SurelyTrustedImpliesTrustAtEveryCorner) {
 // be) and the height with its gradient (HeightAndGradient) are Reconstruct
 // and Gradient bit for bit: on every element of random scenes, at the
 // valuation's 5 x 5 lattice, random points, the edges and corners, and just
-// outside the element, and a few points at a time. Preparing an element from
-// its nodes' trust regions gives the same element.
+// outside the element, and a few points at a time. Preparing an element
+// from its nodes' trust regions (and their SurelyTrusted, or none) gives
+// the same element.
 TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
   std::mt19937_64 rng(27);
   std::uniform_real_distribution<double> u(0, 1);
@@ -347,6 +348,25 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
         ASSERT_EQ(std::memcmp(f.guard.lift, e.guard.lift, sizeof f.guard.lift),
                   0);
         ASSERT_TRUE(f.candidates == e.candidates);
+        // With the nodes' SurelyTrusted taken for a larger element, or
+        // none taken: the same element.
+        for (double scale : {1.0, 1.5, 0.0}) {
+          bool sure[4];
+          for (int k = 0; k < 4; ++k) {
+            sure[k] =
+                scale > 0 && SurelyTrusted(regions[k], scale * (e.x1 - e.x0),
+                                           scale * (e.y1 - e.y0));
+          }
+          ElementCorners g = wp->Corners(ei, ej, /*prepare=*/false);
+          PrepareGuarded(&g, trust, sure);
+          ASSERT_EQ(g.guard.smooth, e.guard.smooth) << scale;
+          ASSERT_EQ(
+              std::memcmp(g.guard.lift, e.guard.lift, sizeof g.guard.lift), 0);
+          ASSERT_EQ(std::memcmp(g.guard.inside, e.guard.inside,
+                                sizeof g.guard.inside),
+                    0);
+          ASSERT_TRUE(g.candidates == e.candidates);
+        }
         xs.push_back(std::nextafter(e.x1, 1e9));
         ys.push_back(e.y0);
         std::vector<double> many(xs.size());
