@@ -260,8 +260,8 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
                  const double* __restrict y_in, int32_t n_in,
                  double* __restrict out) {
   // The points padded to a multiple of 8 with copies of the last: the
-  // vector loops then have no scalar remainder (with the valuation's 21
-  // points an element, the remainders took a third of this call). A copy's
+  // vector loops then have no scalar remainder (the valuation gives 21
+  // points an element: each loop ended with one point alone). A copy's
   // values are the last point's and are not written out; it does not widen
   // the points' box.
   double x[kGuardedChunk], y[kGuardedChunk];
