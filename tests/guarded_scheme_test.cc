@@ -397,5 +397,74 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
   EXPECT_GT(smooth, 200);  // the batched kernel's elements
 }
 
+// FillCorners over an ElementCorners that held another element (prepared,
+// with candidates) gives CornersOf's element, field by field, for every
+// scheme, with the reaches passed in or taken by FillCorners.
+TEST(GuardedSchemeTest, FillCornersOverwritesEveryField) {
+  std::mt19937_64 rng(29);
+  std::uniform_real_distribution<double> u(0, 1);
+  const StockSpec stock{0, 0, 6, 6, 0, 24, 24};
+  std::vector<Move> moves;
+  for (int k = 0; k < 6; ++k) {
+    const double r = 0.2 + 1.3 * u(rng);
+    moves.push_back({{6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)},
+                     {6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)},
+                     r});
+  }
+  for (SchemeKind kind : {SchemeKind::kGuarded, SchemeKind::kExact,
+                          SchemeKind::kTaylor, SchemeKind::kZmap}) {
+    auto wp = Cut(stock, kind, moves);
+    ElementCorners reused = wp->Corners(stock.nx - 1, stock.ny - 1);
+    for (int32_t ej = 0; ej < stock.ny; ++ej) {
+      for (int32_t ei = 0; ei < stock.nx; ++ei) {
+        SCOPED_TRACE(::testing::Message() << GetScheme(kind).name()
+                                          << " element " << ei << ", " << ej);
+        NodeValue n[4] = {wp->Node(ei, ej), wp->Node(ei + 1, ej),
+                          wp->Node(ei + 1, ej + 1), wp->Node(ei, ej + 1)};
+        const NodeValue* const nodes[4] = {&n[0], &n[1], &n[2], &n[3]};
+        const ElementCorners want = wp->CornersOf(ei, ej, nodes, false);
+        CornerReach taken[4];
+        const CornerReach* reaches[4];
+        for (int k = 0; k < 4; ++k) {
+          if (n[k].owner >= 0) {
+            taken[k] = wp->sweeps().Reach(n[k].owner, stock.z_top);
+          }
+          reaches[k] = &taken[k];
+        }
+        for (bool given : {false, true}) {
+          wp->FillCorners(ei, ej, nodes, given ? reaches : nullptr, &reused);
+          ASSERT_EQ(reused.ei, want.ei);
+          ASSERT_EQ(reused.ej, want.ej);
+          ASSERT_EQ(std::memcmp(&reused.x0, &want.x0, 5 * sizeof(double)), 0);
+          ASSERT_EQ(std::memcmp(reused.c, want.c, sizeof want.c), 0);
+          ASSERT_EQ(std::memcmp(reused.owner, want.owner, sizeof want.owner),
+                    0);
+          for (int k = 0; k < 4; ++k) {
+            const CornerReach& a = reused.reach[k];
+            const CornerReach& b = want.reach[k];
+            ASSERT_EQ(a.bounded, b.bounded) << k;
+            ASSERT_EQ(a.empty, b.empty) << k;
+            ASSERT_EQ(std::memcmp(&a.capsule, &b.capsule, sizeof a.capsule), 0)
+                << k;
+            ASSERT_EQ(std::memcmp(&a.z_low, &b.z_low, 8), 0) << k;
+          }
+          ASSERT_TRUE(reused.candidates == want.candidates);
+          ASSERT_EQ(reused.surfaces, want.surfaces);
+          ASSERT_EQ(reused.guard.smooth, want.guard.smooth);
+          ASSERT_EQ(std::memcmp(reused.guard.inside, want.guard.inside,
+                                sizeof want.guard.inside),
+                    0);
+          ASSERT_EQ(std::memcmp(reused.guard.lift, want.guard.lift,
+                                sizeof want.guard.lift),
+                    0);
+          // Prepared (guard, and candidates for the exact scheme): the next
+          // fill overwrites those too.
+          GetScheme(kind).Prepare(&reused);
+        }
+      }
+    }
+  }
+}
+
 }  // namespace
 }  // namespace swarf
