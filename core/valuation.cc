@@ -579,6 +579,9 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     thread_local std::vector<char> top_ok;
     Grow(&top_est, static_cast<size_t>(ei1 - ei0) * edge);
     Grow(&top_ok, ei1 - ei0);
+    // None yet (on the grid's first row ej - 1 is top_row's -1: a previous
+    // bin's flags must not pass there).
+    std::fill_n(top_ok.begin(), ei1 - ei0, 0);
     int32_t top_row = -1;
     thread_local std::vector<int64_t> row_cells;
     if (mapped) Grow(&row_cells, row_size);
