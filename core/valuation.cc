@@ -681,17 +681,15 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           const CornerReach* const reach[4] = {r, r + 1, r + region_w + 1,
                                                r + region_w};
           wp.FillCorners(ei, ej, corner, reach, &el.e);
-        } else {
-          el.e = wp.CornersOf(ei, ej, corner);
-        }
-        if (guarded) {
-          const PatchTrustRegion* r = &regions[at];
-          const PatchTrustRegion* const trust[4] = {r, r + 1, r + region_w + 1,
-                                                    r + region_w};
+          const PatchTrustRegion* t = &regions[at];
+          const PatchTrustRegion* const trust[4] = {t, t + 1, t + region_w + 1,
+                                                    t + region_w};
           const bool sure[4] = {sure_trust[at] != 0, sure_trust[at + 1] != 0,
                                 sure_trust[at + region_w + 1] != 0,
                                 sure_trust[at + region_w] != 0};
           PrepareGuarded(&el.e, trust, sure);
+        } else {
+          el.e = wp.CornersOf(ei, ej, corner);
         }
         el.ei = ei;
         el.count = count;
