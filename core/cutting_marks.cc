@@ -914,12 +914,15 @@ std::vector<MarkPolyline> Chain(
     int64_t seg;
     int end;
   };
-  std::vector<Inc> inc;
-  inc.reserve(2 * n);
-  for (int64_t k = 0; k < n; ++k) {
-    inc.push_back({segs[k].e[0].key, k, 0});
-    inc.push_back({segs[k].e[1].key, k, 1});
-  }
+  std::vector<Inc> inc(2 * n);
+  constexpr int64_t kIncChunk = int64_t{1} << 14;
+  pool.ParallelFor((n + kIncChunk - 1) / kIncChunk, [&](int64_t c) {
+    const int64_t k1 = std::min(n, (c + 1) * kIncChunk);
+    for (int64_t k = c * kIncChunk; k < k1; ++k) {
+      inc[2 * k] = {segs[k].e[0].key, k, 0};
+      inc[2 * k + 1] = {segs[k].e[1].key, k, 1};
+    }
+  });
   // A total order, so the result is the same however it is sorted.
   auto less = [](const Inc& a, const Inc& b) {
     return a.key != b.key ? a.key < b.key
@@ -1547,11 +1550,18 @@ absl::Status FindCuttingMarks(
   std::vector<Ready*> unfinished;
   // Segments handed on, per vertex key an open segment uses (Chain).
   absl::flat_hash_map<uint64_t, int32_t> ghosts;
-  for (int32_t w0 = 0, wn = 0; w0 < bands; w0 += wn) {
-    wn = std::min(window, bands - w0);
-    band_segments.assign(wn, {});
-    wp.pool().ParallelFor(
-        wn, [&](int64_t b) { find_band(w0 + b, &band_segments[b]); });
+  // The next window's bands are searched while this one's are chained
+  // (serial, and the longer the more chains stay open: a plate's creases
+  // along y span every band) and the last one's finished.
+  std::vector<std::vector<Segment>> next_segments;
+  auto find_window = [&](int32_t w0, int32_t wn,
+                         std::vector<std::vector<Segment>>* out) {
+    out->assign(wn, {});
+    wp.pool().ParallelFor(wn,
+                          [&](int64_t b) { find_band(w0 + b, &(*out)[b]); });
+  };
+  find_window(0, std::min(window, bands), &band_segments);
+  for (int32_t w0 = 0, wn = std::min(window, bands); w0 < bands;) {
     {
       int64_t found = 0;
       for (const std::vector<Segment>& band : band_segments) {
@@ -1580,13 +1590,27 @@ absl::Status FindCuttingMarks(
       band.resize(n);
     });
     const size_t window_first = open.size();
-    for (std::vector<Segment>& band : band_segments) {
-      for (const Segment& seg : band) {
-        open.push_back(seg);
-        open_at.push_back(kept_before++);
+    {
+      std::vector<size_t> at(wn + 1, window_first);
+      for (int32_t b = 0; b < wn; ++b) {
+        at[b + 1] = at[b] + band_segments[b].size();
       }
-      std::vector<Segment>().swap(band);
+      open.resize(at[wn]);
+      open_at.resize(at[wn]);
+      wp.pool().ParallelFor(wn, [&](int64_t b) {
+        std::vector<Segment>& band = band_segments[b];
+        std::copy(band.begin(), band.end(), open.begin() + at[b]);
+        const int64_t first_kept =
+            kept_before + static_cast<int64_t>(at[b] - window_first);
+        for (size_t i = 0; i < band.size(); ++i) {
+          open_at[at[b] + i] = first_kept + static_cast<int64_t>(i);
+        }
+        std::vector<Segment>().swap(band);
+      });
+      kept_before += static_cast<int64_t>(at[wn] - window_first);
     }
+    const int32_t next_w0 = w0 + wn;
+    const int32_t next_wn = std::min(window, bands - next_w0);
     // Chain what is open. A chain with a segment of this window may still
     // grow (not after the last): its segments stay open. Every other chain
     // is complete, every segment at its vertices known (a later window's
@@ -1595,11 +1619,15 @@ absl::Status FindCuttingMarks(
     // window's polylines are finished meanwhile: they are only read and
     // written through their own entries of `ready` (a std::map: inserting
     // others moves no entry).
-    const bool last = w0 + wn >= bands;
+    const bool last = next_w0 >= bands;
     std::vector<Ready*> finishing;
     finishing.swap(unfinished);
-    wp.pool().ParallelFor(2, [&](int64_t half) {
-      if (half == 1) {
+    wp.pool().ParallelFor(3, [&](int64_t part) {
+      if (part == 2) {
+        if (!last) find_window(next_w0, next_wn, &next_segments);
+        return;
+      }
+      if (part == 1) {
         finish_all(finishing);
         return;
       }
@@ -1665,6 +1693,9 @@ absl::Status FindCuttingMarks(
       if (absl::Status st = emit(std::move(p)); !st.ok()) return st;
     }
     if (absl::Status st = poll(); !st.ok()) return st;
+    band_segments.swap(next_segments);
+    w0 = next_w0;
+    wn = next_wn;
   }
   return absl::OkStatus();
 }
