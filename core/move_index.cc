@@ -24,10 +24,10 @@ MoveIndex::MoveIndex(const GridGeometry& grid)
       bins_x_((grid.nx() + kBinElements - 1) / kBinElements),
       bins_y_((grid.ny() + kBinElements - 1) / kBinElements),
       bins_(static_cast<size_t>(bins_x_) * bins_y_),
-      bytes_(static_cast<int64_t>(bins_.size() *
-                                  sizeof(std::vector<uint32_t>))) {}
+      bytes_(
+          static_cast<int64_t>(bins_.size() * sizeof(std::vector<uint32_t>))) {}
 
-void MoveIndex::AddToBin(std::vector<uint32_t>* bin, uint32_t id) {
+int64_t MoveIndex::AddToBin(std::vector<uint32_t>* bin, uint32_t id) {
   std::vector<uint32_t>& v = *bin;
   const size_t n = v.size();
   const size_t capacity = v.capacity();
@@ -35,17 +35,17 @@ void MoveIndex::AddToBin(std::vector<uint32_t>* bin, uint32_t id) {
   const bool last_ends_range = n >= 2 && (v[n - 2] & kRangeBit);
   if (last_ends_range && v[n - 1] + 1 == id) {
     v[n - 1] = id;  // the range grows
-    return;
+    return 0;
   }
   // Two singletons just before: the three become a range.
-  if (!last_ends_range && n >= 2 && v[n - 1] + 1 == id &&
-      v[n - 2] + 2 == id && !(n >= 3 && (v[n - 3] & kRangeBit))) {
+  if (!last_ends_range && n >= 2 && v[n - 1] + 1 == id && v[n - 2] + 2 == id &&
+      !(n >= 3 && (v[n - 3] & kRangeBit))) {
     v[n - 2] |= kRangeBit;
     v[n - 1] = id;
-    return;
+    return 0;
   }
   v.push_back(id);
-  bytes_ += static_cast<int64_t>((v.capacity() - capacity) * sizeof(uint32_t));
+  return static_cast<int64_t>((v.capacity() - capacity) * sizeof(uint32_t));
 }
 
 void MoveIndex::BinIds(int32_t b, std::vector<uint32_t>* ids) const {
@@ -53,16 +53,47 @@ void MoveIndex::BinIds(int32_t b, std::vector<uint32_t>* ids) const {
   for (const uint32_t id : Bin(b)) ids->push_back(id);
 }
 
+MoveIndex::BinRect MoveIndex::BinsOf(const Rect& b) const {
+  const auto [bx0, bx1] =
+      BinRange(b.x0, b.x1, grid_.spec().x0, grid_.dx() * kBinElements, bins_x_);
+  const auto [by0, by1] =
+      BinRange(b.y0, b.y1, grid_.spec().y0, grid_.dy() * kBinElements, bins_y_);
+  return {bx0, bx1, by0, by1};
+}
+
 void MoveIndex::Add(uint32_t id, const Rect& b) {
-  const auto [bx0, bx1] = BinRange(b.x0, b.x1, grid_.spec().x0,
-                                   grid_.dx() * kBinElements, bins_x_);
-  const auto [by0, by1] = BinRange(b.y0, b.y1, grid_.spec().y0,
-                                   grid_.dy() * kBinElements, bins_y_);
-  for (int32_t by = by0; by <= by1; ++by) {
-    for (int32_t bx = bx0; bx <= bx1; ++bx) {
-      AddToBin(&bins_[static_cast<size_t>(by) * bins_x_ + bx], id);
+  const BinRect r = BinsOf(b);
+  for (int32_t by = r.by0; by <= r.by1; ++by) {
+    for (int32_t bx = r.bx0; bx <= r.bx1; ++bx) {
+      bytes_ += AddToBin(&bins_[static_cast<size_t>(by) * bins_x_ + bx], id);
     }
   }
+}
+
+void MoveIndex::AddAll(std::span<const uint32_t> ids,
+                       std::span<const BinRect> bins, ThreadPool& pool) {
+  // Bin (bx, by) belongs to part (bx + by) mod parts: a raster's moves
+  // along x or along y spread over every part, and a part visits only
+  // its own bins of each move (a step of `parts` along the row).
+  const int32_t parts = std::max(1, std::min(pool.size(), 64));
+  std::vector<int64_t> grew(parts, 0);
+  pool.ParallelFor(parts, [&](int64_t part) {
+    const int32_t q = static_cast<int32_t>(part);
+    int64_t bytes = 0;
+    for (size_t k = 0; k < ids.size(); ++k) {
+      const BinRect& r = bins[k];
+      for (int32_t by = r.by0; by <= r.by1; ++by) {
+        // The first bx >= bx0 with (bx + by) % parts == q.
+        const int32_t bx = r.bx0 + ((q - (r.bx0 + by) % parts) + parts) % parts;
+        std::vector<uint32_t>* row = &bins_[static_cast<size_t>(by) * bins_x_];
+        for (int32_t x = bx; x <= r.bx1; x += parts) {
+          bytes += AddToBin(row + x, ids[k]);
+        }
+      }
+    }
+    grew[part] = bytes;
+  });
+  for (const int64_t b : grew) bytes_ += b;
 }
 
 }  // namespace swarf

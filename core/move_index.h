@@ -10,10 +10,12 @@
 
 #include <cstdint>
 #include <iterator>
+#include <span>
 #include <vector>
 
 #include "core/cutter/ball_sweep.h"
 #include "core/stock.h"
+#include "core/thread_pool.h"
 
 namespace swarf {
 
@@ -29,6 +31,18 @@ class MoveIndex {
   // bins it reaches) under every bin its footprint's bounding box
   // (BallSweep::FootprintBounds) touches.
   void Add(uint32_t id, const Rect& bounds);
+
+  // The bins Add(id, bounds) records id under: [bx0, bx1] x [by0, by1],
+  // none where bx0 > bx1 or by0 > by1.
+  struct BinRect {
+    int32_t bx0 = 1, bx1 = 0, by0 = 1, by1 = 0;
+  };
+  BinRect BinsOf(const Rect& bounds) const;
+  // The index Add(ids[k], ...) for k = 0, 1, ... gives, `bins[k]` the
+  // BinsOf of each bounds: the bins are shared among the pool's threads,
+  // each adding the ids of its own bins in order. Blocks until done.
+  void AddAll(std::span<const uint32_t> ids, std::span<const BinRect> bins,
+              ThreadPool& pool);
 
   const GridGeometry& grid() const { return grid_; }
   int32_t bins_x() const { return bins_x_; }
@@ -104,7 +118,8 @@ class MoveIndex {
  private:
   // An entry with this bit starts a range; the next entry is its last id.
   static constexpr uint32_t kRangeBit = uint32_t{1} << 31;
-  void AddToBin(std::vector<uint32_t>* bin, uint32_t id);
+  // Returns the bytes the bin's capacity grew by.
+  static int64_t AddToBin(std::vector<uint32_t>* bin, uint32_t id);
 
   const GridGeometry grid_;
   int32_t bins_x_, bins_y_;

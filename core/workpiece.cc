@@ -466,12 +466,19 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
   // (tile, move) pairs for every tile a move's footprint may touch, in
   // move order.
   std::vector<size_t> pair_at(prep_chunks + 1, 0);
+  // Indexed even when it cuts no node: the exact surface still sees it.
+  std::vector<uint32_t> indexed;
+  std::vector<MoveIndex::BinRect> indexed_bins;
+  indexed.reserve(n_moves);
+  indexed_bins.reserve(n_moves);
   for (size_t m = 0; m < n_moves; ++m) {
-    // Indexed even when it cuts no node: the exact surface still sees it.
     if (footprints[m].has_value()) {
-      index_.Add(static_cast<uint32_t>(result.first_move_id + m),
-                 *footprints[m]);
+      indexed.push_back(static_cast<uint32_t>(result.first_move_id + m));
+      indexed_bins.push_back(index_.BinsOf(*footprints[m]));
     }
+  }
+  index_.AddAll(indexed, indexed_bins, *pool_);
+  for (size_t m = 0; m < n_moves; ++m) {
     const TileRange& r = ranges[m];
     pair_at[m / kPrepChunk + 1] +=
         static_cast<size_t>(r.ti1 - r.ti0 + 1) * (r.tj1 - r.tj0 + 1);
@@ -493,17 +500,25 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
   });
   moves_.Append(moves);
 
-  // Group by tile, keeping move order within a tile.
-  std::stable_sort(pairs.begin(), pairs.end(),
-                   [](const auto& a, const auto& b) { return a.first < b.first; });
-  std::vector<uint32_t> tile_moves(pairs.size());
+  // Group by tile, keeping move order within a tile: counted per tile
+  // (a stable sort of the pairs was a tenth of the batch on 16 cores).
+  // `count` is the thread's, all zero between batches.
+  thread_local std::vector<uint32_t> count;
+  if (count.size() < tiles_.size()) count.resize(tiles_.size(), 0);
   std::vector<std::pair<int32_t, size_t>> touched;  // tile, start offset
-  for (size_t k = 0; k < pairs.size(); ++k) {
-    tile_moves[k] = pairs[k].second;
-    if (k == 0 || pairs[k].first != pairs[k - 1].first) {
-      touched.emplace_back(pairs[k].first, k);
-    }
+  for (const auto& [t, m] : pairs) {
+    if (count[t]++ == 0) touched.emplace_back(t, 0);
   }
+  std::sort(touched.begin(), touched.end());
+  size_t at = 0;
+  for (auto& [t, start] : touched) {
+    start = at;
+    at += count[t];
+    count[t] = static_cast<uint32_t>(start);  // the tile's next slot
+  }
+  std::vector<uint32_t> tile_moves(pairs.size());
+  for (const auto& [t, m] : pairs) tile_moves[count[t]++] = m;
+  for (const auto& [t, start] : touched) count[t] = 0;
   touched.emplace_back(-1, pairs.size());  // sentinel end
   const int64_t n_touched = static_cast<int64_t>(touched.size()) - 1;
 

@@ -8,6 +8,7 @@
 
 #include "core/move_index.h"
 #include "core/stock.h"
+#include "core/thread_pool.h"
 #include "gtest/gtest.h"
 
 namespace swarf {
@@ -136,6 +137,42 @@ TEST(MoveIndexTest, RangesListTheSameIdsAsAPlainList) {
     index.BinIds(b, &ids);
     EXPECT_EQ(ids, want[b]) << "bin " << b;
     EXPECT_EQ(index.Bin(b).empty(), want[b].empty());
+  }
+}
+
+// AddAll, which shares the bins among threads, gives the index that Add in
+// id order gives: every bin's ids (ranges, gaps) and the bytes held, for
+// boxes over one bin, many, the grid's edges and none, with any thread
+// count (more parts than bins along a row, too), batch after batch.
+TEST(MoveIndexTest, AddAllIsAddInOrder) {
+  for (int threads : {1, 2, 3, 7, 16}) {
+    SCOPED_TRACE(threads);
+    ThreadPool pool(threads);
+    MoveIndex one(Square(64, 64)), all(Square(64, 64));
+    std::mt19937 rng(threads);
+    uint32_t id = 0;
+    for (int batch = 0; batch < 20; ++batch) {
+      std::vector<uint32_t> ids;
+      std::vector<MoveIndex::BinRect> bins;
+      const int n = static_cast<int>(rng() % 400);
+      for (int k = 0; k < n; ++k) {
+        const double x = static_cast<double>(rng() % 80) - 10;
+        const double y = static_cast<double>(rng() % 80) - 10;
+        const Rect b{x, y, x + (rng() % 4) * 11.0, y + (rng() % 3) * 13.0};
+        one.Add(id, b);
+        ids.push_back(id);
+        bins.push_back(all.BinsOf(b));
+        id += 1 + (rng() % 7 == 0);  // runs, and sometimes a gap
+      }
+      all.AddAll(ids, bins, pool);
+    }
+    EXPECT_EQ(all.MemoryBytes(), one.MemoryBytes());
+    std::vector<uint32_t> want, got;
+    for (int32_t b = 0; b < one.bins_x() * one.bins_y(); ++b) {
+      one.BinIds(b, &want);
+      all.BinIds(b, &got);
+      EXPECT_EQ(got, want) << "bin " << b;
+    }
   }
 }
 
