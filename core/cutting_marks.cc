@@ -5,6 +5,7 @@
 #include <map>
 #include <memory>
 #include <numbers>
+#include <optional>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -906,7 +907,8 @@ std::vector<MarkPolyline> Chain(
     ThreadPool& pool, std::vector<int64_t>* starts = nullptr,
     std::vector<int64_t>* chain_of = nullptr,
     const absl::flat_hash_map<uint64_t, int32_t>* ghosts = nullptr,
-    int64_t grow_from = INT64_MAX) {
+    int64_t grow_from = INT64_MAX, std::vector<uint8_t>* grows_out = nullptr,
+    absl::flat_hash_map<uint64_t, int32_t>* next_ghosts = nullptr) {
   const int64_t n = static_cast<int64_t>(segs.size());
   // Incidences sorted by vertex key.
   struct Inc {
@@ -1017,9 +1019,9 @@ std::vector<MarkPolyline> Chain(
       i = j;
     }
   });
-  std::vector<bool> used(n, false);
+  std::vector<uint8_t> used(n, 0);
+  if (grows_out != nullptr) grows_out->assign(n, 0);
   if (chain_of != nullptr) chain_of->assign(n, -1);
-  std::vector<MarkPolyline> out;
   auto push_vertex = [&](MarkPolyline* p, const End& e) {
     if (!p->vertices.empty()) {
       const Vec3& last = p->vertices.back();
@@ -1029,8 +1031,11 @@ std::vector<MarkPolyline> Chain(
     p->angle_deg.push_back(e.angle * 180 / std::numbers::pi);
     p->vertex_owners.push_back(e.owners);
   };
-  for (int64_t s = 0; s < n; ++s) {
-    if (used[s]) continue;
+  // The chain of segment s, s its lowest index, from the start its walk
+  // back from end 0 reaches (or s, around a loop); none for a chain that
+  // may grow or is too short. Chains are disjoint paths and loops (`other`
+  // pairs ends), so chains run on different threads at once.
+  auto chain_from = [&](int64_t s) -> std::optional<MarkPolyline> {
     // Walk back from end 0 of s to the start of its chain, or around a loop.
     int64_t seg = s;
     int end = 0;
@@ -1063,14 +1068,15 @@ std::vector<MarkPolyline> Chain(
       }
       if (grows) {
         for (;;) {
-          used[seg] = true;
+          used[seg] = 1;
+          if (grows_out != nullptr) (*grows_out)[seg] = 1;
           if (chain_of != nullptr) (*chain_of)[seg] = s;
           const int64_t o = other[2 * seg + (1 - end)];
           if (o < 0 || used[o / 2]) break;
           seg = o / 2;
           end = static_cast<int>(o % 2);
         }
-        continue;
+        return std::nullopt;
       }
     }
     // Walk forward from (seg, end).
@@ -1078,7 +1084,7 @@ std::vector<MarkPolyline> Chain(
     p.closed = closed;
     push_vertex(&p, segs[seg].e[end]);
     for (;;) {
-      used[seg] = true;
+      used[seg] = 1;
       if (chain_of != nullptr) (*chain_of)[seg] = s;
       const End& far = segs[seg].e[1 - end];
       push_vertex(&p, far);
@@ -1097,10 +1103,89 @@ std::vector<MarkPolyline> Chain(
       }
     }
     RemoveFolds(&p, fold, end_fold);
-    if (p.vertices.size() < (closed ? 3u : 2u)) continue;
+    if (p.vertices.size() < (closed ? 3u : 2u)) return std::nullopt;
     p.owners = p.vertex_owners.front();
+    return p;
+  };
+  // The open chains on every thread (on many cores the serial walk was
+  // the marks' longest step): each is walked from both its open ends, the
+  // end of lower index keeps it, with its lowest segment.
+  std::vector<int64_t> open_ends;
+  for (int64_t k = 0; k < 2 * n; ++k) {
+    if (other[k] < 0) open_ends.push_back(k);
+  }
+  std::vector<int64_t> lowest(open_ends.size(), -1);  // -1: the far end's
+  pool.ParallelFor(static_cast<int64_t>(open_ends.size()), [&](int64_t i) {
+    int64_t seg = open_ends[i] / 2;
+    int end = static_cast<int>(open_ends[i] % 2);
+    int64_t low = seg;
+    for (;;) {
+      const int64_t o = other[2 * seg + (1 - end)];
+      if (o < 0) break;
+      seg = o / 2;
+      end = static_cast<int>(o % 2);
+      low = std::min(low, seg);
+    }
+    if (open_ends[i] < 2 * seg + (1 - end)) lowest[i] = low;
+  });
+  std::vector<int64_t> heads;  // lowest segments of the open chains
+  for (const int64_t low : lowest) {
+    if (low >= 0) heads.push_back(low);
+  }
+  std::sort(heads.begin(), heads.end());
+  std::vector<std::optional<MarkPolyline>> from_heads(heads.size());
+  pool.ParallelFor(static_cast<int64_t>(heads.size()),
+                   [&](int64_t i) { from_heads[i] = chain_from(heads[i]); });
+  // The loops, in order, then every chain by its lowest segment.
+  std::vector<std::pair<int64_t, MarkPolyline>> loops;
+  for (int64_t s = 0; s < n; ++s) {
+    if (used[s]) continue;
+    std::optional<MarkPolyline> p = chain_from(s);
+    if (p.has_value()) loops.emplace_back(s, *std::move(p));
+  }
+  std::vector<MarkPolyline> out;
+  auto take = [&](int64_t s, MarkPolyline p) {
     out.push_back(std::move(p));
     if (starts != nullptr) starts->push_back(s);
+  };
+  size_t l = 0;
+  for (size_t i = 0; i < heads.size(); ++i) {
+    for (; l < loops.size() && loops[l].first < heads[i]; ++l) {
+      take(loops[l].first, std::move(loops[l].second));
+    }
+    if (from_heads[i].has_value()) take(heads[i], *std::move(from_heads[i]));
+  }
+  for (; l < loops.size(); ++l)
+    take(loops[l].first, std::move(loops[l].second));
+  // The ghosts the open segments keep: at each vertex key a growing chain
+  // uses, the segments handed on (ghosts before, and the complete chains'
+  // ends now) that end there; a bucket of keys at a time.
+  if (next_ghosts != nullptr) {
+    std::vector<std::vector<std::pair<uint64_t, int32_t>>> kept(bounds.size() -
+                                                                1);
+    pool.ParallelFor(static_cast<int64_t>(bounds.size()) - 1, [&](int64_t b) {
+      const size_t end = bounds[b + 1];
+      for (size_t i = bounds[b]; i < end;) {
+        size_t j = i;
+        int32_t growing = 0;
+        for (; j < end && inc[j].key == inc[i].key; ++j) {
+          growing += (*grows_out)[inc[j].seg];
+        }
+        if (growing > 0) {
+          int32_t count = static_cast<int32_t>(j - i) - growing;
+          if (ghosts != nullptr) {
+            const auto g = ghosts->find(inc[i].key);
+            if (g != ghosts->end()) count += g->second;
+          }
+          if (count > 0) kept[b].emplace_back(inc[i].key, count);
+        }
+        i = j;
+      }
+    });
+    next_ghosts->clear();
+    for (const auto& bucket : kept) {
+      for (const auto& [key, count] : bucket) next_ghosts->emplace(key, count);
+    }
   }
   return out;
 }
@@ -1632,16 +1717,13 @@ absl::Status FindCuttingMarks(
         return;
       }
       std::vector<int64_t> starts, chain_of;
+      std::vector<uint8_t> growing;
+      absl::flat_hash_map<uint64_t, int32_t> kept_ghosts;
       std::vector<MarkPolyline> chained =
           Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts,
                 &chain_of, &ghosts,
-                last ? INT64_MAX : static_cast<int64_t>(window_first));
-      std::vector<bool> growing(open.size(), false);
-      if (!last) {
-        for (size_t k = window_first; k < open.size(); ++k) {
-          growing[chain_of[k]] = true;
-        }
-      }
+                last ? INT64_MAX : static_cast<int64_t>(window_first), &growing,
+                &kept_ghosts);
       // Chain gave polylines for the complete chains only.
       for (size_t k = 0; k < chained.size(); ++k) {
         const auto it = ready.emplace(open_at[starts[k]],
@@ -1651,31 +1733,15 @@ absl::Status FindCuttingMarks(
       // The complete chains' segments leave; where one ends at a vertex an
       // open segment still uses, it stays counted there (a junction of
       // three chains must not join the other two once the first is handed
-      // on).
-      absl::flat_hash_map<uint64_t, int32_t> kept_ghosts;
-      for (size_t k = 0; k < open.size(); ++k) {
-        if (!growing[chain_of[k]]) continue;
-        for (const End& e : open[k].e) kept_ghosts.try_emplace(e.key, 0);
-      }
-      for (auto& [key, count] : kept_ghosts) {
-        const auto g = ghosts.find(key);
-        if (g != ghosts.end()) count = g->second;
-      }
+      // on): Chain counted them in kept_ghosts.
       size_t n = 0;
       for (size_t k = 0; k < open.size(); ++k) {
-        if (!growing[chain_of[k]]) {
-          for (const End& e : open[k].e) {
-            const auto g = kept_ghosts.find(e.key);
-            if (g != kept_ghosts.end()) ++g->second;
-          }
-          continue;
-        }
+        if (!growing[k]) continue;
         open[n] = open[k];
         open_at[n++] = open_at[k];
       }
       open.resize(n);
       open_at.resize(n);
-      absl::erase_if(kept_ghosts, [](const auto& g) { return g.second == 0; });
       ghosts.swap(kept_ghosts);
     });
     if (last) {
