@@ -901,7 +901,11 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
 // give a polyline). `ghosts` counts, per vertex key, segments chained
 // before that end there too (they count in its degree). Chains with a
 // segment of index `grow_from` or more give no polyline (their segments
-// still get their chain_of): they may still grow.
+// still get their chain_of): they may still grow. With `grows_out`, 1 for
+// each segment of such a chain; with `next_ghosts` (which needs
+// `grows_out`), the `ghosts` for those segments alone once the others are
+// handed on: per key a growing segment ends at, the others that end there
+// (ghosts included), where there are any.
 std::vector<MarkPolyline> Chain(
     const std::vector<Segment>& segs, double tol, double fold, double end_fold,
     ThreadPool& pool, std::vector<int64_t>* starts = nullptr,
@@ -930,8 +934,8 @@ std::vector<MarkPolyline> Chain(
     return a.key != b.key ? a.key < b.key
                           : (a.seg != b.seg ? a.seg < b.seg : a.end < b.end);
   };
-  // Sorted by buckets of keys on every thread: a window's chaining is
-  // serial, and two halves sorted at once, then merged, left all but two
+  // Sorted by buckets of keys on every thread: a window's chaining waits
+  // for it, and two halves sorted at once, then merged, left all but two
   // threads of a many-core machine idle. The buckets' bounds are keys (a
   // sample's): a vertex's incidences fall in one bucket, whose ranges
   // (`bounds`) then serve the pass below too.
@@ -1628,16 +1632,16 @@ absl::Status FindCuttingMarks(
   // or to be finished.
   std::map<int64_t, Ready> ready;
   // The last window's polylines in `ready`, not finished yet: they are
-  // finished while the next window is chained (chaining is serial; on many
-  // cores it left the threads idle between windows' projections), and so
-  // handed on a window later. Polylines with nothing to finish (the
+  // finished while the next window is chained (chaining alone left the
+  // threads of a many-core machine idle between windows' projections),
+  // and so handed on a window later. Polylines with nothing to finish (the
   // taylor scheme's) are handed on at once.
   std::vector<Ready*> unfinished;
   // Segments handed on, per vertex key an open segment uses (Chain).
   absl::flat_hash_map<uint64_t, int32_t> ghosts;
-  // The next window's bands are searched while this one's are chained
-  // (serial, and the longer the more chains stay open: a plate's creases
-  // along y span every band) and the last one's finished.
+  // The next window's bands are searched while this one's are chained and
+  // the last one's polylines finished: neither keeps every thread busy (a
+  // few long chains, a plate's creases along y spanning every band).
   std::vector<std::vector<Segment>> next_segments;
   auto find_window = [&](int32_t w0, int32_t wn,
                          std::vector<std::vector<Segment>>* out) {
