@@ -896,12 +896,10 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
 }
 
 // With `starts`, each polyline's first segment (the lowest index of its
-// chain: polylines come out in that order); with `chain_of`, each
-// segment's chain, by that first segment (also for chains too short to
-// give a polyline). `ghosts` counts, per vertex key, segments chained
-// before that end there too (they count in its degree). Chains with a
-// segment of index `grow_from` or more give no polyline (their segments
-// still get their chain_of): they may still grow. With `grows_out`, 1 for
+// chain: polylines come out in that order). `ghosts` counts, per vertex
+// key, segments chained before that end there too (they count in its
+// degree). Chains with a segment of index `grow_from` or more give no
+// polyline: they may still grow. With `grows_out`, 1 for
 // each segment of such a chain; with `next_ghosts` (which needs
 // `grows_out`), the `ghosts` for those segments alone once the others are
 // handed on: per key a growing segment ends at, the others that end there
@@ -909,7 +907,6 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
 std::vector<MarkPolyline> Chain(
     const std::vector<Segment>& segs, double tol, double fold, double end_fold,
     ThreadPool& pool, std::vector<int64_t>* starts = nullptr,
-    std::vector<int64_t>* chain_of = nullptr,
     const absl::flat_hash_map<uint64_t, int32_t>* ghosts = nullptr,
     int64_t grow_from = INT64_MAX, std::vector<uint8_t>* grows_out = nullptr,
     absl::flat_hash_map<uint64_t, int32_t>* next_ghosts = nullptr) {
@@ -1025,7 +1022,6 @@ std::vector<MarkPolyline> Chain(
   });
   std::vector<uint8_t> used(n, 0);
   if (grows_out != nullptr) grows_out->assign(n, 0);
-  if (chain_of != nullptr) chain_of->assign(n, -1);
   auto push_vertex = [&](MarkPolyline* p, const End& e) {
     if (!p->vertices.empty()) {
       const Vec3& last = p->vertices.back();
@@ -1074,7 +1070,6 @@ std::vector<MarkPolyline> Chain(
         for (;;) {
           used[seg] = 1;
           if (grows_out != nullptr) (*grows_out)[seg] = 1;
-          if (chain_of != nullptr) (*chain_of)[seg] = s;
           const int64_t o = other[2 * seg + (1 - end)];
           if (o < 0 || used[o / 2]) break;
           seg = o / 2;
@@ -1089,7 +1084,6 @@ std::vector<MarkPolyline> Chain(
     push_vertex(&p, segs[seg].e[end]);
     for (;;) {
       used[seg] = 1;
-      if (chain_of != nullptr) (*chain_of)[seg] = s;
       const End& far = segs[seg].e[1 - end];
       push_vertex(&p, far);
       const int64_t o = other[2 * seg + (1 - end)];
@@ -1720,14 +1714,13 @@ absl::Status FindCuttingMarks(
         finish_all(finishing);
         return;
       }
-      std::vector<int64_t> starts, chain_of;
+      std::vector<int64_t> starts;
       std::vector<uint8_t> growing;
       absl::flat_hash_map<uint64_t, int32_t> kept_ghosts;
       std::vector<MarkPolyline> chained =
           Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts,
-                &chain_of, &ghosts,
-                last ? INT64_MAX : static_cast<int64_t>(window_first), &growing,
-                &kept_ghosts);
+                &ghosts, last ? INT64_MAX : static_cast<int64_t>(window_first),
+                &growing, &kept_ghosts);
       // Chain gave polylines for the complete chains only.
       for (size_t k = 0; k < chained.size(); ++k) {
         const auto it = ready.emplace(open_at[starts[k]],
