@@ -70,8 +70,8 @@ void MoveIndex::Add(uint32_t id, const Rect& b) {
   }
 }
 
-void MoveIndex::AddAll(std::span<const uint32_t> ids,
-                       std::span<const BinRect> bins, ThreadPool& pool) {
+void MoveIndex::AddAll(uint32_t first_id, std::span<const BinRect> bins,
+                       ThreadPool& pool) {
   // Bin (bx, by) belongs to part (bx + by) mod parts: a raster's moves
   // along x or along y spread over every part, and a part visits only
   // its own bins of each move (a step of `parts` along the row).
@@ -80,14 +80,15 @@ void MoveIndex::AddAll(std::span<const uint32_t> ids,
   pool.ParallelFor(parts, [&](int64_t part) {
     const int32_t q = static_cast<int32_t>(part);
     int64_t bytes = 0;
-    for (size_t k = 0; k < ids.size(); ++k) {
+    for (size_t k = 0; k < bins.size(); ++k) {
+      const uint32_t id = first_id + static_cast<uint32_t>(k);
       const BinRect& r = bins[k];
       for (int32_t by = r.by0; by <= r.by1; ++by) {
         // The first bx >= bx0 with (bx + by) % parts == q.
         const int32_t bx = r.bx0 + ((q - (r.bx0 + by) % parts) + parts) % parts;
         std::vector<uint32_t>* row = &bins_[static_cast<size_t>(by) * bins_x_];
         for (int32_t x = bx; x <= r.bx1; x += parts) {
-          bytes += AddToBin(row + x, ids[k]);
+          bytes += AddToBin(row + x, id);
         }
       }
     }

@@ -38,11 +38,12 @@ class MoveIndex {
     int32_t bx0 = 1, bx1 = 0, by0 = 1, by1 = 0;
   };
   BinRect BinsOf(const Rect& bounds) const;
-  // The index that Add(ids[k], bounds_k) for k = 0, 1, ... in turn gives,
-  // where bins[k] = BinsOf(bounds_k): the bins are shared among the pool's
-  // threads, each adding the ids of its own bins in order. Blocks until
-  // done; not concurrent with other Adds or reads.
-  void AddAll(std::span<const uint32_t> ids, std::span<const BinRect> bins,
+  // The index that Add(first_id + k, bounds_k) for k = 0, 1, ... in turn
+  // gives, where bins[k] = BinsOf(bounds_k) (an empty BinRect adds id
+  // first_id + k nowhere): the bins are shared among the pool's threads,
+  // each adding the ids of its own bins in order. Blocks until done; not
+  // concurrent with other Adds or reads.
+  void AddAll(uint32_t first_id, std::span<const BinRect> bins,
               ThreadPool& pool);
 
   const GridGeometry& grid() const { return grid_; }

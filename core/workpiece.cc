@@ -431,13 +431,15 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
   result.first_move_id = move_count();
   result.moves = static_cast<int64_t>(moves.size());
 
-  // The sweeps, footprints and tile ranges on every thread: done on one
-  // they were the serial part of each batch (about 5% of a plate's
+  // The sweeps, footprints' bins and tile ranges on every thread: done on
+  // one they were the serial part of each batch (about 5% of a plate's
   // simulation on 2 cores, which held 16 cores to under 5x). The index
-  // takes the footprints in move order, as before.
+  // takes the moves in order, each bin on one thread.
   const size_t n_moves = moves.size();
   BatchSweeps batch(n_moves);
-  std::vector<std::optional<Rect>> footprints(n_moves);
+  // Empty where not indexed; indexed even when it cuts no node: the exact
+  // surface still sees it.
+  std::vector<MoveIndex::BinRect> bins(n_moves);
   struct TileRange {
     int32_t ti0 = 0, ti1 = -1, tj0 = 0, tj1 = -1;  // empty by default
   };
@@ -445,44 +447,36 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
   constexpr int64_t kPrepChunk = 256;
   const int64_t prep_chunks =
       (static_cast<int64_t>(n_moves) + kPrepChunk - 1) / kPrepChunk;
+  // Each chunk's count of (tile, move) pairs at [c + 1], then their offsets.
+  std::vector<size_t> pair_at(prep_chunks + 1, 0);
   pool_->ParallelFor(prep_chunks, [&](int64_t c) {
     const size_t m1 =
         std::min(n_moves, static_cast<size_t>((c + 1) * kPrepChunk));
+    size_t pairs_here = 0;
     for (size_t m = static_cast<size_t>(c * kPrepChunk); m < m1; ++m) {
       batch.Build(m, moves[m]);
-      footprints[m] = IndexedFootprint(moves[m], spec().z_top, index_);
-      if (!footprints[m].has_value()) continue;
-      const Rect& b = *footprints[m];
+      const std::optional<Rect> footprint =
+          IndexedFootprint(moves[m], spec().z_top, index_);
+      if (!footprint.has_value()) continue;
+      const Rect& b = *footprint;
+      bins[m] = index_.BinsOf(b);
       const auto [i_lo, i_hi] =
           NodeRange(b.x0, b.x1, spec().x0, 1 / grid_.dx(), grid_.nx());
       const auto [j_lo, j_hi] =
           NodeRange(b.y0, b.y1, spec().y0, 1 / grid_.dy(), grid_.ny());
       if (i_lo > i_hi || j_lo > j_hi) continue;  // between nodes
-      ranges[m] = {i_lo >> kTileBits, i_hi >> kTileBits, j_lo >> kTileBits,
-                   j_hi >> kTileBits};
+      const TileRange r = {i_lo >> kTileBits, i_hi >> kTileBits,
+                           j_lo >> kTileBits, j_hi >> kTileBits};
+      ranges[m] = r;
+      pairs_here +=
+          static_cast<size_t>(r.ti1 - r.ti0 + 1) * (r.tj1 - r.tj0 + 1);
     }
+    pair_at[c + 1] = pairs_here;
   });
   const std::span<const Sweep> sweeps = batch.span();
+  index_.AddAll(static_cast<uint32_t>(result.first_move_id), bins, *pool_);
   // (tile, move) pairs for every tile a move's footprint may touch, in
   // move order.
-  std::vector<size_t> pair_at(prep_chunks + 1, 0);
-  // Indexed even when it cuts no node: the exact surface still sees it.
-  std::vector<uint32_t> indexed;
-  std::vector<MoveIndex::BinRect> indexed_bins;
-  indexed.reserve(n_moves);
-  indexed_bins.reserve(n_moves);
-  for (size_t m = 0; m < n_moves; ++m) {
-    if (footprints[m].has_value()) {
-      indexed.push_back(static_cast<uint32_t>(result.first_move_id + m));
-      indexed_bins.push_back(index_.BinsOf(*footprints[m]));
-    }
-  }
-  index_.AddAll(indexed, indexed_bins, *pool_);
-  for (size_t m = 0; m < n_moves; ++m) {
-    const TileRange& r = ranges[m];
-    pair_at[m / kPrepChunk + 1] +=
-        static_cast<size_t>(r.ti1 - r.ti0 + 1) * (r.tj1 - r.tj0 + 1);
-  }
   for (int64_t c = 0; c < prep_chunks; ++c) pair_at[c + 1] += pair_at[c];
   std::vector<std::pair<int32_t, uint32_t>> pairs(pair_at[prep_chunks]);
   pool_->ParallelFor(prep_chunks, [&](int64_t c) {

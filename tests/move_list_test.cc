@@ -142,8 +142,9 @@ TEST(MoveIndexTest, RangesListTheSameIdsAsAPlainList) {
 
 // AddAll, which shares the bins among threads, gives the index that Add in
 // id order gives: every bin's ids (ranges, gaps) and the bytes held, for
-// boxes over one bin, many, the grid's edges and none, with any thread
-// count (more parts than bins along a row, too), batch after batch.
+// boxes over one bin, many, the grid's edges and none, ids left out (an
+// empty BinRect), with any thread count (more parts than bins along a row,
+// too), batch after batch.
 TEST(MoveIndexTest, AddAllIsAddInOrder) {
   for (int threads : {1, 2, 3, 7, 16}) {
     SCOPED_TRACE(threads);
@@ -152,19 +153,21 @@ TEST(MoveIndexTest, AddAllIsAddInOrder) {
     std::mt19937 rng(threads);
     uint32_t id = 0;
     for (int batch = 0; batch < 20; ++batch) {
-      std::vector<uint32_t> ids;
+      const uint32_t first = id;
       std::vector<MoveIndex::BinRect> bins;
       const int n = static_cast<int>(rng() % 400);
       for (int k = 0; k < n; ++k) {
+        if (rng() % 7 == 0) {  // runs, and sometimes a gap: an id not added
+          bins.push_back({});
+          ++id;
+        }
         const double x = static_cast<double>(rng() % 80) - 10;
         const double y = static_cast<double>(rng() % 80) - 10;
         const Rect b{x, y, x + (rng() % 4) * 11.0, y + (rng() % 3) * 13.0};
-        one.Add(id, b);
-        ids.push_back(id);
+        one.Add(id++, b);
         bins.push_back(all.BinsOf(b));
-        id += 1 + (rng() % 7 == 0);  // runs, and sometimes a gap
       }
-      all.AddAll(ids, bins, pool);
+      all.AddAll(first, bins, pool);
     }
     EXPECT_EQ(all.MemoryBytes(), one.MemoryBytes());
     std::vector<uint32_t> want, got;
