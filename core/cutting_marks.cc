@@ -6,6 +6,7 @@
 #include <memory>
 #include <numbers>
 #include <optional>
+#include <thread>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -895,6 +896,31 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
   }
 }
 
+// A segment end's incidence at its vertex (Chain).
+struct Inc {
+  uint64_t key;
+  int64_t seg;
+  int end;
+};
+
+// Chain's largest arrays, kept from one call to the next: a window's,
+// allocated afresh, were mapped and faulted in again for every window (a
+// window holds tens of MB of segments), with a serial zeroing each time.
+struct ChainScratch {
+  std::vector<Inc> inc, sorted;
+  std::vector<uint16_t> bucket;
+  std::vector<int64_t> other;
+  std::vector<uint8_t> used;
+};
+
+// Resizes *v to n entries, each written after (no copy of the old ones
+// when it grows).
+template <typename T>
+void ResizeForWriting(std::vector<T>* v, size_t n) {
+  if (n > v->capacity()) v->clear();
+  v->resize(n);
+}
+
 // With `starts`, each polyline's first segment (the lowest index of its
 // chain: polylines come out in that order). `ghosts` counts, per vertex
 // key, segments chained before that end there too (they count in its
@@ -906,18 +932,15 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
 // (ghosts included), where there are any.
 std::vector<MarkPolyline> Chain(
     const std::vector<Segment>& segs, double tol, double fold, double end_fold,
-    ThreadPool& pool, std::vector<int64_t>* starts = nullptr,
+    ThreadPool& pool, ChainScratch* scratch,
+    std::vector<int64_t>* starts = nullptr,
     const absl::flat_hash_map<uint64_t, int32_t>* ghosts = nullptr,
     int64_t grow_from = INT64_MAX, std::vector<uint8_t>* grows_out = nullptr,
     absl::flat_hash_map<uint64_t, int32_t>* next_ghosts = nullptr) {
   const int64_t n = static_cast<int64_t>(segs.size());
   // Incidences sorted by vertex key.
-  struct Inc {
-    uint64_t key;
-    int64_t seg;
-    int end;
-  };
-  std::vector<Inc> inc(2 * n);
+  std::vector<Inc>& inc = scratch->inc;
+  ResizeForWriting(&inc, 2 * n);
   constexpr int64_t kIncChunk = int64_t{1} << 14;
   pool.ParallelFor((n + kIncChunk - 1) / kIncChunk, [&](int64_t c) {
     const int64_t k1 = std::min(n, (c + 1) * kIncChunk);
@@ -955,7 +978,8 @@ std::vector<MarkPolyline> Chain(
     // to their bucket's part for that chunk: the order within a bucket is
     // the chunks' (then sorted anyway).
     const int chunks = buckets;
-    std::vector<uint16_t> bucket(m);
+    std::vector<uint16_t>& bucket = scratch->bucket;
+    ResizeForWriting(&bucket, m);
     std::vector<size_t> at(static_cast<size_t>(chunks) * buckets, 0);
     auto chunk_range = [&](int64_t c) {
       return std::pair<size_t, size_t>(c * m / chunks, (c + 1) * m / chunks);
@@ -981,7 +1005,8 @@ std::vector<MarkPolyline> Chain(
       }
     }
     bounds[buckets] = total;
-    std::vector<Inc> sorted(m);
+    std::vector<Inc>& sorted = scratch->sorted;
+    ResizeForWriting(&sorted, m);
     pool.ParallelFor(chunks, [&](int64_t c) {
       const auto [i0, i1] = chunk_range(c);
       for (size_t i = i0; i < i1; ++i) {
@@ -997,7 +1022,8 @@ std::vector<MarkPolyline> Chain(
   }
   // For each segment end at a vertex of degree 2, the other incidence
   // there; a bucket at a time (each writes its own incidences' entries).
-  std::vector<int64_t> other(2 * n, -1);  // seg * 2 + end
+  std::vector<int64_t>& other = scratch->other;  // seg * 2 + end
+  other.assign(2 * n, -1);
   pool.ParallelFor(static_cast<int64_t>(bounds.size()) - 1, [&](int64_t b) {
     const size_t end = bounds[b + 1];
     for (size_t i = bounds[b]; i < end;) {
@@ -1020,7 +1046,8 @@ std::vector<MarkPolyline> Chain(
       i = j;
     }
   });
-  std::vector<uint8_t> used(n, 0);
+  std::vector<uint8_t>& used = scratch->used;
+  used.assign(n, 0);
   if (grows_out != nullptr) grows_out->assign(n, 0);
   auto push_vertex = [&](MarkPolyline* p, const End& e) {
     if (!p->vertices.empty()) {
@@ -1631,8 +1658,12 @@ absl::Status FindCuttingMarks(
   // and so handed on a window later. Polylines with nothing to finish (the
   // taylor scheme's) are handed on at once.
   std::vector<Ready*> unfinished;
+  // Polylines ready to hand on (in order), handed on during the next
+  // window's work.
+  std::vector<MarkPolyline> handing;
   // Segments handed on, per vertex key an open segment uses (Chain).
   absl::flat_hash_map<uint64_t, int32_t> ghosts;
+  ChainScratch chain_scratch;
   // The next window's bands are searched while this one's are chained and
   // the last one's polylines finished: neither keeps every thread busy (a
   // few long chains, a plate's creases along y spanning every band).
@@ -1705,7 +1736,7 @@ absl::Status FindCuttingMarks(
     const bool last = next_w0 >= bands;
     std::vector<Ready*> finishing;
     finishing.swap(unfinished);
-    wp.pool().ParallelFor(3, [&](int64_t part) {
+    auto window_work = [&](int64_t part) {
       if (part == 2) {
         if (!last) find_window(next_w0, next_wn, &next_segments);
         return;
@@ -1718,9 +1749,10 @@ absl::Status FindCuttingMarks(
       std::vector<uint8_t> growing;
       absl::flat_hash_map<uint64_t, int32_t> kept_ghosts;
       std::vector<MarkPolyline> chained =
-          Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts,
-                &ghosts, last ? INT64_MAX : static_cast<int64_t>(window_first),
-                &growing, &kept_ghosts);
+          Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(),
+                &chain_scratch, &starts, &ghosts,
+                last ? INT64_MAX : static_cast<int64_t>(window_first), &growing,
+                &kept_ghosts);
       // Chain gave polylines for the complete chains only.
       for (size_t k = 0; k < chained.size(); ++k) {
         const auto it = ready.emplace(open_at[starts[k]],
@@ -1740,7 +1772,29 @@ absl::Status FindCuttingMarks(
       open.resize(n);
       open_at.resize(n);
       ghosts.swap(kept_ghosts);
-    });
+    };
+    // The last window's polylines are handed on meanwhile, on a thread of
+    // their own (emit may block while its reader catches up): handed on
+    // between windows, they left every thread of a many-core machine idle
+    // for about a third of the marks' time. The window's work stays on
+    // this thread: run on a new thread each window, its allocations went
+    // to another malloc arena, given back to the system and faulted in
+    // again every window.
+    if (handing.empty()) {
+      wp.pool().ParallelFor(3, window_work);
+    } else {
+      absl::Status handed;
+      std::thread emitter([&] {
+        for (MarkPolyline& p : handing) {
+          handed = emit(std::move(p));
+          if (!handed.ok()) break;
+        }
+      });
+      wp.pool().ParallelFor(3, window_work);
+      emitter.join();
+      handing.clear();
+      if (!handed.ok()) return handed;
+    }
     if (last) {
       finish_all(unfinished);
       unfinished.clear();
@@ -1751,14 +1805,16 @@ absl::Status FindCuttingMarks(
     // Nor what is not finished yet (this window's polylines).
     while (!ready.empty() && ready.begin()->first < before &&
            ready.begin()->second.finished) {
-      MarkPolyline p = std::move(ready.begin()->second.p);
+      handing.push_back(std::move(ready.begin()->second.p));
       ready.erase(ready.begin());
-      if (absl::Status st = emit(std::move(p)); !st.ok()) return st;
     }
     if (absl::Status st = poll(); !st.ok()) return st;
     band_segments.swap(next_segments);
     w0 = next_w0;
     wn = next_wn;
+  }
+  for (MarkPolyline& p : handing) {
+    if (absl::Status st = emit(std::move(p)); !st.ok()) return st;
   }
   return absl::OkStatus();
 }

@@ -114,18 +114,22 @@ absl::StatusOr<std::vector<MarkPolyline>> FindCuttingMarks(
 // The same marks, in the same order, handed to `emit` as they are found:
 // the grid is read a window of bands at a time and only the chains still
 // open (and the polylines that wait for an earlier one) are held, not every
-// crease segment of the grid. `emit` runs on the calling thread.
+// crease segment of the grid. `emit` runs on one thread at a time (see
+// below).
 absl::Status FindCuttingMarks(const Workpiece& wp, const MarkOptions& options,
                               absl::FunctionRef<void(MarkPolyline)> emit);
 // The same, and the caller may stop the search: the first non-OK status
-// `emit` returns is returned at once (no other polyline is handed on), and
+// `emit` returns is returned once the window of bands in progress is done
+// (no other polyline is handed on), and
 // `poll`, called after every window of bands (a few ms to a second of work,
 // whether or not it completed a polyline), stops it the same way, so that a
 // caller that is cancelled does not wait for the next polyline: there may
 // be none until the end (a crease along y spans every band). The polylines
-// handed on before are the first ones of the whole result. Both run on the
-// calling thread, and may block (the search waits; the workpiece's pool is
-// not held meanwhile).
+// handed on before are the first ones of the whole result. `poll` runs on
+// the calling thread; `emit` on one thread at a time, in order, not one of
+// the workpiece's pool: a window's polylines are handed on while the next
+// window is searched, from a thread of the search's own. Both may block
+// (the pool is not held meanwhile).
 absl::Status FindCuttingMarks(
     const Workpiece& wp, const MarkOptions& options,
     absl::FunctionRef<absl::Status(MarkPolyline)> emit,

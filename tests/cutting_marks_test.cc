@@ -862,10 +862,13 @@ TEST(CuttingMarksTest, PollStopsTheSearchBetweenWindows) {
   auto wp = LongRaster(&one);
   const std::vector<MarkPolyline> all = Marks(*wp);
   // 500 rows: 32 bands, 4 windows. A chain is complete once a window has
-  // passed without touching it: the poll after the second window stops the
-  // search once the first window's marks are handed on.
+  // passed without touching it, and handed on while the next window is
+  // searched: the poll after the second window stops the search before any
+  // is, the one after the third once the first window's marks are.
   std::vector<MarkPolyline> got;
   EXPECT_EQ(MarksUntilPoll(*wp, 2, &got), absl::DeadlineExceededError("stop"));
+  EXPECT_TRUE(got.empty());
+  EXPECT_EQ(MarksUntilPoll(*wp, 3, &got), absl::DeadlineExceededError("stop"));
   // The marks of the first window's passes, and none of the rest.
   EXPECT_GT(got.size(), 0u);
   EXPECT_LT(got.size(), all.size() / 2);
@@ -934,13 +937,14 @@ TEST(CuttingMarksTest, PollStopsGuardedMarksAWindowLater) {
     const std::vector<MarkPolyline> all = Marks(*wp);
     ASSERT_GE(all.size(), 90u);
     // One thread: 500 rows are 32 bands in 4 windows of 8. After the
-    // second window, the first's chains are complete but not projected.
-    for (int stop_at : {2, 3}) {
+    // second window, the first's chains are complete but not projected;
+    // projected during the third, they are handed on during the fourth.
+    for (int stop_at : {3, 4}) {
       if (pool == &four) break;
       std::vector<MarkPolyline> got;
       EXPECT_EQ(MarksUntilPoll(*wp, stop_at, &got),
                 absl::DeadlineExceededError("stop"));
-      if (stop_at == 2) {
+      if (stop_at == 3) {
         EXPECT_EQ(got.size(), 0u);
       } else {
         EXPECT_GT(got.size(), 0u);
