@@ -130,7 +130,11 @@ MarksStream::MarksStream(const StockSpec& stock, const std::string& dir,
 }
 
 // The writers' destructors remove unfinished files; the spool's its file.
-MarksStream::~MarksStream() = default;
+MarksStream::~MarksStream() { WaitForWrite(); }
+
+void MarksStream::WaitForWrite() {
+  if (write_.valid()) write_.get();
+}
 
 void MarksStream::Add(MarkPolyline p) {
   all_.Add(p);
@@ -147,27 +151,36 @@ void MarksStream::Add(MarkPolyline p) {
 
 void MarksStream::Flush() {
   if (batch_.empty()) return;
+  // The reader goes on taking marks while a batch is formatted and
+  // written: written in its turn, the server's search waited for it.
+  WaitForWrite();
+  writing_.swap(batch_);
+  batch_.clear();
+  batch_vertices_ = 0;
+  write_ = std::async(std::launch::async, [this] { WriteBatch(); });
+}
+
+void MarksStream::WriteBatch() {
   // As the files were chained: marks.json stops at marks.svg's error.
   if (svg_status_.ok()) {
     const auto t0 = Clock::now();
-    svg_status_ = svg_->Append(batch_);
+    svg_status_ = svg_->Append(writing_);
     svg_seconds_ += Since(t0);
   }
   if (svg_status_.ok() && json_status_.ok()) {
     const auto t0 = Clock::now();
-    json_status_ = json_->Append(batch_);
+    json_status_ = json_->Append(writing_);
     json_seconds_ += Since(t0);
   }
   // Its error is marks.png's, when it is drawn.
-  (void)spool_->Append(batch_);
-  batch_.clear();
-  batch_vertices_ = 0;
+  (void)spool_->Append(writing_);
 }
 
 void MarksStream::Finish() {
   if (!files_ || finished_) return;
   finished_ = true;
   Flush();
+  WaitForWrite();
   if (svg_status_.ok()) {
     const auto t0 = Clock::now();
     svg_status_ = svg_->Finish();
@@ -182,6 +195,7 @@ void MarksStream::Finish() {
   // Not needed any more: their buffers go.
   batch_ = std::vector<MarkPolyline>();
   pieces_ = std::vector<MarkPolyline>();
+  writing_ = std::vector<MarkPolyline>();
 }
 
 std::optional<MarkSummary> MarksStream::shown() const {

@@ -1,11 +1,13 @@
 // The cutting marks of `swarf run --out` consumed as they arrive (issue 28):
 // summarised, filtered for display, the shown pieces appended to marks.svg
 // and marks.json and spooled to disk for marks.png, which needs the relief
-// sampled later. No more than a batch of marks is held at a time.
+// sampled later. No more than two batches of marks are held at a time: one
+// filling while the last is written.
 #ifndef SWARF_CLIENT_MARKS_STREAM_H_
 #define SWARF_CLIENT_MARKS_STREAM_H_
 
 #include <cstddef>
+#include <future>
 #include <memory>
 #include <optional>
 #include <span>
@@ -57,8 +59,9 @@ class MarksSpool {
 // FilterMarks of them), and the shown pieces written to dir/marks.svg and
 // dir/marks.json (the bytes WriteMarksSvg/WriteMarksJson write for
 // FilterMarks of all of them) and spooled to dir/marks.png.spool, a batch
-// of `batch_vertices` shown vertices at a time (formatted in parallel;
-// memory, not the files, depends on it).
+// of `batch_vertices` shown vertices at a time (formatted in parallel, on
+// a thread of the stream's own while the next batch is taken; memory, not
+// the files, depends on it).
 //
 // Write errors do not stop the consumption (the summaries are still
 // computed): they are kept, the first naming its file, and reported by
@@ -92,7 +95,12 @@ class MarksStream {
   StreamedMarks streamed() const;
 
  private:
+  // Hands the batch to the writing thread (after the last batch's write).
   void Flush();
+  // Writes writing_ to the files and the spool (the writing thread).
+  void WriteBatch();
+  // Waits for the batch being written, if any.
+  void WaitForWrite();
 
   const bool files_ = false;
   MarkDisplayFilter filter_;
@@ -103,6 +111,10 @@ class MarksStream {
   std::unique_ptr<MarksSpool> spool_;
   std::vector<MarkPolyline> batch_, pieces_;
   size_t batch_vertices_ = 0;
+  // The batch being written and its write; the statuses and seconds below
+  // are the writing thread's while it runs.
+  std::vector<MarkPolyline> writing_;
+  std::future<void> write_;
   absl::Status svg_status_, json_status_;
   double svg_seconds_ = 0, json_seconds_ = 0;
   bool finished_ = false;
