@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -567,15 +568,15 @@ class PolylineStroke {
 // a pixel apart in a picture of a few thousand pixels: each cost a stroke
 // and changed nothing to be seen. The first and last are kept; a vertex is
 // kept at least every kMaxRun.
-std::vector<size_t> KeptVertices(const std::vector<double>& xs,
-                                 const std::vector<double>& ys,
-                                 const std::vector<double>& angles) {
+// Into *kept (its old entries dropped).
+void KeptVertices(std::span<const double> xs, std::span<const double> ys,
+                  std::span<const double> angles, std::vector<size_t>* kept) {
   constexpr double kDropPx = 0.05, kDropDeg = 0.25;
   constexpr size_t kMaxRun = 32;
   const size_t n = xs.size();
-  std::vector<size_t> kept;
-  if (n == 0) return kept;
-  kept.push_back(0);
+  kept->clear();
+  if (n == 0) return;
+  kept->push_back(0);
   // Whether every vertex strictly between a and b lies near segment a-b.
   auto spans = [&](size_t a, size_t b) {
     const double dx = xs[b] - xs[a], dy = ys[b] - ys[a];
@@ -595,10 +596,9 @@ std::vector<size_t> KeptVertices(const std::vector<double>& xs,
   while (a + 1 < n) {
     size_t b = a + 1;
     while (b + 1 < n && b + 1 - a <= kMaxRun && spans(a, b + 1)) ++b;
-    kept.push_back(b);
+    kept->push_back(b);
     a = b;
   }
-  return kept;
 }
 
 }  // namespace
@@ -700,9 +700,78 @@ absl::StatusOr<Image> DrawMarksOver(
   // (a later polyline's angles take precedence), and nothing more is drawn
   // once either is seen (the picture is not returned).
   bool finite = true;
-  std::vector<double> xs, ys;
+  // The polylines' segments (the vertices kept, KeptVertices) are taken a
+  // batch of polylines at a time on every thread, in groups of whole
+  // polylines, then added to the chunk in order: taken one polyline at a
+  // time, on one thread, they were most of the picture's time on a large
+  // job (tens of millions of vertices, a few thousand pixels across) on a
+  // many-core machine. The batch holds the
+  // polylines in pixels, flat: polyline q's vertices are [first[q],
+  // first[q + 1]).
+  constexpr size_t kBatchVertices = size_t{1} << 18;
+  constexpr size_t kGroupVertices = size_t{1} << 12;
+  std::vector<double> xs, ys, angles;
+  std::vector<size_t> first = {0};
+  std::vector<uint8_t> closed;
+  std::vector<size_t> group_first;  // each group's first polyline, then end
+  std::vector<std::vector<PixelSegment>> group_segments;
+  std::vector<size_t> segment_count;  // per polyline of the batch
+  auto segments_of = [&](size_t q, std::vector<PixelSegment>* out) {
+    thread_local std::vector<size_t> kept;
+    const size_t v0 = first[q], n = first[q + 1] - v0;
+    const std::span<const double> x(xs.data() + v0, n), y(ys.data() + v0, n),
+        angle(angles.data() + v0, n);
+    KeptVertices(x, y, angle, &kept);
+    const size_t m = kept.size();
+    const size_t ends = closed[q] && n > 2 ? m : (m > 0 ? m - 1 : 0);
+    const size_t before = out->size();
+    for (size_t k = 0; k < ends || (m == 1 && k == 0); ++k) {
+      const size_t a = kept[k], b = kept[m == 1 ? 0 : (k + 1) % m];
+      out->push_back({x[a], y[a], x[b], y[b], angle[a], angle[b], 0});
+    }
+    segment_count[q] = out->size() - before;
+  };
   for (const bool halo : {true, false}) {
     uint32_t polyline = 0;
+    auto take_batch = [&] {
+      const size_t polylines = closed.size();
+      group_first.clear();
+      for (size_t q = 0, since = kGroupVertices; q < polylines; ++q) {
+        if (since >= kGroupVertices) {
+          group_first.push_back(q);
+          since = 0;
+        }
+        since += first[q + 1] - first[q];
+      }
+      group_first.push_back(polylines);
+      const size_t groups = group_first.size() - 1;
+      if (group_segments.size() < groups) group_segments.resize(groups);
+      segment_count.resize(polylines);
+      ThreadPool::Default().ParallelFor(
+          static_cast<int64_t>(groups), [&](int64_t g) {
+            group_segments[g].clear();
+            for (size_t q = group_first[g]; q < group_first[g + 1]; ++q) {
+              segments_of(q, &group_segments[g]);
+            }
+          });
+      for (size_t g = 0; g < groups; ++g) {
+        const PixelSegment* seg = group_segments[g].data();
+        for (size_t q = group_first[g]; q < group_first[g + 1]; ++q) {
+          for (size_t k = 0; k < segment_count[q]; ++k, ++seg) {
+            chunk.push_back(*seg);
+            chunk.back().polyline = polyline;
+          }
+          ++polyline;
+          // Whole polylines only: each is blended at once within a chunk.
+          if (chunk.size() >= options.chunk_segments) draw_chunk(halo);
+        }
+      }
+      xs.clear();
+      ys.clear();
+      angles.clear();
+      first.assign(1, 0);
+      closed.clear();
+    };
     absl::Status st = marks([&](const MarkPolyline& p) -> absl::Status {
       const size_t n = p.vertices.size();
       if (p.angle_deg.size() != n) {
@@ -710,28 +779,28 @@ absl::StatusOr<Image> DrawMarksOver(
             absl::StrFormat("mark polyline with %d vertices has %d angles", n,
                             p.angle_deg.size()));
       }
-      xs.resize(n);
-      ys.resize(n);
-      for (size_t k = 0; k < n; ++k) {
-        xs[k] = frame.PixelX(p.vertices[k].x);
-        ys[k] = frame.PixelY(p.vertices[k].y);
-        if (!(std::isfinite(xs[k]) && std::isfinite(ys[k]))) finite = false;
-      }
+      // Nothing more is drawn once a vertex is not finite.
       if (!finite) return absl::OkStatus();
-      const std::vector<size_t> kept = KeptVertices(xs, ys, p.angle_deg);
-      const size_t m = kept.size();
-      const size_t ends = p.closed && n > 2 ? m : (m > 0 ? m - 1 : 0);
-      for (size_t k = 0; k < ends || (m == 1 && k == 0); ++k) {
-        const size_t a = kept[k], b = kept[m == 1 ? 0 : (k + 1) % m];
-        chunk.push_back({xs[a], ys[a], xs[b], ys[b], p.angle_deg[a],
-                         p.angle_deg[b], polyline});
+      for (size_t k = 0; k < n; ++k) {
+        const double x = frame.PixelX(p.vertices[k].x);
+        const double y = frame.PixelY(p.vertices[k].y);
+        if (!(std::isfinite(x) && std::isfinite(y))) {
+          finite = false;
+          xs.resize(first.back());
+          ys.resize(first.back());
+          return absl::OkStatus();
+        }
+        xs.push_back(x);
+        ys.push_back(y);
       }
-      ++polyline;
-      // Whole polylines only: each is blended at once within a chunk.
-      if (chunk.size() >= options.chunk_segments) draw_chunk(halo);
+      angles.insert(angles.end(), p.angle_deg.begin(), p.angle_deg.end());
+      first.push_back(xs.size());
+      closed.push_back(p.closed ? 1 : 0);
+      if (xs.size() - first.front() >= kBatchVertices) take_batch();
       return absl::OkStatus();
     });
     if (!st.ok()) return st;
+    take_batch();
     if (!finite) return absl::InvalidArgumentError("mark vertex is not finite");
     draw_chunk(halo);
   }
