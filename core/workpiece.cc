@@ -371,15 +371,49 @@ std::optional<Rect> IndexedFootprint(const Move& move, double z_top,
   return b;
 }
 
-// A batch's sweeps, built on every thread: Sweep has no empty state, so
-// they are constructed in place in storage of their own.
+// Storage for a batch's sweeps (Sweep has no empty state: they are
+// constructed in place), kept from batch to batch up to kKeptSweeps: built
+// in new storage, every batch's sweeps were faulted in afresh, about a
+// tenth of a plate job's page faults.
+class SweepStorage {
+ public:
+  SweepStorage() = default;
+  ~SweepStorage() { Release(); }
+  SweepStorage(const SweepStorage&) = delete;
+  SweepStorage& operator=(const SweepStorage&) = delete;
+
+  // Room for n sweeps (none constructed).
+  Sweep* Reserve(size_t n) {
+    if (n > capacity_) {
+      Release();
+      p_ = alloc_.allocate(n);
+      capacity_ = n;
+    }
+    return p_;
+  }
+  // Gives the storage back when it is larger than kept sweeps.
+  void Trim(size_t kept) {
+    if (capacity_ > kept) Release();
+  }
+
+ private:
+  void Release() {
+    if (p_ != nullptr) alloc_.deallocate(p_, capacity_);
+    p_ = nullptr;
+    capacity_ = 0;
+  }
+  std::allocator<Sweep> alloc_;
+  Sweep* p_ = nullptr;
+  size_t capacity_ = 0;
+};
+
+// A batch's sweeps, built on every thread in `storage`; destroyed with the
+// batch.
 class BatchSweeps {
  public:
-  explicit BatchSweeps(size_t n) : n_(n), p_(alloc_.allocate(n)) {}
-  ~BatchSweeps() {
-    std::destroy_n(p_, n_);
-    alloc_.deallocate(p_, n_);
-  }
+  BatchSweeps(SweepStorage* storage, size_t n)
+      : n_(n), p_(storage->Reserve(n)) {}
+  ~BatchSweeps() { std::destroy_n(p_, n_); }
   BatchSweeps(const BatchSweeps&) = delete;
   BatchSweeps& operator=(const BatchSweeps&) = delete;
 
@@ -390,12 +424,48 @@ class BatchSweeps {
   std::span<const Sweep> span() const { return {p_, n_}; }
 
  private:
-  std::allocator<Sweep> alloc_;
   size_t n_;
   Sweep* p_;
 };
 
+// A move's tiles (Apply).
+struct TileRange {
+  int32_t ti0 = 0, ti1 = -1, tj0 = 0, tj1 = -1;  // empty by default
+};
+
+// *v holding n entries, each to be written (no copy of the old ones when
+// it grows).
+template <typename T>
+void ResizeForWriting(std::vector<T>* v, size_t n) {
+  if (n > v->capacity()) v->clear();
+  v->resize(n);
+}
+
+// Gives *v's storage back when it holds room for more than `keep`.
+template <typename T>
+void TrimVector(std::vector<T>* v, size_t keep) {
+  if (v->capacity() > keep) std::vector<T>().swap(*v);
+}
+
 }  // namespace
+
+// Kept from batch to batch for batches of up to kKeptMoves moves (a larger
+// batch's are given back after it).
+struct Workpiece::ApplyScratch {
+  static constexpr size_t kKeptMoves = size_t{1} << 15;
+  SweepStorage sweeps;
+  std::vector<MoveIndex::BinRect> bins;
+  std::vector<TileRange> ranges;
+  std::vector<std::pair<int32_t, uint32_t>> pairs;  // (tile, move)
+  std::vector<uint32_t> tile_moves;
+  void Trim() {
+    sweeps.Trim(kKeptMoves);
+    TrimVector(&bins, kKeptMoves);
+    TrimVector(&ranges, kKeptMoves);
+    TrimVector(&pairs, 4 * kKeptMoves);
+    TrimVector(&tile_moves, 4 * kKeptMoves);
+  }
+};
 
 std::optional<Rect> IndexMove(uint32_t id, const Move& move, double z_top,
                               MoveIndex* index) {
@@ -436,14 +506,21 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
   // simulation on 2 cores, which held 16 cores to under 5x). The index
   // takes the moves in order, each bin on one thread.
   const size_t n_moves = moves.size();
-  BatchSweeps batch(n_moves);
+  if (apply_scratch_ == nullptr)
+    apply_scratch_ = std::make_unique<ApplyScratch>();
+  ApplyScratch& scratch = *apply_scratch_;
+  // Trimmed once the batch's sweeps are destroyed (declared after this).
+  struct TrimAfter {
+    ApplyScratch* scratch;
+    ~TrimAfter() { scratch->Trim(); }
+  } trim_after{&scratch};
+  BatchSweeps batch(&scratch.sweeps, n_moves);
   // Empty where not indexed; indexed even when it cuts no node: the exact
   // surface still sees it.
-  std::vector<MoveIndex::BinRect> bins(n_moves);
-  struct TileRange {
-    int32_t ti0 = 0, ti1 = -1, tj0 = 0, tj1 = -1;  // empty by default
-  };
-  std::vector<TileRange> ranges(n_moves);
+  std::vector<MoveIndex::BinRect>& bins = scratch.bins;
+  bins.assign(n_moves, {});
+  std::vector<TileRange>& ranges = scratch.ranges;
+  ranges.assign(n_moves, {});
   constexpr int64_t kPrepChunk = 256;
   const int64_t prep_chunks =
       (static_cast<int64_t>(n_moves) + kPrepChunk - 1) / kPrepChunk;
@@ -478,7 +555,8 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
   // (tile, move) pairs for every tile a move's footprint may touch, in
   // move order.
   for (int64_t c = 0; c < prep_chunks; ++c) pair_at[c + 1] += pair_at[c];
-  std::vector<std::pair<int32_t, uint32_t>> pairs(pair_at[prep_chunks]);
+  std::vector<std::pair<int32_t, uint32_t>>& pairs = scratch.pairs;
+  ResizeForWriting(&pairs, pair_at[prep_chunks]);
   pool_->ParallelFor(prep_chunks, [&](int64_t c) {
     const size_t m1 =
         std::min(n_moves, static_cast<size_t>((c + 1) * kPrepChunk));
@@ -510,7 +588,8 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
     at += count[t];
     count[t] = static_cast<uint32_t>(start);  // the tile's next slot
   }
-  std::vector<uint32_t> tile_moves(pairs.size());
+  std::vector<uint32_t>& tile_moves = scratch.tile_moves;
+  ResizeForWriting(&tile_moves, pairs.size());
   for (const auto& [t, m] : pairs) tile_moves[count[t]++] = m;
   for (const auto& [t, start] : touched) count[t] = 0;
   touched.emplace_back(-1, pairs.size());  // sentinel end

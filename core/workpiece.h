@@ -422,6 +422,9 @@ class Workpiece {
   MoveSweeps surfaces_{&moves_, &index_};
   // The workpiece's own cache (Node, PrepareJets, ReadTile).
   mutable JetCache jets_;
+  // Apply's arrays for a batch, kept from batch to batch (Apply only).
+  struct ApplyScratch;
+  std::unique_ptr<ApplyScratch> apply_scratch_;
 };
 
 }  // namespace swarf

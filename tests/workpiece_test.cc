@@ -557,6 +557,39 @@ TEST(WorkpieceTilesTest, VersionsAndChangedTilesFollowTheNodes) {
 
 // A bad move anywhere in a batch rejects the whole batch with
 // InvalidArgument naming the move's index and field, and nothing changes.
+// Apply keeps its batch arrays from batch to batch up to 32 Ki moves, and
+// gives a larger batch's back after it: batches above and below that size,
+// in turn (a smaller one after a larger, its moves above the stock, not
+// indexed, where the last batch's were), give the nodes and the index of
+// one batch, bit for bit.
+TEST(WorkpieceTest, BatchesAroundTheKeptScratchSize) {
+  const std::vector<Move> moves = MixedMoves(5, 70000);
+  const int n = static_cast<int>(moves.size());
+  std::vector<int> in_order(n);
+  std::iota(in_order.begin(), in_order.end(), 0);
+  ThreadPool pool(2);
+  auto one = ApplyInBatches(moves, in_order, {n}, SchemeKind::kTaylor, &pool);
+  const std::vector<NodeValue> want = Snapshot(*one);
+  auto turns = ApplyInBatches(moves, in_order, {7, 30000, 5000, 34000, 990},
+                              SchemeKind::kTaylor, &pool);
+  const std::vector<NodeValue> got = Snapshot(*turns);
+  ASSERT_EQ(got.size(), want.size());
+  for (size_t k = 0; k < got.size(); ++k) {
+    ASSERT_TRUE(SameJet(got[k].jet, want[k].jet)) << "node " << k;
+    ASSERT_EQ(got[k].owner, want[k].owner) << "node " << k;
+  }
+  // The same moves indexed in every bin (a move above the stock is in none).
+  const MoveIndex& a = one->index();
+  const MoveIndex& b = turns->index();
+  ASSERT_EQ(a.bins_x() * a.bins_y(), b.bins_x() * b.bins_y());
+  std::vector<uint32_t> ids_a, ids_b;
+  for (int32_t bin = 0; bin < a.bins_x() * a.bins_y(); ++bin) {
+    a.BinIds(bin, &ids_a);
+    b.BinIds(bin, &ids_b);
+    ASSERT_EQ(ids_a, ids_b) << "bin " << bin;
+  }
+}
+
 TEST(WorkpieceValidationTest, BadBatchIsRejectedWhole) {
   const double nan = std::nan(""), inf = kInf;
   for (SchemeKind scheme : kSchemes) {
