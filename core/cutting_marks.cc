@@ -903,24 +903,6 @@ struct Inc {
   int end;
 };
 
-// Chain's largest arrays, kept from one call to the next: a window's,
-// allocated afresh, were mapped and faulted in again for every window (a
-// window holds tens of MB of segments), with a serial zeroing each time.
-struct ChainScratch {
-  std::vector<Inc> inc, sorted;
-  std::vector<uint16_t> bucket;
-  std::vector<int64_t> other;
-  std::vector<uint8_t> used;
-};
-
-// Resizes *v to n entries, each written after (no copy of the old ones
-// when it grows).
-template <typename T>
-void ResizeForWriting(std::vector<T>* v, size_t n) {
-  if (n > v->capacity()) v->clear();
-  v->resize(n);
-}
-
 // With `starts`, each polyline's first segment (the lowest index of its
 // chain: polylines come out in that order). `ghosts` counts, per vertex
 // key, segments chained before that end there too (they count in its
@@ -932,15 +914,13 @@ void ResizeForWriting(std::vector<T>* v, size_t n) {
 // (ghosts included), where there are any.
 std::vector<MarkPolyline> Chain(
     const std::vector<Segment>& segs, double tol, double fold, double end_fold,
-    ThreadPool& pool, ChainScratch* scratch,
-    std::vector<int64_t>* starts = nullptr,
+    ThreadPool& pool, std::vector<int64_t>* starts = nullptr,
     const absl::flat_hash_map<uint64_t, int32_t>* ghosts = nullptr,
     int64_t grow_from = INT64_MAX, std::vector<uint8_t>* grows_out = nullptr,
     absl::flat_hash_map<uint64_t, int32_t>* next_ghosts = nullptr) {
   const int64_t n = static_cast<int64_t>(segs.size());
   // Incidences sorted by vertex key.
-  std::vector<Inc>& inc = scratch->inc;
-  ResizeForWriting(&inc, 2 * n);
+  std::vector<Inc> inc(2 * n);
   constexpr int64_t kIncChunk = int64_t{1} << 14;
   pool.ParallelFor((n + kIncChunk - 1) / kIncChunk, [&](int64_t c) {
     const int64_t k1 = std::min(n, (c + 1) * kIncChunk);
@@ -978,8 +958,7 @@ std::vector<MarkPolyline> Chain(
     // to their bucket's part for that chunk: the order within a bucket is
     // the chunks' (then sorted anyway).
     const int chunks = buckets;
-    std::vector<uint16_t>& bucket = scratch->bucket;
-    ResizeForWriting(&bucket, m);
+    std::vector<uint16_t> bucket(m);
     std::vector<size_t> at(static_cast<size_t>(chunks) * buckets, 0);
     auto chunk_range = [&](int64_t c) {
       return std::pair<size_t, size_t>(c * m / chunks, (c + 1) * m / chunks);
@@ -1005,8 +984,7 @@ std::vector<MarkPolyline> Chain(
       }
     }
     bounds[buckets] = total;
-    std::vector<Inc>& sorted = scratch->sorted;
-    ResizeForWriting(&sorted, m);
+    std::vector<Inc> sorted(m);
     pool.ParallelFor(chunks, [&](int64_t c) {
       const auto [i0, i1] = chunk_range(c);
       for (size_t i = i0; i < i1; ++i) {
@@ -1022,8 +1000,7 @@ std::vector<MarkPolyline> Chain(
   }
   // For each segment end at a vertex of degree 2, the other incidence
   // there; a bucket at a time (each writes its own incidences' entries).
-  std::vector<int64_t>& other = scratch->other;  // seg * 2 + end
-  other.assign(2 * n, -1);
+  std::vector<int64_t> other(2 * n, -1);  // seg * 2 + end
   pool.ParallelFor(static_cast<int64_t>(bounds.size()) - 1, [&](int64_t b) {
     const size_t end = bounds[b + 1];
     for (size_t i = bounds[b]; i < end;) {
@@ -1046,8 +1023,7 @@ std::vector<MarkPolyline> Chain(
       i = j;
     }
   });
-  std::vector<uint8_t>& used = scratch->used;
-  used.assign(n, 0);
+  std::vector<uint8_t> used(n, 0);
   if (grows_out != nullptr) grows_out->assign(n, 0);
   auto push_vertex = [&](MarkPolyline* p, const End& e) {
     if (!p->vertices.empty()) {
@@ -1663,7 +1639,6 @@ absl::Status FindCuttingMarks(
   std::vector<MarkPolyline> handing;
   // Segments handed on, per vertex key an open segment uses (Chain).
   absl::flat_hash_map<uint64_t, int32_t> ghosts;
-  ChainScratch chain_scratch;
   // The next window's bands are searched while this one's are chained and
   // the last one's polylines finished: neither keeps every thread busy (a
   // few long chains, a plate's creases along y spanning every band).
@@ -1749,10 +1724,9 @@ absl::Status FindCuttingMarks(
       std::vector<uint8_t> growing;
       absl::flat_hash_map<uint64_t, int32_t> kept_ghosts;
       std::vector<MarkPolyline> chained =
-          Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(),
-                &chain_scratch, &starts, &ghosts,
-                last ? INT64_MAX : static_cast<int64_t>(window_first), &growing,
-                &kept_ghosts);
+          Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts,
+                &ghosts, last ? INT64_MAX : static_cast<int64_t>(window_first),
+                &growing, &kept_ghosts);
       // Chain gave polylines for the complete chains only.
       for (size_t k = 0; k < chained.size(); ++k) {
         const auto it = ready.emplace(open_at[starts[k]],
