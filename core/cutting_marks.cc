@@ -896,13 +896,6 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
   }
 }
 
-// A segment end's incidence at its vertex (Chain).
-struct Inc {
-  uint64_t key;
-  int64_t seg;
-  int end;
-};
-
 // With `starts`, each polyline's first segment (the lowest index of its
 // chain: polylines come out in that order). `ghosts` counts, per vertex
 // key, segments chained before that end there too (they count in its
@@ -920,6 +913,11 @@ std::vector<MarkPolyline> Chain(
     absl::flat_hash_map<uint64_t, int32_t>* next_ghosts = nullptr) {
   const int64_t n = static_cast<int64_t>(segs.size());
   // Incidences sorted by vertex key.
+  struct Inc {
+    uint64_t key;
+    int64_t seg;
+    int end;
+  };
   std::vector<Inc> inc(2 * n);
   constexpr int64_t kIncChunk = int64_t{1} << 14;
   pool.ParallelFor((n + kIncChunk - 1) / kIncChunk, [&](int64_t c) {

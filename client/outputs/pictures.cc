@@ -567,8 +567,7 @@ class PolylineStroke {
 // angle interpolated there. A fine grid's marks have vertices a fraction of
 // a pixel apart in a picture of a few thousand pixels: each cost a stroke
 // and changed nothing to be seen. The first and last are kept; a vertex is
-// kept at least every kMaxRun.
-// Into *kept (its old entries dropped).
+// kept at least every kMaxRun. Into *kept (its old entries dropped).
 void KeptVertices(std::span<const double> xs, std::span<const double> ys,
                   std::span<const double> angles, std::vector<size_t>* kept) {
   constexpr double kDropPx = 0.05, kDropDeg = 0.25;
@@ -705,9 +704,8 @@ absl::StatusOr<Image> DrawMarksOver(
   // polylines, then added to the chunk in order: taken one polyline at a
   // time, on one thread, they were most of the picture's time on a large
   // job (tens of millions of vertices, a few thousand pixels across) on a
-  // many-core machine. The batch holds the
-  // polylines in pixels, flat: polyline q's vertices are [first[q],
-  // first[q + 1]).
+  // many-core machine. The batch holds the polylines in pixels, flat:
+  // polyline q's vertices are [first[q], first[q + 1]).
   constexpr size_t kBatchVertices = size_t{1} << 18;
   constexpr size_t kGroupVertices = size_t{1} << 12;
   std::vector<double> xs, ys, angles;
@@ -796,7 +794,7 @@ absl::StatusOr<Image> DrawMarksOver(
       angles.insert(angles.end(), p.angle_deg.begin(), p.angle_deg.end());
       first.push_back(xs.size());
       closed.push_back(p.closed ? 1 : 0);
-      if (xs.size() - first.front() >= kBatchVertices) take_batch();
+      if (xs.size() >= kBatchVertices) take_batch();
       return absl::OkStatus();
     });
     if (!st.ok()) return st;
