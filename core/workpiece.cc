@@ -372,9 +372,9 @@ std::optional<Rect> IndexedFootprint(const Move& move, double z_top,
 }
 
 // Storage for a batch's sweeps (Sweep has no empty state: they are
-// constructed in place), kept from batch to batch up to kKeptSweeps: built
-// in new storage, every batch's sweeps were faulted in afresh, about a
-// tenth of a plate job's page faults.
+// constructed in place), kept from batch to batch (ApplyScratch, up to its
+// kKeptMoves): built in new storage, every batch's sweeps were faulted in
+// afresh, about a tenth of a plate job's page faults.
 class SweepStorage {
  public:
   SweepStorage() = default;
