@@ -475,6 +475,12 @@ std::optional<Rect> IndexMove(uint32_t id, const Move& move, double z_top,
   return b;
 }
 
+MoveIndex::BinRect IndexedBins(const Move& move, double z_top,
+                               const MoveIndex& index) {
+  const std::optional<Rect> b = IndexedFootprint(move, z_top, index);
+  return b.has_value() ? index.BinsOf(*b) : MoveIndex::BinRect{};
+}
+
 absl::Status Workpiece::AdmitMoves(std::span<const Move> moves) const {
   SWARF_RETURN_IF_ERROR(ValidateMoves(moves));
   if (move_count() + static_cast<int64_t>(moves.size()) > kMaxMoves) {

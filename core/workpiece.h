@@ -120,6 +120,10 @@ class MoveSweeps final : public MoveSurfaces {
 // top or beside the stock).
 std::optional<Rect> IndexMove(uint32_t id, const Move& move, double z_top,
                               MoveIndex* index);
+// The bins IndexMove(id, move, z_top, &index) records the move under (an
+// empty BinRect: none), for MoveIndex::AddAll. Thread-safe.
+MoveIndex::BinRect IndexedBins(const Move& move, double z_top,
+                               const MoveIndex& index);
 
 // Physical bounds on moves (mm). With kMinRadius and kMaxRadius
 // (core/cutter/cutter.h) they keep every intermediate value of the sweep

@@ -153,6 +153,47 @@ TEST(SurfaceGridTest, MatchesTheWorkpieceBitForBit) {
   }
 }
 
+// A band reset is untouched stock in every node, whatever it held, when it
+// keeps its storage, grows past what was reserved or shrinks.
+TEST(SurfaceGridTest, ResetBandIsUntouchedStockWhateverItHeld) {
+  const StockSpec spec = TestStock();
+  auto band = SurfaceGrid::Band(spec, SchemeKind::kTaylor, 0, 3);
+  ASSERT_TRUE(band.ok());
+  band->ReserveRows(12);
+  const size_t room = band->jets.capacity();
+  EXPECT_GE(room, static_cast<size_t>(band->nodes_x()) * 12);
+  auto dirty = [&] {
+    for (size_t k = 0; k < band->jets.size(); ++k) {
+      band->jets[k] = SurfaceJet{1, 2, 3, 4, 5, 6};
+      band->owners[k] = 7;
+    }
+  };
+  auto expect_stock = [&](int32_t row0, int32_t rows) {
+    EXPECT_EQ(band->row0, row0);
+    ASSERT_EQ(band->held_rows(), rows);
+    ASSERT_EQ(band->owners.size(), band->jets.size());
+    for (size_t k = 0; k < band->jets.size(); ++k) {
+      const SurfaceJet& j = band->jets[k];
+      ASSERT_TRUE(j.w == spec.z_top && j.wx == 0 && j.wy == 0 && j.wxx == 0 &&
+                  j.wxy == 0 && j.wyy == 0 && band->owners[k] == -1)
+          << "node " << k;
+    }
+  };
+  dirty();
+  band->ResetBand(5, 12);  // within the room reserved
+  expect_stock(5, 12);
+  EXPECT_EQ(band->jets.capacity(), room);
+  dirty();
+  band->ResetBand(0, 40);  // grows past it
+  expect_stock(0, 40);
+  dirty();
+  band->ResetBand(2, 4);  // shrinks
+  expect_stock(2, 4);
+  dirty();
+  band->ResetBand(50, 40);  // clamped to the grid's last rows
+  expect_stock(50, spec.ny + 1 - 50);
+}
+
 TEST(SurfaceGridTest, SetNodesChecksTheBlock) {
   auto g = SurfaceGrid::Uncut(TestStock(), SchemeKind::kTaylor);
   ASSERT_TRUE(g.ok());

@@ -5,15 +5,20 @@
 // input.
 #include "gcode/toolpath.h"
 
+#include <sys/stat.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
 #include <random>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "absl/status/status.h"
+#include "gcode/text.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/shared_files.h"
@@ -763,6 +768,50 @@ TEST(ReadToolpathFileTest, ByExtensionAndContent) {
   // By content: README.md's prose is no G-code.
   EXPECT_THAT(std::string(unknown.status().message()),
               StartsWith(src + "/README.md: line "));
+}
+
+// A regular file is read at its size, a pipe a buffer at a time: the same
+// bytes either way (NULs and all, past one 64 KiB buffer).
+TEST(ReadWholeFileTest, RegularFilesAndPipesWhole) {
+  std::string bytes;
+  for (int k = 0; k < 200000; ++k) bytes.push_back(static_cast<char>(k * 7));
+  char dir_template[] = "/tmp/swarf_read_XXXXXX";
+  ASSERT_NE(mkdtemp(dir_template), nullptr);
+  const std::string dir = dir_template;
+  const std::string file = dir + "/whole.nc", fifo = dir + "/pipe.nc";
+  {
+    std::FILE* f = std::fopen(file.c_str(), "wb");
+    ASSERT_NE(f, nullptr);
+    ASSERT_EQ(std::fwrite(bytes.data(), 1, bytes.size(), f), bytes.size());
+    std::fclose(f);
+  }
+  absl::StatusOr<std::string> read = gcode::ReadWholeFile(file);
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_TRUE(*read == bytes);
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  std::thread writer([&] {
+    std::FILE* f = std::fopen(fifo.c_str(), "wb");
+    if (f == nullptr) return;
+    std::fwrite(bytes.data(), 1, bytes.size(), f);
+    std::fclose(f);
+  });
+  read = gcode::ReadWholeFile(fifo);
+  writer.join();
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_TRUE(*read == bytes);
+  {
+    std::FILE* f = std::fopen(file.c_str(), "wb");  // empty
+    ASSERT_NE(f, nullptr);
+    std::fclose(f);
+  }
+  read = gcode::ReadWholeFile(file);
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(*read, "");
+  EXPECT_EQ(gcode::ReadWholeFile(dir + "/missing.nc").status().code(),
+            absl::StatusCode::kNotFound);
+  std::remove(file.c_str());
+  std::remove(fifo.c_str());
+  rmdir(dir.c_str());
 }
 
 // ---------------------------------------------- the generated examples

@@ -119,6 +119,9 @@ absl::Status TileRowBands::ForEach(const BandVisitor& visit) {
   const int64_t tile_row_nodes = int64_t{kTileSize} * nodes_x;
   const int32_t per_band = static_cast<int32_t>(
       std::clamp<int64_t>(max_band_nodes_ / tile_row_nodes, 1, tiles_y));
+  // Room for the largest band (its tile rows and the row before them) at
+  // once: the second band, a row longer, allocated it all again.
+  band.ReserveRows(per_band * kTileSize + 1);
   std::vector<SurfaceJet> carry_jets;
   std::vector<int32_t> carry_owners;
   int32_t e0 = 0;

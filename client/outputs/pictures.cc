@@ -194,9 +194,15 @@ ReliefSampler::ReliefSampler(const StockSpec& spec, const PixelFrame& frame)
     // As SurfaceGrid::HeightAndGradient clamps and looks up.
     row_element_[py] = g.ElementY(std::clamp(frame.Y(py), spec.y0, spec.y1));
   }
-  const size_t n = static_cast<size_t>(frame.width) * frame.height;
-  height_.assign(n, 0);
-  shade_.assign(n, 1);
+  // Up to 4096 x 4096 pixels (128 MiB): filled, and faulted in, on every
+  // thread.
+  const size_t w = static_cast<size_t>(frame.width);
+  height_.resize(w * frame.height);
+  shade_.resize(w * frame.height);
+  ThreadPool::Default().ParallelFor(frame.height, [&](int64_t py) {
+    std::fill_n(height_.begin() + py * w, w, 0.0f);
+    std::fill_n(shade_.begin() + py * w, w, 1.0f);
+  });
   lowest_ = spec.z_top;
 }
 

@@ -18,6 +18,7 @@
 #include "absl/status/statusor.h"
 #include "client/outputs/png_image.h"
 #include "client/outputs/surface_grid.h"
+#include "client/outputs/unfilled_vector.h"
 #include "core/cutting_marks.h"
 #include "core/geometry.h"
 #include "core/stock.h"
@@ -76,7 +77,7 @@ class ReliefSampler {
   StockSpec spec_;
   PixelFrame frame_;
   std::vector<int32_t> row_element_;  // per pixel row
-  std::vector<float> height_, shade_;
+  UnfilledVector<float> height_, shade_;
   double lowest_;  // the lowest sampled height, z_top at least
 };
 

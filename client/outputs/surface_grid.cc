@@ -20,10 +20,7 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::Uncut(const StockSpec& spec,
   SurfaceGrid g;
   g.spec = spec;
   g.scheme = scheme;
-  SurfaceJet top;
-  top.w = spec.z_top;
-  g.jets.assign(n, top);
-  g.owners.assign(n, -1);
+  g.ResetBand(0, spec.ny + 1);
   return g;
 }
 
@@ -49,10 +46,11 @@ void SurfaceGrid::ResetBand(int32_t first, int32_t rows) {
   const size_t n = static_cast<size_t>(nodes_x()) * rows;
   SurfaceJet top;
   top.w = spec.z_top;
-  // A tile row of a wide grid is tens of MB (52 bytes a node): filled on
-  // every thread, as the rows read into it are.
-  jets.resize(n);
-  owners.resize(n);
+  // A tile row of a wide grid is tens of MB (52 bytes a node): filled (and
+  // faulted in) on every thread, as the rows read into it are, and not
+  // copied when it grows.
+  ResizeUnfilled(&jets, n);
+  ResizeUnfilled(&owners, n);
   constexpr size_t kPiece = size_t{1} << 16;
   ThreadPool::Default().ParallelFor(
       static_cast<int64_t>((n + kPiece - 1) / kPiece), [&](int64_t p) {
@@ -60,6 +58,13 @@ void SurfaceGrid::ResetBand(int32_t first, int32_t rows) {
         std::fill(jets.begin() + a, jets.begin() + b, top);
         std::fill(owners.begin() + a, owners.begin() + b, -1);
       });
+}
+
+void SurfaceGrid::ReserveRows(int32_t rows) {
+  const size_t n =
+      static_cast<size_t>(nodes_x()) * std::clamp(rows, 0, nodes_y());
+  jets.reserve(n);
+  owners.reserve(n);
 }
 
 absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
@@ -88,9 +93,11 @@ absl::Status SurfaceGrid::SetTileRows(const Workpiece& wp, int32_t t0,
   constexpr size_t kChunk = 64;
   static_assert(kChunk <= Workpiece::kJetCacheTiles);
   const size_t chunk_max = std::min(kChunk, tiles.size());
-  std::vector<double> w(chunk_max * kTileNodes);
-  std::vector<float> dbuf(heights_only ? 0 : 5 * chunk_max * kTileNodes);
-  std::vector<int32_t> owner(heights_only ? 0 : chunk_max * kTileNodes);
+  // Written by ReadTile before they are read: not zeroed first (8 MiB on
+  // one thread for each band).
+  UnfilledVector<double> w(chunk_max * kTileNodes);
+  UnfilledVector<float> dbuf(heights_only ? 0 : 5 * chunk_max * kTileNodes);
+  UnfilledVector<int32_t> owner(heights_only ? 0 : chunk_max * kTileNodes);
   std::vector<absl::Status> status(chunk_max);
   for (size_t c = 0; c < tiles.size(); c += kChunk) {
     const std::span<const int32_t> chunk(tiles.data() + c,

@@ -22,6 +22,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "client/outputs/unfilled_vector.h"
 #include "core/scheme.h"
 #include "core/stock.h"
 #include "core/surface_jet.h"
@@ -32,8 +33,8 @@ namespace swarf::cli {
 struct SurfaceGrid {
   StockSpec spec;
   SchemeKind scheme = SchemeKind::kGuarded;
-  std::vector<SurfaceJet> jets;  // (nx + 1) * held rows, row-major
-  std::vector<int32_t> owners;   // same size; -1: stock top
+  UnfilledVector<SurfaceJet> jets;  // (nx + 1) * held rows, row-major
+  UnfilledVector<int32_t> owners;   // same size; -1: stock top
   int32_t row0 = 0;              // first node row held
   // The session's moves by id (null: none), for the guarded scheme's
   // reach of each owner (ReachOf). Owners beyond them have an unbounded
@@ -68,6 +69,9 @@ struct SurfaceGrid {
   // Makes this band hold node rows [row0, row0 + rows) (clamped to the
   // grid), untouched stock, keeping the moves and the storage's capacity.
   void ResetBand(int32_t row0, int32_t rows);
+  // Room for `rows` node rows (clamped to the grid), so that ResetBand up
+  // to that many allocates nothing; the rows held are unchanged.
+  void ReserveRows(int32_t rows);
 
   // A copy of every node of `wp` (derivatives widened from the core's
   // floats, as ReadTile gives them).

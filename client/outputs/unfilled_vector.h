@@ -1,0 +1,56 @@
+// A std::vector whose resize() leaves the new elements as allocated, for the
+// large buffers of the output writers that are then filled on every thread:
+// value-initialising them first wrote (and page-faulted in) every byte on one
+// thread, a serial step of each picture and band (issue 28).
+//
+// Contract: only for trivially copyable, trivially destructible types
+// (scalars, aggregates such as SurfaceJet), whose objects the allocation
+// itself creates; their values are indeterminate until written. The caller
+// writes every element that resize() adds before reading it. Everything
+// else (copies, insert, push_back with a value) behaves as std::vector.
+#ifndef SWARF_CLIENT_OUTPUTS_UNFILLED_VECTOR_H_
+#define SWARF_CLIENT_OUTPUTS_UNFILLED_VECTOR_H_
+
+#include <memory>
+#include <new>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+namespace swarf::cli {
+
+template <typename T>
+struct UnfilledAllocator : std::allocator<T> {
+  static_assert(std::is_trivially_copyable_v<T> &&
+                std::is_trivially_destructible_v<T>);
+  template <typename U>
+  struct rebind {
+    using other = UnfilledAllocator<U>;
+  };
+  UnfilledAllocator() = default;
+  template <typename U>
+  UnfilledAllocator(const UnfilledAllocator<U>&) noexcept {}
+
+  // Default construction (resize, the sized constructor) writes nothing.
+  template <typename U>
+  void construct(U*) noexcept {}
+  template <typename U, typename... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+
+template <typename T>
+using UnfilledVector = std::vector<T, UnfilledAllocator<T>>;
+
+// *v holding n elements, all to be written by the caller: when it must grow,
+// the old ones are dropped rather than copied.
+template <typename T>
+void ResizeUnfilled(UnfilledVector<T>* v, size_t n) {
+  if (n > v->capacity()) UnfilledVector<T>().swap(*v);
+  v->resize(n);
+}
+
+}  // namespace swarf::cli
+
+#endif  // SWARF_CLIENT_OUTPUTS_UNFILLED_VECTOR_H_
