@@ -631,21 +631,37 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
   }
   result.version = version_;
   if (options.cuts) {
-    // Merged in tile order: the same sums whatever the threads did.
+    // Each move's cuts merged in tile order: the same sums whatever the
+    // threads did. A range of moves a task, each finding its moves in every
+    // tile's list (in move order) by bisection: merged on one thread, with
+    // the array's zeroing and faults, this was a serial step of each batch.
     result.cuts.resize(moves.size());
-    for (const std::vector<TileCut>& list : tile_cuts) {
-      for (const TileCut& tc : list) {
-        MoveCut& c = result.cuts[tc.m];
-        c.removed_mm3 += tc.cut.removed_mm3;
-        c.over_limit_mm3 += tc.cut.over_limit_mm3;
-        if (tc.cut.max_drop > c.max_drop) {
-          c.max_drop = tc.cut.max_drop;
-          c.i = tc.cut.i;
-          c.j = tc.cut.j;
-          c.z = tc.cut.z;
-        }
-      }
-    }
+    constexpr int64_t kRangeMoves = 1024;
+    const int64_t n_moves = static_cast<int64_t>(moves.size());
+    pool_->ParallelFor(
+        (n_moves + kRangeMoves - 1) / kRangeMoves, [&](int64_t r) {
+          const uint32_t m0 = static_cast<uint32_t>(r * kRangeMoves);
+          const uint32_t m1 =
+              static_cast<uint32_t>(std::min(n_moves, (r + 1) * kRangeMoves));
+          std::fill(result.cuts.begin() + m0, result.cuts.begin() + m1,
+                    MoveCut{});
+          auto by_move = [](const TileCut& tc, uint32_t m) { return tc.m < m; };
+          for (const std::vector<TileCut>& list : tile_cuts) {
+            for (auto it =
+                     std::lower_bound(list.begin(), list.end(), m0, by_move);
+                 it != list.end() && it->m < m1; ++it) {
+              MoveCut& c = result.cuts[it->m];
+              c.removed_mm3 += it->cut.removed_mm3;
+              c.over_limit_mm3 += it->cut.over_limit_mm3;
+              if (it->cut.max_drop > c.max_drop) {
+                c.max_drop = it->cut.max_drop;
+                c.i = it->cut.i;
+                c.j = it->cut.j;
+                c.z = it->cut.z;
+              }
+            }
+          }
+        });
   }
   return result;
 }

@@ -38,6 +38,7 @@
 #include "core/stock.h"
 #include "core/thread_pool.h"
 #include "core/tile_arena.h"
+#include "core/unfilled_vector.h"
 
 namespace swarf {
 
@@ -167,7 +168,7 @@ struct ApplyResult {
   int64_t node_lowerings = 0;  // node updates (a node lowered twice counts 2)
   uint64_t version = 0;       // workpiece version after the batch
   std::vector<int32_t> changed_tiles;  // ascending tile indices
-  std::vector<MoveCut> cuts;  // per move, with ApplyOptions::cuts
+  UnfilledVector<MoveCut> cuts;        // per move, with ApplyOptions::cuts
 };
 
 class Workpiece {
@@ -380,7 +381,7 @@ class Workpiece {
   // The highest node of tile t (what CutTile caps cuts with).
   double TileTop(int32_t t, const Tile& tile) const;
   // With `cuts` non-null, appends (batch move, what it cut here) for every
-  // move that lowered a node of the tile.
+  // move that lowered a node of the tile, in move order.
   struct TileCut {
     uint32_t m;
     MoveCut cut;

@@ -258,7 +258,8 @@ absl::StatusOr<std::string> Session::ReplayLocked(
     }
     // Held by the snapshot: the moves are recorded, not cut again.
     std::optional<Vec3> end;
-    const std::vector<Move> moves = BatchMoves(*tool, b.xyz, b.reposition, &end);
+    const UnfilledVector<Move> moves =
+        BatchMoves(*tool, b.xyz, b.reposition, &end);
     if (absl::Status s = wp_->Record(moves); !s.ok()) return s;
     last_seq_ = b.seq;
     last_position_ = end;
@@ -325,20 +326,30 @@ const ToolSpec* Session::FindTool(int32_t id) const {
   return nullptr;
 }
 
-std::vector<Move> Session::BatchMoves(const ToolSpec& tool,
-                                      std::span<const double> xyz,
-                                      bool reposition,
-                                      std::optional<Vec3>* end) const {
+UnfilledVector<Move> Session::BatchMoves(const ToolSpec& tool,
+                                         std::span<const double> xyz,
+                                         bool reposition,
+                                         std::optional<Vec3>* end) const {
   const int64_t points = static_cast<int64_t>(xyz.size() / 3);
-  std::vector<Move> moves;
-  moves.reserve(points);
-  std::optional<Vec3> pos = reposition ? std::nullopt : last_position_;
-  for (int64_t p = 0; p < points; ++p) {
-    const Vec3 next{xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]};
-    if (pos.has_value()) moves.push_back({*pos, next, tool.cutter});
-    pos = next;
-  }
-  *end = pos;
+  const std::optional<Vec3> start = reposition ? std::nullopt : last_position_;
+  auto point = [&](int64_t p) {
+    return Vec3{xyz[3 * p], xyz[3 * p + 1], xyz[3 * p + 2]};
+  };
+  // Without a position to start from, the first point only places the tool.
+  const int64_t skip = start.has_value() ? 0 : 1;
+  UnfilledVector<Move> moves;
+  moves.resize(static_cast<size_t>(std::max<int64_t>(0, points - skip)));
+  // Built on every thread: a batch's moves (88 bytes each) were written
+  // and faulted in on one.
+  constexpr int64_t kPiece = 4096;
+  const int64_t n = static_cast<int64_t>(moves.size());
+  wp_->pool().ParallelFor((n + kPiece - 1) / kPiece, [&](int64_t c) {
+    for (int64_t k = c * kPiece; k < std::min(n, (c + 1) * kPiece); ++k) {
+      const int64_t p = k + skip;
+      moves[k] = Move(p == 0 ? *start : point(p - 1), point(p), tool.cutter);
+    }
+  });
+  *end = points > 0 ? std::optional<Vec3>(point(points - 1)) : start;
   return moves;
 }
 
@@ -675,7 +686,7 @@ absl::StatusOr<BatchResult> Session::ApplyLocked(uint64_t seq,
                      last_seq_ + 1, "..", seq - 1, " are missing"));
   }
   std::optional<Vec3> pos;
-  const std::vector<Move> moves = BatchMoves(tool, xyz, reposition, &pos);
+  const UnfilledVector<Move> moves = BatchMoves(tool, xyz, reposition, &pos);
   // Durable before applied, applied before acknowledged.
   if (journal && journal_ != nullptr) {
     if (absl::Status s = journal_->Append(seq, tool.id, reposition, xyz);

@@ -19,10 +19,11 @@
 #include "absl/synchronization/mutex.h"
 #include "core/cutter/cutter.h"
 #include "core/geometry.h"
+#include "core/safety.h"
 #include "core/scheme.h"
 #include "core/stock.h"
+#include "core/unfilled_vector.h"
 #include "core/workpiece.h"
-#include "core/safety.h"
 #include "design/placed_design.h"
 #include "server/journal.h"
 #include "server/snapshot.h"
@@ -280,9 +281,9 @@ class Session {
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   // The moves of a batch continuing from last_position_ (from its first
   // point with `reposition`); *end receives the tool's position after it.
-  std::vector<Move> BatchMoves(const ToolSpec& tool,
-                               std::span<const double> xyz, bool reposition,
-                               std::optional<Vec3>* end) const
+  UnfilledVector<Move> BatchMoves(const ToolSpec& tool,
+                                  std::span<const double> xyz, bool reposition,
+                                  std::optional<Vec3>* end) const
       ABSL_SHARED_LOCKS_REQUIRED(mu_);
   const ToolSpec* FindTool(int32_t id) const;
   absl::StatusOr<bool> SaveSnapshotLocked() const

@@ -3,6 +3,7 @@
 #include "core/workpiece.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -587,6 +588,72 @@ TEST(WorkpieceTest, BatchesAroundTheKeptScratchSize) {
     a.BinIds(bin, &ids_a);
     b.BinIds(bin, &ids_b);
     ASSERT_EQ(ids_a, ids_b) << "bin " << bin;
+  }
+}
+
+// What each move of a batch cut (merged from its tiles a range of moves at
+// a time, on several threads): the same bits on one thread as on three, and
+// what the move cut applied alone after the same moves (each tile's sum in
+// its own order: to 1e-12), across the ranges' edges, with and without a
+// drop limit.
+TEST(WorkpieceTest, CutsOfABatchAreEachMovesOwn) {
+  const std::vector<Move> moves = MixedMoves(7, 3000);
+  const std::vector<double> limits(moves.size(), 0.3);
+  auto same_bits = [](double a, double b) {
+    return std::bit_cast<uint64_t>(a) == std::bit_cast<uint64_t>(b);
+  };
+  for (bool limited : {false, true}) {
+    SCOPED_TRACE(limited ? "with a drop limit" : "without");
+    ApplyOptions options;
+    options.cuts = true;
+    if (limited) options.drop_limit = limits;
+    ThreadPool pool1(1), pool3(3);
+    auto batch = MakeWorkpiece(MixedStock(), SchemeKind::kTaylor, &pool3);
+    auto applied = batch->Apply(moves, options);
+    ASSERT_TRUE(applied.ok()) << applied.status();
+    ASSERT_EQ(applied->cuts.size(), moves.size());
+    auto batch1 = MakeWorkpiece(MixedStock(), SchemeKind::kTaylor, &pool1);
+    auto applied1 = batch1->Apply(moves, options);
+    ASSERT_TRUE(applied1.ok()) << applied1.status();
+    auto alone = MakeWorkpiece(MixedStock(), SchemeKind::kTaylor, &pool3);
+    int cutting = 0, over = 0;
+    double removed = 0;
+    for (size_t k = 0; k < moves.size(); ++k) {
+      const MoveCut& got = applied->cuts[k];
+      const MoveCut& one_thread = applied1->cuts[k];
+      ASSERT_TRUE(same_bits(got.removed_mm3, one_thread.removed_mm3) &&
+                  same_bits(got.over_limit_mm3, one_thread.over_limit_mm3) &&
+                  same_bits(got.max_drop, one_thread.max_drop) &&
+                  same_bits(got.z, one_thread.z) && got.i == one_thread.i &&
+                  got.j == one_thread.j)
+          << "move " << k;
+      ApplyOptions one = options;
+      if (limited) one.drop_limit = std::span<const double>(&limits[k], 1);
+      auto r = alone->Apply(std::span<const Move>(&moves[k], 1), one);
+      ASSERT_TRUE(r.ok()) << r.status();
+      const MoveCut& want = r->cuts[0];
+      ASSERT_NEAR(got.removed_mm3, want.removed_mm3, 1e-12 * want.removed_mm3)
+          << "move " << k;
+      ASSERT_NEAR(got.over_limit_mm3, want.over_limit_mm3,
+                  1e-12 * want.over_limit_mm3)
+          << "move " << k;
+      ASSERT_TRUE(got.max_drop == want.max_drop && got.i == want.i &&
+                  got.j == want.j && got.z == want.z)
+          << "move " << k;
+      cutting += want.max_drop > 0;
+      over += want.over_limit_mm3 > 0;
+      removed += got.removed_mm3;
+    }
+    EXPECT_GT(cutting, 500);  // the mix really cuts (564 moves)
+    if (limited) EXPECT_GT(over, 100);
+    double by_nodes = 0;  // the stock's volume minus the nodes'
+    for (int32_t j = 0; j <= batch->grid().ny(); ++j) {
+      for (int32_t i = 0; i <= batch->grid().nx(); ++i) {
+        by_nodes += batch->spec().z_top - batch->HeightAt(i, j);
+      }
+    }
+    by_nodes *= batch->grid().dx() * batch->grid().dy();
+    EXPECT_NEAR(removed, by_nodes, 1e-9 * removed);
   }
 }
 

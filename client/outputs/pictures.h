@@ -18,10 +18,10 @@
 #include "absl/status/statusor.h"
 #include "client/outputs/png_image.h"
 #include "client/outputs/surface_grid.h"
-#include "client/outputs/unfilled_vector.h"
 #include "core/cutting_marks.h"
 #include "core/geometry.h"
 #include "core/stock.h"
+#include "core/unfilled_vector.h"
 
 namespace swarf::cli {
 

@@ -22,10 +22,10 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "client/outputs/unfilled_vector.h"
 #include "core/scheme.h"
 #include "core/stock.h"
 #include "core/surface_jet.h"
+#include "core/unfilled_vector.h"
 #include "core/workpiece.h"
 
 namespace swarf::cli {

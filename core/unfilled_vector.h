@@ -1,15 +1,15 @@
-// A std::vector whose resize() leaves the new elements as allocated, for the
-// large buffers of the output writers that are then filled on every thread:
-// value-initialising them first wrote (and page-faulted in) every byte on one
-// thread, a serial step of each picture and band (issue 28).
+// A std::vector whose resize() leaves the new elements as allocated, for
+// large buffers that are then filled on every thread: value-initialising
+// them first wrote (and page-faulted in) every byte on one thread, a serial
+// step of each picture, band and batch of moves (issue 28).
 //
 // Contract: only for trivially copyable, trivially destructible types
 // (scalars, aggregates such as SurfaceJet), whose objects the allocation
 // itself creates; their values are indeterminate until written. The caller
 // writes every element that resize() adds before reading it. Everything
 // else (copies, insert, push_back with a value) behaves as std::vector.
-#ifndef SWARF_CLIENT_OUTPUTS_UNFILLED_VECTOR_H_
-#define SWARF_CLIENT_OUTPUTS_UNFILLED_VECTOR_H_
+#ifndef SWARF_CORE_UNFILLED_VECTOR_H_
+#define SWARF_CORE_UNFILLED_VECTOR_H_
 
 #include <memory>
 #include <new>
@@ -17,7 +17,7 @@
 #include <utility>
 #include <vector>
 
-namespace swarf::cli {
+namespace swarf {
 
 template <typename T>
 struct UnfilledAllocator : std::allocator<T> {
@@ -51,6 +51,6 @@ void ResizeUnfilled(UnfilledVector<T>* v, size_t n) {
   v->resize(n);
 }
 
-}  // namespace swarf::cli
+}  // namespace swarf
 
-#endif  // SWARF_CLIENT_OUTPUTS_UNFILLED_VECTOR_H_
+#endif  // SWARF_CORE_UNFILLED_VECTOR_H_
