@@ -59,15 +59,16 @@ class MarksSpool {
 // FilterMarks of them), and the shown pieces written to dir/marks.svg and
 // dir/marks.json (the bytes WriteMarksSvg/WriteMarksJson write for
 // FilterMarks of all of them) and spooled to dir/marks.png.spool, a batch
-// of `batch_vertices` shown vertices at a time (formatted in parallel, on
-// a thread of the stream's own while the next batch is taken; memory, not
-// the files, depends on it).
+// of `batch_vertices` shown vertices at a time (formatted in parallel, the
+// three files at once on threads of the stream's own while the next batch
+// is taken; memory, not the files, depends on it).
 //
 // Write errors do not stop the consumption (the summaries are still
 // computed): they are kept, the first naming its file, and reported by
-// streamed(). As the files are chained in WriteRunOutputs, marks.json is
-// not written past an error in marks.svg. Files not finished are removed
-// when the stream goes, and the spool always. Not thread-safe.
+// streamed(). As the files are chained in WriteRunOutputs, there is no
+// marks.json after an error in marks.svg (it stops a batch later and is
+// not finished). Files not finished are removed when the stream goes, and
+// the spool always. Not thread-safe.
 struct MarksStreamOptions {
   size_t batch_vertices = size_t{1} << 18;  // >= 1
 };
@@ -112,7 +113,7 @@ class MarksStream {
   std::vector<MarkPolyline> batch_, pieces_;
   size_t batch_vertices_ = 0;
   // The batch being written and its write; the statuses and seconds below
-  // are the writing thread's while it runs.
+  // are the writing threads' while they run (each file's its own).
   std::vector<MarkPolyline> writing_;
   std::future<void> write_;
   absl::Status svg_status_, json_status_;
