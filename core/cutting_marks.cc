@@ -6,6 +6,7 @@
 #include <memory>
 #include <numbers>
 #include <optional>
+#include <span>
 #include <thread>
 #include <tuple>
 #include <utility>
@@ -13,6 +14,7 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "core/unfilled_vector.h"
 
 namespace swarf {
 namespace {
@@ -906,7 +908,7 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
 // handed on: per key a growing segment ends at, the others that end there
 // (ghosts included), where there are any.
 std::vector<MarkPolyline> Chain(
-    const std::vector<Segment>& segs, double tol, double fold, double end_fold,
+    std::span<const Segment> segs, double tol, double fold, double end_fold,
     ThreadPool& pool, std::vector<int64_t>* starts = nullptr,
     const absl::flat_hash_map<uint64_t, int32_t>* ghosts = nullptr,
     int64_t grow_from = INT64_MAX, std::vector<uint8_t>* grows_out = nullptr,
@@ -1619,8 +1621,11 @@ absl::Status FindCuttingMarks(
   const int32_t most_bands = std::max(8, 4 * threads);
   int32_t window = most_bands;
   std::vector<std::vector<Segment>> band_segments;
-  std::vector<Segment> open;     // kept segments not chained yet, in order
-  std::vector<int64_t> open_at;  // their index among every kept segment
+  // Kept segments not chained yet, in order, and their index among every
+  // kept segment: a window's are appended unfilled, then copied in on
+  // every thread (zeroed first, on one thread, they were a serial step).
+  UnfilledVector<Segment> open;
+  UnfilledVector<int64_t> open_at;
   uint64_t raw_before = 0;       // segments found in earlier windows
   int64_t kept_before = 0;       // kept (clipped) in earlier windows
   // Polylines chained, by first segment, waiting for earlier open chains

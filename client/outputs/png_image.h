@@ -5,13 +5,13 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
-#include <functional>
-
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "core/unfilled_vector.h"
 
 namespace swarf::cli {
 
@@ -63,15 +63,15 @@ class Image {
   // Fills [x0, x1) x [y0, y1), clipped to the image.
   void FillRect(int x0, int y0, int x1, int y1, Rgb c);
 
-  std::vector<uint8_t>& pixels() { return pixels_; }
-  const std::vector<uint8_t>& pixels() const { return pixels_; }
+  UnfilledVector<uint8_t>& pixels() { return pixels_; }
+  const UnfilledVector<uint8_t>& pixels() const { return pixels_; }
 
  private:
   size_t Offset(int x, int y) const {
     return (static_cast<size_t>(y) * width_ + x) * channels_;
   }
   int width_ = 0, height_ = 0, channels_ = 3;
-  std::vector<uint8_t> pixels_;
+  UnfilledVector<uint8_t> pixels_;
 };
 
 // Writes `image` as an 8-bit PNG (RGB or RGBA as the image has), replacing

@@ -60,22 +60,25 @@ class GridRows : public LatticeWindows {
   GridRows(GridBands& grid, SurfaceGrid band)
       : grid_(grid), band_(std::move(band)) {}
   absl::StatusOr<const double*> Rows(int64_t j0, int64_t j1) override {
-    const int32_t nx = band_.nodes_x(), ny = band_.spec.ny;
+    const int32_t nx = band_.nodes_x();
     z_.resize(static_cast<size_t>(j1 - j0 + 1) * nx);
+    // Each tile row's part copied on every thread (on one, the copy was a
+    // serial step of the mesh), before the next tile row is read.
     for (int64_t t = j0 / kTileSize; t <= j1 / kTileSize; ++t) {
-      absl::StatusOr<const std::vector<double>*> tile_row = TileRow(t);
+      absl::StatusOr<const UnfilledVector<double>*> tile_row = TileRow(t);
       if (!tile_row.ok()) return tile_row.status();
       const int64_t a = std::max(j0, t * kTileSize);
       const int64_t b = std::min<int64_t>(j1, t * kTileSize + kTileSize - 1);
-      std::copy_n((*tile_row)->begin() + (a - t * kTileSize) * nx,
-                  (b - a + 1) * nx, z_.begin() + (a - j0) * nx);
+      const double* from = (*tile_row)->data() + (a - t * kTileSize) * nx;
+      ThreadPool::Default().ParallelFor(b - a + 1, [&](int64_t r) {
+        std::copy_n(from + r * nx, nx, z_.begin() + (a - j0 + r) * nx);
+      });
     }
-    (void)ny;
     return z_.data();
   }
 
  private:
-  absl::StatusOr<const std::vector<double>*> TileRow(int64_t t) {
+  absl::StatusOr<const UnfilledVector<double>*> TileRow(int64_t t) {
     for (const auto& [held, z] : held_) {
       if (held == t) return &z;
     }
@@ -96,8 +99,8 @@ class GridRows : public LatticeWindows {
 
   GridBands& grid_;
   SurfaceGrid band_;
-  std::vector<double> z_;
-  std::array<std::pair<int64_t, std::vector<double>>, 3> held_ = {
+  UnfilledVector<double> z_;
+  std::array<std::pair<int64_t, UnfilledVector<double>>, 3> held_ = {
       {{-1, {}}, {-1, {}}, {-1, {}}}};
   size_t next_ = 0;
 };
