@@ -636,32 +636,34 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
     // tile's list (in move order) by bisection: merged on one thread, with
     // the array's zeroing and faults, this was a serial step of each batch.
     result.cuts.resize(moves.size());
-    constexpr int64_t kRangeMoves = 1024;
+    // At least 1,024 moves a range, at most four ranges a thread: each range
+    // bisects every tile's list.
     const int64_t n_moves = static_cast<int64_t>(moves.size());
-    pool_->ParallelFor(
-        (n_moves + kRangeMoves - 1) / kRangeMoves, [&](int64_t r) {
-          const uint32_t m0 = static_cast<uint32_t>(r * kRangeMoves);
-          const uint32_t m1 =
-              static_cast<uint32_t>(std::min(n_moves, (r + 1) * kRangeMoves));
-          std::fill(result.cuts.begin() + m0, result.cuts.begin() + m1,
-                    MoveCut{});
-          auto by_move = [](const TileCut& tc, uint32_t m) { return tc.m < m; };
-          for (const std::vector<TileCut>& list : tile_cuts) {
-            for (auto it =
-                     std::lower_bound(list.begin(), list.end(), m0, by_move);
-                 it != list.end() && it->m < m1; ++it) {
-              MoveCut& c = result.cuts[it->m];
-              c.removed_mm3 += it->cut.removed_mm3;
-              c.over_limit_mm3 += it->cut.over_limit_mm3;
-              if (it->cut.max_drop > c.max_drop) {
-                c.max_drop = it->cut.max_drop;
-                c.i = it->cut.i;
-                c.j = it->cut.j;
-                c.z = it->cut.z;
-              }
-            }
+    const int64_t ranges = std::clamp<int64_t>(
+        n_moves / 1024, 1, 4 * static_cast<int64_t>(pool_->size()));
+    const int64_t per_range = (n_moves + ranges - 1) / ranges;
+    pool_->ParallelFor(ranges, [&](int64_t r) {
+      const uint32_t m0 =
+          static_cast<uint32_t>(std::min(n_moves, r * per_range));
+      const uint32_t m1 =
+          static_cast<uint32_t>(std::min(n_moves, (r + 1) * per_range));
+      std::fill(result.cuts.begin() + m0, result.cuts.begin() + m1, MoveCut{});
+      auto by_move = [](const TileCut& tc, uint32_t m) { return tc.m < m; };
+      for (const std::vector<TileCut>& list : tile_cuts) {
+        for (auto it = std::lower_bound(list.begin(), list.end(), m0, by_move);
+             it != list.end() && it->m < m1; ++it) {
+          MoveCut& c = result.cuts[it->m];
+          c.removed_mm3 += it->cut.removed_mm3;
+          c.over_limit_mm3 += it->cut.over_limit_mm3;
+          if (it->cut.max_drop > c.max_drop) {
+            c.max_drop = it->cut.max_drop;
+            c.i = it->cut.i;
+            c.j = it->cut.j;
+            c.z = it->cut.z;
           }
-        });
+        }
+      }
+    });
   }
   return result;
 }
