@@ -248,7 +248,8 @@ TEST(ViewerBrowserTest, AttachedViewerFollowsAStreamedJob) {
   ASSERT_EQ(line, "READY");
 
   // Another client streams the job, one pass per batch, paced so that the
-  // page sees it being cut.
+  // page sees it being cut (300 ms a batch: at 150 ms, a page slowed by a
+  // busy machine fetched tiles once while the job streamed).
   {
     auto c = ctx();
     auto stream = stub->Simulate(c.get());
@@ -263,7 +264,7 @@ TEST(ViewerBrowserTest, AttachedViewerFollowsAStreamedJob) {
       pb::SimulateResponse resp;
       ASSERT_TRUE(stream->Read(&resp));
       ASSERT_TRUE(resp.has_ack()) << resp.DebugString();
-      std::this_thread::sleep_for(std::chrono::milliseconds(150));
+      std::this_thread::sleep_for(std::chrono::milliseconds(300));
     }
     stream->WritesDone();
     ASSERT_TRUE(stream->Finish().ok());
