@@ -43,11 +43,12 @@ struct UnfilledAllocator : std::allocator<T> {
 template <typename T>
 using UnfilledVector = std::vector<T, UnfilledAllocator<T>>;
 
-// *v holding n elements, all to be written by the caller: when it must grow,
-// the old ones are dropped rather than copied.
-template <typename T>
-void ResizeUnfilled(UnfilledVector<T>* v, size_t n) {
-  if (n > v->capacity()) UnfilledVector<T>().swap(*v);
+// *v holding n elements, all to be written by the caller (a std::vector's
+// still value-initialised, an UnfilledVector's not): when it must grow, the
+// old ones are dropped, their storage given back first, rather than copied.
+template <typename T, typename Alloc>
+void ResizeForWriting(std::vector<T, Alloc>* v, size_t n) {
+  if (n > v->capacity()) std::vector<T, Alloc>().swap(*v);
   v->resize(n);
 }
 

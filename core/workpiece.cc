@@ -433,14 +433,6 @@ struct TileRange {
   int32_t ti0 = 0, ti1 = -1, tj0 = 0, tj1 = -1;  // empty by default
 };
 
-// *v holding n entries, each to be written (no copy of the old ones when
-// it grows).
-template <typename T>
-void ResizeForWriting(std::vector<T>* v, size_t n) {
-  if (n > v->capacity()) v->clear();
-  v->resize(n);
-}
-
 // Gives *v's storage back when it holds room for more than `keep`.
 template <typename T>
 void TrimVector(std::vector<T>* v, size_t keep) {

@@ -49,8 +49,8 @@ void SurfaceGrid::ResetBand(int32_t first, int32_t rows) {
   // A tile row of a wide grid is tens of MB (52 bytes a node): filled (and
   // faulted in) on every thread, as the rows read into it are, and not
   // copied when it grows.
-  ResizeUnfilled(&jets, n);
-  ResizeUnfilled(&owners, n);
+  ResizeForWriting(&jets, n);
+  ResizeForWriting(&owners, n);
   constexpr size_t kPiece = size_t{1} << 16;
   ThreadPool::Default().ParallelFor(
       static_cast<int64_t>((n + kPiece - 1) / kPiece), [&](int64_t p) {
