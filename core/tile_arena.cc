@@ -4,9 +4,7 @@
 #include <cstdlib>
 #include <new>
 
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
+#include "core/huge_pages.h"
 
 namespace swarf {
 namespace {
@@ -28,10 +26,7 @@ void* NewChunk() {
   }
   void* c = std::aligned_alloc(TileArena::kChunkBytes, TileArena::kChunkBytes);
   if (c == nullptr) throw std::bad_alloc();
-#if defined(MADV_HUGEPAGE)
-  // Advice only: without huge pages the chunk works the same.
-  madvise(c, TileArena::kChunkBytes, MADV_HUGEPAGE);
-#endif
+  AdviseHugePages(c, TileArena::kChunkBytes);
   return c;
 }
 
