@@ -1,8 +1,17 @@
 #include "core/thread_pool.h"
 
+#include <cxxabi.h>
+#include <time.h>
+
 #include <algorithm>
 #include <atomic>
+#include <chrono>
+#include <cstdio>
 #include <cstdlib>
+#include <map>
+#include <memory>
+#include <queue>
+#include <string>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -93,6 +102,124 @@ class CurrentJob {
  private:
   const void* saved_;
 };
+// SWARF_LOOP_PROFILE (thread_pool.h): each loop's figures, by the type
+// of its body, printed when the process exits.
+class LoopProfile {
+ public:
+  // Null unless SWARF_LOOP_PROFILE is a thread count in [1, 1024].
+  static LoopProfile* Get() {
+    static LoopProfile* const profile = [] {
+      const char* v = std::getenv("SWARF_LOOP_PROFILE");
+      int threads = 0;
+      if (v == nullptr || !absl::SimpleAtoi(v, &threads) || threads < 1 ||
+          threads > 1024) {
+        return static_cast<LoopProfile*>(nullptr);
+      }
+      static LoopProfile p(threads);  // prints as the process exits
+      return &p;
+    }();
+    return profile;
+  }
+
+  int threads() const { return threads_; }
+
+  // One loop's items' CPU seconds, in index order, and its wall seconds.
+  void Add(const std::function<void(int64_t)>& fn, bool inner,
+           const std::vector<float>& cpu, double wall) {
+    double sum = 0;
+    for (float c : cpu) sum += c;
+    const double modelled = Modelled(cpu);
+    std::string name = BodyName(fn);
+    if (inner) name = "[in] " + name;
+    std::lock_guard<std::mutex> l(mu_);
+    Figures& f = loops_[name];
+    ++f.calls;
+    f.items += static_cast<int64_t>(cpu.size());
+    f.cpu += sum;
+    f.wall += wall;
+    f.modelled += modelled;
+  }
+
+  ~LoopProfile() {
+    std::lock_guard<std::mutex> l(mu_);
+    std::vector<std::pair<std::string, Figures>> rows(loops_.begin(),
+                                                      loops_.end());
+    std::sort(rows.begin(), rows.end(), [](const auto& a, const auto& b) {
+      return a.second.cpu > b.second.cpu;
+    });
+    std::fprintf(stderr, "loop profile: %7s %9s %8s %8s %8s %8s  %s\n", "calls",
+                 "items", "cpu s", "wall s",
+                 absl::StrCat("on ", threads_).c_str(), "cpu/n", "loop");
+    for (const auto& [name, f] : rows) {
+      std::fprintf(
+          stderr, "loop profile: %7lld %9lld %8.3f %8.3f %8.3f %8.3f  %s\n",
+          static_cast<long long>(f.calls), static_cast<long long>(f.items),
+          f.cpu, f.wall, f.modelled, f.cpu / threads_, name.c_str());
+    }
+  }
+
+ private:
+  struct Figures {
+    int64_t calls = 0, items = 0;
+    double cpu = 0, wall = 0, modelled = 0;
+  };
+
+  explicit LoopProfile(int threads) : threads_(threads) {}
+
+  // The loop on threads_ threads: its runs of items (as ParallelFor
+  // claims them), in order, each to the thread free first; the last to
+  // finish.
+  double Modelled(const std::vector<float>& cpu) const {
+    const int64_t n = static_cast<int64_t>(cpu.size());
+    const int64_t grain = std::max<int64_t>(1, n / (1024 * threads_));
+    std::priority_queue<double, std::vector<double>, std::greater<double>>
+        free_at;
+    for (int t = 0; t < threads_; ++t) free_at.push(0);
+    double end = 0;
+    for (int64_t i = 0; i < n; i += grain) {
+      double run = 0;
+      for (int64_t k = i; k < std::min(n, i + grain); ++k) run += cpu[k];
+      const double done = free_at.top() + run;
+      free_at.pop();
+      free_at.push(done);
+      end = std::max(end, done);
+    }
+    return end;
+  }
+
+  // "swarf::Workpiece::Apply::{lambda(long)#3}": the function a lambda is
+  // in, and its number there.
+  static std::string BodyName(const std::function<void(int64_t)>& fn) {
+    int status = 0;
+    std::unique_ptr<char, void (*)(void*)> demangled(
+        abi::__cxa_demangle(fn.target_type().name(), nullptr, nullptr, &status),
+        std::free);
+    std::string full =
+        demangled != nullptr ? demangled.get() : fn.target_type().name();
+    // Parentheses only around the function's parameters.
+    for (size_t at;
+         (at = full.find("(anonymous namespace)::")) != std::string::npos;) {
+      full.erase(at, 23);
+    }
+    std::string name = full.substr(0, full.find('('));
+    const size_t lambda = full.rfind("{lambda");
+    if (lambda != std::string::npos) {
+      name += "::" + full.substr(lambda, full.find('}', lambda) - lambda + 1);
+    }
+    return name;
+  }
+
+  const int threads_;
+  std::mutex mu_;
+  std::map<std::string, Figures> loops_;  // guarded by mu_
+};
+
+double ThreadCpuSeconds() {
+  timespec t;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return static_cast<double>(t.tv_sec) + 1e-9 * static_cast<double>(t.tv_nsec);
+}
+
 }  // namespace
 
 ThreadPool::ThreadPool(int threads) {
@@ -148,6 +275,27 @@ void ThreadPool::Work(Job* job, std::unique_lock<std::mutex>* l) {
 void ThreadPool::ParallelFor(int64_t n,
                              const std::function<void(int64_t)>& fn) {
   if (n <= 0) return;
+  if (LoopProfile* profile = LoopProfile::Get()) {
+    // Each item's CPU time on its own thread: not its wall time, which
+    // another thread's work on the same core stretches.
+    std::vector<float> cpu(n);
+    const bool inner = current_job != nullptr;
+    const auto t0 = std::chrono::steady_clock::now();
+    Loop(n, [&](int64_t i) {
+      const double c0 = ThreadCpuSeconds();
+      fn(i);
+      cpu[i] = static_cast<float>(ThreadCpuSeconds() - c0);
+    });
+    profile->Add(
+        fn, inner, cpu,
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0)
+            .count());
+    return;
+  }
+  Loop(n, fn);
+}
+
+void ThreadPool::Loop(int64_t n, const std::function<void(int64_t)>& fn) {
   if (n == 1 || workers_.empty()) {
     for (int64_t i = 0; i < n; ++i) fn(i);
     return;

@@ -53,6 +53,17 @@ class ThreadPool {
 
   // Runs fn(i) for every i in [0, n), in any order and on any thread
   // (indices are claimed in runs of about n / (1024 * size())).
+  //
+  // A diagnostic: with SWARF_LOOP_PROFILE=N in the environment, each item
+  // is timed (its thread's CPU time) and, when the process exits, a line
+  // per loop body (its function and lambda number) goes to stderr: calls,
+  // items, CPU and wall seconds, and the loop's time modelled on N threads
+  // (its runs of items, in order, each to the thread free first) against
+  // CPU / N. It shows the loops that too few or too uneven items keep from
+  // N cores, measured on any machine: run with SWARF_THREADS=N as well, so
+  // that loops sized by the pool take their size on N. Loops run from
+  // another loop's items are marked [in]; an item's CPU time leaves out
+  // what other threads do for the loops it starts.
   void ParallelFor(int64_t n, const std::function<void(int64_t)>& fn);
 
   // A process-wide pool with one thread per available core.
@@ -61,6 +72,8 @@ class ThreadPool {
  private:
   struct Job;
   void WorkerLoop();
+  // ParallelFor without the profile.
+  void Loop(int64_t n, const std::function<void(int64_t)>& fn);
   // Works on `job` (holding *l, which it releases meanwhile) until its
   // indices are all claimed or another loop starts.
   void Work(Job* job, std::unique_lock<std::mutex>* l);

@@ -2,6 +2,8 @@
 // threads call it at the same time.
 #include "core/thread_pool.h"
 
+#include <time.h>
+
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -257,6 +259,38 @@ TEST(ThreadPoolTest, NestedLoops) {
   int wrong = 0;
   for (auto& h : hits) wrong += h.load() != 1;
   EXPECT_EQ(wrong, 0);
+}
+
+// Spins on this thread's CPU clock for about `seconds`.
+void BurnCpu(double seconds) {
+  timespec t0, t;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t0);
+  do {
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  } while ((t.tv_sec - t0.tv_sec) + 1e-9 * (t.tv_nsec - t0.tv_nsec) < seconds);
+}
+
+// SWARF_LOOP_PROFILE: a loop of 64 items, one of them 40 times as long as
+// each other, on 4 threads: its line names the loop, counts the call and
+// the items, and models it by its longest item (0.2 s at least), not by
+// its CPU over 4 (about 0.13 s); a loop run from its items is marked [in].
+// In a child process (the profile prints as the process exits).
+TEST(ThreadPoolDeathTest, LoopProfileModelsTheLongestItem) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  EXPECT_EXIT(
+      {
+        setenv("SWARF_LOOP_PROFILE", "4", 1);
+        ThreadPool pool(4);
+        pool.ParallelFor(64, [](int64_t i) { BurnCpu(i == 0 ? 0.2 : 0.005); });
+        pool.ParallelFor(2, [&pool](int64_t) {
+          pool.ParallelFor(3, [](int64_t) { BurnCpu(0.001); });
+        });
+        std::exit(0);
+      },
+      ::testing::ExitedWithCode(0),
+      "loop profile: +1 +64 +0\\.[2-9][0-9]* +[0-9.]+ +0\\.[2-9][0-9]* "
+      "+0\\.1[0-9]*  swarf::ThreadPoolDeathTest_LoopProfileModelsTheLongestItem"
+      "_Test::TestBody::\\{lambda\\(long\\)#1\\}\n.*  \\[in\\] swarf::");
 }
 
 }  // namespace
