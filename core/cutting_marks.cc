@@ -898,6 +898,33 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
   }
 }
 
+// A vertex key's incidence: segment `seg`'s end `end`.
+struct Inc {
+  uint64_t key;
+  int64_t seg;
+  int end;
+};
+
+// Chain's arrays, kept from one window to the next: allocated for each
+// window, their pages were faulted in and zeroed again on the chaining's
+// thread, while the other threads waited for it (half its time on a
+// plate). Every entry is written before it is read.
+struct ChainScratch {
+  UnfilledVector<Inc> inc, sorted;
+  UnfilledVector<uint16_t> bucket;
+  UnfilledVector<int64_t> other;
+  UnfilledVector<uint8_t> used;
+};
+
+// v[0..n) = value on every thread of pool (n >= 0).
+template <typename T>
+void FillOnEvery(ThreadPool& pool, T* v, int64_t n, T value) {
+  constexpr int64_t kChunk = int64_t{1} << 16;
+  pool.ParallelFor((n + kChunk - 1) / kChunk, [&](int64_t c) {
+    std::fill(v + c * kChunk, v + std::min(n, (c + 1) * kChunk), value);
+  });
+}
+
 // With `starts`, each polyline's first segment (the lowest index of its
 // chain: polylines come out in that order). `ghosts` counts, per vertex
 // key, segments chained before that end there too (they count in its
@@ -906,21 +933,18 @@ void RemoveFolds(MarkPolyline* p, double fold, double end_fold) {
 // each segment of such a chain; with `next_ghosts` (which needs
 // `grows_out`), the `ghosts` for those segments alone once the others are
 // handed on: per key a growing segment ends at, the others that end there
-// (ghosts included), where there are any.
+// (ghosts included), where there are any. Its arrays are `scratch`'s.
 std::vector<MarkPolyline> Chain(
     std::span<const Segment> segs, double tol, double fold, double end_fold,
-    ThreadPool& pool, std::vector<int64_t>* starts = nullptr,
+    ThreadPool& pool, ChainScratch* scratch,
+    std::vector<int64_t>* starts = nullptr,
     const absl::flat_hash_map<uint64_t, int32_t>* ghosts = nullptr,
-    int64_t grow_from = INT64_MAX, std::vector<uint8_t>* grows_out = nullptr,
+    int64_t grow_from = INT64_MAX, UnfilledVector<uint8_t>* grows_out = nullptr,
     absl::flat_hash_map<uint64_t, int32_t>* next_ghosts = nullptr) {
   const int64_t n = static_cast<int64_t>(segs.size());
   // Incidences sorted by vertex key.
-  struct Inc {
-    uint64_t key;
-    int64_t seg;
-    int end;
-  };
-  std::vector<Inc> inc(2 * n);
+  UnfilledVector<Inc>& inc = scratch->inc;
+  ResizeForWriting(&inc, 2 * n);
   constexpr int64_t kIncChunk = int64_t{1} << 14;
   pool.ParallelFor((n + kIncChunk - 1) / kIncChunk, [&](int64_t c) {
     const int64_t k1 = std::min(n, (c + 1) * kIncChunk);
@@ -958,7 +982,8 @@ std::vector<MarkPolyline> Chain(
     // to their bucket's part for that chunk: the order within a bucket is
     // the chunks' (then sorted anyway).
     const int chunks = buckets;
-    std::vector<uint16_t> bucket(m);
+    UnfilledVector<uint16_t>& bucket = scratch->bucket;
+    ResizeForWriting(&bucket, m);
     std::vector<size_t> at(static_cast<size_t>(chunks) * buckets, 0);
     auto chunk_range = [&](int64_t c) {
       return std::pair<size_t, size_t>(c * m / chunks, (c + 1) * m / chunks);
@@ -984,7 +1009,8 @@ std::vector<MarkPolyline> Chain(
       }
     }
     bounds[buckets] = total;
-    std::vector<Inc> sorted(m);
+    UnfilledVector<Inc>& sorted = scratch->sorted;
+    ResizeForWriting(&sorted, m);
     pool.ParallelFor(chunks, [&](int64_t c) {
       const auto [i0, i1] = chunk_range(c);
       for (size_t i = i0; i < i1; ++i) {
@@ -1000,7 +1026,9 @@ std::vector<MarkPolyline> Chain(
   }
   // For each segment end at a vertex of degree 2, the other incidence
   // there; a bucket at a time (each writes its own incidences' entries).
-  std::vector<int64_t> other(2 * n, -1);  // seg * 2 + end
+  UnfilledVector<int64_t>& other = scratch->other;  // seg * 2 + end
+  ResizeForWriting(&other, 2 * n);
+  FillOnEvery<int64_t>(pool, other.data(), 2 * n, -1);
   pool.ParallelFor(static_cast<int64_t>(bounds.size()) - 1, [&](int64_t b) {
     const size_t end = bounds[b + 1];
     for (size_t i = bounds[b]; i < end;) {
@@ -1023,8 +1051,13 @@ std::vector<MarkPolyline> Chain(
       i = j;
     }
   });
-  std::vector<uint8_t> used(n, 0);
-  if (grows_out != nullptr) grows_out->assign(n, 0);
+  UnfilledVector<uint8_t>& used = scratch->used;
+  ResizeForWriting(&used, n);
+  FillOnEvery<uint8_t>(pool, used.data(), n, 0);
+  if (grows_out != nullptr) {
+    ResizeForWriting(grows_out, n);
+    FillOnEvery<uint8_t>(pool, grows_out->data(), n, 0);
+  }
   auto push_vertex = [&](MarkPolyline* p, const End& e) {
     if (!p->vertices.empty()) {
       const Vec3& last = p->vertices.back();
@@ -1112,8 +1145,19 @@ std::vector<MarkPolyline> Chain(
   // the marks' longest step): each is walked from both its open ends, the
   // end of lower index keeps it, with its lowest segment.
   std::vector<int64_t> open_ends;
-  for (int64_t k = 0; k < 2 * n; ++k) {
-    if (other[k] < 0) open_ends.push_back(k);
+  constexpr int64_t kScanChunk = int64_t{1} << 16;
+  const int64_t scan_chunks = (2 * n + kScanChunk - 1) / kScanChunk;
+  {
+    std::vector<std::vector<int64_t>> found(scan_chunks);
+    pool.ParallelFor(scan_chunks, [&](int64_t c) {
+      for (int64_t k = c * kScanChunk;
+           k < std::min(2 * n, (c + 1) * kScanChunk); ++k) {
+        if (other[k] < 0) found[c].push_back(k);
+      }
+    });
+    for (const std::vector<int64_t>& f : found) {
+      open_ends.insert(open_ends.end(), f.begin(), f.end());
+    }
   }
   std::vector<int64_t> lowest(open_ends.size(), -1);  // -1: the far end's
   pool.ParallelFor(static_cast<int64_t>(open_ends.size()), [&](int64_t i) {
@@ -1137,12 +1181,25 @@ std::vector<MarkPolyline> Chain(
   std::vector<std::optional<MarkPolyline>> from_heads(heads.size());
   pool.ParallelFor(static_cast<int64_t>(heads.size()),
                    [&](int64_t i) { from_heads[i] = chain_from(heads[i]); });
-  // The loops, in order, then every chain by its lowest segment.
+  // The loops, in order, then every chain by its lowest segment. The
+  // segments no open chain used are found on every thread; walking a loop
+  // uses its others (checked again in order).
   std::vector<std::pair<int64_t, MarkPolyline>> loops;
-  for (int64_t s = 0; s < n; ++s) {
-    if (used[s]) continue;
-    std::optional<MarkPolyline> p = chain_from(s);
-    if (p.has_value()) loops.emplace_back(s, *std::move(p));
+  {
+    std::vector<std::vector<int64_t>> unused(scan_chunks);
+    pool.ParallelFor(scan_chunks, [&](int64_t c) {
+      for (int64_t s = c * kScanChunk / 2;
+           s < std::min(n, (c + 1) * kScanChunk / 2); ++s) {
+        if (!used[s]) unused[c].push_back(s);
+      }
+    });
+    for (const std::vector<int64_t>& u : unused) {
+      for (const int64_t s : u) {
+        if (used[s]) continue;
+        std::optional<MarkPolyline> p = chain_from(s);
+        if (p.has_value()) loops.emplace_back(s, *std::move(p));
+      }
+    }
   }
   std::vector<MarkPolyline> out;
   auto take = [&](int64_t s, MarkPolyline p) {
@@ -1637,6 +1694,10 @@ absl::Status FindCuttingMarks(
   // and so handed on a window later. Polylines with nothing to finish (the
   // taylor scheme's) are handed on at once.
   std::vector<Ready*> unfinished;
+  // Chain's arrays, and which open segments' chains may still grow: kept
+  // from window to window (ChainScratch).
+  ChainScratch chain_scratch;
+  UnfilledVector<uint8_t> growing;
   // Polylines ready to hand on (in order), handed on during the next
   // window's work.
   std::vector<MarkPolyline> handing;
@@ -1724,12 +1785,12 @@ absl::Status FindCuttingMarks(
         return;
       }
       std::vector<int64_t> starts;
-      std::vector<uint8_t> growing;
       absl::flat_hash_map<uint64_t, int32_t> kept_ghosts;
       std::vector<MarkPolyline> chained =
-          Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(), &starts,
-                &ghosts, last ? INT64_MAX : static_cast<int64_t>(window_first),
-                &growing, &kept_ghosts);
+          Chain(open, tol, 0.1 * h, kJunctionMargin * h, wp.pool(),
+                &chain_scratch, &starts, &ghosts,
+                last ? INT64_MAX : static_cast<int64_t>(window_first), &growing,
+                &kept_ghosts);
       // Chain gave polylines for the complete chains only.
       for (size_t k = 0; k < chained.size(); ++k) {
         const auto it = ready.emplace(open_at[starts[k]],
