@@ -102,17 +102,23 @@ class CurrentJob {
  private:
   const void* saved_;
 };
+
 // SWARF_LOOP_PROFILE (thread_pool.h): each loop's figures, by the type
 // of its body, printed when the process exits.
 class LoopProfile {
  public:
-  // Null unless SWARF_LOOP_PROFILE is a thread count in [1, 1024].
+  // Null unless SWARF_LOOP_PROFILE is a thread count in [1, 1024] (any
+  // other value is named on stderr, once).
   static LoopProfile* Get() {
     static LoopProfile* const profile = [] {
       const char* v = std::getenv("SWARF_LOOP_PROFILE");
+      if (v == nullptr) return static_cast<LoopProfile*>(nullptr);
       int threads = 0;
-      if (v == nullptr || !absl::SimpleAtoi(v, &threads) || threads < 1 ||
-          threads > 1024) {
+      if (!absl::SimpleAtoi(v, &threads) || threads < 1 || threads > 1024) {
+        std::fprintf(stderr,
+                     "SWARF_LOOP_PROFILE must be a thread count in [1, 1024], "
+                     "got \"%s\": no loop profile\n",
+                     v);
         return static_cast<LoopProfile*>(nullptr);
       }
       static LoopProfile p(threads);  // prints as the process exits
@@ -120,8 +126,6 @@ class LoopProfile {
     }();
     return profile;
   }
-
-  int threads() const { return threads_; }
 
   // One loop's items' CPU seconds, in index order, and its wall seconds.
   void Add(const std::function<void(int64_t)>& fn, bool inner,

@@ -293,5 +293,20 @@ TEST(ThreadPoolDeathTest, LoopProfileModelsTheLongestItem) {
       "_Test::TestBody::\\{lambda\\(long\\)#1\\}\n.*  \\[in\\] swarf::");
 }
 
+// A value that is not a thread count is named, and nothing is profiled.
+TEST(ThreadPoolDeathTest, LoopProfileNamesABadValue) {
+  GTEST_FLAG_SET(death_test_style, "threadsafe");
+  EXPECT_EXIT(
+      {
+        setenv("SWARF_LOOP_PROFILE", "sixteen", 1);
+        ThreadPool pool(2);
+        pool.ParallelFor(4, [](int64_t) {});
+        std::exit(0);
+      },
+      ::testing::ExitedWithCode(0),
+      "^SWARF_LOOP_PROFILE must be a thread count in \\[1, 1024\\], got "
+      "\"sixteen\": no loop profile\n$");
+}
+
 }  // namespace
 }  // namespace swarf
