@@ -13,16 +13,7 @@
 
 #include "core/huge_pages.h"
 
-#if defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define SWARF_KEEP_SANITIZER_NEW 1
-#endif
-#endif
-#if defined(__SANITIZE_ADDRESS__)
-#define SWARF_KEEP_SANITIZER_NEW 1
-#endif
-
-#if !defined(SWARF_KEEP_SANITIZER_NEW)
+#if !defined(SWARF_SANITIZER_ALLOCATOR)
 
 namespace {
 
@@ -70,4 +61,4 @@ void operator delete[](void* p, const std::nothrow_t&) noexcept {
   std::free(p);
 }
 
-#endif  // !SWARF_KEEP_SANITIZER_NEW
+#endif  // !SWARF_SANITIZER_ALLOCATOR

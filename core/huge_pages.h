@@ -14,6 +14,16 @@
 
 #include <cstddef>
 
+// Defined in sanitizer (ASan) builds, which keep the sanitizer's operator
+// new and delete: core/huge_new.cc then replaces nothing.
+#if defined(__SANITIZE_ADDRESS__)
+#define SWARF_SANITIZER_ALLOCATOR 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define SWARF_SANITIZER_ALLOCATOR 1
+#endif
+#endif
+
 namespace swarf {
 
 inline constexpr size_t kHugePageBytes = size_t{2} << 20;

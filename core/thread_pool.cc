@@ -12,6 +12,7 @@
 #include <memory>
 #include <queue>
 #include <string>
+#include <string_view>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -103,6 +104,12 @@ class CurrentJob {
   const void* saved_;
 };
 
+// The indices a thread claims at a time in a loop of n on `threads`
+// (ParallelFor's runs, and the profile's model of them).
+int64_t RunLength(int64_t n, int threads) {
+  return std::max<int64_t>(1, n / (1024 * int64_t{threads}));
+}
+
 // SWARF_LOOP_PROFILE (thread_pool.h): each loop's figures, by the type
 // of its body, printed when the process exits.
 class LoopProfile {
@@ -175,7 +182,7 @@ class LoopProfile {
   // finish.
   double Modelled(const std::vector<float>& cpu) const {
     const int64_t n = static_cast<int64_t>(cpu.size());
-    const int64_t grain = std::max<int64_t>(1, n / (1024 * threads_));
+    const int64_t grain = RunLength(n, threads_);
     std::priority_queue<double, std::vector<double>, std::greater<double>>
         free_at;
     for (int t = 0; t < threads_; ++t) free_at.push(0);
@@ -201,9 +208,9 @@ class LoopProfile {
     std::string full =
         demangled != nullptr ? demangled.get() : fn.target_type().name();
     // Parentheses only around the function's parameters.
-    for (size_t at;
-         (at = full.find("(anonymous namespace)::")) != std::string::npos;) {
-      full.erase(at, 23);
+    constexpr std::string_view kAnonymous = "(anonymous namespace)::";
+    for (size_t at; (at = full.find(kAnonymous)) != std::string::npos;) {
+      full.erase(at, kAnonymous.size());
     }
     std::string name = full.substr(0, full.find('('));
     const size_t lambda = full.rfind("{lambda");
@@ -315,7 +322,7 @@ void ThreadPool::Loop(int64_t n, const std::function<void(int64_t)>& fn) {
   // toolpath): 1024 runs per thread keep it balanced (64 made the
   // valuation of BM_Read 10% slower), and loops of under 2048 items per
   // thread still go one index at a time.
-  job.grain = std::max<int64_t>(1, n / (1024 * size()));
+  job.grain = RunLength(n, size());
   {
     std::lock_guard<std::mutex> l(mu_);
     job.active = 1;  // the caller

@@ -90,16 +90,8 @@ TEST_F(HugePagesTest, AdvisesTheWholeAlignedPagesInside) {
   munmap(m, bytes);
 }
 
-#if defined(__SANITIZE_ADDRESS__)
-#define SWARF_SANITIZER_NEW 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define SWARF_SANITIZER_NEW 1
-#endif
-#endif
-
 TEST_F(HugePagesTest, LargeAllocationsOfEveryFormAreAdvised) {
-#if defined(SWARF_SANITIZER_NEW)
+#if defined(SWARF_SANITIZER_ALLOCATOR)
   GTEST_SKIP() << "sanitizer builds keep the sanitizer's operator new";
 #else
   const size_t big = 64 << 20;
@@ -140,7 +132,7 @@ TEST_F(HugePagesTest, LargeAllocationsOfEveryFormAreAdvised) {
 }
 
 TEST_F(HugePagesTest, FailedAllocationsStillThrowOrReturnNull) {
-#if defined(SWARF_SANITIZER_NEW)
+#if defined(SWARF_SANITIZER_ALLOCATOR)
   GTEST_SKIP() << "sanitizer builds keep the sanitizer's operator new";
 #else
   // More than any address space: malloc fails, no new-handler is set.
