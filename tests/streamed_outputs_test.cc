@@ -16,9 +16,11 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -465,6 +467,7 @@ TEST(StreamedMarksTest, StreamedMarksWriteTheHeldMarksFilesByteForByte) {
     Written got;
     {
       MarksStream stream(Stock(), dir.path, filter,
+                         ReliefFrame(Stock(), options.marks.relief),
                          {.batch_vertices = sizes.batch_vertices});
       for (const MarkPolyline& p : marks) stream.Add(p);
       stream.Finish();
@@ -547,6 +550,23 @@ TEST(StreamedMarksTest, ChunkedDrawingIsTheHeldDrawing) {
   EXPECT_EQ(DrawMarks(relief, MarksOf(bad), mo).status().message(),
             absl::StrCat("mark polyline with ", bad[2].vertices.size(),
                          " vertices has ", bad[2].angle_deg.size(), " angles"));
+  // The same errors through a spool, the marks kept as they arrive (the
+  // angles of a later batch's polyline win over an earlier vertex that is
+  // not finite).
+  std::vector<MarkPolyline> not_finite = {marks[0], marks[1], marks[2]};
+  not_finite[1].vertices[0].y = std::numeric_limits<double>::infinity();
+  for (const std::vector<MarkPolyline>* batch : {&not_finite, &bad}) {
+    TempDir dir;
+    MarksSpool spool(dir.path + "/spool", relief.frame());
+    const std::span<const MarkPolyline> all(*batch);
+    (void)spool.Append(all.first(1));
+    (void)spool.Append(all.subspan(1));
+    (void)spool.Finish();
+    const absl::Status want_error =
+        DrawMarks(relief, MarksOf(*batch), mo).status();
+    EXPECT_FALSE(want_error.ok());
+    EXPECT_EQ(DrawKeptMarks(relief, spool.source(), mo).status(), want_error);
+  }
   mo.chunk_segments = 0;
   EXPECT_EQ(DrawMarks(relief, MarksOf(marks), mo).status().code(),
             absl::StatusCode::kInvalidArgument);
@@ -579,6 +599,7 @@ TEST(StreamedMarksTest, ErrorsNameTheFileAndLeaveNoSpool) {
     ASSERT_FALSE(held.ok());
     {
       MarksStream stream(Stock(), dir.path, kDefaultMarkDisplay,
+                         ReliefFrame(Stock(), options.marks.relief),
                          {.batch_vertices = 100});
       for (const MarkPolyline& p : marks) stream.Add(p);
       stream.Finish();
@@ -605,10 +626,27 @@ TEST(StreamedMarksTest, ErrorsNameTheFileAndLeaveNoSpool) {
               fs::is_regular_file(held_dir.path + "/marks.svg"));
   }
   {
+    // Marks spooled for another picture than marks.png's.
+    TempDir dir;
+    MarksStream stream(Stock(), dir.path, kDefaultMarkDisplay,
+                       ReliefFrame(Stock(), {.max_side = 50, .min_side = 50}));
+    for (const MarkPolyline& p : marks) stream.Add(p);
+    stream.Finish();
+    const StreamedMarks streamed = stream.streamed();
+    ASSERT_TRUE(streamed.status.ok()) << streamed.status;
+    auto got =
+        WriteRunOutputsStreamed(dir.path, bands, nullptr, &streamed, options);
+    EXPECT_EQ(got.status(),
+              absl::InvalidArgumentError("the streamed marks were kept for a "
+                                         "50 x 41 picture, marks.png is 100 x "
+                                         "83"));
+  }
+  {
     // A fetch that fails half way: the stream goes unfinished.
     TempDir dir;
     {
       MarksStream stream(Stock(), dir.path, kDefaultMarkDisplay,
+                         ReliefFrame(Stock(), options.marks.relief),
                          {.batch_vertices = 10});
       for (size_t k = 0; k < marks.size() / 2; ++k) stream.Add(marks[k]);
       EXPECT_TRUE(fs::exists(dir.path + "/marks.png.spool"));
@@ -619,7 +657,8 @@ TEST(StreamedMarksTest, ErrorsNameTheFileAndLeaveNoSpool) {
     // marks.png fails (a bad stroke width): the spool still goes.
     TempDir dir;
     {
-      MarksStream stream(Stock(), dir.path, kDefaultMarkDisplay);
+      MarksStream stream(Stock(), dir.path, kDefaultMarkDisplay,
+                         ReliefFrame(Stock(), options.marks.relief));
       for (const MarkPolyline& p : marks) stream.Add(p);
       stream.Finish();
       const StreamedMarks streamed = stream.streamed();

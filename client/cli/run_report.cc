@@ -358,12 +358,18 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
   // written to marks.svg and marks.json and spooled for marks.png); the
   // stream removes its spool and any unfinished file when it goes.
   std::unique_ptr<MarksStream> marks_stream;
+  // marks.png's relief; the marks are spooled as it strokes them in its
+  // frame.
+  ReliefOptions marks_relief = MarksPictureOptions().relief;
+  marks_relief.max_side = options.picture_size;
+  marks_relief.min_side = std::min(marks_relief.min_side, options.picture_size);
   const MarksConsumer to_stream{
       [&] {
         marks_stream.reset();
         marks_stream = files && !dir_error
                            ? std::make_unique<MarksStream>(
-                                 stock, options.dir, options.marks_display)
+                                 stock, options.dir, options.marks_display,
+                                 ReliefFrame(stock, marks_relief))
                            : std::make_unique<MarksStream>();
       },
       [&](MarkPolyline p) { marks_stream->Add(std::move(p)); }};
@@ -504,9 +510,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
     streamed = marks_stream->streamed();
   }
   out.relief.max_side = options.picture_size;
-  out.marks.relief.max_side = options.picture_size;
-  out.marks.relief.min_side =
-      std::min(out.marks.relief.min_side, options.picture_size);
+  out.marks.relief = marks_relief;
   out.error.max_side = options.picture_size;
   out.error.min_side = std::min(out.error.min_side, options.picture_size);
   // The statistics' and the marks' transient memory (freed, on the

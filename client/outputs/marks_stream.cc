@@ -20,11 +20,12 @@ double Since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-// A spooled polyline: this head, then vertices * (x, y) and angles doubles,
-// in the machine's byte order (the file never leaves the run).
+// A spooled kept polyline: this head, then its x, y and angle arrays of
+// `vertices` doubles each, in the machine's byte order (the file never
+// leaves the run).
 struct SpoolHead {
-  uint64_t vertices = 0, angles = 0;
-  uint8_t closed = 0;
+  uint64_t vertices = 0;
+  uint8_t wrap = 0;
   uint8_t pad[7] = {};
 };
 
@@ -33,10 +34,17 @@ void Put(std::string* s, const T& v) {
   s->append(reinterpret_cast<const char*>(&v), sizeof v);
 }
 
+void PutAll(std::string* s, std::span<const double> v) {
+  s->append(reinterpret_cast<const char*>(v.data()), v.size_bytes());
+}
+
 }  // namespace
 
-MarksSpool::MarksSpool(std::string path)
-    : path_(std::move(path)), file_(std::make_unique<FileWriter>(path_)) {
+MarksSpool::MarksSpool(std::string path, const PixelFrame& frame)
+    : path_(std::move(path)),
+      frame_(frame),
+      keeper_(frame),
+      file_(std::make_unique<FileWriter>(path_)) {
   status_ = file_->status();
 }
 
@@ -47,22 +55,28 @@ MarksSpool::~MarksSpool() {
 
 absl::Status MarksSpool::Append(std::span<const MarkPolyline> batch) {
   if (!status_.ok()) return status_;
-  std::string bytes;
-  for (const MarkPolyline& p : batch) {
-    bytes.clear();
+  // Kept here, once, as the marks arrive: marks.png reads the file twice
+  // (the halos, then the lines), and the kept vertices are a small part of
+  // a fine grid's (a few a pixel of a mark's length instead of tens).
+  auto write = [&](const KeptPolyline& p) {
+    bytes_.clear();
     SpoolHead h;
-    h.vertices = p.vertices.size();
-    h.angles = p.angle_deg.size();
-    h.closed = p.closed ? 1 : 0;
-    Put(&bytes, h);
-    for (const Vec3& v : p.vertices) {
-      Put(&bytes, v.x);
-      Put(&bytes, v.y);
-    }
-    for (double a : p.angle_deg) Put(&bytes, a);
-    file_->Write(bytes);
+    h.vertices = p.x.size();
+    h.wrap = p.wrap ? 1 : 0;
+    Put(&bytes_, h);
+    PutAll(&bytes_, p.x);
+    PutAll(&bytes_, p.y);
+    PutAll(&bytes_, p.angle);
+    file_->Write(bytes_);
+    return absl::OkStatus();
+  };
+  for (const MarkPolyline& p : batch) {
+    status_ = keeper_.Add(p);
+    if (status_.ok() && keeper_.full()) status_ = keeper_.Take(write);
+    if (!status_.ok()) return status_;
   }
-  status_ = file_->status();
+  status_ = keeper_.Take(write);
+  if (status_.ok()) status_ = file_->status();
   return status_;
 }
 
@@ -72,10 +86,13 @@ absl::Status MarksSpool::Finish() {
   return status_;
 }
 
-MarkSource MarksSpool::source() const {
-  return [this](const std::function<absl::Status(const MarkPolyline&)>&
-                    visit) -> absl::Status {
+KeptMarkSource MarksSpool::source() const {
+  return [this](const std::function<absl::Status(const KeptPolyline&)>& visit)
+             -> absl::Status {
     if (!status_.ok()) return status_;
+    if (!keeper_.finite()) {
+      return absl::InvalidArgumentError("mark vertex is not finite");
+    }
     std::FILE* in = std::fopen(path_.c_str(), "rb");
     if (in == nullptr) {
       return absl::InternalError(absl::StrCat("cannot read ", path_, " back: ",
@@ -85,24 +102,19 @@ MarkSource MarksSpool::source() const {
     std::vector<char> buffer(size_t{1} << 20);
     std::setvbuf(in, buffer.data(), _IOFBF, buffer.size());
     absl::Status st;
-    MarkPolyline p;
-    std::vector<double> xy;
+    std::vector<double> v;  // x, y, angle
     SpoolHead h;
     while (st.ok() && std::fread(&h, sizeof h, 1, in) == 1) {
-      xy.resize(2 * h.vertices);
-      p.angle_deg.resize(h.angles);
-      if (std::fread(xy.data(), sizeof(double), xy.size(), in) != xy.size() ||
-          std::fread(p.angle_deg.data(), sizeof(double), h.angles, in) !=
-              h.angles) {
+      const size_t n = h.vertices;
+      v.resize(3 * n);
+      if (std::fread(v.data(), sizeof(double), v.size(), in) != v.size()) {
         st = absl::DataLossError(absl::StrCat(path_, " is truncated"));
         break;
       }
-      p.closed = h.closed != 0;
-      p.vertices.resize(h.vertices);
-      for (size_t k = 0; k < h.vertices; ++k) {
-        p.vertices[k] = {xy[2 * k], xy[2 * k + 1], 0};
-      }
-      st = visit(p);
+      st = visit(KeptPolyline{{v.data(), n},
+                              {v.data() + n, n},
+                              {v.data() + 2 * n, n},
+                              h.wrap != 0});
     }
     if (st.ok() && std::ferror(in)) {
       st = absl::InternalError(absl::StrCat("reading ", path_, " back failed: ",
@@ -117,6 +129,7 @@ MarksStream::MarksStream() = default;
 
 MarksStream::MarksStream(const StockSpec& stock, const std::string& dir,
                          const MarkDisplayFilter& filter,
+                         const PixelFrame& picture,
                          const MarksStreamOptions& options)
     : files_(true), filter_(filter), options_(options) {
   const std::filesystem::path d(dir);
@@ -126,7 +139,8 @@ MarksStream::MarksStream(const StockSpec& stock, const std::string& dir,
   const auto t1 = Clock::now();
   json_ = std::make_unique<MarksJsonWriter>((d / "marks.json").string());
   json_seconds_ += Since(t1);
-  spool_ = std::make_unique<MarksSpool>((d / "marks.png.spool").string());
+  spool_ =
+      std::make_unique<MarksSpool>((d / "marks.png.spool").string(), picture);
 }
 
 // The writers' destructors remove unfinished files; the spool's its file.
@@ -218,6 +232,7 @@ StreamedMarks MarksStream::streamed() const {
   StreamedMarks s;
   if (!files_) return s;
   s.source = spool_->source();
+  s.frame = spool_->frame();
   if (svg_status_.ok()) s.files.push_back({svg_->path(), svg_seconds_});
   if (svg_status_.ok() && json_status_.ok()) {
     s.files.push_back({json_->path(), json_seconds_});

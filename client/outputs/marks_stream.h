@@ -25,31 +25,36 @@ namespace swarf::cli {
 
 class FileWriter;
 
-// Polylines kept on disk for marks.png, with what drawing them needs, in
-// exact doubles: closed, the vertices' x and y (z is read back as 0) and
-// the angles. The file is removed when the spool goes (whatever happened).
-// Not thread-safe.
+// Polylines kept on disk for marks.png, as it strokes them: the kept
+// polylines of a picture in `frame` (MarkKeeper), in exact doubles. The
+// file is removed when the spool goes (whatever happened). Not thread-safe.
 class MarksSpool {
  public:
-  explicit MarksSpool(std::string path);
+  MarksSpool(std::string path, const PixelFrame& frame);
   ~MarksSpool();
   MarksSpool(const MarksSpool&) = delete;
   MarksSpool& operator=(const MarksSpool&) = delete;
 
-  // Appends (buffered); errors name the file and are sticky.
+  // Keeps (on every thread) and appends (buffered). Errors are sticky: a
+  // write error names the file; a polyline whose angles do not match its
+  // vertices is DrawMarks's error.
   absl::Status Append(std::span<const MarkPolyline> batch);
   // After the last Append: flushes and closes.
   absl::Status Finish();
-  // The polylines as appended, read from the file (after Finish): the
-  // first write error instead if there was one. Valid while the spool
-  // lives.
-  MarkSource source() const;
+  // The kept polylines as appended, read from the file (after Finish): the
+  // first error instead if there was one, else DrawMarks's error for a
+  // vertex that is not finite. Valid while the spool lives.
+  KeptMarkSource source() const;
+  const PixelFrame& frame() const { return frame_; }
   const std::string& path() const { return path_; }
 
  private:
   std::string path_;
+  PixelFrame frame_;
+  MarkKeeper keeper_;
   std::unique_ptr<FileWriter> file_;
   absl::Status status_;
+  std::string bytes_;  // a kept polyline's, reused
 };
 
 // Consumes the marks one polyline at a time, in the order they come.
@@ -58,7 +63,8 @@ class MarksSpool {
 // With `dir` (an existing directory): also shown() (Summarize of
 // FilterMarks of them), and the shown pieces written to dir/marks.svg and
 // dir/marks.json (the bytes WriteMarksSvg/WriteMarksJson write for
-// FilterMarks of all of them) and spooled to dir/marks.png.spool, a batch
+// FilterMarks of all of them) and spooled to dir/marks.png.spool as
+// marks.png in `picture` strokes them (MarksSpool), a batch
 // of `batch_vertices` shown vertices at a time (formatted in parallel, the
 // three files at once on threads of the stream's own while the next batch
 // is taken; memory, not the files, depends on it).
@@ -77,7 +83,7 @@ class MarksStream {
  public:
   MarksStream();
   MarksStream(const StockSpec& stock, const std::string& dir,
-              const MarkDisplayFilter& filter,
+              const MarkDisplayFilter& filter, const PixelFrame& picture,
               const MarksStreamOptions& options = {});
   ~MarksStream();
   MarksStream(const MarksStream&) = delete;

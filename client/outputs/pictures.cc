@@ -614,7 +614,7 @@ namespace {
 // from several threads at once.
 absl::StatusOr<Image> DrawMarksOver(
     const std::function<void(int, uint8_t*)>& relief_row,
-    const PixelFrame& frame, const MarkSource& marks,
+    const PixelFrame& frame, const KeptMarkSource& marks,
     const MarksPictureOptions& options) {
   if (!(options.line_width_px >= 0 && options.line_width_px <= 100)) {
     return absl::InvalidArgumentError("line_width_px must be in [0, 100]");
@@ -700,119 +700,149 @@ absl::StatusOr<Image> DrawMarksOver(
         });
     chunk.clear();
   };
-  // The first pass checks the marks too: the first polyline whose angles
-  // do not match fails at once; a non-finite vertex fails after the pass
-  // (a later polyline's angles take precedence), and nothing more is drawn
-  // once either is seen (the picture is not returned).
-  bool finite = true;
-  // The polylines' segments (the vertices kept, KeptVertices) are taken a
-  // batch of polylines at a time on every thread, in groups of whole
-  // polylines, then added to the chunk in order: taken one polyline at a
-  // time, on one thread, they were most of the picture's time on a large
-  // job (tens of millions of vertices, a few thousand pixels across) on a
-  // many-core machine. The batch holds the polylines in pixels, flat:
-  // polyline q's vertices are [first[q], first[q + 1]).
-  constexpr size_t kBatchVertices = size_t{1} << 18;
-  constexpr size_t kGroupVertices = size_t{1} << 12;
-  std::vector<double> xs, ys, angles;
-  std::vector<size_t> first = {0};
-  std::vector<uint8_t> closed;
-  std::vector<size_t> group_first;  // each group's first polyline, then end
-  std::vector<std::vector<PixelSegment>> group_segments;
-  std::vector<size_t> segment_count;  // per polyline of the batch
-  auto segments_of = [&](size_t q, std::vector<PixelSegment>* out) {
-    thread_local std::vector<size_t> kept;
-    const size_t v0 = first[q], n = first[q + 1] - v0;
-    const std::span<const double> x(xs.data() + v0, n), y(ys.data() + v0, n),
-        angle(angles.data() + v0, n);
-    KeptVertices(x, y, angle, &kept);
-    const size_t m = kept.size();
-    const size_t ends = closed[q] && n > 2 ? m : (m > 0 ? m - 1 : 0);
-    const size_t before = out->size();
-    for (size_t k = 0; k < ends || (m == 1 && k == 0); ++k) {
-      const size_t a = kept[k], b = kept[m == 1 ? 0 : (k + 1) % m];
-      out->push_back({x[a], y[a], x[b], y[b], angle[a], angle[b], 0});
-    }
-    segment_count[q] = out->size() - before;
-  };
+  // Each pass adds each polyline's segments (between its kept vertices) to
+  // the chunk, whole polylines at a time.
   for (const bool halo : {true, false}) {
     uint32_t polyline = 0;
-    auto take_batch = [&] {
-      const size_t polylines = closed.size();
-      group_first.clear();
-      for (size_t q = 0, since = kGroupVertices; q < polylines; ++q) {
-        if (since >= kGroupVertices) {
-          group_first.push_back(q);
-          since = 0;
-        }
-        since += first[q + 1] - first[q];
+    absl::Status st = marks([&](const KeptPolyline& p) -> absl::Status {
+      const size_t m = p.x.size();
+      const size_t ends = p.wrap ? m : (m > 0 ? m - 1 : 0);
+      for (size_t k = 0; k < ends || (m == 1 && k == 0); ++k) {
+        const size_t a = k, b = m == 1 ? 0 : (k + 1) % m;
+        chunk.push_back(
+            {p.x[a], p.y[a], p.x[b], p.y[b], p.angle[a], p.angle[b], polyline});
       }
-      group_first.push_back(polylines);
-      const size_t groups = group_first.size() - 1;
-      if (group_segments.size() < groups) group_segments.resize(groups);
-      segment_count.resize(polylines);
-      ThreadPool::Default().ParallelFor(
-          static_cast<int64_t>(groups), [&](int64_t g) {
-            group_segments[g].clear();
-            for (size_t q = group_first[g]; q < group_first[g + 1]; ++q) {
-              segments_of(q, &group_segments[g]);
-            }
-          });
-      for (size_t g = 0; g < groups; ++g) {
-        const PixelSegment* seg = group_segments[g].data();
-        for (size_t q = group_first[g]; q < group_first[g + 1]; ++q) {
-          for (size_t k = 0; k < segment_count[q]; ++k, ++seg) {
-            chunk.push_back(*seg);
-            chunk.back().polyline = polyline;
-          }
-          ++polyline;
-          // Whole polylines only: each is blended at once within a chunk.
-          if (chunk.size() >= options.chunk_segments) draw_chunk(halo);
-        }
-      }
-      xs.clear();
-      ys.clear();
-      angles.clear();
-      first.assign(1, 0);
-      closed.clear();
-    };
-    absl::Status st = marks([&](const MarkPolyline& p) -> absl::Status {
-      const size_t n = p.vertices.size();
-      if (p.angle_deg.size() != n) {
-        return absl::InvalidArgumentError(
-            absl::StrFormat("mark polyline with %d vertices has %d angles", n,
-                            p.angle_deg.size()));
-      }
-      // Nothing more is drawn once a vertex is not finite.
-      if (!finite) return absl::OkStatus();
-      for (size_t k = 0; k < n; ++k) {
-        const double x = frame.PixelX(p.vertices[k].x);
-        const double y = frame.PixelY(p.vertices[k].y);
-        if (!(std::isfinite(x) && std::isfinite(y))) {
-          finite = false;
-          xs.resize(first.back());
-          ys.resize(first.back());
-          return absl::OkStatus();
-        }
-        xs.push_back(x);
-        ys.push_back(y);
-      }
-      angles.insert(angles.end(), p.angle_deg.begin(), p.angle_deg.end());
-      first.push_back(xs.size());
-      closed.push_back(p.closed ? 1 : 0);
-      if (xs.size() >= kBatchVertices) take_batch();
+      ++polyline;
+      // Whole polylines only: each is blended at once within a chunk.
+      if (chunk.size() >= options.chunk_segments) draw_chunk(halo);
       return absl::OkStatus();
     });
     if (!st.ok()) return st;
-    take_batch();
-    if (!finite) return absl::InvalidArgumentError("mark vertex is not finite");
     draw_chunk(halo);
   }
   DrawLegend(image, legend_x0, image.height(), legend, scale, nullptr, nullptr);
   return image;
 }
 
+// The kept polylines of `marks` in `frame` (MarkKeeper), read as the
+// marks are: the first polyline whose angles do not match fails at once; a
+// non-finite vertex fails after the pass (a later polyline's angles take
+// precedence).
+KeptMarkSource Kept(const PixelFrame& frame, const MarkSource& marks) {
+  return [frame,
+          &marks](const std::function<absl::Status(const KeptPolyline&)>& visit)
+             -> absl::Status {
+    MarkKeeper keeper(frame);
+    absl::Status st = marks([&](const MarkPolyline& p) -> absl::Status {
+      if (absl::Status added = keeper.Add(p); !added.ok()) return added;
+      return keeper.full() ? keeper.Take(visit) : absl::OkStatus();
+    });
+    if (st.ok()) st = keeper.Take(visit);
+    if (!st.ok()) return st;
+    if (!keeper.finite()) {
+      return absl::InvalidArgumentError("mark vertex is not finite");
+    }
+    return absl::OkStatus();
+  };
+}
+
 }  // namespace
+
+absl::Status MarkKeeper::Add(const MarkPolyline& p) {
+  const size_t n = p.vertices.size();
+  if (p.angle_deg.size() != n) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "mark polyline with %d vertices has %d angles", n, p.angle_deg.size()));
+  }
+  // Nothing more is kept once a vertex is not finite.
+  if (!finite_) return absl::OkStatus();
+  for (size_t k = 0; k < n; ++k) {
+    const double x = frame_.PixelX(p.vertices[k].x);
+    const double y = frame_.PixelY(p.vertices[k].y);
+    if (!(std::isfinite(x) && std::isfinite(y))) {
+      finite_ = false;
+      xs_.resize(first_.back());
+      ys_.resize(first_.back());
+      return absl::OkStatus();
+    }
+    xs_.push_back(x);
+    ys_.push_back(y);
+  }
+  angles_.insert(angles_.end(), p.angle_deg.begin(), p.angle_deg.end());
+  first_.push_back(xs_.size());
+  closed_.push_back(p.closed ? 1 : 0);
+  return absl::OkStatus();
+}
+
+bool MarkKeeper::full() const { return xs_.size() >= kBatchVertices; }
+
+absl::Status MarkKeeper::Take(
+    const std::function<absl::Status(const KeptPolyline&)>& visit) {
+  // The batch's polylines are kept on every thread, in groups of whole
+  // polylines, then visited in order: kept one polyline at a time, on one
+  // thread, they were most of the picture's time on a large job (tens of
+  // millions of vertices, a few thousand pixels across) on a many-core
+  // machine.
+  const size_t polylines = closed_.size();
+  group_first_.clear();
+  for (size_t q = 0, since = kGroupVertices; q < polylines; ++q) {
+    if (since >= kGroupVertices) {
+      group_first_.push_back(q);
+      since = 0;
+    }
+    since += first_[q + 1] - first_[q];
+  }
+  group_first_.push_back(polylines);
+  const size_t groups = group_first_.size() - 1;
+  if (group_kept_.size() < groups) group_kept_.resize(groups);
+  kept_count_.resize(polylines);
+  ThreadPool::Default().ParallelFor(
+      static_cast<int64_t>(groups), [&](int64_t g) {
+        thread_local std::vector<size_t> kept;
+        Group& out = group_kept_[g];
+        out.x.clear();
+        out.y.clear();
+        out.angle.clear();
+        for (size_t q = group_first_[g]; q < group_first_[g + 1]; ++q) {
+          const size_t v0 = first_[q], n = first_[q + 1] - v0;
+          KeptVertices({xs_.data() + v0, n}, {ys_.data() + v0, n},
+                       {angles_.data() + v0, n}, &kept);
+          for (const size_t k : kept) {
+            out.x.push_back(xs_[v0 + k]);
+            out.y.push_back(ys_[v0 + k]);
+            out.angle.push_back(angles_[v0 + k]);
+          }
+          kept_count_[q] = kept.size();
+        }
+      });
+  absl::Status st;
+  for (size_t g = 0; g < groups && st.ok(); ++g) {
+    const Group& kept = group_kept_[g];
+    size_t at = 0;
+    for (size_t q = group_first_[g]; q < group_first_[g + 1] && st.ok(); ++q) {
+      const size_t m = kept_count_[q];
+      const size_t n = first_[q + 1] - first_[q];
+      st = visit(KeptPolyline{{kept.x.data() + at, m},
+                              {kept.y.data() + at, m},
+                              {kept.angle.data() + at, m},
+                              closed_[q] != 0 && n > 2});
+      at += m;
+    }
+  }
+  xs_.clear();
+  ys_.clear();
+  angles_.clear();
+  first_.assign(1, 0);
+  closed_.clear();
+  return st;
+}
+
+absl::StatusOr<Image> DrawKeptMarks(const ReliefSampler& relief,
+                                    const KeptMarkSource& marks,
+                                    const MarksPictureOptions& options) {
+  return DrawMarksOver([&](int y, uint8_t* out) { relief.ColorRow(y, out); },
+                       relief.frame(), marks, options);
+}
 
 absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
                                 const std::vector<MarkPolyline>& marks,
@@ -824,11 +854,12 @@ absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
         relief.width(), relief.height(), relief.channels(), frame.width,
         frame.height));
   }
+  const MarkSource source = MarksOf(marks);
   return DrawMarksOver(
       [&](int y, uint8_t* out) {
         std::copy(relief.row(y), relief.row(y) + 3 * frame.width, out);
       },
-      frame, MarksOf(marks), options);
+      frame, Kept(frame, source), options);
 }
 
 absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
@@ -840,8 +871,7 @@ absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
 absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
                                 const MarkSource& marks,
                                 const MarksPictureOptions& options) {
-  return DrawMarksOver([&](int y, uint8_t* out) { relief.ColorRow(y, out); },
-                       relief.frame(), marks, options);
+  return DrawKeptMarks(relief, Kept(relief.frame(), marks), options);
 }
 
 MarkSource MarksOf(const std::vector<MarkPolyline>& marks) {

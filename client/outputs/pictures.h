@@ -13,6 +13,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -189,6 +190,66 @@ absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
 absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,
                                 const MarkSource& marks,
                                 const MarksPictureOptions& options = {});
+
+// A mark polyline as marks.png strokes it, in its picture's pixels: the
+// vertices kept (those within 0.05 px and 0.25 degrees of their kept
+// neighbours' segment left out), their angles, and whether the last joins
+// the first (a closed polyline of more than two vertices). A view: the
+// arrays belong to whoever visits with it.
+struct KeptPolyline {
+  std::span<const double> x, y, angle;  // the same size
+  bool wrap = false;
+};
+
+// Kept polylines read in order, as MarkSource.
+using KeptMarkSource = std::function<absl::Status(
+    const std::function<absl::Status(const KeptPolyline&)>& visit)>;
+
+// Mark polylines made into the kept polylines of a picture in `frame`, a
+// batch at a time, kept on every thread. The checks DrawMarks makes: a
+// polyline whose angles do not match its vertices is refused at once; once
+// a vertex is not finite, nothing more is kept (later polylines' angles
+// are still checked). Not thread-safe.
+class MarkKeeper {
+ public:
+  explicit MarkKeeper(const PixelFrame& frame) : frame_(frame) {}
+  // InvalidArgument for a polyline whose angles do not match its vertices
+  // (nothing added).
+  absl::Status Add(const MarkPolyline& p);
+  // Whether the batch is large enough to Take.
+  bool full() const;
+  // Keeps the batch's polylines and visits each in order (visit's first
+  // error is returned); the batch is then empty.
+  absl::Status Take(
+      const std::function<absl::Status(const KeptPolyline&)>& visit);
+  // Whether every vertex added was finite.
+  bool finite() const { return finite_; }
+
+ private:
+  // A batch's vertices, and a group's (polylines kept by one thread).
+  static constexpr size_t kBatchVertices = size_t{1} << 18;
+  static constexpr size_t kGroupVertices = size_t{1} << 12;
+  struct Group {
+    std::vector<double> x, y, angle;
+  };
+  PixelFrame frame_;
+  bool finite_ = true;
+  // The batch in pixels, flat: polyline q's vertices are
+  // [first_[q], first_[q + 1]).
+  std::vector<double> xs_, ys_, angles_;
+  std::vector<size_t> first_ = {0};
+  std::vector<uint8_t> closed_;
+  // Each group's first polyline, then the end; each group's kept vertices
+  // (flat, polyline after polyline) and each polyline's count of them.
+  std::vector<size_t> group_first_;
+  std::vector<Group> group_kept_;
+  std::vector<size_t> kept_count_;
+};
+
+// DrawMarks from kept polylines (MarkKeeper's, for this relief's frame).
+absl::StatusOr<Image> DrawKeptMarks(const ReliefSampler& relief,
+                                    const KeptMarkSource& marks,
+                                    const MarksPictureOptions& options = {});
 
 // RenderRelief(grid, options.relief) then DrawMarks. A relief already
 // rendered (`drawn`, by RenderRelief(grid, drawn_with)) serves instead when

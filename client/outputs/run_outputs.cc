@@ -124,10 +124,8 @@ absl::StatusOr<std::vector<WrittenFile>> WriteAll(
     const std::string& dir, GridBands& grid, const ErrorRaster* error,
     const std::vector<MarkPolyline>* held, const StreamedMarks* streamed,
     const RunOutputOptions& options, RunOutputSummary* summary) {
-  // marks.png's polylines, whichever way they come.
-  std::optional<MarkSource> marks;
-  if (held != nullptr) marks = MarksOf(*held);
-  if (streamed != nullptr) marks = streamed->source;
+  // Whether there is a marks.png to draw (its polylines held or streamed).
+  const bool marks = held != nullptr || streamed != nullptr;
   const std::string base = dir.empty() || dir.back() == '/' ? dir : dir + "/";
   const StockSpec spec = grid.spec();
   if (absl::Status st = ValidateStock(spec); !st.ok()) return st;
@@ -149,6 +147,13 @@ absl::StatusOr<std::vector<WrittenFile>> WriteAll(
   relief.emplace(spec, ReliefFrame(spec, options.relief));
   std::optional<ReliefSampler> marks_relief;
   const PixelFrame marks_frame = ReliefFrame(spec, options.marks.relief);
+  if (streamed != nullptr && !(streamed->frame == marks_frame)) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the streamed marks were kept for a %d x %d picture, marks.png is "
+        "%d x %d",
+        streamed->frame.width, streamed->frame.height, marks_frame.width,
+        marks_frame.height));
+  }
   if (marks && !(marks_frame == relief->frame())) {
     marks_relief.emplace(spec, marks_frame);
   }
@@ -295,8 +300,11 @@ absl::StatusOr<std::vector<WrittenFile>> WriteAll(
         "marks.png",
         [&](const std::string& path) {
           // The relief already sampled serves when the frames agree.
-          absl::StatusOr<Image> picture = DrawMarks(
-              marks_relief ? *marks_relief : *relief, *marks, options.marks);
+          const ReliefSampler& under = marks_relief ? *marks_relief : *relief;
+          absl::StatusOr<Image> picture =
+              held != nullptr
+                  ? DrawMarks(under, *held, options.marks)
+                  : DrawKeptMarks(under, streamed->source, options.marks);
           marks_relief.reset();
           relief.reset();
           if (!picture.ok()) return picture.status();

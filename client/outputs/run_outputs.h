@@ -33,7 +33,9 @@ struct WrittenFile {
 // marks.json already written as they arrived, marks.png to draw from
 // `source` (read twice).
 struct StreamedMarks {
-  MarkSource source;
+  // The shown marks as marks.png in `frame` strokes them (MarkKeeper).
+  KeptMarkSource source;
+  PixelFrame frame;
   std::vector<WrittenFile> files;  // marks.svg, marks.json as written
   // Their first write error (naming the file): returned where
   // WriteRunOutputs returns the marks files' errors.
@@ -69,7 +71,9 @@ absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputs(
     const std::vector<MarkPolyline>* marks,
     const RunOutputOptions& options = {}, RunOutputSummary* summary = nullptr);
 // The same with the marks streamed: marks.png drawn from marks->source
-// (a chunk of segments at a time, options.marks.chunk_segments), marks.svg
+// (a chunk of segments at a time, options.marks.chunk_segments; its frame
+// must be marks.png's, ReliefFrame(spec, options.marks.relief), else
+// InvalidArgument), marks.svg
 // and marks.json as marks->files (in that place in the list) or
 // marks->status. `marks` may be null (no marks files).
 absl::StatusOr<std::vector<WrittenFile>> WriteRunOutputsStreamed(
