@@ -42,7 +42,6 @@ void PutAll(std::string* s, std::span<const double> v) {
 
 MarksSpool::MarksSpool(std::string path, const PixelFrame& frame)
     : path_(std::move(path)),
-      frame_(frame),
       keeper_(frame),
       file_(std::make_unique<FileWriter>(path_)) {
   status_ = file_->status();
@@ -90,9 +89,7 @@ KeptMarkSource MarksSpool::source() const {
   return [this](const std::function<absl::Status(const KeptPolyline&)>& visit)
              -> absl::Status {
     if (!status_.ok()) return status_;
-    if (!keeper_.finite()) {
-      return absl::InvalidArgumentError("mark vertex is not finite");
-    }
+    if (absl::Status st = keeper_.finite_status(); !st.ok()) return st;
     std::FILE* in = std::fopen(path_.c_str(), "rb");
     if (in == nullptr) {
       return absl::InternalError(absl::StrCat("cannot read ", path_, " back: ",

@@ -45,12 +45,11 @@ class MarksSpool {
   // first error instead if there was one, else DrawMarks's error for a
   // vertex that is not finite. Valid while the spool lives.
   KeptMarkSource source() const;
-  const PixelFrame& frame() const { return frame_; }
+  const PixelFrame& frame() const { return keeper_.frame(); }
   const std::string& path() const { return path_; }
 
  private:
   std::string path_;
-  PixelFrame frame_;
   MarkKeeper keeper_;
   std::unique_ptr<FileWriter> file_;
   absl::Status status_;

@@ -728,9 +728,9 @@ absl::StatusOr<Image> DrawMarksOver(
 // marks are: the first polyline whose angles do not match fails at once; a
 // non-finite vertex fails after the pass (a later polyline's angles take
 // precedence).
-KeptMarkSource Kept(const PixelFrame& frame, const MarkSource& marks) {
-  return [frame,
-          &marks](const std::function<absl::Status(const KeptPolyline&)>& visit)
+KeptMarkSource Kept(const PixelFrame& frame, MarkSource marks) {
+  return [frame, marks = std::move(marks)](
+             const std::function<absl::Status(const KeptPolyline&)>& visit)
              -> absl::Status {
     MarkKeeper keeper(frame);
     absl::Status st = marks([&](const MarkPolyline& p) -> absl::Status {
@@ -739,10 +739,7 @@ KeptMarkSource Kept(const PixelFrame& frame, const MarkSource& marks) {
     });
     if (st.ok()) st = keeper.Take(visit);
     if (!st.ok()) return st;
-    if (!keeper.finite()) {
-      return absl::InvalidArgumentError("mark vertex is not finite");
-    }
-    return absl::OkStatus();
+    return keeper.finite_status();
   };
 }
 
@@ -775,6 +772,11 @@ absl::Status MarkKeeper::Add(const MarkPolyline& p) {
 }
 
 bool MarkKeeper::full() const { return xs_.size() >= kBatchVertices; }
+
+absl::Status MarkKeeper::finite_status() const {
+  return finite_ ? absl::OkStatus()
+                 : absl::InvalidArgumentError("mark vertex is not finite");
+}
 
 absl::Status MarkKeeper::Take(
     const std::function<absl::Status(const KeptPolyline&)>& visit) {
@@ -854,12 +856,11 @@ absl::StatusOr<Image> DrawMarks(const Image& relief, const PixelFrame& frame,
         relief.width(), relief.height(), relief.channels(), frame.width,
         frame.height));
   }
-  const MarkSource source = MarksOf(marks);
   return DrawMarksOver(
       [&](int y, uint8_t* out) {
         std::copy(relief.row(y), relief.row(y) + 3 * frame.width, out);
       },
-      frame, Kept(frame, source), options);
+      frame, Kept(frame, MarksOf(marks)), options);
 }
 
 absl::StatusOr<Image> DrawMarks(const ReliefSampler& relief,

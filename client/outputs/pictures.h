@@ -222,8 +222,9 @@ class MarkKeeper {
   // error is returned); the batch is then empty.
   absl::Status Take(
       const std::function<absl::Status(const KeptPolyline&)>& visit);
-  // Whether every vertex added was finite.
-  bool finite() const { return finite_; }
+  // OK, or DrawMarks's InvalidArgument once a vertex added was not finite.
+  absl::Status finite_status() const;
+  const PixelFrame& frame() const { return frame_; }
 
  private:
   // A batch's vertices, and a group's (polylines kept by one thread).
