@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
+#include <cstdint>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -72,6 +74,16 @@ void QuarterMaxima(const double* __restrict err, const double* __restrict si,
   m[1] = m1;
   m[2] = m2;
   m[3] = m3;
+}
+
+// Whether a and b have the same slopes and curvatures, bit for bit (their
+// heights aside): then every function of those alone agrees on them.
+bool SameShape(const SurfaceJet& a, const SurfaceJet& b) {
+  return std::bit_cast<uint64_t>(a.wx) == std::bit_cast<uint64_t>(b.wx) &&
+         std::bit_cast<uint64_t>(a.wy) == std::bit_cast<uint64_t>(b.wy) &&
+         std::bit_cast<uint64_t>(a.wxx) == std::bit_cast<uint64_t>(b.wxx) &&
+         std::bit_cast<uint64_t>(a.wxy) == std::bit_cast<uint64_t>(b.wxy) &&
+         std::bit_cast<uint64_t>(a.wyy) == std::bit_cast<uint64_t>(b.wyy);
 }
 
 // At least n entries in *v (the existing ones kept, not zeroed).
@@ -489,14 +501,29 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     for (int32_t c0 = ei0; c0 <= ei1;) {
       const int32_t c1 = std::min(ei1, (c0 / kTileSize + 1) * kTileSize - 1);
       for (int32_t j = ej0; j <= ej1; ++j) {
+        // The row's last node with an owner: a trust region depends on the
+        // jet's slopes and curvatures alone (not w), a reach on the owner
+        // alone, and along a straight pass neighbouring nodes of one move
+        // mostly have the same ones, bit for bit (a raster along x: every
+        // node of a cylinder's row). Those are copied, not computed again.
+        size_t last = SIZE_MAX;
         for (int32_t i = c0; i <= c1; ++i) {
           const size_t at =
               static_cast<size_t>(j - ej0) * region_w + (i - ei0);
           nodes[at] = wp.Node(i, j, jets.get());
           if (guarded && nodes[at].owner >= 0) {
-            regions[at] = TrustRegion(nodes[at].jet);
-            reaches[at] = wp.sweeps().Reach(nodes[at].owner, z_top);
-            sure_trust[at] = SurelyTrusted(regions[at], widest, tallest);
+            const NodeValue& node = nodes[at];
+            if (last != SIZE_MAX && SameShape(nodes[last].jet, node.jet)) {
+              regions[at] = regions[last];
+              sure_trust[at] = sure_trust[last];
+            } else {
+              regions[at] = TrustRegion(node.jet);
+              sure_trust[at] = SurelyTrusted(regions[at], widest, tallest);
+            }
+            reaches[at] = last != SIZE_MAX && nodes[last].owner == node.owner
+                              ? reaches[last]
+                              : wp.sweeps().Reach(node.owner, z_top);
+            last = at;
           }
         }
       }
