@@ -220,7 +220,9 @@ enum class PatchTrust { kFull, kLowerBound, kNone };
 // The trust of the patch with jet `j` at offset (dx, dy) from its node.
 PatchTrust TrustPatch(const SurfaceJet& j, double dx, double dy);
 // The same in two steps, for many offsets of one patch: its trust region
-// (from the jet alone), then the trust at an offset, as TrustPatch.
+// (from the jet's slopes and curvatures alone: j.w is not read, so nodes
+// whose wx..wyy are the same bits share one, as MeasureError relies on),
+// then the trust at an offset, as TrustPatch.
 struct PatchTrustRegion {
   bool everywhere = true;  // a plane: trusted everywhere
   double delta = 0, de = 0, reach = 0;  // rim distances, trusted radius
