@@ -1468,10 +1468,12 @@ absl::Status FindCuttingMarks(
 
   // Bands are claimed in order; four read each tile row (and a fifth its
   // first node row): the nodes' jets in a cache of this traversal's own,
-  // of two rows of tiles (the workpiece's, shared with other readers such
-  // as the valuation, holds less than a row of a wide grid: each tile was
-  // computed up to once per node row).
-  const std::unique_ptr<Workpiece::JetCache> jets = wp.TraversalJetCache();
+  // of the tile rows the threads' bands (one a thread) span at once (the
+  // workpiece's, shared with other readers such as the valuation, holds
+  // less than a row of a wide grid: each tile was computed up to once per
+  // node row).
+  const std::unique_ptr<Workpiece::JetCache> jets =
+      wp.TraversalJetCache(wp.pool().size() * kBandRows + 1);
   auto find_band = [&](int64_t band, std::vector<Segment>* out) {
     const int32_t r0 = ej0 + static_cast<int32_t>(band) * kBandRows;
     const int32_t r1 = std::min(r0 + kBandRows, ej1 + 1);  // rows [r0, r1)

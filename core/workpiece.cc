@@ -883,12 +883,19 @@ std::unique_ptr<Workpiece::JetCache> Workpiece::NewJetCache(
   return std::unique_ptr<JetCache>(new JetCache(tile_count(), tiles));
 }
 
-std::unique_ptr<Workpiece::JetCache> Workpiece::TraversalJetCache() const {
+std::unique_ptr<Workpiece::JetCache> Workpiece::TraversalJetCache(
+    int32_t rows_at_once) const {
   // A traversal in order of rows of tiles first computes a tile when it
   // reaches the node row above its tile row (or its own first row), and
-  // last reads it about a tile row of tiles later: two rows, and room for
-  // the threads working ahead of the slowest one.
-  const size_t rows = 2 * static_cast<size_t>(tiles_x_) + 64;
+  // last reads it about a tile row of tiles later: two rows, or the rows
+  // that the node rows read at once can span (sized for two, sixteen
+  // threads' bands of the marks over four tile rows evicted each tile
+  // before its next node row was read: each computed about seven times),
+  // and room for the threads working ahead of the slowest one.
+  const int64_t at_once = std::max(rows_at_once, 1);
+  const int64_t tile_rows =
+      std::max<int64_t>(2, (at_once - 1 + kTileSize - 1) / kTileSize + 1);
+  const size_t rows = static_cast<size_t>(tile_rows * tiles_x_ + 64);
   return NewJetCache(std::min({rows, static_cast<size_t>(tile_count()),
                                kTraversalJetBytes / sizeof(TileJets)}));
 }

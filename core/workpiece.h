@@ -266,11 +266,14 @@ class Workpiece {
   std::unique_ptr<JetCache> NewJetCache(size_t tiles) const;
   // A cache for a traversal that goes over the grid in order of rows of
   // tiles and reads each node row of a tile row several times (by bins or
-  // bands a fraction of a tile high), or a node row past it: two tile rows
-  // and some, so that each tile's jets are computed once; at most
+  // bands a fraction of a tile high), or a node row past it, its threads
+  // reading up to `rows_at_once` consecutive node rows at a time (all its
+  // threads' bands together): the tile rows those span, two at least, and
+  // some, so that each tile's jets are computed once; at most
   // kTraversalJetBytes (a grid wider than that allows computes a tile's
   // jets once per pass of the traversal over its tile row instead).
-  std::unique_ptr<JetCache> TraversalJetCache() const;
+  std::unique_ptr<JetCache> TraversalJetCache(
+      int32_t rows_at_once = kTileSize) const;
   static constexpr size_t kTraversalJetBytes = size_t{256} << 20;
 
   // Node (i, j), 0 <= i <= nx, 0 <= j <= ny.

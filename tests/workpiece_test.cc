@@ -1198,6 +1198,15 @@ TEST(WorkpieceJetsTest, TraversalCachesReadTheSameNodes) {
   // Two rows of 15 tiles and 64 more, fewer than the grid's 225.
   EXPECT_EQ(wp->tiles_x(), 15);
   EXPECT_EQ(traversal->capacity(), size_t{2 * 15 + 64});
+  // Node rows read at once: 257 (sixteen threads' bands of 16 rows and the
+  // row past them) can span five tile rows (63 to 319), 66 three and 65
+  // two; fewer, two; the whole grid at most.
+  EXPECT_EQ(wp->TraversalJetCache(257)->capacity(), size_t{5 * 15 + 64});
+  EXPECT_EQ(wp->TraversalJetCache(66)->capacity(), size_t{3 * 15 + 64});
+  EXPECT_EQ(wp->TraversalJetCache(65)->capacity(), size_t{2 * 15 + 64});
+  EXPECT_EQ(wp->TraversalJetCache(1)->capacity(), size_t{2 * 15 + 64});
+  EXPECT_EQ(wp->TraversalJetCache(1 << 20)->capacity(),
+            static_cast<size_t>(wp->tile_count()));
   const std::unique_ptr<Workpiece::JetCache> one = wp->NewJetCache(1);
   EXPECT_EQ(one->capacity(), 1u);
   EXPECT_EQ(wp->NewJetCache(0)->capacity(), 1u);
