@@ -1,6 +1,7 @@
 #include "core/cutting_marks.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <map>
 #include <memory>
@@ -1463,20 +1464,30 @@ absl::Status FindCuttingMarks(
   const int32_t ei0 = grid.ElementX(region.x0), ei1 = grid.ElementX(region.x1);
   const int32_t ej0 = grid.ElementY(region.y0), ej1 = grid.ElementY(region.y1);
   const int32_t cols = ei1 - ei0 + 1;  // elements per row in the region
-  constexpr int32_t kBandRows = 16;
-  const int32_t bands = (ej1 - ej0 + kBandRows) / kBandRows;
+  // A band's rows: 16, fewer on many threads, so that the bands the threads
+  // search at once (one each) lie in two tile rows. Sixteen threads' bands
+  // of 16 rows spanned five, and evicted each tile's jets from a cache of
+  // two before its next node row was read (the 300 mm plate's were computed
+  // about seven times each); a cache of five is 73 MB more on the full
+  // plate. The segments come out in the same order (rows, then elements
+  // along each), whatever the bands.
+  const int32_t threads = wp.pool().size();
+  const int32_t band_rows = std::clamp(
+      std::bit_floor(static_cast<uint32_t>(kTileSize / std::max(threads, 1))),
+      4u, 16u);
+  const int32_t bands = (ej1 - ej0 + band_rows) / band_rows;
 
-  // Bands are claimed in order; four read each tile row (and a fifth its
-  // first node row): the nodes' jets in a cache of this traversal's own,
-  // of the tile rows the threads' bands (one a thread) span at once (the
+  // Bands are claimed in order, several to a tile row (and one more reads
+  // its first node row): the nodes' jets in a cache of this traversal's
+  // own, of the tile rows the threads' bands span at once (the
   // workpiece's, shared with other readers such as the valuation, holds
   // less than a row of a wide grid: each tile was computed up to once per
   // node row).
   const std::unique_ptr<Workpiece::JetCache> jets =
-      wp.TraversalJetCache(wp.pool().size() * kBandRows + 1);
+      wp.TraversalJetCache(threads * band_rows + 1);
   auto find_band = [&](int64_t band, std::vector<Segment>* out) {
-    const int32_t r0 = ej0 + static_cast<int32_t>(band) * kBandRows;
-    const int32_t r1 = std::min(r0 + kBandRows, ej1 + 1);  // rows [r0, r1)
+    const int32_t r0 = ej0 + static_cast<int32_t>(band) * band_rows;
+    const int32_t r1 = std::min(r0 + band_rows, ej1 + 1);  // rows [r0, r1)
     // Node rows r0..r1, columns ei0..ei1+1, a tile's columns at a time (a
     // row crosses every tile of the band).
     const int32_t nc = cols + 1;
@@ -1671,13 +1682,13 @@ absl::Status FindCuttingMarks(
   // only on its own segments and their order), and handed on once no open
   // chain can still come before them.
   //
-  // A window is four bands a thread (their costs vary), fewer where the
-  // marks are dense: its segments are held at once (in each band's vector,
-  // then in `open`), so after each window the next takes as many bands as
-  // fit options.window_segment_bytes at the last one's segments a band,
-  // one band a thread at least. The marks do not depend on the windows.
-  const int32_t threads = wp.pool().size();
-  const int32_t most_bands = std::max(8, 4 * threads);
+  // A window is four bands of 16 rows a thread (their costs vary), fewer
+  // where the marks are dense: its segments are held at once (in each
+  // band's vector, then in `open`), so after each window the next takes as
+  // many bands as fit options.window_segment_bytes at the last one's
+  // segments a band, one band a thread at least. The marks do not depend
+  // on the windows.
+  const int32_t most_bands = std::max(8, 4 * threads) * (16 / band_rows);
   int32_t window = most_bands;
   std::vector<std::vector<Segment>> band_segments;
   // Kept segments not chained yet, in order, and their index among every

@@ -795,6 +795,34 @@ TEST(CuttingMarksTest, EmitStopsTheSearchAfterTheFirstPolylines) {
   }
 }
 
+// Many threads search bands of fewer rows (8 on 8 threads, 4 on 16, so
+// that the bands searched at once lie in two tile rows): the same marks, bit
+// for bit, as one thread's bands of 16, in windows of the default size and
+// of one band a thread.
+TEST(CuttingMarksTest, ManyThreadsShorterBandsGiveTheSameMarks) {
+  ThreadPool one(1);
+  auto wp = LongRaster(&one);
+  const std::vector<MarkPolyline> want = Marks(*wp);
+  ASSERT_GE(want.size(), 90u);
+  for (int threads : {8, 16}) {
+    SCOPED_TRACE(threads);
+    ThreadPool pool(threads);
+    auto many = LongRaster(&pool);
+    for (int64_t bytes : {MarkOptions().window_segment_bytes, int64_t{1}}) {
+      SCOPED_TRACE(bytes);
+      MarkOptions o;
+      o.window_segment_bytes = bytes;
+      const absl::StatusOr<std::vector<MarkPolyline>> got =
+          FindCuttingMarks(*many, o);
+      ASSERT_TRUE(got.ok()) << got.status();
+      ASSERT_EQ(got->size(), want.size());
+      for (size_t i = 0; i < want.size(); ++i) {
+        ExpectSamePolyline((*got)[i], want[i]);
+      }
+    }
+  }
+}
+
 // Windows as small as the thread count (one band each) where the segments
 // would pass window_segment_bytes: the same marks, bit for bit, as windows
 // of 8 bands; the budget is validated.
