@@ -1471,10 +1471,11 @@ absl::Status FindCuttingMarks(
   // about seven times each); a cache of five is 73 MB more on the full
   // plate. The segments come out in the same order (rows, then elements
   // along each), whatever the bands.
+  constexpr int32_t kWideBandRows = 16;
   const int32_t threads = wp.pool().size();
-  const int32_t band_rows = std::clamp(
+  const int32_t band_rows = static_cast<int32_t>(std::clamp(
       std::bit_floor(static_cast<uint32_t>(kTileSize / std::max(threads, 1))),
-      4u, 16u);
+      4u, static_cast<uint32_t>(kWideBandRows)));
   const int32_t bands = (ej1 - ej0 + band_rows) / band_rows;
 
   // Bands are claimed in order, several to a tile row (and one more reads
@@ -1688,7 +1689,8 @@ absl::Status FindCuttingMarks(
   // many bands as fit options.window_segment_bytes at the last one's
   // segments a band, one band a thread at least. The marks do not depend
   // on the windows.
-  const int32_t most_bands = std::max(8, 4 * threads) * (16 / band_rows);
+  const int32_t most_bands =
+      std::max(8, 4 * threads) * (kWideBandRows / band_rows);
   int32_t window = most_bands;
   std::vector<std::vector<Segment>> band_segments;
   // Kept segments not chained yet, in order, and their index among every

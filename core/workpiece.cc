@@ -887,11 +887,11 @@ std::unique_ptr<Workpiece::JetCache> Workpiece::TraversalJetCache(
     int32_t rows_at_once) const {
   // A traversal in order of rows of tiles first computes a tile when it
   // reaches the node row above its tile row (or its own first row), and
-  // last reads it about a tile row of tiles later: two rows, or the rows
-  // that the node rows read at once can span (sized for two, sixteen
-  // threads' bands of the marks over four tile rows evicted each tile
-  // before its next node row was read: each computed about seven times),
-  // and room for the threads working ahead of the slowest one.
+  // last reads it about a tile row of tiles later: two rows, or as many as
+  // the node rows read at once can span (fewer evict each tile before its
+  // next node row is read: sixteen threads' bands of 16 rows over four
+  // tile rows computed each tile about seven times), and room for the
+  // threads working ahead of the slowest one.
   const int64_t at_once = std::max(rows_at_once, 1);
   const int64_t tile_rows =
       std::max<int64_t>(2, (at_once - 1 + kTileSize - 1) / kTileSize + 1);
