@@ -1683,14 +1683,15 @@ absl::Status FindCuttingMarks(
   // only on its own segments and their order), and handed on once no open
   // chain can still come before them.
   //
-  // A window is four bands of 16 rows a thread (their costs vary), fewer
-  // where the marks are dense: its segments are held at once (in each
-  // band's vector, then in `open`), so after each window the next takes as
-  // many bands as fit options.window_segment_bytes at the last one's
-  // segments a band, one band a thread at least. The marks do not depend
-  // on the windows.
-  const int32_t most_bands =
-      std::max(8, 4 * threads) * (kWideBandRows / band_rows);
+  // A window is four bands a thread (their costs vary), fewer where the
+  // marks are dense: its segments are held at once (in each band's vector,
+  // then in `open`), so after each window the next takes as many bands as
+  // fit options.window_segment_bytes at the last one's segments a band, one
+  // band a thread at least. Four bands, not four of 16 rows: on 16 threads
+  // (bands of 4 rows) windows of 1024 rows held the segments of 4x the
+  // rows of 2 threads' windows, this one's and the next's, and raised the
+  // 300 mm plate's peak by 180 MB. The marks do not depend on the windows.
+  const int32_t most_bands = std::max(8, 4 * threads);
   int32_t window = most_bands;
   std::vector<std::vector<Segment>> band_segments;
   // Kept segments not chained yet, in order, and their index among every
