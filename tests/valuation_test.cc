@@ -328,7 +328,9 @@ void ExpectSameStats(const ErrorStats& got, const ErrorStats& want,
   EXPECT_EQ(got.max_y, want.max_y);
   EXPECT_EQ(got.mean_error, want.mean_error);
   EXPECT_EQ(got.rms_error, want.rms_error);
-  if (map) EXPECT_EQ(got.map, want.map);
+  if (map) {
+    EXPECT_EQ(got.map, want.map);
+  }
 }
 
 // Any pool gives the same bits: statistics, place of the max and map. And
