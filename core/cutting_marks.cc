@@ -1690,7 +1690,8 @@ absl::Status FindCuttingMarks(
   // band a thread at least. Four bands, not four of 16 rows: on 16 threads
   // (bands of 4 rows) windows of 1024 rows held the segments of 4x the
   // rows of 2 threads' windows, this one's and the next's, and raised the
-  // 300 mm plate's peak by 180 MB. The marks do not depend on the windows.
+  // 300 mm plate's peak on 16 threads by 266 MiB (1,162 against 896). The
+  // marks do not depend on the windows.
   const int32_t most_bands = std::max(8, 4 * threads);
   int32_t window = most_bands;
   std::vector<std::vector<Segment>> band_segments;
