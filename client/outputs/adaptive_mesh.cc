@@ -27,6 +27,7 @@
 #include "absl/strings/str_format.h"
 #include "client/outputs/surface_mesh.h"
 #include "core/thread_pool.h"
+#include "core/unfilled_vector.h"
 
 namespace swarf::cli {
 namespace {
@@ -157,17 +158,34 @@ struct Leaf {
   int64_t i0, j0, w, h;  // cells [i0, i0 + w) x [j0, j0 + h)
 };
 
-// The two corner triangles of a leaf, split along the diagonal whose ends
-// differ less in height (as the full-resolution cells are).
-void CornerTriangles(const Lattice& l, const Leaf& f, std::vector<P>* out) {
-  const P a{f.i0, f.j0}, b{f.i0 + f.w, f.j0}, c{f.i0 + f.w, f.j0 + f.h},
-      d{f.i0, f.j0 + f.h};
-  if (std::fabs(l.Z(a.i, a.j) - l.Z(c.i, c.j)) <=
-      std::fabs(l.Z(b.i, b.j) - l.Z(d.i, d.j))) {
+// How a leaf is triangulated: with its two corner triangles, sharing the
+// diagonal from corner (i0, j0) (kDiagonalAC) or the other one, or by a
+// list of triangles (kEars: ClipEars').
+enum LeafShape : uint8_t { kDiagonalAC = 0, kDiagonalBD = 1, kEars = 2 };
+
+// The diagonal of a leaf's corner triangles: the one whose ends differ less
+// in height (as the full-resolution cells are split).
+LeafShape CornerDiagonal(const Lattice& l, const Leaf& f) {
+  return std::fabs(l.Z(f.i0, f.j0) - l.Z(f.i0 + f.w, f.j0 + f.h)) <=
+                 std::fabs(l.Z(f.i0 + f.w, f.j0) - l.Z(f.i0, f.j0 + f.h))
+             ? kDiagonalAC
+             : kDiagonalBD;
+}
+
+// The two corner triangles of the leaf from (i0, j0) to (i1, j1), sharing
+// `diagonal`, appended to *out.
+void CornerTriangles(int64_t i0, int64_t j0, int64_t i1, int64_t j1,
+                     LeafShape diagonal, std::vector<P>* out) {
+  const P a{i0, j0}, b{i1, j0}, c{i1, j1}, d{i0, j1};
+  if (diagonal == kDiagonalAC) {
     out->insert(out->end(), {a, b, c, a, c, d});
   } else {
     out->insert(out->end(), {a, b, d, b, c, d});
   }
+}
+void CornerTriangles(const Lattice& l, const Leaf& f, std::vector<P>* out) {
+  CornerTriangles(f.i0, f.j0, f.i0 + f.w, f.j0 + f.h, CornerDiagonal(l, f),
+                  out);
 }
 
 // Largest distance of the lattice heights on the line from p to q (along a
@@ -335,6 +353,41 @@ std::vector<int64_t> RunStarts(ThreadPool& pool, int64_t chunks,
   return starts;
 }
 
+// fn(begin, end) over [0, n) in chunks, on every thread.
+constexpr int64_t kFillChunk = int64_t{1} << 16;
+void ForChunks(ThreadPool& pool, int64_t n,
+               const std::function<void(int64_t, int64_t)>& fn) {
+  pool.ParallelFor((n + kFillChunk - 1) / kFillChunk, [&](int64_t c) {
+    fn(c * kFillChunk, std::min(n, (c + 1) * kFillChunk));
+  });
+}
+
+// n copies of v, written on every thread: a std::vector's value
+// initialisation wrote (and page-faulted in) every byte on one thread, a
+// serial step of the mesh (millions of leaves on large jobs).
+template <typename T>
+UnfilledVector<T> Filled(ThreadPool& pool, int64_t n, T v) {
+  UnfilledVector<T> out(n);
+  ForChunks(pool, n, [&](int64_t b, int64_t e) {
+    std::fill(out.begin() + b, out.begin() + e, v);
+  });
+  return out;
+}
+
+// Room for at least n elements in *v, its elements copied on every thread
+// when it must grow (a reallocation copied them on one).
+template <typename T>
+void ReserveOnEveryThread(ThreadPool& pool, UnfilledVector<T>* v, int64_t n) {
+  if (n <= static_cast<int64_t>(v->capacity())) return;
+  UnfilledVector<T> grown;
+  grown.reserve(n);
+  grown.resize(v->size());
+  ForChunks(pool, static_cast<int64_t>(v->size()), [&](int64_t b, int64_t e) {
+    std::copy(v->begin() + b, v->begin() + e, grown.begin() + b);
+  });
+  v->swap(grown);
+}
+
 }  // namespace
 
 absl::StatusOr<TriangleMesh> SimplifyLattice(const LatticeHeights& heights,
@@ -434,12 +487,13 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
       t.shrink_to_fit();  // kept until the conforming passes end
     });
   }
-  std::vector<Leaf> leaves;
+  // Both written on every thread, every entry (below).
+  UnfilledVector<Leaf> leaves;
   // Per leaf, its corner triangles' deviation where CornersFit measured it
   // (-1: not measured): a leaf whose sides gain no vertex keeps those
   // triangles, and the conforming pass takes the value instead of
   // measuring them again.
-  std::vector<double> fit_dev;
+  UnfilledVector<double> fit_dev;
   {
     // Listed on every thread: a tree is built as a queue, so its nodes lie
     // level by level, and the listing takes level 0 of every tree, then
@@ -499,15 +553,28 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   // row's heights read once a pass.
   const int64_t lattice_vertices = (nx + 1) * (ny + 1);
   const int64_t roots = static_cast<int64_t>(leaves.size());
-  std::vector<int64_t> kids(leaves.size(), -1);
-  std::vector<std::vector<P>> tris(leaves.size());
-  std::vector<double> leaf_dev(leaves.size());
+  UnfilledVector<int64_t> kids = Filled<int64_t>(pool, roots, -1);
+  // Each leaf's triangles: most leaves' are their corner triangles, kept
+  // as a byte (shape); the rest are listed in ears, owned here (null
+  // elsewhere) and freed when the leaf is split or listed. A vector a leaf
+  // was 72 bytes and a malloc, zeroed on one thread.
+  UnfilledVector<uint8_t> shape(roots);  // written by the first pass
+  struct EarLists {
+    UnfilledVector<std::vector<P>*> at;
+    ~EarLists() {
+      for (std::vector<P>* t : at) delete t;
+    }
+  } ears{Filled<std::vector<P>*>(pool, roots, nullptr)};
+  // Written by each pass for its work leaves before it is read (the first
+  // pass's work is every leaf).
+  UnfilledVector<double> leaf_dev(leaves.size());
   // Which lattice vertices are leaf corners (splits only add corners: a
   // leaf's corners are its halves').
   // Which lattice vertices the mesh keeps, a bit each (the plate's 400 M
   // lattice vertices: 48 MiB, not the 381 of a byte each). Set only on
   // this thread (add_corners), read by the parallel passes in between.
-  std::vector<uint64_t> used_bits((lattice_vertices + 63) / 64, 0);
+  UnfilledVector<uint64_t> used_bits =
+      Filled<uint64_t>(pool, (lattice_vertices + 63) / 64, 0);
   auto used = [&used_bits](int64_t v) -> bool {
     return (used_bits[v >> 6] >> (v & 63)) & 1;
   };
@@ -536,29 +603,66 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
       used_bits[v >> 6] |= uint64_t{1} << (v & 63);
     }
   };
-  std::vector<int64_t> work(leaves.size());
-  for (int64_t k = 0; k < roots; ++k) {
-    add_corners(leaves[k]);
-    work[k] = k;
-  }
+  // The first leaves' corners, on every thread (a word of used_bits may
+  // hold corners of leaves on several threads: an atomic or).
+  UnfilledVector<int64_t> work(roots);
+  ForChunks(pool, roots, [&](int64_t b, int64_t e) {
+    for (int64_t k = b; k < e; ++k) {
+      const Leaf& f = leaves[k];
+      for (const P& p : {P{f.i0, f.j0}, P{f.i0 + f.w, f.j0},
+                         P{f.i0, f.j0 + f.h}, P{f.i0 + f.w, f.j0 + f.h}}) {
+        const int64_t v = index(p.i, p.j);
+        std::atomic_ref<uint64_t>(used_bits[v >> 6])
+            .fetch_or(uint64_t{1} << (v & 63), std::memory_order_relaxed);
+      }
+      work[k] = k;
+    }
+  });
   std::vector<uint8_t> queued;
-  std::vector<std::vector<int64_t>> by_row(roots_y);
+  // A pass's work by root row: its positions in `work`, row after row
+  // (row_start[rr] .. row_start[rr + 1]), listed on every thread (chunks
+  // of work counted per row, then placed where the rows and the chunks
+  // before them end).
+  UnfilledVector<int64_t> by_row;
+  std::vector<int64_t> row_start(roots_y + 1);
+  auto list_by_row = [&] {
+    const int64_t n = static_cast<int64_t>(work.size());
+    const int64_t chunks = (n + kFillChunk - 1) / kFillChunk;
+    std::vector<int64_t> at(static_cast<size_t>(chunks) * roots_y, 0);
+    ForChunks(pool, n, [&](int64_t b, int64_t e) {
+      int64_t* count = &at[static_cast<size_t>(b / kFillChunk) * roots_y];
+      for (int64_t w = b; w < e; ++w) ++count[leaves[work[w]].j0 / kRoot];
+    });
+    int64_t total = 0;
+    for (int64_t rr = 0; rr < roots_y; ++rr) {
+      row_start[rr] = total;
+      for (int64_t c = 0; c < chunks; ++c) {
+        const int64_t count = at[c * roots_y + rr];
+        at[c * roots_y + rr] = total;
+        total += count;
+      }
+    }
+    row_start[roots_y] = total;
+    ResizeForWriting(&by_row, n);
+    ForChunks(pool, n, [&](int64_t b, int64_t e) {
+      int64_t* next = &at[static_cast<size_t>(b / kFillChunk) * roots_y];
+      for (int64_t w = b; w < e; ++w)
+        by_row[next[leaves[work[w]].j0 / kRoot]++] = w;
+    });
+  };
   for (bool first_pass = true;; first_pass = false) {
     // Each work leaf triangulated and measured where its root row's
     // heights are read; how one over the tolerance is halved too (a byte a
-    // leaf: the first pass visits every leaf).
-    std::vector<uint8_t> split_x(work.size());
-    for (auto& r : by_row) r.clear();
-    for (size_t w = 0; w < work.size(); ++w) {
-      by_row[leaves[work[w]].j0 / kRoot].push_back(static_cast<int64_t>(w));
-    }
+    // leaf, written for those alone: the first pass visits every leaf).
+    UnfilledVector<uint8_t> split_x(work.size());
+    list_by_row();
     for (int64_t rr = 0; rr < roots_y; ++rr) {
-      if (by_row[rr].empty()) continue;
+      if (row_start[rr] == row_start[rr + 1]) continue;
       absl::StatusOr<Lattice> window_rows = window(rr);
       if (!window_rows.ok()) return window_rows.status();
       const Lattice& l = *window_rows;
-      const std::vector<int64_t>& row_work = by_row[rr];
-      pool.ParallelFor(static_cast<int64_t>(row_work.size()), [&](int64_t x) {
+      const int64_t* const row_work = by_row.data() + row_start[rr];
+      pool.ParallelFor(row_start[rr + 1] - row_start[rr], [&](int64_t x) {
         const int64_t w = row_work[x];
         const int64_t k = work[w];
         const Leaf& f = leaves[k];
@@ -573,20 +677,31 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
           for (int64_t d = 0; d < f.h; ++d) side_vertex(f.i0 + f.w, f.j0 + d);
           for (int64_t d = f.w; d > 0; --d) side_vertex(f.i0 + d, f.j0 + f.h);
           for (int64_t d = f.h; d > 0; --d) side_vertex(f.i0, f.j0 + d);
-          std::vector<P>& t = tris[k];
-          t.clear();
+          std::vector<P>*& ear = ears.at[k];
+          thread_local std::vector<P> corners;
+          const std::vector<P>* t = &corners;
           if (ring.size() == 4) {
-            CornerTriangles(l, f, &t);
+            delete ear;
+            ear = nullptr;
+            shape[k] = CornerDiagonal(l, f);
             if (first_pass && fit_dev[k] >= 0) {
               leaf_dev[k] = fit_dev[k];
               return;
             }
+            corners.clear();
+            CornerTriangles(f.i0, f.j0, f.i0 + f.w, f.j0 + f.h,
+                            static_cast<LeafShape>(shape[k]), &corners);
           } else {
-            ClipEars(std::move(ring), &t);
+            if (ear == nullptr) ear = new std::vector<P>();
+            ear->clear();
+            ClipEars(std::move(ring), ear);
+            shape[k] = kEars;
+            t = ear;
           }
           double dev = 0;
-          for (size_t q = 0; q + 2 < t.size(); q += 3) {
-            dev = std::max(dev, l.TriangleDeviation(t[q], t[q + 1], t[q + 2]));
+          for (size_t q = 0; q + 2 < t->size(); q += 3) {
+            dev = std::max(
+                dev, l.TriangleDeviation((*t)[q], (*t)[q + 1], (*t)[q + 2]));
           }
           leaf_dev[k] = dev;
         };
@@ -598,26 +713,41 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
     }
     corners_added.clear();
     std::vector<int64_t> halves;
+    // The leaves' arrays grown once for the pass's halves, their copies on
+    // every thread.
+    int64_t splits = 0;
+    for (size_t w = 0; w < work.size(); ++w) {
+      const int64_t k = work[w];
+      splits += !(leaf_dev[k] <= tolerance) && leaves[k].w * leaves[k].h != 1;
+    }
+    if (splits == 0) break;
+    const int64_t grown = static_cast<int64_t>(leaves.size()) + 2 * splits;
+    ReserveOnEveryThread(pool, &leaves, grown);
+    ReserveOnEveryThread(pool, &kids, grown);
+    ReserveOnEveryThread(pool, &leaf_dev, grown);
+    ReserveOnEveryThread(pool, &shape, grown);
+    ReserveOnEveryThread(pool, &ears.at, grown);
     for (size_t w = 0; w < work.size(); ++w) {
       const int64_t k = work[w];
       const Leaf f = leaves[k];  // a copy: `leaves` grows below
       if (leaf_dev[k] <= tolerance || f.w * f.h == 1) continue;
       kids[k] = static_cast<int64_t>(leaves.size());
-      std::vector<P>().swap(tris[k]);
+      delete ears.at[k];
+      ears.at[k] = nullptr;
       for (const Leaf& half : HalvesAcross(f, split_x[w])) {
         halves.push_back(static_cast<int64_t>(leaves.size()));
         leaves.push_back(half);
         kids.push_back(-1);
-        tris.emplace_back();
+        shape.push_back(kDiagonalAC);  // written when it is measured
+        ears.at.push_back(nullptr);
         leaf_dev.push_back(INFINITY);
         add_corners(half);
       }
     }
-    if (halves.empty()) break;
     // Next: the halves, and every leaf with a new corner on its sides (it
     // holds one of the four cells around that corner).
     queued.resize(leaves.size());
-    work = halves;
+    work.assign(halves.begin(), halves.end());
     for (const int64_t k : halves) queued[k] = 1;
     for (const int64_t v : corners_added) {
       const int64_t i = v % (nx + 1), j = v / (nx + 1);
@@ -641,7 +771,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   // thread, counted, then listed where the runs before them end.
   constexpr int64_t kRootRun = 4096;
   const int64_t runs = (roots + kRootRun - 1) / kRootRun;
-  std::vector<int64_t> final_leaves;
+  UnfilledVector<int64_t> final_leaves;  // written on every thread
   auto depth_first = [&](int64_t run, auto&& visit) {
     std::vector<int64_t> stack;
     const int64_t end = std::min(roots, (run + 1) * kRootRun);
@@ -666,17 +796,25 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
         return n;
       });
   final_leaves.resize(run_start[runs]);
+  // Each final leaf's first and opposite corners, for its corner triangles
+  // once `leaves` is gone.
+  UnfilledVector<std::array<P, 2>> final_corners(run_start[runs]);
   pool.ParallelFor(runs, [&](int64_t run) {
     int64_t at = run_start[run];
-    depth_first(run, [&](int64_t k) { final_leaves[at++] = k; });
+    depth_first(run, [&](int64_t k) {
+      const Leaf& f = leaves[k];
+      final_corners[at] = {P{f.i0, f.j0}, P{f.i0 + f.w, f.j0 + f.h}};
+      final_leaves[at++] = k;
+    });
   });
   // What only the passes needed goes before the mesh is listed: on the
   // 1000 mm plate's 6.4 M triangles, hundreds of MB (buffers this large go
   // back to the system when freed).
-  std::vector<Leaf>().swap(leaves);
-  std::vector<int64_t>().swap(kids);
-  std::vector<double>().swap(fit_dev);
-  std::vector<int64_t>().swap(work);
+  UnfilledVector<Leaf>().swap(leaves);
+  UnfilledVector<int64_t>().swap(kids);
+  UnfilledVector<double>().swap(fit_dev);
+  UnfilledVector<int64_t>().swap(work);
+  UnfilledVector<int64_t>().swap(by_row);
   std::vector<uint8_t>().swap(queued);
 
   // The used lattice vertices, row-major, are the new top vertices: their
@@ -688,7 +826,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   // 400 M lattice vertices, ran on one): a vertex's new index is the number
   // of used ones before it (a prefix over blocks of 64), a leaf's first
   // triangle the number of triangles of the leaves before it.
-  std::vector<uint32_t> block_rank(used_bits.size());
+  UnfilledVector<uint32_t> block_rank(used_bits.size());  // every thread
   constexpr int64_t kRankChunk = 4096;  // blocks of 64 vertices
   const int64_t rank_chunks =
       (static_cast<int64_t>(used_bits.size()) + kRankChunk - 1) / kRankChunk;
@@ -740,7 +878,9 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
         int64_t n = 0;
         const int64_t end = std::min(n_leaves, (c + 1) * kLeafChunk);
         for (int64_t q = c * kLeafChunk; q < end; ++q) {
-          n += static_cast<int64_t>(tris[final_leaves[q]].size() / 3);
+          const int64_t k = final_leaves[q];
+          n += shape[k] == kEars ? static_cast<int64_t>(ears.at[k]->size() / 3)
+                                 : 2;
         }
         return n;
       });
@@ -767,22 +907,32 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
     });
   }
   mesh.top_vertices = kept;
-  // Each leaf's triangles, freed as they are listed (millions of small
-  // vectors: freeing them on one thread took longer than listing).
+  // Each leaf's triangles; the ear-clipped lists freed as they are listed
+  // (freeing them on one thread took longer than listing).
   std::vector<double> chunk_dev(leaf_chunks, 0);
   pool.ParallelFor(leaf_chunks, [&](int64_t c) {
+    std::vector<P> corners;
     int64_t out = first_triangle[c];
     const int64_t end = std::min(n_leaves, (c + 1) * kLeafChunk);
     double dev = 0;
     for (int64_t q = c * kLeafChunk; q < end; ++q) {
       const int64_t k = final_leaves[q];
-      std::vector<P>& t = tris[k];
-      for (size_t p = 0; p + 2 < t.size(); p += 3) {
-        mesh.triangles[out++] = {remap(index(t[p].i, t[p].j)),
-                                 remap(index(t[p + 1].i, t[p + 1].j)),
-                                 remap(index(t[p + 2].i, t[p + 2].j))};
+      const std::vector<P>* t = ears.at[k];
+      if (shape[k] != kEars) {
+        const auto& [a, c] = final_corners[q];
+        corners.clear();
+        CornerTriangles(a.i, a.j, c.i, c.j, static_cast<LeafShape>(shape[k]),
+                        &corners);
+        t = &corners;
       }
-      std::vector<P>().swap(t);
+      for (size_t p = 0; p + 2 < t->size(); p += 3) {
+        const P* v = t->data() + p;
+        mesh.triangles[out++] = {remap(index(v[0].i, v[0].j)),
+                                 remap(index(v[1].i, v[1].j)),
+                                 remap(index(v[2].i, v[2].j))};
+      }
+      delete ears.at[k];
+      ears.at[k] = nullptr;
       dev = std::max(dev, leaf_dev[k]);
     }
     chunk_dev[c] = dev;
