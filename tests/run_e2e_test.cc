@@ -219,13 +219,14 @@ std::string ReadFile(const std::string& path) {
   return std::string(std::istreambuf_iterator<char>(in), {});
 }
 
-// swarf run asks for the marks as one message, and one per polyline when
-// they pass the server's message limit: the same marks either way. A server
+// swarf run asks a server for the marks as one message, and one per
+// polyline when they pass the server's message limit; the embedded run
+// finds them on its session's workpiece: the same marks every way. A server
 // with 1 MiB messages (the marks of bear.nc and vcarve.nc at 0.25 mm are
-// over 1 MiB) against the embedded one (64 MiB: one message). The other
-// files are the same too, though the embedded run's outputs read the
-// session's own moves and index (pinned) and the remote run's its program's
-// points, indexed again.
+// over 1 MiB), one with the default 64 MiB (one message) and the embedded
+// one. The other files are the same too, though the embedded run's outputs
+// read the session's own moves and index (pinned) and the remote runs'
+// their program's points, indexed again.
 class RunE2eMarksTest : public ::testing::TestWithParam<Job> {};
 
 // swarf run asks for the marks streamed at once past 16 Mi nodes (4 bytes
@@ -244,7 +245,7 @@ TEST(RunMarksRequestTest, LargeGridsAskForTheMarksStreamed) {
   EXPECT_FALSE(cli::MarksFitOneMessage(stock(4095, 4096)));  // a row more
 }
 
-TEST_P(RunE2eMarksTest, OneMessageOrOnePerPolylineGiveTheSameMarks) {
+TEST_P(RunE2eMarksTest, OneMessageOnePerPolylineAndEmbeddedGiveTheSameMarks) {
   const Job& job = GetParam();
   const std::string file = job.File();
   if (job.corpus) SWARF_SKIP_UNLESS_SHARED_FILE(file);
@@ -254,10 +255,16 @@ TEST_P(RunE2eMarksTest, OneMessageOrOnePerPolylineGiveTheSameMarks) {
   o.limits.max_batch_points = 20000;
   auto srv = server::SwarfServer::Start(o);
   ASSERT_TRUE(srv.ok()) << srv.status();
+  server::ServerOptions o_one;
+  o_one.listen = "127.0.0.1:0";
+  auto srv_one = server::SwarfServer::Start(o_one);
+  ASSERT_TRUE(srv_one.ok()) << srv_one.status();
+  ASSERT_EQ(o_one.limits.max_message_bytes, 64 << 20);
   const std::filesystem::path base =
       std::filesystem::temp_directory_path() /
       ("swarf-e2e-marks-" + std::to_string(::getpid()));
   const std::string remote = (base / "remote").string();
+  const std::string one = (base / "one").string();
   const std::string embedded = (base / "embedded").string();
   std::filesystem::remove_all(base);
   std::vector<std::string> args = {file, "--spacing", "0.25", "--quiet"};
@@ -267,8 +274,16 @@ TEST_P(RunE2eMarksTest, OneMessageOrOnePerPolylineGiveTheSameMarks) {
                      "127.0.0.1:" + std::to_string((*srv)->port())});
   ASSERT_EQ(RunCommand(a), 0);
   a = args;
+  a.insert(a.end(), {"--out", one, "--server",
+                     "127.0.0.1:" + std::to_string((*srv_one)->port())});
+  ASSERT_EQ(RunCommand(a), 0);
+  a = args;
   a.insert(a.end(), {"--out", embedded});
   ASSERT_EQ(RunCommand(a), 0);
+  // Each server took its way: one per polyline (GetCuttingMarks queues
+  // them), one message (nothing queued).
+  EXPECT_GT((*srv)->marks_counters().peak_queued_bytes.load(), 0);
+  EXPECT_EQ((*srv_one)->marks_counters().peak_queued_bytes.load(), 0);
   const google::protobuf::Struct remote_stats =
       ReadJson(remote + "/stats.json");
   const google::protobuf::Struct embedded_stats =
@@ -284,6 +299,7 @@ TEST_P(RunE2eMarksTest, OneMessageOrOnePerPolylineGiveTheSameMarks) {
         "surface.stl", "surface.wrl", "load.png"}) {
     const std::string r = ReadFile(remote + "/" + f);
     EXPECT_FALSE(r.empty()) << f;
+    EXPECT_TRUE(r == ReadFile(one + "/" + f)) << f;
     EXPECT_TRUE(r == ReadFile(embedded + "/" + f)) << f;
   }
   std::filesystem::remove_all(base);

@@ -3,6 +3,7 @@
 #include <malloc.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -112,6 +113,21 @@ absl::Status FetchMarks(Connection& conn, const std::string& id,
     return absl::DataLossError("the marks request got no answer");
   }
   return absl::OkStatus();
+}
+
+// The embedded session's marks, found on its pinned workpiece and handed to
+// `to` as the core finds them: the polylines GetCuttingMarks would send
+// (StreamMarks with the default options), in the same order, without
+// their protobuf copies, each serialized and parsed on one thread (on
+// cameo.nc the transfer was most of the marks' serial CPU). The API's
+// Polyline has no per-vertex owners: they are dropped, so that the files
+// are those a remote server's marks give.
+absl::Status FindEmbeddedMarks(const Workpiece& wp, const MarksConsumer& to) {
+  to.restart();
+  return FindCuttingMarks(wp, MarkOptions(), [&](MarkPolyline m) {
+    std::vector<std::array<int32_t, 2>>().swap(m.vertex_owners);
+    to.consume(std::move(m));
+  });
 }
 
 // Sets tile rows [t0, t1) of `band` from the session's tiles (every tile
@@ -381,9 +397,12 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
       const auto t0 = Clock::now();
       auto m =
           Retrying<bool>("the cutting marks", [&]() -> absl::StatusOr<bool> {
-            absl::Status s = MarksFitOneMessage(stock)
-                                 ? FetchMarks(conn, id, to_stream)
-                                 : FetchMarksStreamed(conn, id, to_stream);
+            absl::Status s =
+                options.workpiece != nullptr
+                    ? FindEmbeddedMarks(*options.workpiece, to_stream)
+                : MarksFitOneMessage(stock)
+                    ? FetchMarks(conn, id, to_stream)
+                    : FetchMarksStreamed(conn, id, to_stream);
             if (!s.ok()) return s;
             marks_stream->Finish();
             return true;

@@ -117,7 +117,8 @@ struct OutputOptions {
   // The embedded session's workpiece, pinned (Session::Pin): the passes
   // over the grid read its tiles straight from it, on its threads, instead
   // of through GetTiles (the same doubles, not serialized and parsed on
-  // one thread). Null: GetTiles.
+  // one thread), and its marks are found on it, not fetched. Null: GetTiles
+  // and the marks requests.
   std::shared_ptr<const Workpiece> workpiece;
   // The design to compare with (LoadDesign done); not owned, may be null.
   const DesignInput* design = nullptr;
