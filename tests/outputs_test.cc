@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdint>
@@ -219,6 +220,44 @@ TEST(SurfaceGridTest, SetNodesChecksTheBlock) {
 
 // A picture is its fill everywhere, filled a band of rows a task when it
 // spans several (1 MiB each), alpha opaque.
+// FormatInOrder puts the pieces in order, one call at a time (a group is
+// put while the next is made), and they join into the serial text: many
+// groups, one group, one partial chunk, none.
+TEST(FormatInOrderTest, PiecesComeInOrderOneAtATime) {
+  auto item = [](int64_t k) {
+    return absl::StrCat(k, k % 7 == 0 ? "\n" : ",");
+  };
+  for (const auto& [n, per_chunk, at_once] :
+       std::vector<std::array<int64_t, 3>>{{10000, 37, 3},
+                                           {10000, 64, 1},
+                                           {500, 1000, 4},
+                                           {90, 10, 9},
+                                           {0, 5, 2}}) {
+    std::string serial;
+    for (int64_t k = 0; k < n; ++k) serial += item(k);
+    std::string text;
+    int64_t pieces = 0;
+    std::atomic<int> in_put{0};
+    bool overlapped = false;
+    FormatInOrder(
+        n, per_chunk, at_once,
+        [&](int64_t first, int64_t last, std::string* out) {
+          EXPECT_TRUE(out->empty());
+          EXPECT_EQ(first % per_chunk, 0);
+          for (int64_t k = first; k < last; ++k) *out += item(k);
+        },
+        [&](std::string_view piece) {
+          overlapped |= in_put.fetch_add(1) != 0;
+          text += piece;
+          ++pieces;
+          in_put.fetch_sub(1);
+        });
+    EXPECT_FALSE(overlapped) << n;
+    EXPECT_EQ(pieces, (n + per_chunk - 1) / per_chunk) << n;
+    EXPECT_EQ(text, serial) << n << " " << per_chunk << " " << at_once;
+  }
+}
+
 TEST(ImageTest, EveryPixelIsTheFill) {
   const Rgb fill{12, 34, 56};
   for (const auto& [w, h, channels] : std::vector<std::array<int, 3>>{

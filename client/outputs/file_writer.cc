@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <future>
 #include <utility>
 #include <vector>
 
@@ -53,15 +54,30 @@ void FormatInOrder(
   per_chunk = std::max<int64_t>(per_chunk, 1);
   const int64_t chunks = (n + per_chunk - 1) / per_chunk;
   const int64_t group = std::min(chunks, std::max<int64_t>(chunks_at_once, 1));
-  std::vector<std::string> pieces(group);
-  for (int64_t c0 = 0; c0 < chunks; c0 += group) {
+  // Two groups' pieces: one is put, on a thread of its own, while the next
+  // is made. Put after its group was made, a file's writes (serialised by
+  // the kernel, on one thread) left the pool idle for this file, and the
+  // next group waited for them.
+  std::vector<std::string> pieces[2];
+  std::future<void> putting;
+  int made = 0;
+  for (int64_t c0 = 0; c0 < chunks; c0 += group, made ^= 1) {
     const int64_t nc = std::min(group, chunks - c0);
+    std::vector<std::string>& p = pieces[made];
+    p.resize(group);
     ThreadPool::Default().ParallelFor(nc, [&](int64_t k) {
       const int64_t first = (c0 + k) * per_chunk;
-      pieces[k].clear();
-      format(first, std::min(n, first + per_chunk), &pieces[k]);
+      p[k].clear();
+      format(first, std::min(n, first + per_chunk), &p[k]);
     });
-    for (int64_t k = 0; k < nc; ++k) put(pieces[k]);
+    if (putting.valid()) putting.get();  // the other group is put
+    if (c0 + nc == chunks) {
+      for (int64_t k = 0; k < nc; ++k) put(p[k]);  // the last: here
+      break;
+    }
+    putting = std::async(std::launch::async, [&put, &p, nc] {
+      for (int64_t k = 0; k < nc; ++k) put(p[k]);
+    });
   }
 }
 

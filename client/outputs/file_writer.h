@@ -46,8 +46,10 @@ class FileWriter {
 // thread of ThreadPool::Default() and handed to put(piece) in order:
 // format(first, last, out) appends the bytes of items [first, last) to *out
 // (empty) and is called from several threads at once; `chunks_at_once`
-// chunks (at least 1) are made, then put, at a time, which bounds the bytes
-// held. The same pieces in order as formatting every item on one thread.
+// chunks (at least 1) are made at a time, and put (one call at a time, in
+// order, on a thread of their own) while the next ones are made: at most
+// twice that many chunks' bytes are held. Returns once every piece is put.
+// The same pieces in order as formatting every item on one thread.
 void FormatInOrder(int64_t n, int64_t per_chunk, int64_t chunks_at_once,
                    const std::function<void(int64_t first, int64_t last,
                                             std::string* out)>& format,
