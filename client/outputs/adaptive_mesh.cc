@@ -375,12 +375,14 @@ UnfilledVector<T> Filled(ThreadPool& pool, int64_t n, T v) {
 }
 
 // Room for at least n elements in *v, its elements copied on every thread
-// when it must grow (a reallocation copied them on one).
+// when it must grow (a reallocation copied them on one); grown by half at
+// least, as each of the conforming passes grows it a little.
 template <typename T>
 void ReserveOnEveryThread(ThreadPool& pool, UnfilledVector<T>* v, int64_t n) {
-  if (n <= static_cast<int64_t>(v->capacity())) return;
+  const int64_t capacity = static_cast<int64_t>(v->capacity());
+  if (n <= capacity) return;
   UnfilledVector<T> grown;
-  grown.reserve(n);
+  grown.reserve(std::max(n, capacity + capacity / 2));
   grown.resize(v->size());
   ForChunks(pool, static_cast<int64_t>(v->size()), [&](int64_t b, int64_t e) {
     std::copy(v->begin() + b, v->begin() + e, grown.begin() + b);
