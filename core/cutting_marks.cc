@@ -15,6 +15,7 @@
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "core/bucket_starts.h"
 #include "core/unfilled_vector.h"
 
 namespace swarf {
@@ -1000,16 +1001,7 @@ std::vector<MarkPolyline> Chain(
       }
     });
     bounds.assign(buckets + 1, 0);
-    size_t total = 0;
-    for (int b = 0; b < buckets; ++b) {
-      bounds[b] = total;
-      for (int c = 0; c < chunks; ++c) {
-        const size_t count = at[c * buckets + b];
-        at[c * buckets + b] = total;
-        total += count;
-      }
-    }
-    bounds[buckets] = total;
+    BucketStarts<size_t>(chunks, buckets, at.data(), bounds.data());
     UnfilledVector<Inc>& sorted = scratch->sorted;
     ResizeForWriting(&sorted, m);
     pool.ParallelFor(chunks, [&](int64_t c) {

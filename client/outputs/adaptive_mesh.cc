@@ -26,6 +26,7 @@
 
 #include "absl/strings/str_format.h"
 #include "client/outputs/surface_mesh.h"
+#include "core/bucket_starts.h"
 #include "core/thread_pool.h"
 #include "core/unfilled_vector.h"
 
@@ -635,16 +636,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
       int64_t* count = &at[static_cast<size_t>(b / kFillChunk) * roots_y];
       for (int64_t w = b; w < e; ++w) ++count[leaves[work[w]].j0 / kRoot];
     });
-    int64_t total = 0;
-    for (int64_t rr = 0; rr < roots_y; ++rr) {
-      row_start[rr] = total;
-      for (int64_t c = 0; c < chunks; ++c) {
-        const int64_t count = at[c * roots_y + rr];
-        at[c * roots_y + rr] = total;
-        total += count;
-      }
-    }
-    row_start[roots_y] = total;
+    BucketStarts<int64_t>(chunks, roots_y, at.data(), row_start.data());
     ResizeForWriting(&by_row, n);
     ForChunks(pool, n, [&](int64_t b, int64_t e) {
       int64_t* next = &at[static_cast<size_t>(b / kFillChunk) * roots_y];
