@@ -4,6 +4,7 @@
 
 #include <time.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdint>
@@ -14,6 +15,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "core/bucket_starts.h"
 #include "gtest/gtest.h"
 
 #ifdef __linux__
@@ -306,6 +308,43 @@ TEST(ThreadPoolDeathTest, LoopProfileNamesABadValue) {
       ::testing::ExitedWithCode(0),
       "^SWARF_LOOP_PROFILE must be a thread count in \\[1, 1024\\], got "
       "\"sixteen\": no loop profile\n$");
+}
+
+// BucketStarts places a parallel counting sort's chunks: counted on the
+// pool and moved where it says, the items are std::stable_sort's by
+// bucket, and bounds are where each bucket starts (empty ones too).
+TEST(BucketStartsTest, ChunksCountedOnThePoolGiveTheStableSort) {
+  ThreadPool pool(3);
+  constexpr int64_t kItems = 10007, kChunks = 7, kBuckets = 13;
+  std::vector<int64_t> key(kItems);
+  for (int64_t i = 0; i < kItems; ++i) {
+    key[i] = (i * 7919 % 101) % kBuckets == 5 ? 4 : (i * 7919 % 101) % kBuckets;
+  }
+  auto chunk_begin = [](int64_t c) { return c * kItems / kChunks; };
+  std::vector<int64_t> at(kChunks * kBuckets, 0), bounds(kBuckets + 1);
+  pool.ParallelFor(kChunks, [&](int64_t c) {
+    for (int64_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) {
+      ++at[c * kBuckets + key[i]];
+    }
+  });
+  BucketStarts<int64_t>(kChunks, kBuckets, at.data(), bounds.data());
+  std::vector<int64_t> placed(kItems, -1);
+  pool.ParallelFor(kChunks, [&](int64_t c) {
+    for (int64_t i = chunk_begin(c); i < chunk_begin(c + 1); ++i) {
+      placed[at[c * kBuckets + key[i]]++] = i;
+    }
+  });
+  std::vector<int64_t> sorted(kItems);
+  for (int64_t i = 0; i < kItems; ++i) sorted[i] = i;
+  std::stable_sort(sorted.begin(), sorted.end(),
+                   [&](int64_t a, int64_t b) { return key[a] < key[b]; });
+  EXPECT_EQ(placed, sorted);
+  for (int64_t b = 0; b <= kBuckets; ++b) {
+    EXPECT_EQ(bounds[b], std::count_if(key.begin(), key.end(),
+                                       [b](int64_t k) { return k < b; }))
+        << b;
+  }
+  EXPECT_EQ(bounds[5], bounds[6]);  // bucket 5 is empty
 }
 
 }  // namespace
