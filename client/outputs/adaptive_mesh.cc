@@ -574,8 +574,9 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   // Which lattice vertices are leaf corners (splits only add corners: a
   // leaf's corners are its halves').
   // Which lattice vertices the mesh keeps, a bit each (the plate's 400 M
-  // lattice vertices: 48 MiB, not the 381 of a byte each). Set only on
-  // this thread (add_corners), read by the parallel passes in between.
+  // lattice vertices: 48 MiB, not the 381 of a byte each). Set on every
+  // thread for the first leaves (below), then only on this thread
+  // (add_corners), read by the parallel passes in between.
   UnfilledVector<uint64_t> used_bits =
       Filled<uint64_t>(pool, (lattice_vertices + 63) / 64, 0);
   auto used = [&used_bits](int64_t v) -> bool {
@@ -913,10 +914,10 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
       const int64_t k = final_leaves[q];
       const std::vector<P>* t = ears.at[k];
       if (shape[k] != kEars) {
-        const auto& [a, c] = final_corners[q];
+        const auto& [lo, hi] = final_corners[q];
         corners.clear();
-        CornerTriangles(a.i, a.j, c.i, c.j, static_cast<LeafShape>(shape[k]),
-                        &corners);
+        CornerTriangles(lo.i, lo.j, hi.i, hi.j,
+                        static_cast<LeafShape>(shape[k]), &corners);
         t = &corners;
       }
       for (size_t p = 0; p + 2 < t->size(); p += 3) {
