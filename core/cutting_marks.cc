@@ -918,15 +918,6 @@ struct ChainScratch {
   UnfilledVector<uint8_t> used;
 };
 
-// v[0..n) = value on every thread of pool (n >= 0).
-template <typename T>
-void FillOnEvery(ThreadPool& pool, T* v, int64_t n, T value) {
-  constexpr int64_t kChunk = int64_t{1} << 16;
-  pool.ParallelFor((n + kChunk - 1) / kChunk, [&](int64_t c) {
-    std::fill(v + c * kChunk, v + std::min(n, (c + 1) * kChunk), value);
-  });
-}
-
 // With `starts`, each polyline's first segment (the lowest index of its
 // chain: polylines come out in that order). `ghosts` counts, per vertex
 // key, segments chained before that end there too (they count in its

@@ -2,6 +2,7 @@
 #ifndef SWARF_CORE_THREAD_POOL_H_
 #define SWARF_CORE_THREAD_POOL_H_
 
+#include <algorithm>
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
@@ -88,6 +89,17 @@ class ThreadPool {
   std::atomic<uint64_t> started_{0};
   std::vector<std::thread> workers_;
 };
+
+// v[0..n) = value on every thread of pool (n >= 0), 64 Ki elements a task:
+// for large buffers left unfilled (UnfilledVector), whose first writes on
+// one thread also page-faulted them in on one.
+template <typename T>
+void FillOnEvery(ThreadPool& pool, T* v, int64_t n, T value) {
+  constexpr int64_t kChunk = int64_t{1} << 16;
+  pool.ParallelFor((n + kChunk - 1) / kChunk, [&](int64_t c) {
+    std::fill(v + c * kChunk, v + std::min(n, (c + 1) * kChunk), value);
+  });
+}
 
 }  // namespace swarf
 

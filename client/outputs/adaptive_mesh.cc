@@ -159,6 +159,12 @@ struct Leaf {
   int64_t i0, j0, w, h;  // cells [i0, i0 + w) x [j0, j0 + h)
 };
 
+// A leaf's four corners (lattice vertices).
+std::array<P, 4> CornersOf(const Leaf& f) {
+  return {P{f.i0, f.j0}, P{f.i0 + f.w, f.j0}, P{f.i0, f.j0 + f.h},
+          P{f.i0 + f.w, f.j0 + f.h}};
+}
+
 // How a leaf is triangulated: with its two corner triangles, sharing the
 // diagonal from corner (i0, j0) (kDiagonalAC) or the other one, or by a
 // list of triangles (kEars: ClipEars').
@@ -369,9 +375,7 @@ void ForChunks(ThreadPool& pool, int64_t n,
 template <typename T>
 UnfilledVector<T> Filled(ThreadPool& pool, int64_t n, T v) {
   UnfilledVector<T> out(n);
-  ForChunks(pool, n, [&](int64_t b, int64_t e) {
-    std::fill(out.begin() + b, out.begin() + e, v);
-  });
+  FillOnEvery(pool, out.data(), n, v);
   return out;
 }
 
@@ -600,8 +604,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   };
   std::vector<int64_t> corners_added;
   auto add_corners = [&](const Leaf& f) {
-    for (const P& p : {P{f.i0, f.j0}, P{f.i0 + f.w, f.j0}, P{f.i0, f.j0 + f.h},
-                       P{f.i0 + f.w, f.j0 + f.h}}) {
+    for (const P& p : CornersOf(f)) {
       const int64_t v = index(p.i, p.j);
       if (!used(v)) corners_added.push_back(v);
       used_bits[v >> 6] |= uint64_t{1} << (v & 63);
@@ -612,9 +615,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   UnfilledVector<int64_t> work(roots);
   ForChunks(pool, roots, [&](int64_t b, int64_t e) {
     for (int64_t k = b; k < e; ++k) {
-      const Leaf& f = leaves[k];
-      for (const P& p : {P{f.i0, f.j0}, P{f.i0 + f.w, f.j0},
-                         P{f.i0, f.j0 + f.h}, P{f.i0 + f.w, f.j0 + f.h}}) {
+      for (const P& p : CornersOf(leaves[k])) {
         const int64_t v = index(p.i, p.j);
         std::atomic_ref<uint64_t>(used_bits[v >> 6])
             .fetch_or(uint64_t{1} << (v & 63), std::memory_order_relaxed);
@@ -644,6 +645,11 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
       for (int64_t w = b; w < e; ++w)
         by_row[next[leaves[work[w]].j0 / kRoot]++] = w;
     });
+  };
+  // Whether measured leaf k is split: over the tolerance, and more than a
+  // cell.
+  auto splits_leaf = [&](int64_t k) {
+    return !(leaf_dev[k] <= tolerance) && leaves[k].w * leaves[k].h != 1;
   };
   for (bool first_pass = true;; first_pass = false) {
     // Each work leaf triangulated and measured where its root row's
@@ -701,7 +707,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
           leaf_dev[k] = dev;
         };
         measure();
-        if (!(leaf_dev[k] <= tolerance) && f.w * f.h != 1) {
+        if (splits_leaf(k)) {
           split_x[w] = SplitsAcrossX(l, f);
         }
       });
@@ -711,10 +717,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
     // The leaves' arrays grown once for the pass's halves, their copies on
     // every thread.
     int64_t splits = 0;
-    for (size_t w = 0; w < work.size(); ++w) {
-      const int64_t k = work[w];
-      splits += !(leaf_dev[k] <= tolerance) && leaves[k].w * leaves[k].h != 1;
-    }
+    for (const int64_t k : work) splits += splits_leaf(k);
     if (splits == 0) break;
     const int64_t grown = static_cast<int64_t>(leaves.size()) + 2 * splits;
     ReserveOnEveryThread(pool, &leaves, grown);
@@ -724,8 +727,8 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
     ReserveOnEveryThread(pool, &ears.at, grown);
     for (size_t w = 0; w < work.size(); ++w) {
       const int64_t k = work[w];
+      if (!splits_leaf(k)) continue;
       const Leaf f = leaves[k];  // a copy: `leaves` grows below
-      if (leaf_dev[k] <= tolerance || f.w * f.h == 1) continue;
       kids[k] = static_cast<int64_t>(leaves.size());
       delete ears.at[k];
       ears.at[k] = nullptr;
