@@ -146,6 +146,42 @@ void BM_FinishingMovesCuts(benchmark::State& state, SchemeKind scheme) {
 BENCHMARK_CAPTURE(BM_FinishingMovesCuts, taylor, SchemeKind::kTaylor)
     ->Arg(10000)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// The plate job's finishing (scripts/make-example --plate): a 4 mm ball
+// (r = 2) raster of 0.5 mm moves over a wave, stepover 0.2 mm, on a 0.05 mm
+// grid (60 x 30 mm, 1200 x 600 elements), in batches of 10000. A pass's
+// footprint spans up to 80 nodes of a row, on rows the passes before it cut:
+// the footprint narrowed row by row to each row's highest node.
+void BM_PlateFinishing(benchmark::State& state) {
+  std::vector<Move> moves;
+  for (int k = 0; k < 100; ++k) {
+    const double y = 5 + k * 0.2;
+    const bool fwd = k % 2 == 0;
+    for (double s = 5; s < 55; s += 0.5) {
+      const double xa = fwd ? s : 60 - s, xb = fwd ? s + 0.5 : 60 - s - 0.5;
+      auto z = [&](double x) { return -3 + std::sin(x * 0.3 + y * 0.2); };
+      moves.push_back({{xa, y, z(xa)}, {xb, y, z(xb)}, 2.0});
+    }
+  }
+  constexpr size_t kBatch = 10000;
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto wp =
+        *Workpiece::Create({0, 0, 60, 30, 0, 1200, 600}, SchemeKind::kGuarded);
+    state.ResumeTiming();
+    for (size_t k = 0; k < moves.size(); k += kBatch) {
+      const size_t n = std::min(kBatch, moves.size() - k);
+      auto r = wp->Apply(std::span<const Move>(moves.data() + k, n));
+      benchmark::DoNotOptimize(r->node_lowerings);
+    }
+    state.PauseTiming();
+    wp.reset();
+    state.ResumeTiming();
+  }
+  state.SetItemsProcessed(state.iterations() * moves.size());
+  state.counters["ns_per_move"] = TimePerMove(moves.size());
+}
+BENCHMARK(BM_PlateFinishing)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // Cutter shapes (issue 16): the same paths for the ball and each new shape,
 // applied to a 100 mm stock at 1000x1000 (0.1 mm) in batches of 10000.
 // - finishing: the zig-zag raster above (0.2 mm moves on a gentle wave,

@@ -284,44 +284,72 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     // The footprint's node range on each row, rows at a time (j_lo is in
     // the tile: at most a tile's rows).
     int32_t row_lo[kTileSize], row_hi[kTileSize];
-    if (j_hi >= j_lo) {
-      RowNodeRanges(cap, y0, dy, j_lo, j_hi - j_lo + 1, x0, inv_dx, i_max,
-                    row_lo, row_hi);
+    const int32_t rows = j_hi - j_lo + 1;
+    if (rows > 0) {
+      RowNodeRanges(cap, y0, dy, j_lo, rows, x0, inv_dx, i_max, row_lo, row_hi);
     }
-    for (int32_t j = j_lo; j <= j_hi; ++j) {
-      const double y = y0 + j * dy;  // as GridGeometry::NodeY
-      int32_t i_lo = row_lo[j - j_lo], i_hi = row_hi[j - j_lo];
-      if (i_lo > i_hi) continue;
+    // On a long span, the highest node of the span caps what the move can
+    // cut there, as zmax does for the tile but much lower on the rows a
+    // raster's passes have cut: nothing where the sweep's lowest point is
+    // not below it, and a ball's footprint shrinks to it (over the
+    // narrower span, the nodes it leaves out are at or below the span's
+    // top, and the sweep is not below it there). A short span is evaluated
+    // whole: the test would cost more than it saves. Heights are never
+    // NaN: a vectorized max, in any order. The tops are taken for every
+    // row before any is cut: a row's nodes are lowered only after it is
+    // gathered, so each top is the one its row would see then. The narrow
+    // rows' radii and ranges are then taken together, in vectorized loops.
+    int32_t narrow_j[kTileSize], narrow_q[kTileSize];
+    double narrow_top[kTileSize];
+    int32_t narrowed = 0;
+    for (int32_t q = 0; q < rows; ++q) {
+      int32_t& i_lo = row_lo[q];
+      const int32_t i_hi = row_hi[q];
       i_lo = std::max(i_lo, i_base);
-      if (i_lo > i_hi) continue;
-      const int32_t k0 = (j - j_base) * kTileSize - i_base;  // node i's: k0 + i
-      // On a long span, the highest node of the span caps what the move
-      // can cut there, as zmax does for the tile but much lower on the
-      // rows a raster's passes have cut: nothing where the sweep's lowest
-      // point is not below it, and a ball's footprint shrinks to it (over
-      // the narrower span, the nodes it leaves out are at or below the
-      // span's top, and the sweep is not below it there). A short span is
-      // evaluated whole: the test would cost more than it saves. Heights
-      // are never NaN: a vectorized max, in any order.
-      if (i_hi - i_lo + 1 >= kNarrowSpan) {
-        // Blocks of 8 until one reaches the tile's top (uncut stock, the
-        // rows ahead of a raster: the first block).
-        const double top = SpanTop(w + k0 + i_lo, i_hi - i_lo + 1, zmax);
-        if (!(lowest < top)) continue;
-        if constexpr (std::is_same_v<S, BallSweep>) {
-          if (top < zmax) {
-            Capsule narrow = cap;
-            narrow.radius = std::min(cap.radius, sweep.FootprintRadius(top));
-            const Interval in = narrow.RowSpan(y);
-            if (in.empty()) continue;
-            const auto [n_lo, n_hi] =
-                NodeRange(in.lo, in.hi, x0, inv_dx, i_max);
-            i_lo = std::max(i_lo, n_lo);
-            i_hi = std::min(i_hi, n_hi);
-            if (i_lo > i_hi) continue;
+      if (i_lo > i_hi || i_hi - i_lo + 1 < kNarrowSpan) continue;
+      const int32_t k0 = (j_lo + q - j_base) * kTileSize - i_base;
+      // Blocks of 8 until one reaches the tile's top (uncut stock, the
+      // rows ahead of a raster: the first block).
+      const double top = SpanTop(w + k0 + i_lo, i_hi - i_lo + 1, zmax);
+      if (!(lowest < top)) {
+        i_lo = i_hi + 1;  // none
+        continue;
+      }
+      if constexpr (std::is_same_v<S, BallSweep>) {
+        if (top < zmax) {
+          narrow_j[narrowed] = j_lo + q;
+          narrow_q[narrowed] = q;
+          narrow_top[narrowed++] = top;
+        }
+      }
+    }
+    if constexpr (std::is_same_v<S, BallSweep>) {
+      if (narrowed > 0) {
+        double radii[kTileSize];
+        int32_t n_lo[kTileSize], n_hi[kTileSize];
+        sweep.FootprintRadii(narrow_top, narrowed, radii);
+        for (int32_t k = 0; k < narrowed; ++k) {
+          radii[k] = std::min(cap.radius, radii[k]);
+        }
+        RowNodeRangesAt(cap, radii, narrow_j, narrowed, y0, dy, x0, inv_dx,
+                        i_max, n_lo, n_hi);
+        for (int32_t k = 0; k < narrowed; ++k) {
+          const int32_t q = narrow_q[k];
+          if (n_lo[k] > n_hi[k]) {
+            row_lo[q] = row_hi[q] + 1;  // the narrow footprint misses it
+          } else {
+            row_lo[q] = std::max(row_lo[q], n_lo[k]);
+            row_hi[q] = std::min(row_hi[q], n_hi[k]);
           }
         }
       }
+    }
+    for (int32_t q = 0; q < rows; ++q) {
+      const int32_t i_lo = row_lo[q], i_hi = row_hi[q];
+      if (i_lo > i_hi) continue;
+      const int32_t j = j_lo + q;
+      const double y = y0 + j * dy;  // as GridGeometry::NodeY
+      const int32_t k0 = (j - j_base) * kTileSize - i_base;  // node i's: k0 + i
       const int32_t count = i_hi - i_lo + 1;
       if (n + count > kChunk) flush();
       GatherRow(x0, dx, i_lo, count, y, k0, w, cx + n, cy + n, ck + n, cw + n);

@@ -139,6 +139,88 @@ TEST(SweepKernelsTest, RowNodeRangesMatchRowSpanAndNodeRange) {
   EXPECT_GT(rows_missed, 10000);
 }
 
+// CutTile's narrowed rows: RowNodeRangesAt is RowSpan and NodeRange of the
+// capsule with each row's own radius, for rows in any order (repeated ones
+// too), capsules in every direction, radii that miss the row and radii of
+// zero.
+TEST(SweepKernelsTest, RowNodeRangesAtMatchRowSpanWithEachRowsRadius) {
+  std::mt19937_64 rng(12);
+  std::uniform_real_distribution<double> pos(-2, 12), rad(0.0, 3);
+  const double x0 = 0.05, dx = 0.1, y0 = -0.3, dy = 0.07;
+  const int32_t i_max = 100;
+  int32_t rows_hit = 0, rows_missed = 0;
+  for (int k = 0; k < 4000; ++k) {
+    Capsule c;
+    c.empty = false;
+    c.x0 = pos(rng);
+    c.y0 = pos(rng);
+    switch (k % 4) {
+      case 0:
+        c.x1 = pos(rng), c.y1 = pos(rng);
+        break;  // diagonal
+      case 1:
+        c.x1 = c.x0, c.y1 = pos(rng);
+        break;  // along y
+      case 2:
+        c.x1 = pos(rng), c.y1 = c.y0;
+        break;  // along x
+      default:
+        c.x1 = c.x0, c.y1 = c.y0;
+        break;  // a point
+    }
+    c.radius = 3;
+    FillDirection(&c);
+    const int32_t m = 1 + static_cast<int32_t>(rng() % 130);
+    std::vector<int32_t> j(m), lo(m), hi(m);
+    std::vector<double> radii(m);
+    for (int32_t q = 0; q < m; ++q) {
+      j[q] = static_cast<int32_t>(rng() % 240) - 20;
+      radii[q] = q % 9 == 0 ? 0.0 : rad(rng);
+    }
+    RowNodeRangesAt(c, radii.data(), j.data(), m, y0, dy, x0, 1 / dx, i_max,
+                    lo.data(), hi.data());
+    for (int32_t q = 0; q < m; ++q) {
+      Capsule narrow = c;
+      narrow.radius = radii[q];
+      const Interval span = narrow.RowSpan(y0 + j[q] * dy);
+      auto [want_lo, want_hi] = NodeRange(span.lo, span.hi, x0, 1 / dx, i_max);
+      if (span.empty() || want_lo > want_hi) {
+        ++rows_missed;
+        EXPECT_GT(lo[q], hi[q]) << "capsule " << k << ", row " << q;
+      } else {
+        ++rows_hit;
+        EXPECT_EQ(lo[q], want_lo) << "capsule " << k << ", row " << q;
+        EXPECT_EQ(hi[q], want_hi) << "capsule " << k << ", row " << q;
+      }
+    }
+  }
+  EXPECT_GT(rows_hit, 10000);
+  EXPECT_GT(rows_missed, 10000);
+}
+
+// FootprintRadii is FootprintRadius, bit for bit, at caps above, at and
+// below the lowest ball centre and below the whole ball.
+TEST(SweepKernelsTest, FootprintRadiiMatchFootprintRadius) {
+  std::mt19937_64 rng(13);
+  std::uniform_real_distribution<double> cap(-10, 6);
+  int32_t checked = 0;
+  for (const BallSweep& s : RandomSweeps(200, 13)) {
+    std::vector<double> caps(67), radii(caps.size());
+    for (double& c : caps) c = cap(rng);
+    caps[0] = s.lowest();
+    caps[1] = s.lowest() + s.radius();  // the lowest centre
+    s.FootprintRadii(caps.data(), static_cast<int32_t>(caps.size()),
+                     radii.data());
+    for (size_t q = 0; q < caps.size(); ++q) {
+      const double want = s.FootprintRadius(caps[q]);
+      EXPECT_EQ(std::memcmp(&radii[q], &want, sizeof want), 0)
+          << "cap " << caps[q] << ": " << radii[q] << " against " << want;
+      ++checked;
+    }
+  }
+  EXPECT_EQ(checked, 200 * 67);
+}
+
 TEST(SweepKernelsTest, LocateAndJetsMatchTheScalarPath) {
   std::vector<double> xs, ys;
   int checked = 0;

@@ -6,6 +6,7 @@
 
 #include "core/cutter/hypot.h"
 #include "core/target_clones.h"
+#include "core/value_minmax.h"
 
 namespace swarf {
 namespace {
@@ -131,6 +132,20 @@ std::optional<BallSweep::SupportPlane> BallSweep::SupportingPlane(
     plane.wy = p.py / p.depth;
   }
   return plane;
+}
+
+SWARF_TARGET_CLONES
+void BallSweep::FootprintRadii(const double* __restrict caps, int32_t n,
+                               double* __restrict out) const {
+  const double z_min = std::min(a_.z, b_.z), r = r_, r2 = r2_;
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) {
+    // FootprintRadiusAt as selects.
+    const double h = z_min - caps[q];
+    const double below = std::sqrt(MaxOf(0.0, r2 - h * h));
+    const double rho = z_min > caps[q] ? below : r;
+    out[q] = rho * (1 + 1e-12) + kFootprintMargin;
+  }
 }
 
 SWARF_TARGET_CLONES

@@ -246,6 +246,9 @@ class BallSweep {
   double FootprintRadius(double cap) const {
     return FootprintRadiusAt(std::min(a_.z, b_.z), r_, r2_, cap);
   }
+  // out[q] = FootprintRadius(caps[q]) for q < n, the same bits, in a
+  // vectorized loop.
+  void FootprintRadii(const double* caps, int32_t n, double* out) const;
 
  private:
   friend struct BallSweepKernels;  // the kernels over many frames

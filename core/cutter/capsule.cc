@@ -31,26 +31,28 @@ constexpr double kFootprintMargin = 1e-9;
 // outside the loop, so that the loop is selects only.
 enum Strip { kNoStrip, kBothClips, kUxZero, kUyZero };
 
-// RowNodeRanges for one kind of band.
-template <Strip kStrip>
-[[gnu::always_inline]] inline void RowNodeRangesOf(const Capsule& c, double y0,
-                                                   double dy, int32_t j0,
-                                                   int32_t n, double x0,
-                                                   double inv_dx, int32_t i_max,
-                                                   int32_t* __restrict out_lo,
-                                                   int32_t* __restrict out_hi) {
-  const double r2 = c.radius * c.radius;
+// RowNodeRanges for one kind of band: rows j0 + q of c, or (kRadii) rows
+// rows[q] of c with radius radii[q].
+template <Strip kStrip, bool kRadii>
+[[gnu::always_inline]] inline void RowNodeRangesOf(
+    const Capsule& c, const double* __restrict radii,
+    const int32_t* __restrict rows, double y0, double dy, int32_t j0, int32_t n,
+    double x0, double inv_dx, int32_t i_max, int32_t* __restrict out_lo,
+    int32_t* __restrict out_hi) {
   const double ax = c.x0, ay = c.y0, bx = c.x1, by = c.y1;
-  const double ux = c.ux, uy = c.uy, length = c.length, radius = c.radius;
+  const double ux = c.ux, uy = c.uy, length = c.length;
   // ClipLinear's bounds, swapped where its slope is negative.
   const double inv_a1 = c.inv_ux, inv_a2 = -c.inv_uy;
   const double c1_lo = ux < 0 ? length : 0, c1_hi = ux < 0 ? 0 : length;
-  const double c2_lo = -uy < 0 ? radius : -radius;
-  const double c2_hi = -uy < 0 ? -radius : radius;
+  const bool swap2 = -uy < 0;
   const double top = i_max + 1.0;
 #pragma omp simd
   for (int32_t q = 0; q < n; ++q) {
-    const double y = y0 + (j0 + q) * dy;
+    const double radius = kRadii ? radii[q] : c.radius;
+    const double r2 = radius * radius;
+    const double c2_lo = swap2 ? radius : -radius;
+    const double c2_hi = swap2 ? -radius : radius;
+    const double y = kRadii ? y0 + rows[q] * dy : y0 + (j0 + q) * dy;
     const double dy0 = y - ay, dy1 = y - by;
     const double q0 = r2 - dy0 * dy0, q1 = r2 - dy1 * dy1;
     double lo = kInf, hi = -kInf;                         // empty (HullWhere)
@@ -99,13 +101,36 @@ void RowNodeRanges(const Capsule& c, double y0, double dy, int32_t j0,
                    int32_t n, double x0, double inv_dx, int32_t i_max,
                    int32_t* lo, int32_t* hi) {
   if (!(c.length > 0)) {
-    RowNodeRangesOf<kNoStrip>(c, y0, dy, j0, n, x0, inv_dx, i_max, lo, hi);
+    RowNodeRangesOf<kNoStrip, false>(c, nullptr, nullptr, y0, dy, j0, n, x0,
+                                     inv_dx, i_max, lo, hi);
   } else if (c.ux == 0) {
-    RowNodeRangesOf<kUxZero>(c, y0, dy, j0, n, x0, inv_dx, i_max, lo, hi);
+    RowNodeRangesOf<kUxZero, false>(c, nullptr, nullptr, y0, dy, j0, n, x0,
+                                    inv_dx, i_max, lo, hi);
   } else if (c.uy == 0) {
-    RowNodeRangesOf<kUyZero>(c, y0, dy, j0, n, x0, inv_dx, i_max, lo, hi);
+    RowNodeRangesOf<kUyZero, false>(c, nullptr, nullptr, y0, dy, j0, n, x0,
+                                    inv_dx, i_max, lo, hi);
   } else {
-    RowNodeRangesOf<kBothClips>(c, y0, dy, j0, n, x0, inv_dx, i_max, lo, hi);
+    RowNodeRangesOf<kBothClips, false>(c, nullptr, nullptr, y0, dy, j0, n, x0,
+                                       inv_dx, i_max, lo, hi);
+  }
+}
+
+SWARF_TARGET_CLONES
+void RowNodeRangesAt(const Capsule& c, const double* radii, const int32_t* j,
+                     int32_t m, double y0, double dy, double x0, double inv_dx,
+                     int32_t i_max, int32_t* lo, int32_t* hi) {
+  if (!(c.length > 0)) {
+    RowNodeRangesOf<kNoStrip, true>(c, radii, j, y0, dy, 0, m, x0, inv_dx,
+                                    i_max, lo, hi);
+  } else if (c.ux == 0) {
+    RowNodeRangesOf<kUxZero, true>(c, radii, j, y0, dy, 0, m, x0, inv_dx, i_max,
+                                   lo, hi);
+  } else if (c.uy == 0) {
+    RowNodeRangesOf<kUyZero, true>(c, radii, j, y0, dy, 0, m, x0, inv_dx, i_max,
+                                   lo, hi);
+  } else {
+    RowNodeRangesOf<kBothClips, true>(c, radii, j, y0, dy, 0, m, x0, inv_dx,
+                                      i_max, lo, hi);
   }
 }
 
