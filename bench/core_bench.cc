@@ -97,16 +97,16 @@ std::vector<Move> FinishingRaster(double step, double stepover, int rows) {
   return moves;
 }
 
-// Applies the finishing raster in batches of state.range(0) moves; with
-// `cuts`, asking what each move cut (ApplyOptions::cuts and a flute length
-// per move).
-void FinishingApply(benchmark::State& state, SchemeKind scheme, bool cuts) {
-  const std::vector<Move> moves = FinishingRaster(0.2, 0.1, 100);
-  const size_t batch = static_cast<size_t>(state.range(0));
+// Applies `moves` to a new workpiece of `stock` in batches of `batch`
+// moves; with `cuts`, asking what each move cut (ApplyOptions::cuts and a
+// flute length per move).
+void ApplyInBatches(benchmark::State& state, const std::vector<Move>& moves,
+                    const StockSpec& stock, SchemeKind scheme, size_t batch,
+                    bool cuts) {
   const std::vector<double> flutes(batch, 10.0);
   for (auto _ : state) {
     state.PauseTiming();
-    auto wp = *Workpiece::Create({0, 0, 100, 100, 0, 1000, 1000}, scheme);
+    auto wp = *Workpiece::Create(stock, scheme);
     state.ResumeTiming();
     for (size_t k = 0; k < moves.size(); k += batch) {
       const size_t n = std::min(batch, moves.size() - k);
@@ -128,6 +128,13 @@ void FinishingApply(benchmark::State& state, SchemeKind scheme, bool cuts) {
   }
   state.SetItemsProcessed(state.iterations() * moves.size());
   state.counters["ns_per_move"] = TimePerMove(moves.size());
+}
+
+// The finishing raster in batches of state.range(0) moves.
+void FinishingApply(benchmark::State& state, SchemeKind scheme, bool cuts) {
+  ApplyInBatches(state, FinishingRaster(0.2, 0.1, 100),
+                 {0, 0, 100, 100, 0, 1000, 1000}, scheme,
+                 static_cast<size_t>(state.range(0)), cuts);
 }
 
 void BM_FinishingMoves(benchmark::State& state, SchemeKind scheme) {
@@ -162,23 +169,8 @@ void BM_PlateFinishing(benchmark::State& state) {
       moves.push_back({{xa, y, z(xa)}, {xb, y, z(xb)}, 2.0});
     }
   }
-  constexpr size_t kBatch = 10000;
-  for (auto _ : state) {
-    state.PauseTiming();
-    auto wp =
-        *Workpiece::Create({0, 0, 60, 30, 0, 1200, 600}, SchemeKind::kGuarded);
-    state.ResumeTiming();
-    for (size_t k = 0; k < moves.size(); k += kBatch) {
-      const size_t n = std::min(kBatch, moves.size() - k);
-      auto r = wp->Apply(std::span<const Move>(moves.data() + k, n));
-      benchmark::DoNotOptimize(r->node_lowerings);
-    }
-    state.PauseTiming();
-    wp.reset();
-    state.ResumeTiming();
-  }
-  state.SetItemsProcessed(state.iterations() * moves.size());
-  state.counters["ns_per_move"] = TimePerMove(moves.size());
+  ApplyInBatches(state, moves, {0, 0, 60, 30, 0, 1200, 600},
+                 SchemeKind::kGuarded, 10000, /*cuts=*/false);
 }
 BENCHMARK(BM_PlateFinishing)->Unit(benchmark::kMillisecond)->UseRealTime();
 

@@ -88,6 +88,33 @@ TEST(SweepKernelsTest, HeightsMatchHeightBitForBit) {
   EXPECT_GT(points, 100000);
 }
 
+// Capsule k of a test's: along x, along y, diagonal or a point (k % 4), its
+// ends from `pos`, its direction filled.
+Capsule TestCapsule(int k, double radius, std::mt19937_64& rng,
+                    std::uniform_real_distribution<double>& pos) {
+  Capsule c;
+  c.empty = false;
+  c.x0 = pos(rng);
+  c.y0 = pos(rng);
+  switch (k % 4) {
+    case 0:
+      c.x1 = pos(rng), c.y1 = pos(rng);
+      break;  // diagonal
+    case 1:
+      c.x1 = c.x0, c.y1 = pos(rng);
+      break;  // along y
+    case 2:
+      c.x1 = pos(rng), c.y1 = c.y0;
+      break;  // along x
+    default:
+      c.x1 = c.x0, c.y1 = c.y0;
+      break;  // a point
+  }
+  c.radius = radius;
+  FillDirection(&c);
+  return c;
+}
+
 // CutTile's rows: RowNodeRanges is RowSpan and NodeRange, row by row, for
 // capsules in every direction (along x, along y, diagonal, points), rows
 // that miss, and spans clipped at the grid's ends.
@@ -98,26 +125,7 @@ TEST(SweepKernelsTest, RowNodeRangesMatchRowSpanAndNodeRange) {
   const int32_t i_max = 100;
   int32_t rows_hit = 0, rows_missed = 0;
   for (int k = 0; k < 4000; ++k) {
-    Capsule c;
-    c.empty = false;
-    c.x0 = pos(rng);
-    c.y0 = pos(rng);
-    switch (k % 4) {
-      case 0:
-        c.x1 = pos(rng), c.y1 = pos(rng);
-        break;  // diagonal
-      case 1:
-        c.x1 = c.x0, c.y1 = pos(rng);
-        break;  // along y
-      case 2:
-        c.x1 = pos(rng), c.y1 = c.y0;
-        break;  // along x
-      default:
-        c.x1 = c.x0, c.y1 = c.y0;
-        break;  // a point
-    }
-    c.radius = rad(rng);
-    FillDirection(&c);
+    const Capsule c = TestCapsule(k, rad(rng), rng, pos);
     const int32_t j0 = static_cast<int32_t>(rng() % 40) - 5;
     const int32_t n = 1 + static_cast<int32_t>(rng() % 200);
     std::vector<int32_t> lo(n), hi(n);
@@ -150,26 +158,7 @@ TEST(SweepKernelsTest, RowNodeRangesAtMatchRowSpanWithEachRowsRadius) {
   const int32_t i_max = 100;
   int32_t rows_hit = 0, rows_missed = 0;
   for (int k = 0; k < 4000; ++k) {
-    Capsule c;
-    c.empty = false;
-    c.x0 = pos(rng);
-    c.y0 = pos(rng);
-    switch (k % 4) {
-      case 0:
-        c.x1 = pos(rng), c.y1 = pos(rng);
-        break;  // diagonal
-      case 1:
-        c.x1 = c.x0, c.y1 = pos(rng);
-        break;  // along y
-      case 2:
-        c.x1 = pos(rng), c.y1 = c.y0;
-        break;  // along x
-      default:
-        c.x1 = c.x0, c.y1 = c.y0;
-        break;  // a point
-    }
-    c.radius = 3;
-    FillDirection(&c);
+    const Capsule c = TestCapsule(k, 3, rng, pos);
     const int32_t m = 1 + static_cast<int32_t>(rng() % 130);
     std::vector<int32_t> j(m), lo(m), hi(m);
     std::vector<double> radii(m);
