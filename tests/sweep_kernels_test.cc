@@ -115,32 +115,44 @@ Capsule TestCapsule(int k, double radius, std::mt19937_64& rng,
   return c;
 }
 
+// The grid of the row-range tests: nodes kX0 + i * kDx, 0 <= i <= kIMax,
+// on rows kY0 + j * kDy.
+constexpr double kX0 = 0.05, kDx = 0.1, kY0 = -0.3, kDy = 0.07;
+constexpr int32_t kIMax = 100;
+
+// That [lo, hi] is NodeRange of c.RowSpan(y) (lo > hi where the span is
+// empty or holds no node), counting the row as hit or missed.
+void ExpectRowSpanNodes(const Capsule& c, double y, int32_t lo, int32_t hi,
+                        int32_t* rows_hit, int32_t* rows_missed) {
+  const Interval span = c.RowSpan(y);
+  auto [want_lo, want_hi] = NodeRange(span.lo, span.hi, kX0, 1 / kDx, kIMax);
+  if (span.empty() || want_lo > want_hi) {
+    ++*rows_missed;
+    EXPECT_GT(lo, hi) << "row at y " << y << ", radius " << c.radius;
+  } else {
+    ++*rows_hit;
+    EXPECT_EQ(lo, want_lo) << "row at y " << y << ", radius " << c.radius;
+    EXPECT_EQ(hi, want_hi) << "row at y " << y << ", radius " << c.radius;
+  }
+}
+
 // CutTile's rows: RowNodeRanges is RowSpan and NodeRange, row by row, for
 // capsules in every direction (along x, along y, diagonal, points), rows
 // that miss, and spans clipped at the grid's ends.
 TEST(SweepKernelsTest, RowNodeRangesMatchRowSpanAndNodeRange) {
   std::mt19937_64 rng(11);
   std::uniform_real_distribution<double> pos(-2, 12), rad(0.01, 3);
-  const double x0 = 0.05, dx = 0.1, y0 = -0.3, dy = 0.07;
-  const int32_t i_max = 100;
   int32_t rows_hit = 0, rows_missed = 0;
   for (int k = 0; k < 4000; ++k) {
     const Capsule c = TestCapsule(k, rad(rng), rng, pos);
     const int32_t j0 = static_cast<int32_t>(rng() % 40) - 5;
     const int32_t n = 1 + static_cast<int32_t>(rng() % 200);
     std::vector<int32_t> lo(n), hi(n);
-    RowNodeRanges(c, y0, dy, j0, n, x0, 1 / dx, i_max, lo.data(), hi.data());
+    RowNodeRanges(c, kY0, kDy, j0, n, kX0, 1 / kDx, kIMax, lo.data(),
+                  hi.data());
     for (int32_t q = 0; q < n; ++q) {
-      const Interval span = c.RowSpan(y0 + (j0 + q) * dy);
-      auto [want_lo, want_hi] = NodeRange(span.lo, span.hi, x0, 1 / dx, i_max);
-      if (span.empty() || want_lo > want_hi) {
-        ++rows_missed;
-        EXPECT_GT(lo[q], hi[q]) << "capsule " << k << ", row " << q;
-      } else {
-        ++rows_hit;
-        EXPECT_EQ(lo[q], want_lo) << "capsule " << k << ", row " << q;
-        EXPECT_EQ(hi[q], want_hi) << "capsule " << k << ", row " << q;
-      }
+      ExpectRowSpanNodes(c, kY0 + (j0 + q) * kDy, lo[q], hi[q], &rows_hit,
+                         &rows_missed);
     }
   }
   EXPECT_GT(rows_hit, 10000);
@@ -154,8 +166,6 @@ TEST(SweepKernelsTest, RowNodeRangesMatchRowSpanAndNodeRange) {
 TEST(SweepKernelsTest, RowNodeRangesAtMatchRowSpanWithEachRowsRadius) {
   std::mt19937_64 rng(12);
   std::uniform_real_distribution<double> pos(-2, 12), rad(0.0, 3);
-  const double x0 = 0.05, dx = 0.1, y0 = -0.3, dy = 0.07;
-  const int32_t i_max = 100;
   int32_t rows_hit = 0, rows_missed = 0;
   for (int k = 0; k < 4000; ++k) {
     const Capsule c = TestCapsule(k, 3, rng, pos);
@@ -166,21 +176,13 @@ TEST(SweepKernelsTest, RowNodeRangesAtMatchRowSpanWithEachRowsRadius) {
       j[q] = static_cast<int32_t>(rng() % 240) - 20;
       radii[q] = q % 9 == 0 ? 0.0 : rad(rng);
     }
-    RowNodeRangesAt(c, radii.data(), j.data(), m, y0, dy, x0, 1 / dx, i_max,
+    RowNodeRangesAt(c, radii.data(), j.data(), m, kY0, kDy, kX0, 1 / kDx, kIMax,
                     lo.data(), hi.data());
     for (int32_t q = 0; q < m; ++q) {
       Capsule narrow = c;
       narrow.radius = radii[q];
-      const Interval span = narrow.RowSpan(y0 + j[q] * dy);
-      auto [want_lo, want_hi] = NodeRange(span.lo, span.hi, x0, 1 / dx, i_max);
-      if (span.empty() || want_lo > want_hi) {
-        ++rows_missed;
-        EXPECT_GT(lo[q], hi[q]) << "capsule " << k << ", row " << q;
-      } else {
-        ++rows_hit;
-        EXPECT_EQ(lo[q], want_lo) << "capsule " << k << ", row " << q;
-        EXPECT_EQ(hi[q], want_hi) << "capsule " << k << ", row " << q;
-      }
+      ExpectRowSpanNodes(narrow, kY0 + j[q] * kDy, lo[q], hi[q], &rows_hit,
+                         &rows_missed);
     }
   }
   EXPECT_GT(rows_hit, 10000);
