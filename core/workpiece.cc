@@ -299,7 +299,7 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     // row before any is cut: a row's nodes are lowered only after it is
     // gathered, so each top is the one its row would see then. The narrow
     // rows' radii and ranges are then taken together, in vectorized loops.
-    int32_t narrow_j[kTileSize], narrow_q[kTileSize];
+    int32_t narrow_q[kTileSize];
     double narrow_top[kTileSize];
     int32_t narrowed = 0;
     for (int32_t q = 0; q < rows; ++q) {
@@ -317,7 +317,6 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       }
       if constexpr (std::is_same_v<S, BallSweep>) {
         if (top < zmax) {
-          narrow_j[narrowed] = j_lo + q;
           narrow_q[narrowed] = q;
           narrow_top[narrowed++] = top;
         }
@@ -331,8 +330,8 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
         for (int32_t k = 0; k < narrowed; ++k) {
           radii[k] = std::min(cap.radius, radii[k]);
         }
-        RowNodeRangesAt(cap, radii, narrow_j, narrowed, y0, dy, x0, inv_dx,
-                        i_max, n_lo, n_hi);
+        RowNodeRangesAt(cap, radii, j_lo, narrow_q, narrowed, y0, dy, x0,
+                        inv_dx, i_max, n_lo, n_hi);
         for (int32_t k = 0; k < narrowed; ++k) {
           const int32_t q = narrow_q[k];
           if (n_lo[k] > n_hi[k]) {

@@ -173,16 +173,16 @@ TEST(SweepKernelsTest, RowNodeRangesAtMatchRowSpanWithEachRowsRadius) {
     std::vector<int32_t> j(m), lo(m), hi(m);
     std::vector<double> radii(m);
     for (int32_t q = 0; q < m; ++q) {
-      j[q] = static_cast<int32_t>(rng() % 240) - 20;
+      j[q] = static_cast<int32_t>(rng() % 240);  // rows -20 + j[q]
       radii[q] = q % 9 == 0 ? 0.0 : rad(rng);
     }
-    RowNodeRangesAt(c, radii.data(), j.data(), m, kY0, kDy, kX0, 1 / kDx, kIMax,
-                    lo.data(), hi.data());
+    RowNodeRangesAt(c, radii.data(), -20, j.data(), m, kY0, kDy, kX0, 1 / kDx,
+                    kIMax, lo.data(), hi.data());
     for (int32_t q = 0; q < m; ++q) {
       Capsule narrow = c;
       narrow.radius = radii[q];
-      ExpectRowSpanNodes(narrow, kY0 + j[q] * kDy, lo[q], hi[q], &rows_hit,
-                         &rows_missed);
+      ExpectRowSpanNodes(narrow, kY0 + (-20 + j[q]) * kDy, lo[q], hi[q],
+                         &rows_hit, &rows_missed);
     }
   }
   EXPECT_GT(rows_hit, 10000);

@@ -32,7 +32,7 @@ constexpr double kFootprintMargin = 1e-9;
 enum Strip { kNoStrip, kBothClips, kUxZero, kUyZero };
 
 // RowNodeRanges for one kind of band: rows j0 + q of c, or (kRadii) rows
-// rows[q] of c with radius radii[q].
+// j0 + rows[q] of c with radius radii[q].
 template <Strip kStrip, bool kRadii>
 [[gnu::always_inline]] inline void RowNodeRangesOf(
     const Capsule& c, const double* __restrict radii,
@@ -52,7 +52,7 @@ template <Strip kStrip, bool kRadii>
     const double r2 = radius * radius;
     const double c2_lo = swap2 ? radius : -radius;
     const double c2_hi = swap2 ? -radius : radius;
-    const double y = kRadii ? y0 + rows[q] * dy : y0 + (j0 + q) * dy;
+    const double y = y0 + (j0 + (kRadii ? rows[q] : q)) * dy;
     const double dy0 = y - ay, dy1 = y - by;
     const double q0 = r2 - dy0 * dy0, q1 = r2 - dy1 * dy1;
     double lo = kInf, hi = -kInf;                         // empty (HullWhere)
@@ -94,44 +94,44 @@ template <Strip kStrip, bool kRadii>
   }
 }
 
+// RowNodeRangesOf for c's kind of band, decided once for its rows.
+template <bool kRadii>
+[[gnu::always_inline]] inline void RowNodeRangesBy(
+    const Capsule& c, const double* radii, const int32_t* rows, double y0,
+    double dy, int32_t j0, int32_t n, double x0, double inv_dx, int32_t i_max,
+    int32_t* lo, int32_t* hi) {
+  if (!(c.length > 0)) {
+    RowNodeRangesOf<kNoStrip, kRadii>(c, radii, rows, y0, dy, j0, n, x0, inv_dx,
+                                      i_max, lo, hi);
+  } else if (c.ux == 0) {
+    RowNodeRangesOf<kUxZero, kRadii>(c, radii, rows, y0, dy, j0, n, x0, inv_dx,
+                                     i_max, lo, hi);
+  } else if (c.uy == 0) {
+    RowNodeRangesOf<kUyZero, kRadii>(c, radii, rows, y0, dy, j0, n, x0, inv_dx,
+                                     i_max, lo, hi);
+  } else {
+    RowNodeRangesOf<kBothClips, kRadii>(c, radii, rows, y0, dy, j0, n, x0,
+                                        inv_dx, i_max, lo, hi);
+  }
+}
+
 }  // namespace
 
 SWARF_TARGET_CLONES
 void RowNodeRanges(const Capsule& c, double y0, double dy, int32_t j0,
                    int32_t n, double x0, double inv_dx, int32_t i_max,
                    int32_t* lo, int32_t* hi) {
-  if (!(c.length > 0)) {
-    RowNodeRangesOf<kNoStrip, false>(c, nullptr, nullptr, y0, dy, j0, n, x0,
-                                     inv_dx, i_max, lo, hi);
-  } else if (c.ux == 0) {
-    RowNodeRangesOf<kUxZero, false>(c, nullptr, nullptr, y0, dy, j0, n, x0,
-                                    inv_dx, i_max, lo, hi);
-  } else if (c.uy == 0) {
-    RowNodeRangesOf<kUyZero, false>(c, nullptr, nullptr, y0, dy, j0, n, x0,
-                                    inv_dx, i_max, lo, hi);
-  } else {
-    RowNodeRangesOf<kBothClips, false>(c, nullptr, nullptr, y0, dy, j0, n, x0,
-                                       inv_dx, i_max, lo, hi);
-  }
+  RowNodeRangesBy<false>(c, nullptr, nullptr, y0, dy, j0, n, x0, inv_dx, i_max,
+                         lo, hi);
 }
 
 SWARF_TARGET_CLONES
-void RowNodeRangesAt(const Capsule& c, const double* radii, const int32_t* j,
-                     int32_t m, double y0, double dy, double x0, double inv_dx,
-                     int32_t i_max, int32_t* lo, int32_t* hi) {
-  if (!(c.length > 0)) {
-    RowNodeRangesOf<kNoStrip, true>(c, radii, j, y0, dy, 0, m, x0, inv_dx,
-                                    i_max, lo, hi);
-  } else if (c.ux == 0) {
-    RowNodeRangesOf<kUxZero, true>(c, radii, j, y0, dy, 0, m, x0, inv_dx, i_max,
-                                   lo, hi);
-  } else if (c.uy == 0) {
-    RowNodeRangesOf<kUyZero, true>(c, radii, j, y0, dy, 0, m, x0, inv_dx, i_max,
-                                   lo, hi);
-  } else {
-    RowNodeRangesOf<kBothClips, true>(c, radii, j, y0, dy, 0, m, x0, inv_dx,
-                                      i_max, lo, hi);
-  }
+void RowNodeRangesAt(const Capsule& c, const double* radii, int32_t j0,
+                     const int32_t* rows, int32_t m, double y0, double dy,
+                     double x0, double inv_dx, int32_t i_max, int32_t* lo,
+                     int32_t* hi) {
+  RowNodeRangesBy<true>(c, radii, rows, y0, dy, j0, m, x0, inv_dx, i_max, lo,
+                        hi);
 }
 
 void FillDirection(Capsule* c) {

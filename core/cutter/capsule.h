@@ -98,11 +98,12 @@ void RowNodeRanges(const Capsule& c, double y0, double dy, int32_t j0,
                    int32_t n, double x0, double inv_dx, int32_t i_max,
                    int32_t* lo, int32_t* hi);
 
-// As RowNodeRanges, for m rows j[q] (q < m, any order) each of its own
-// capsule: c with radius radii[q] (a footprint narrowed row by row).
-void RowNodeRangesAt(const Capsule& c, const double* radii, const int32_t* j,
-                     int32_t m, double y0, double dy, double x0, double inv_dx,
-                     int32_t i_max, int32_t* lo, int32_t* hi);
+// As RowNodeRanges, for m rows j0 + rows[k] (k < m, any order), each of its
+// own capsule: c with radius radii[k] (a footprint narrowed row by row).
+void RowNodeRangesAt(const Capsule& c, const double* radii, int32_t j0,
+                     const int32_t* rows, int32_t m, double y0, double dy,
+                     double x0, double inv_dx, int32_t i_max, int32_t* lo,
+                     int32_t* hi);
 
 // The footprint below `cap` of a straight move of cutter `c` between two
 // tool tips: the part of the segment where the tip is below cap, widened by
