@@ -155,10 +155,10 @@ BENCHMARK_CAPTURE(BM_FinishingMovesCuts, taylor, SchemeKind::kTaylor)
 
 // The plate job's finishing (scripts/make-example --plate): a 4 mm ball
 // (r = 2) raster of 0.5 mm moves over a wave, stepover 0.2 mm, on a 0.05 mm
-// grid (60 x 30 mm, 1200 x 600 elements), in batches of 10000. A pass's
-// footprint spans up to 80 nodes of a row, on rows the passes before it cut:
-// the footprint narrowed row by row to each row's highest node.
-void BM_PlateFinishing(benchmark::State& state) {
+// grid (60 x 30 mm, 1200 x 600 elements).
+const StockSpec kPlateStock{0, 0, 60, 30, 0, 1200, 600};
+
+std::vector<Move> PlateFinishingRaster() {
   std::vector<Move> moves;
   for (int k = 0; k < 100; ++k) {
     const double y = 5 + k * 0.2;
@@ -169,7 +169,14 @@ void BM_PlateFinishing(benchmark::State& state) {
       moves.push_back({{xa, y, z(xa)}, {xb, y, z(xb)}, 2.0});
     }
   }
-  ApplyInBatches(state, moves, {0, 0, 60, 30, 0, 1200, 600},
+  return moves;
+}
+
+// The plate's finishing applied in batches of 10000. A pass's footprint
+// spans up to 80 nodes of a row, on rows the passes before it cut: the
+// footprint narrowed row by row to each row's highest node.
+void BM_PlateFinishing(benchmark::State& state) {
+  ApplyInBatches(state, PlateFinishingRaster(), kPlateStock,
                  SchemeKind::kGuarded, 10000, /*cuts=*/false);
 }
 BENCHMARK(BM_PlateFinishing)->Unit(benchmark::kMillisecond)->UseRealTime();
@@ -409,6 +416,31 @@ BENCHMARK_CAPTURE(BM_Read, marks_guarded, Read::kMarks, SchemeKind::kGuarded)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK_CAPTURE(BM_Read, marks_exact, Read::kMarks, SchemeKind::kExact)
     ->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The valuation of the plate's finishing (BM_PlateFinishing's cut, guarded)
+// with an error map of a cell per 4 x 4 elements, as swarf run asks on a
+// large plate (cells larger than elements): a ball's neighbouring passes
+// reach most elements, where the rule-outs of the valuation's moves work.
+void BM_PlateValuation(benchmark::State& state) {
+  const std::vector<Move> moves = PlateFinishingRaster();
+  ValuationOptions options;
+  options.map_cols = kPlateStock.nx / 4;
+  options.map_rows = kPlateStock.ny / 4;
+  for (auto _ : state) {
+    state.PauseTiming();
+    auto wp = *Workpiece::Create(kPlateStock, SchemeKind::kGuarded);
+    for (size_t k = 0; k < moves.size(); k += 10000) {
+      const size_t n = std::min<size_t>(10000, moves.size() - k);
+      (void)wp->Apply(std::span<const Move>(moves.data() + k, n));
+    }
+    state.ResumeTiming();
+    benchmark::DoNotOptimize(MeasureError(*wp, options)->max_error);
+    state.PauseTiming();
+    wp.reset();
+    state.ResumeTiming();
+  }
+}
+BENCHMARK(BM_PlateValuation)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 }  // namespace swarf
