@@ -17,4 +17,12 @@ void ReturnLargeBuffersOnFree(size_t bytes) {
 #endif
 }
 
+void KeepFreedArenaTops(size_t bytes) {
+#ifdef __GLIBC__
+  mallopt(M_TRIM_THRESHOLD, static_cast<int>(bytes));
+#else
+  (void)bytes;
+#endif
+}
+
 }  // namespace swarf

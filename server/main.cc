@@ -82,6 +82,7 @@ std::string ReplicaName() {
 
 int main(int argc, char** argv) {
   swarf::ReturnLargeBuffersOnFree();
+  swarf::KeepFreedArenaTops();
   absl::SetProgramUsageMessage("swarfd [flags]: the swarf simulation server");
   // absl lists only the flags of a file named like the program (swarfd.cc);
   // ours are here, so --help and --helpshort must be told.

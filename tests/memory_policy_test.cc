@@ -52,6 +52,38 @@ TEST(MemoryPolicyDeathTest, WithoutItTheSecondBufferIsNotMapped) {
       },
       ::testing::ExitedWithCode(0), "");
 }
+
+// KeepFreedArenaTops: a buffer freed at the top of the main arena stays
+// there (mallinfo2's keepcost, the releasable top) instead of going back to
+// the kernel. 2 MiB: under ReturnLargeBuffersOnFree's 4 MiB, so carved from
+// the arena.
+size_t TopKeptAfterFree(size_t bytes) {
+  void* (*volatile alloc)(size_t) = std::malloc;
+  void (*volatile release)(void*) = std::free;
+  void* buffer = alloc(bytes);
+  std::memset(buffer, 1, bytes);
+  release(buffer);
+  return mallinfo2().keepcost;
+}
+
+TEST(MemoryPolicyTest, FreedArenaTopIsKept) {
+  constexpr size_t kBytes = size_t{2} << 20;
+  ReturnLargeBuffersOnFree();
+  KeepFreedArenaTops();
+  EXPECT_GE(TopKeptAfterFree(kBytes), kBytes);
+}
+
+// The default it changes: with the mmap threshold fixed at 4 MiB, glibc's
+// trim threshold is 128 KiB, and the freed top goes back.
+TEST(MemoryPolicyDeathTest, WithoutItTheFreedTopIsReturned) {
+  constexpr size_t kBytes = size_t{2} << 20;
+  EXPECT_EXIT(
+      {
+        ReturnLargeBuffersOnFree();
+        std::exit(TopKeptAfterFree(kBytes) < kBytes ? 0 : 1);
+      },
+      ::testing::ExitedWithCode(0), "");
+}
 #endif
 
 }  // namespace

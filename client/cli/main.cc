@@ -29,6 +29,7 @@ constexpr char kUsage[] =
 
 int main(int argc, char** argv) {
   swarf::ReturnLargeBuffersOnFree();
+  swarf::KeepFreedArenaTops();
   if (auto threads = swarf::ThreadsFromEnvironment(); !threads.ok()) {
     std::cerr << "swarf: " << threads.status().message() << "\n";
     return 2;
