@@ -257,9 +257,8 @@ void MovesThatMayCut(const RowMoves& row, const Rect& element, double cap,
 }
 
 // The q < n with pass[q] != 0, in order, into at[0..count), returning the
-// count. Without a branch: a row's moves pass at about one in six, in no
-// pattern a branch predictor learns, and each miss cost more than the
-// store a move that fails.
+// count. Without a branch: a row's moves pass at about one in six, and a
+// mispredicted branch costs more than the store for a move that fails.
 int32_t Passing(const double* __restrict pass, int32_t n,
                 int32_t* __restrict at) {
   int32_t count = 0;
