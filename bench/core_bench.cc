@@ -309,14 +309,21 @@ BENCHMARK(BM_RecordMoves)->Unit(benchmark::kMillisecond)->UseRealTime();
 // cutting marks (FindCuttingMarks, default options). Each read starts from a
 // freshly cut workpiece, so that nothing computed for an earlier read is
 // reused.
-std::unique_ptr<Workpiece> FinishedWorkpiece(SchemeKind scheme) {
-  const std::vector<Move> moves = FinishingRaster(0.2, 0.1, 100);
-  auto wp = *Workpiece::Create({0, 0, 100, 100, 0, 1000, 1000}, scheme);
+// `moves` cut on a new workpiece of `stock`, in batches of 10000.
+std::unique_ptr<Workpiece> CutWorkpiece(const std::vector<Move>& moves,
+                                        const StockSpec& stock,
+                                        SchemeKind scheme) {
+  auto wp = *Workpiece::Create(stock, scheme);
   for (size_t k = 0; k < moves.size(); k += 10000) {
     const size_t n = std::min<size_t>(10000, moves.size() - k);
     (void)wp->Apply(std::span<const Move>(moves.data() + k, n));
   }
   return wp;
+}
+
+std::unique_ptr<Workpiece> FinishedWorkpiece(SchemeKind scheme) {
+  return CutWorkpiece(FinishingRaster(0.2, 0.1, 100),
+                      {0, 0, 100, 100, 0, 1000, 1000}, scheme);
 }
 
 // kTiles reads as the service answers GetTiles: chunks of 16 tiles, each
@@ -428,11 +435,7 @@ void BM_PlateValuation(benchmark::State& state) {
   options.map_rows = kPlateStock.ny / 4;
   for (auto _ : state) {
     state.PauseTiming();
-    auto wp = *Workpiece::Create(kPlateStock, SchemeKind::kGuarded);
-    for (size_t k = 0; k < moves.size(); k += 10000) {
-      const size_t n = std::min<size_t>(10000, moves.size() - k);
-      (void)wp->Apply(std::span<const Move>(moves.data() + k, n));
-    }
+    auto wp = CutWorkpiece(moves, kPlateStock, SchemeKind::kGuarded);
     state.ResumeTiming();
     benchmark::DoNotOptimize(MeasureError(*wp, options)->max_error);
     state.PauseTiming();

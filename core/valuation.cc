@@ -269,6 +269,17 @@ int32_t Passing(const double* __restrict pass, int32_t n,
   return count;
 }
 
+// *to = the moves of `from` that may cut into `box` below `cap`
+// (MovesThatMayCut), in order. Scratch: pass of from.padded() entries,
+// passing of from.size().
+void KeepMovesThatMayCut(const RowMoves& from, const Rect& box, double cap,
+                         double* pass, int32_t* passing, RowMoves* to) {
+  MovesThatMayCut(from, box, cap, pass);
+  to->Clear();
+  const int32_t count = Passing(pass, from.size(), passing);
+  for (int32_t u = 0; u < count; ++u) from.CopyFrom(passing[u], to);
+}
+
 }  // namespace
 
 absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
@@ -762,15 +773,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       // The elements' boxes share the row's y0 and y1.
       const Rect row_box{elements[0].box.x0, ey0,
                          elements[row_elements - 1].box.x1, ey1};
-      MovesThatMayCut(bin_moves, row_box, row_cap, pass.data());
+      KeepMovesThatMayCut(bin_moves, row_box, row_cap, pass.data(),
+                          passing.data(), &near);
       std::fill_n(top_ok.begin(), ei1 - ei0, 0);
       top_row = ej;
-      near.Clear();
-      const int32_t near_count =
-          Passing(pass.data(), bin_moves.size(), passing.data());
-      for (int32_t u = 0; u < near_count; ++u) {
-        bin_moves.CopyFrom(passing[u], &near);
-      }
       for (int32_t q = 0; q < near.size(); ++q) held[near.k[q]].held = false;
       // The cell of the row's last one-cell elements and their max (-1:
       // none), put in the map when the cell changes and at the row's end.
@@ -790,13 +796,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           }
           const Rect block_box{elements[w].box.x0, ey0, elements[w1 - 1].box.x1,
                                ey1};
-          MovesThatMayCut(near, block_box, block_cap, pass.data());
-          block.Clear();
-          const int32_t block_count =
-              Passing(pass.data(), near.size(), passing.data());
-          for (int32_t u = 0; u < block_count; ++u) {
-            near.CopyFrom(passing[u], &block);
-          }
+          KeepMovesThatMayCut(near, block_box, block_cap, pass.data(),
+                              passing.data(), &block);
         }
         RowElement& el = elements[w];
         const ElementCorners& e = el.e;
