@@ -1,6 +1,7 @@
 #include "core/move_index.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
 namespace swarf {
@@ -15,6 +16,46 @@ std::pair<int32_t, int32_t> BinRange(double a, double b, double origin,
   // Not NaN here, so the conditionals are fmax/fmin without their calls.
   return {static_cast<int32_t>(lo > 0 ? lo : 0.0),
           static_cast<int32_t>(hi < bins - 1.0 ? hi : bins - 1.0)};
+}
+
+// Adds move first_id + k to each bin of bins[k] in turn, as
+// add(bin, id) (returning the bytes the bin grew by), the bins shared among
+// the pool's threads, each adding the ids of its own bins in order; returns
+// the bytes added. Bin (bx, by) belongs to part (bx + by) mod parts: a
+// raster's moves along x or along y spread over every part, and a part
+// visits only its own bins of each move (a step of `parts` along the row).
+template <typename Add>
+int64_t AddInParts(int32_t bins_x, uint32_t first_id,
+                   std::span<const MoveIndex::BinRect> bins, ThreadPool& pool,
+                   Add add) {
+  const int32_t parts = std::max(1, std::min(pool.size(), 64));
+  std::vector<int64_t> grew(parts, 0);
+  pool.ParallelFor(parts, [&](int64_t part) {
+    const int32_t q = static_cast<int32_t>(part);
+    int64_t bytes = 0;
+    for (size_t k = 0; k < bins.size(); ++k) {
+      const uint32_t id = first_id + static_cast<uint32_t>(k);
+      const MoveIndex::BinRect& r = bins[k];
+      if (r.by0 > r.by1) continue;
+      // The first bx >= bx0 with (bx + by) % parts == q is bx0 + skip, skip
+      // in [0, parts): one down (mod parts) from one row to the next. Taken
+      // once a move, not a division a row: every part visits every move's
+      // rows, and on 16 threads the divisions were a fifth of its CPU.
+      int32_t skip = q - (r.bx0 + r.by0) % parts;
+      if (skip < 0) skip += parts;
+      for (int32_t by = r.by0; by <= r.by1; ++by) {
+        const size_t row = static_cast<size_t>(by) * bins_x;
+        for (int32_t x = r.bx0 + skip; x <= r.bx1; x += parts) {
+          bytes += add(row + x, id);
+        }
+        skip = skip == 0 ? parts - 1 : skip - 1;
+      }
+    }
+    grew[part] = bytes;
+  });
+  int64_t bytes = 0;
+  for (const int64_t b : grew) bytes += b;
+  return bytes;
 }
 
 }  // namespace
@@ -53,11 +94,13 @@ void MoveIndex::BinIds(int32_t b, std::vector<uint32_t>* ids) const {
   for (const uint32_t id : Bin(b)) ids->push_back(id);
 }
 
-MoveIndex::BinRect MoveIndex::BinsOf(const Rect& b) const {
+MoveIndex::BinRect MoveIndex::BinsOf(const GridGeometry& grid, const Rect& b) {
+  const int32_t bins_x = (grid.nx() + kBinElements - 1) / kBinElements;
+  const int32_t bins_y = (grid.ny() + kBinElements - 1) / kBinElements;
   const auto [bx0, bx1] =
-      BinRange(b.x0, b.x1, grid_.spec().x0, grid_.dx() * kBinElements, bins_x_);
+      BinRange(b.x0, b.x1, grid.spec().x0, grid.dx() * kBinElements, bins_x);
   const auto [by0, by1] =
-      BinRange(b.y0, b.y1, grid_.spec().y0, grid_.dy() * kBinElements, bins_y_);
+      BinRange(b.y0, b.y1, grid.spec().y0, grid.dy() * kBinElements, bins_y);
   return {bx0, bx1, by0, by1};
 }
 
@@ -72,35 +115,49 @@ void MoveIndex::Add(uint32_t id, const Rect& b) {
 
 void MoveIndex::AddAll(uint32_t first_id, std::span<const BinRect> bins,
                        ThreadPool& pool) {
-  // Bin (bx, by) belongs to part (bx + by) mod parts: a raster's moves
-  // along x or along y spread over every part, and a part visits only
-  // its own bins of each move (a step of `parts` along the row).
-  const int32_t parts = std::max(1, std::min(pool.size(), 64));
-  std::vector<int64_t> grew(parts, 0);
-  pool.ParallelFor(parts, [&](int64_t part) {
-    const int32_t q = static_cast<int32_t>(part);
-    int64_t bytes = 0;
-    for (size_t k = 0; k < bins.size(); ++k) {
-      const uint32_t id = first_id + static_cast<uint32_t>(k);
-      const BinRect& r = bins[k];
-      if (r.by0 > r.by1) continue;
-      // The first bx >= bx0 with (bx + by) % parts == q is bx0 + skip, skip
-      // in [0, parts): one down (mod parts) from one row to the next. Taken
-      // once a move, not a division a row: every part visits every move's
-      // rows, and on 16 threads the divisions were a fifth of its CPU.
-      int32_t skip = q - (r.bx0 + r.by0) % parts;
-      if (skip < 0) skip += parts;
-      for (int32_t by = r.by0; by <= r.by1; ++by) {
-        std::vector<uint32_t>* row = &bins_[static_cast<size_t>(by) * bins_x_];
-        for (int32_t x = r.bx0 + skip; x <= r.bx1; x += parts) {
-          bytes += AddToBin(row + x, id);
-        }
-        skip = skip == 0 ? parts - 1 : skip - 1;
-      }
-    }
-    grew[part] = bytes;
+  bytes_ += AddInParts(
+      bins_x_, first_id, bins, pool,
+      [this](size_t bin, uint32_t id) { return AddToBin(&bins_[bin], id); });
+}
+
+MoveIndexTally::MoveIndexTally(const GridGeometry& grid)
+    : bins_x_((grid.nx() + MoveIndex::kBinElements - 1) /
+              MoveIndex::kBinElements),
+      tails_(static_cast<size_t>(bins_x_) *
+             ((grid.ny() + MoveIndex::kBinElements - 1) /
+              MoveIndex::kBinElements)) {}
+
+void MoveIndexTally::AddAll(uint32_t first_id,
+                            std::span<const MoveIndex::BinRect> bins,
+                            ThreadPool& pool) {
+  // With ids ascending, AddToBin's entries for a run of consecutive ids are
+  // the ids themselves up to two, then two (a range): one entry for the
+  // run's first id and its second, none after. Without branches: a raster
+  // adds hundreds of millions.
+  AddInParts(bins_x_, first_id, bins, pool, [this](size_t bin, uint32_t id) {
+    Tail& t = tails_[bin];
+    const bool next = t.run != 0 && id == t.last + 1;
+    t.entries += next && t.run != 1 ? 0 : 1;
+    t.run = next ? std::min<uint32_t>(t.run + 1, 3) : 1;
+    t.last = id;
+    return int64_t{0};
   });
-  for (const int64_t b : grew) bytes_ += b;
+}
+
+int64_t MoveIndexTally::MemoryBytes() const {
+  // MoveIndex's bins and their capacities: std::vector's push_back
+  // (libstdc++) grows a full vector to twice its size, an empty one to 1,
+  // so n entries pushed take n rounded up to a power of two (MoveIndexTest
+  // checks it against a MoveIndex).
+  int64_t bytes =
+      static_cast<int64_t>(tails_.size() * sizeof(std::vector<uint32_t>));
+  for (const Tail& t : tails_) {
+    if (t.entries > 0) {
+      bytes +=
+          static_cast<int64_t>(std::bit_ceil(t.entries) * sizeof(uint32_t));
+    }
+  }
+  return bytes;
 }
 
 }  // namespace swarf

@@ -37,7 +37,9 @@ class MoveIndex {
   struct BinRect {
     int32_t bx0 = 1, bx1 = 0, by0 = 1, by1 = 0;
   };
-  BinRect BinsOf(const Rect& bounds) const;
+  BinRect BinsOf(const Rect& bounds) const { return BinsOf(grid_, bounds); }
+  // The same for any index over `grid`.
+  static BinRect BinsOf(const GridGeometry& grid, const Rect& bounds);
   // The index that Add(first_id + k, bounds_k) for k = 0, 1, ... in turn
   // gives, where bins[k] = BinsOf(bounds_k) (an empty BinRect adds id
   // first_id + k nowhere): the bins are shared among the pool's threads,
@@ -127,6 +129,31 @@ class MoveIndex {
   int32_t bins_x_, bins_y_;
   std::vector<std::vector<uint32_t>> bins_;
   int64_t bytes_ = 0;
+};
+
+// The bytes a MoveIndex over the same grid would hold (MemoryBytes) after
+// the same AddAll calls, bit for bit, without holding the ids (a memory
+// check before a run, of an index of hundreds of MB): 12 bytes a bin, its
+// entry count, last id and the length of its last run of consecutive ids.
+// Thread safety as MoveIndex's.
+class MoveIndexTally {
+ public:
+  explicit MoveIndexTally(const GridGeometry& grid);
+  // As MoveIndex::AddAll.
+  void AddAll(uint32_t first_id, std::span<const MoveIndex::BinRect> bins,
+              ThreadPool& pool);
+  // O(bins).
+  int64_t MemoryBytes() const;
+
+ private:
+  struct Tail {
+    uint32_t entries = 0;
+    uint32_t last = 0;  // id
+    uint32_t run = 0;   // 0: empty; 1, 2, or 3 for three or more
+  };
+
+  int32_t bins_x_;
+  std::vector<Tail> tails_;
 };
 
 }  // namespace swarf

@@ -389,10 +389,10 @@ namespace {
 // The footprint IndexMove indexes (nullopt: above the top, or beside the
 // stock).
 std::optional<Rect> IndexedFootprint(const Move& move, double z_top,
-                                     const MoveIndex& index) {
+                                     const GridGeometry& grid) {
   const std::optional<Rect> b =
       FootprintBounds(move.from, move.to, move.cutter, z_top);
-  if (!b.has_value() || !b->Intersects(index.grid().bounds())) {
+  if (!b.has_value() || !b->Intersects(grid.bounds())) {
     return std::nullopt;
   }
   return b;
@@ -488,7 +488,7 @@ struct Workpiece::ApplyScratch {
 
 std::optional<Rect> IndexMove(uint32_t id, const Move& move, double z_top,
                               MoveIndex* index) {
-  const std::optional<Rect> b = IndexedFootprint(move, z_top, *index);
+  const std::optional<Rect> b = IndexedFootprint(move, z_top, index->grid());
   // Indexed even when it cuts no node: the exact surface still sees it.
   if (b.has_value()) index->Add(id, *b);
   return b;
@@ -496,8 +496,13 @@ std::optional<Rect> IndexMove(uint32_t id, const Move& move, double z_top,
 
 MoveIndex::BinRect IndexedBins(const Move& move, double z_top,
                                const MoveIndex& index) {
-  const std::optional<Rect> b = IndexedFootprint(move, z_top, index);
-  return b.has_value() ? index.BinsOf(*b) : MoveIndex::BinRect{};
+  return IndexedBins(move, z_top, index.grid());
+}
+
+MoveIndex::BinRect IndexedBins(const Move& move, double z_top,
+                               const GridGeometry& grid) {
+  const std::optional<Rect> b = IndexedFootprint(move, z_top, grid);
+  return b.has_value() ? MoveIndex::BinsOf(grid, *b) : MoveIndex::BinRect{};
 }
 
 absl::Status Workpiece::AdmitMoves(std::span<const Move> moves) const {
@@ -558,7 +563,7 @@ absl::StatusOr<ApplyResult> Workpiece::Apply(std::span<const Move> moves,
     for (size_t m = static_cast<size_t>(c * kPrepChunk); m < m1; ++m) {
       batch.Build(m, moves[m]);
       const std::optional<Rect> footprint =
-          IndexedFootprint(moves[m], spec().z_top, index_);
+          IndexedFootprint(moves[m], spec().z_top, grid_);
       if (!footprint.has_value()) continue;
       const Rect& b = *footprint;
       bins[m] = index_.BinsOf(b);

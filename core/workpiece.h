@@ -125,6 +125,9 @@ std::optional<Rect> IndexMove(uint32_t id, const Move& move, double z_top,
 // empty BinRect: none), for MoveIndex::AddAll. Thread-safe.
 MoveIndex::BinRect IndexedBins(const Move& move, double z_top,
                                const MoveIndex& index);
+// The same for an index over `grid` (a MoveIndexTally's).
+MoveIndex::BinRect IndexedBins(const Move& move, double z_top,
+                               const GridGeometry& grid);
 
 // Physical bounds on moves (mm). With kMinRadius and kMaxRadius
 // (core/cutter/cutter.h) they keep every intermediate value of the sweep

@@ -179,6 +179,70 @@ TEST(MoveIndexTest, AddAllIsAddInOrder) {
   }
 }
 
+// The tally's bytes are the index's, bit for bit, after every batch of
+// AddAll: ranges that grow, singletons that become ranges, gaps, every
+// capacity doubling (bins of up to thousands of entries), boxes beside the
+// grid and none, with any thread count.
+TEST(MoveIndexTest, TallyHoldsTheIndexsBytes) {
+  for (int threads : {1, 2, 7, 16}) {
+    SCOPED_TRACE(threads);
+    ThreadPool pool(threads);
+    const GridGeometry grid = Square(64, 64);
+    MoveIndex index(grid);
+    MoveIndexTally tally(grid);
+    EXPECT_EQ(tally.MemoryBytes(), index.MemoryBytes());
+    std::mt19937 rng(100 + threads);
+    uint32_t id = 0;
+    for (int batch = 0; batch < 40; ++batch) {
+      const uint32_t first = id;
+      std::vector<MoveIndex::BinRect> bins;
+      const int n = static_cast<int>(rng() % 600);
+      for (int k = 0; k < n; ++k) {
+        if (rng() % 5 == 0) {  // an id left out: a gap in the bins' runs
+          bins.push_back({});
+          ++id;
+        }
+        const double x = static_cast<double>(rng() % 80) - 10;
+        const double y = static_cast<double>(rng() % 80) - 10;
+        const int run = 1 + static_cast<int>(rng() % 5);
+        for (int r = 0; r < run && k < n; ++r, ++k) {
+          const Rect b{x, y, x + (rng() % 4) * 11.0, y + (rng() % 3) * 13.0};
+          bins.push_back(MoveIndex::BinsOf(grid, b));
+          ++id;
+        }
+      }
+      index.AddAll(first, bins, pool);
+      tally.AddAll(first, bins, pool);
+      ASSERT_EQ(tally.MemoryBytes(), index.MemoryBytes()) << "batch " << batch;
+    }
+    EXPECT_GT(index.MemoryBytes(),
+              static_cast<int64_t>(index.bins_x() * index.bins_y() *
+                                   sizeof(std::vector<uint32_t>)));
+  }
+}
+
+// The same for a raster of short moves, whose passes cross each bin in long
+// runs of consecutive ids.
+TEST(MoveIndexTest, TallyHoldsARastersBytes) {
+  ThreadPool pool(3);
+  const GridGeometry grid = Square(100, 2000);
+  MoveIndex index(grid);
+  MoveIndexTally tally(grid);
+  std::vector<MoveIndex::BinRect> bins;
+  uint32_t first = 0, id = 0;
+  for (double y = 0; y <= 100; y += 0.5) {
+    for (double x = 0; x < 100; x += 0.1) {
+      bins.push_back(MoveIndex::BinsOf(grid, {x - 2, y - 2, x + 2.1, y + 2}));
+      ++id;
+    }
+    index.AddAll(first, bins, pool);
+    tally.AddAll(first, bins, pool);
+    bins.clear();
+    first = id;
+  }
+  EXPECT_EQ(tally.MemoryBytes(), index.MemoryBytes());
+}
+
 // A raster's pass crosses a bin in many consecutive moves: a few bytes a
 // move instead of 4 a bin.
 TEST(MoveIndexTest, ARasterTakesAFewBytesAMove) {

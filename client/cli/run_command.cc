@@ -246,15 +246,16 @@ int64_t AvailableMemoryBytes() {
 
 // What the moves of a run take at least (bytes): the server keeps each in
 // its MoveList and lists it in the bins of its move index that the move's
-// footprint below the top reaches (the index is built here, as the server
-// builds it, and measured); the client keeps the parsed point and its feed
-// until the last batch is acknowledged, and its outputs read the embedded
-// session's index (pinned), not one of their own. Sets *index_bytes to the
-// index's part.
+// footprint below the top reaches (its bytes tallied here as the server's
+// index grows, without holding the ids: MoveIndexTally); the client keeps
+// the parsed point and its feed until the last batch is acknowledged, and
+// its outputs read the embedded session's index (pinned), not one of their
+// own. Sets *index_bytes to the index's part.
 int64_t MovesMemoryBytes(const Toolpath& path,
                          const std::map<int, Cutter>& tools,
                          const StockSpec& stock, int64_t* index_bytes) {
-  MoveIndex index{GridGeometry(stock)};
+  const GridGeometry grid(stock);
+  MoveIndexTally index(grid);
   const auto& points = path.points();
   // A chunk of moves at a time, their bins found on every thread and added
   // as the server adds a batch (AddAll): on one thread this was a serial
@@ -277,7 +278,7 @@ int64_t MovesMemoryBytes(const Toolpath& path,
         const size_t k = at[m];
         bins[m] = IndexedBins(Move(points[k - 1].position, points[k].position,
                                    tools.at(points[k].tool)),
-                              stock.z_top, index);
+                              stock.z_top, grid);
       }
     });
     index.AddAll(first_id, bins, pool);
