@@ -26,6 +26,8 @@
 
 namespace swarf {
 
+class ThreadPool;
+
 inline constexpr size_t kHugePageBytes = size_t{2} << 20;
 // The smallest allocation the global operator new of core/huge_new.cc
 // advises: one that holds at least one whole aligned huge page.
@@ -36,6 +38,15 @@ inline constexpr size_t kHugeAllocationBytes = size_t{4} << 20;
 // either end are left as they are. Returns whether the kernel took the
 // advice (false: no whole page inside, no THP support, or not Linux).
 bool AdviseHugePages(void* p, size_t bytes);
+
+// Faults in the pages of [p, p + bytes) as if written (madvise
+// MADV_POPULATE_WRITE: contents unchanged), a piece on each of the pool's
+// threads: for memory that one thread is about to fill, whose page faults
+// (each zeroing a page, 2 MiB at once on huge pages) would otherwise be a
+// serial step. The memory must be this process's own, private and
+// writable. Returns whether the kernel took it all (false: before Linux
+// 5.14, or not Linux; memory works the same). Blocks until done.
+bool PopulatePages(void* p, size_t bytes, ThreadPool& pool);
 
 }  // namespace swarf
 

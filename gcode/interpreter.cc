@@ -69,7 +69,8 @@ absl::StatusOr<Toolpath> Interpreter::Run(std::string_view text) {
   // fresh pages: the slowest part of parsing, see docs/benchmarks.md);
   // loops and long arcs grow the vector past it.
   const int64_t lines = std::count(text.begin(), text.end(), '\n') + 1;
-  path_.Reserve(std::min<int64_t>(lines + lines / 5, options_.max_points));
+  path_.Reserve(std::min<int64_t>(lines + lines / 5, options_.max_points),
+                std::min<int64_t>(lines, options_.max_points));
 
   Block& block = block_;
   bool seen_content = false;   // a non-blank line was read

@@ -15,7 +15,9 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "core/huge_pages.h"
 #include "core/status_macros.h"
+#include "core/thread_pool.h"
 #include "gcode/text.h"
 
 namespace swarf::gcode {
@@ -138,6 +140,19 @@ std::vector<ToolpathRun> SplitRuns(
     runs.back().end = static_cast<int64_t>(k) + 1;
   }
   return runs;
+}
+
+void Toolpath::Reserve(int64_t points, int64_t expected) {
+  points_.reserve(points);
+  feeds_.reserve(points);
+  const int64_t n = std::clamp<int64_t>(expected, 0, points);
+  // Past what is held already; reserve() may have moved the storage.
+  const size_t held = points_.size();
+  if (static_cast<size_t>(n) <= held) return;
+  ThreadPool& pool = ThreadPool::Default();
+  PopulatePages(points_.data() + held, (n - held) * sizeof(ToolpathPoint),
+                pool);
+  PopulatePages(feeds_.data() + held, (n - held) * sizeof(float), pool);
 }
 
 void Toolpath::Append(const ToolpathPoint& p) { Append(p, -1); }
@@ -270,8 +285,9 @@ absl::StatusOr<Toolpath> ParseXyz(std::string_view text, int64_t max_points) {
   static constexpr char kAxis[3] = {'x', 'y', 'z'};
   Toolpath path;
   // A point per line at most.
-  path.Reserve(std::min<int64_t>(
-      std::count(text.begin(), text.end(), '\n') + 1, max_points));
+  const int64_t lines = std::min<int64_t>(
+      std::count(text.begin(), text.end(), '\n') + 1, max_points);
+  path.Reserve(lines, lines);
   const char* p = SkipBom(text.data(), text.data() + text.size());
   const char* const end = text.data() + text.size();
   int64_t line = 0;

@@ -157,10 +157,11 @@ class Toolpath {
   void NoteToolSelected(int tool, int32_t line) {
     tool_selected_.emplace(tool, line);
   }
-  void Reserve(int64_t points) {
-    points_.reserve(points);
-    feeds_.reserve(points);
-  }
+  // Room for `points` points, the pages of the first `expected` of them
+  // (at most `points`) faulted in on every thread (PopulatePages): written
+  // one by one as a program is read, their page faults were the slowest
+  // part of reading a large one.
+  void Reserve(int64_t points, int64_t expected = 0);
   // Gives back capacity beyond half the size over it (a trim copies every
   // point into freshly faulted memory: slow, so only for a large waste).
   void Trim() {

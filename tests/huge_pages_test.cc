@@ -3,8 +3,11 @@
 // (core/huge_new.cc, linked into this test as into swarf and swarfd)
 // advises every allocation of kHugeAllocationBytes or more. The advice is
 // read back from the kernel: the "hg" flag of the mapping in
-// /proc/self/smaps.
+// /proc/self/smaps. PopulatePages faults a range in (read back with
+// mincore) and leaves its contents as they were.
 #include "core/huge_pages.h"
+
+#include "core/thread_pool.h"
 
 #include <gtest/gtest.h>
 #include <sys/mman.h>
@@ -149,6 +152,56 @@ TEST_F(HugePagesTest, FailedAllocationsStillThrowOrReturnNull) {
   EXPECT_EQ(calls, 3);
   std::set_new_handler(nullptr);
 #endif
+}
+
+// Whether each 4 KiB page of [p, p + bytes) is resident.
+std::vector<bool> Resident(const char* p, size_t bytes) {
+  std::vector<unsigned char> v(bytes / 4096);
+  EXPECT_EQ(mincore(const_cast<char*>(p), bytes, v.data()), 0);
+  std::vector<bool> out;
+  for (const unsigned char c : v) out.push_back((c & 1) != 0);
+  return out;
+}
+
+// The pages a range touches are faulted in, over several threads' pieces,
+// and no others; what was written stays, the rest reads zero.
+TEST(PopulatePagesTest, FaultsInTheRangesPagesKeepingTheirContents) {
+  constexpr size_t kPage = 4096;
+  const size_t bytes = 40 << 20;  // several pieces of 16 MiB
+  char* m = static_cast<char*>(mmap(nullptr, bytes, PROT_READ | PROT_WRITE,
+                                    MAP_PRIVATE | MAP_ANONYMOUS, -1, 0));
+  ASSERT_NE(m, MAP_FAILED);
+  // 4 KiB pages whatever the machine's huge page setting: residency is
+  // then counted page by page.
+  madvise(m, bytes, MADV_NOHUGEPAGE);
+  std::memset(m + 5 * kPage, 0x5a, 3 * kPage);
+  m[bytes - 3 * kPage + 7] = 9;
+  std::vector<bool> before = Resident(m, bytes);
+  EXPECT_TRUE(before[5]);
+  EXPECT_FALSE(before[100]);
+  ThreadPool pool(3);
+  // From the middle of page 1 to the middle of the third page from the end.
+  const size_t lo = kPage + 100, hi = bytes - 3 * kPage + 100;
+  EXPECT_TRUE(PopulatePages(m, 0, pool));
+  if (!PopulatePages(m + lo, hi - lo, pool)) {
+    munmap(m, bytes);
+    GTEST_SKIP() << "this kernel has no MADV_POPULATE_WRITE (Linux 5.14)";
+  }
+  const std::vector<bool> after = Resident(m, bytes);
+  const size_t pages = bytes / kPage;
+  EXPECT_FALSE(after[0]);
+  for (size_t k = 1; k <= (hi - 1) / kPage; ++k) {
+    ASSERT_TRUE(after[k]) << "page " << k;
+  }
+  for (size_t k = (hi - 1) / kPage + 1; k < pages; ++k) {
+    EXPECT_EQ(after[k], before[k]) << "page " << k;
+  }
+  for (size_t k = 0; k < bytes; k += 997) {
+    const bool written = (k >= 5 * kPage && k < 8 * kPage);
+    ASSERT_EQ(m[k], written ? 0x5a : 0) << "byte " << k;
+  }
+  EXPECT_EQ(m[bytes - 3 * kPage + 7], 9);
+  munmap(m, bytes);
 }
 
 }  // namespace
