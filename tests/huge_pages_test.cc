@@ -7,8 +7,6 @@
 // mincore) and leaves its contents as they were.
 #include "core/huge_pages.h"
 
-#include "core/thread_pool.h"
-
 #include <gtest/gtest.h>
 #include <sys/mman.h>
 #include <unistd.h>
@@ -21,6 +19,8 @@
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include "core/thread_pool.h"
 
 namespace swarf {
 namespace {

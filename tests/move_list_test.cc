@@ -144,12 +144,15 @@ TEST(MoveIndexTest, RangesListTheSameIdsAsAPlainList) {
 // id order gives: every bin's ids (ranges, gaps) and the bytes held, for
 // boxes over one bin, many, the grid's edges and none, ids left out (an
 // empty BinRect), with any thread count (more parts than bins along a row,
-// too), batch after batch.
+// too), batch after batch. A MoveIndexTally given the same batches holds
+// the same bytes after each, bit for bit (runs that grow into ranges, gaps,
+// every doubling of a bin's capacity).
 TEST(MoveIndexTest, AddAllIsAddInOrder) {
   for (int threads : {1, 2, 3, 7, 16}) {
     SCOPED_TRACE(threads);
     ThreadPool pool(threads);
     MoveIndex one(Square(64, 64)), all(Square(64, 64));
+    MoveIndexTally tally(Square(64, 64));
     std::mt19937 rng(threads);
     uint32_t id = 0;
     for (int batch = 0; batch < 20; ++batch) {
@@ -168,6 +171,8 @@ TEST(MoveIndexTest, AddAllIsAddInOrder) {
         bins.push_back(all.BinsOf(b));
       }
       all.AddAll(first, bins, pool);
+      tally.AddAll(first, bins, pool);
+      ASSERT_EQ(tally.MemoryBytes(), all.MemoryBytes()) << "batch " << batch;
     }
     EXPECT_EQ(all.MemoryBytes(), one.MemoryBytes());
     std::vector<uint32_t> want, got;
@@ -179,50 +184,8 @@ TEST(MoveIndexTest, AddAllIsAddInOrder) {
   }
 }
 
-// The tally's bytes are the index's, bit for bit, after every batch of
-// AddAll: ranges that grow, singletons that become ranges, gaps, every
-// capacity doubling (bins of up to thousands of entries), boxes beside the
-// grid and none, with any thread count.
-TEST(MoveIndexTest, TallyHoldsTheIndexsBytes) {
-  for (int threads : {1, 2, 7, 16}) {
-    SCOPED_TRACE(threads);
-    ThreadPool pool(threads);
-    const GridGeometry grid = Square(64, 64);
-    MoveIndex index(grid);
-    MoveIndexTally tally(grid);
-    EXPECT_EQ(tally.MemoryBytes(), index.MemoryBytes());
-    std::mt19937 rng(100 + threads);
-    uint32_t id = 0;
-    for (int batch = 0; batch < 40; ++batch) {
-      const uint32_t first = id;
-      std::vector<MoveIndex::BinRect> bins;
-      const int n = static_cast<int>(rng() % 600);
-      for (int k = 0; k < n; ++k) {
-        if (rng() % 5 == 0) {  // an id left out: a gap in the bins' runs
-          bins.push_back({});
-          ++id;
-        }
-        const double x = static_cast<double>(rng() % 80) - 10;
-        const double y = static_cast<double>(rng() % 80) - 10;
-        const int run = 1 + static_cast<int>(rng() % 5);
-        for (int r = 0; r < run && k < n; ++r, ++k) {
-          const Rect b{x, y, x + (rng() % 4) * 11.0, y + (rng() % 3) * 13.0};
-          bins.push_back(MoveIndex::BinsOf(grid, b));
-          ++id;
-        }
-      }
-      index.AddAll(first, bins, pool);
-      tally.AddAll(first, bins, pool);
-      ASSERT_EQ(tally.MemoryBytes(), index.MemoryBytes()) << "batch " << batch;
-    }
-    EXPECT_GT(index.MemoryBytes(),
-              static_cast<int64_t>(index.bins_x() * index.bins_y() *
-                                   sizeof(std::vector<uint32_t>)));
-  }
-}
-
-// The same for a raster of short moves, whose passes cross each bin in long
-// runs of consecutive ids.
+// A tally's bytes are the index's for a raster of short moves too, whose
+// passes cross each bin in long runs of consecutive ids.
 TEST(MoveIndexTest, TallyHoldsARastersBytes) {
   ThreadPool pool(3);
   const GridGeometry grid = Square(100, 2000);
