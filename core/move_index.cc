@@ -62,8 +62,8 @@ int64_t AddInParts(int32_t bins_x, uint32_t first_id,
 
 MoveIndex::MoveIndex(const GridGeometry& grid)
     : grid_(grid),
-      bins_x_((grid.nx() + kBinElements - 1) / kBinElements),
-      bins_y_((grid.ny() + kBinElements - 1) / kBinElements),
+      bins_x_(BinsAlong(grid.nx())),
+      bins_y_(BinsAlong(grid.ny())),
       bins_(static_cast<size_t>(bins_x_) * bins_y_),
       bytes_(
           static_cast<int64_t>(bins_.size() * sizeof(std::vector<uint32_t>))) {}
@@ -94,9 +94,8 @@ void MoveIndex::BinIds(int32_t b, std::vector<uint32_t>* ids) const {
   for (const uint32_t id : Bin(b)) ids->push_back(id);
 }
 
-MoveIndex::BinRect MoveIndex::BinsOf(const GridGeometry& grid, const Rect& b) {
-  const int32_t bins_x = (grid.nx() + kBinElements - 1) / kBinElements;
-  const int32_t bins_y = (grid.ny() + kBinElements - 1) / kBinElements;
+MoveIndex::BinRect MoveIndex::BinsOf(const GridGeometry& grid, int32_t bins_x,
+                                     int32_t bins_y, const Rect& b) {
   const auto [bx0, bx1] =
       BinRange(b.x0, b.x1, grid.spec().x0, grid.dx() * kBinElements, bins_x);
   const auto [by0, by1] =
@@ -121,11 +120,8 @@ void MoveIndex::AddAll(uint32_t first_id, std::span<const BinRect> bins,
 }
 
 MoveIndexTally::MoveIndexTally(const GridGeometry& grid)
-    : bins_x_((grid.nx() + MoveIndex::kBinElements - 1) /
-              MoveIndex::kBinElements),
-      tails_(static_cast<size_t>(bins_x_) *
-             ((grid.ny() + MoveIndex::kBinElements - 1) /
-              MoveIndex::kBinElements)) {}
+    : bins_x_(MoveIndex::BinsAlong(grid.nx())),
+      tails_(static_cast<size_t>(bins_x_) * MoveIndex::BinsAlong(grid.ny())) {}
 
 void MoveIndexTally::AddAll(uint32_t first_id,
                             std::span<const MoveIndex::BinRect> bins,

@@ -27,6 +27,11 @@ class MoveIndex {
 
   explicit MoveIndex(const GridGeometry& grid);
 
+  // The bins along an axis of `elements` elements.
+  static constexpr int32_t BinsAlong(int32_t elements) {
+    return (elements + kBinElements - 1) / kBinElements;
+  }
+
   // Records move `id` (< 2^31, and above every id already added to the
   // bins it reaches) under every bin its footprint's bounding box
   // (BallSweep::FootprintBounds) touches.
@@ -37,9 +42,13 @@ class MoveIndex {
   struct BinRect {
     int32_t bx0 = 1, bx1 = 0, by0 = 1, by1 = 0;
   };
-  BinRect BinsOf(const Rect& bounds) const { return BinsOf(grid_, bounds); }
+  BinRect BinsOf(const Rect& bounds) const {
+    return BinsOf(grid_, bins_x_, bins_y_, bounds);
+  }
   // The same for any index over `grid`.
-  static BinRect BinsOf(const GridGeometry& grid, const Rect& bounds);
+  static BinRect BinsOf(const GridGeometry& grid, const Rect& bounds) {
+    return BinsOf(grid, BinsAlong(grid.nx()), BinsAlong(grid.ny()), bounds);
+  }
   // The index that Add(first_id + k, bounds_k) for k = 0, 1, ... in turn
   // gives, where bins[k] = BinsOf(bounds_k) (an empty BinRect adds id
   // first_id + k nowhere): the bins are shared among the pool's threads,
@@ -122,6 +131,9 @@ class MoveIndex {
  private:
   // An entry with this bit starts a range; the next entry is its last id.
   static constexpr uint32_t kRangeBit = uint32_t{1} << 31;
+  // BinsOf over `grid`, whose bins are bins_x x bins_y.
+  static BinRect BinsOf(const GridGeometry& grid, int32_t bins_x,
+                        int32_t bins_y, const Rect& bounds);
   // Returns the bytes the bin's capacity grew by.
   static int64_t AddToBin(std::vector<uint32_t>* bin, uint32_t id);
 
