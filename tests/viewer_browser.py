@@ -4,6 +4,10 @@
 Run by tests/viewer_browser_test.cc, which starts the viewer and streams the
 job; this side speaks on stdout, one line each:
   READY                the page loaded and drew its mesh (stream now)
+  SEEN moves           (stream mode, twice) tiles arrived for a state of the
+                       job cut up to `moves` (0 < moves < the total, the
+                       second above the first): the test paces the job on
+                       these lines, not on time
   PROBE x y z          a height read under the pointer (repr floats), for
                        the test to compare with the API's Probe
   OK | FAIL reason     the verdict of the checks made here
@@ -86,6 +90,19 @@ def run(driver, url, total, shot, mode):
     if errors:
         fail('console errors after loading: %r' % errors)
     say('READY')
+
+    if mode == 'stream':
+        # The job pauses until each line: however slow this page on a busy
+        # machine, it must fetch a part-cut state.
+        seen = 0
+        for _ in range(2):
+            seen = wait_for(
+                driver, 'for (const e of window.swarf.stats.tileLog) '
+                'if (e.tiles > 0 && e.moves > %d && e.moves < %d) '
+                'return e.moves; return 0' % (seen, total),
+                'tiles while the job streams (after %d moves)' % seen,
+                timeout=120)
+            say('SEEN %d' % seen)
 
     # The job ends: every move applied and the page holds the last version.
     wait_for(driver, 'const s = window.swarf.state; return s && s.moves === %d '

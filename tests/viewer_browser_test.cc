@@ -247,13 +247,18 @@ TEST(ViewerBrowserTest, AttachedViewerFollowsAStreamedJob) {
   ASSERT_TRUE(script.ReadLine(&line));
   ASSERT_EQ(line, "READY");
 
-  // Another client streams the job, one pass per batch, paced so that the
-  // page sees it being cut (300 ms a batch: at 150 ms, a page slowed by a
-  // busy machine fetched tiles once while the job streamed).
+  // Another client streams the job, one pass per batch. It pauses after a
+  // third and after two thirds of the passes until the page says it fetched
+  // tiles of a part-cut state (SEEN): paced on time alone (300 ms a batch),
+  // a page slowed by a busy machine saw the job's states in bursts seconds
+  // apart, and fetched tiles once or not at all while the job streamed.
   {
     auto c = ctx();
     auto stream = stub->Simulate(c.get());
     uint64_t seq = 0;
+    int64_t sent = 0;
+    const size_t pause_at[2] = {passes.size() / 3, 2 * passes.size() / 3};
+    int64_t last_seen = 0;
     for (const auto& xyz : passes) {
       pb::SimulateRequest req;
       auto* b = req.mutable_moves();
@@ -264,7 +269,20 @@ TEST(ViewerBrowserTest, AttachedViewerFollowsAStreamedJob) {
       pb::SimulateResponse resp;
       ASSERT_TRUE(stream->Read(&resp));
       ASSERT_TRUE(resp.has_ack()) << resp.DebugString();
-      std::this_thread::sleep_for(std::chrono::milliseconds(300));
+      sent += static_cast<int64_t>(xyz.size() / 3) - (seq == 1 ? 1 : 0);
+      if (seq == pause_at[0] || seq == pause_at[1]) {
+        ASSERT_TRUE(script.ReadLine(&line)) << "no SEEN after " << sent;
+        std::fprintf(stderr, "viewer_browser.py: %s\n", line.c_str());
+        ASSERT_EQ(line.rfind("SEEN ", 0), 0u) << line;
+        const int64_t seen = std::stoll(line.substr(5));
+        // A state the page saw is one the job was in: part-cut, and not
+        // ahead of what was sent.
+        EXPECT_GT(seen, last_seen);
+        EXPECT_LE(seen, sent);
+        last_seen = seen;
+      } else {
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+      }
     }
     stream->WritesDone();
     ASSERT_TRUE(stream->Finish().ok());
