@@ -258,7 +258,7 @@ void BM_Restart(benchmark::State& state) {
     server::SessionSpec spec;
     spec.id = "long-job";
     spec.stock = kStock;
-    spec.tools = {{1, Cutter::Ball(kBallRadius)}};
+    spec.tools = {{1, Cutter::Ball(kBallRadius), {}}};
     auto s = *r.Create(spec);
     std::vector<double> xyz;
     uint64_t seq = 0;

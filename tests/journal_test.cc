@@ -42,7 +42,7 @@ SessionSpec Spec(const std::string& id) {
   s.id = id;
   s.stock = {0, 0, 10, 10, 0, 100, 100};
   s.scheme = SchemeKind::kTaylor;
-  s.tools = {{1, Cutter::Ball(0.5)}};
+  s.tools = {{1, Cutter::Ball(0.5), {}}};
   return s;
 }
 
@@ -211,11 +211,11 @@ TEST_F(JournalTest, BallDefinitionIsTheBytesOfEarlierJournals) {
 // journal with the same tools and the same nodes.
 TEST_F(JournalTest, EveryCutterShapeRestoresWithItsTools) {
   SessionSpec spec = Spec("shapes");
-  spec.tools = {{1, Cutter::Ball(0.5)},
-                {2, Cutter::Flat(0.4)},
-                {3, Cutter::BullNose(0.6, 0.2)},
-                {4, Cutter::Cone(0.7, 30, 0.05)},
-                {5, Cutter::TaperedBall(0.8, 0.25, 8)}};
+  spec.tools = {{1, Cutter::Ball(0.5), {}},
+                {2, Cutter::Flat(0.4), {}},
+                {3, Cutter::BullNose(0.6, 0.2), {}},
+                {4, Cutter::Cone(0.7, 30, 0.05), {}},
+                {5, Cutter::TaperedBall(0.8, 0.25, 8), {}}};
   NodeState cut;
   {
     Registry r(Limits{}, Durable());

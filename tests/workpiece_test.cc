@@ -645,7 +645,9 @@ TEST(WorkpieceTest, CutsOfABatchAreEachMovesOwn) {
       removed += got.removed_mm3;
     }
     EXPECT_GT(cutting, 500);  // the mix really cuts (564 moves)
-    if (limited) EXPECT_GT(over, 100);
+    if (limited) {
+      EXPECT_GT(over, 100);
+    }
     double by_nodes = 0;  // the stock's volume minus the nodes'
     for (int32_t j = 0; j <= batch->grid().ny(); ++j) {
       for (int32_t i = 0; i <= batch->grid().nx(); ++i) {

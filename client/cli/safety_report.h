@@ -147,7 +147,7 @@ class SafetyCollector {
   std::map<LineKey, Amount> by_line_;  // repeated lines only
   std::map<LineKey, Amount> air_by_line_;
   Group group_;
-  TopLines top_lines_{&Amount::volume}, top_air_{&Amount::mm};
+  TopLines top_lines_{&Amount::volume, {}}, top_air_{&Amount::mm, {}};
   // load.png, drawn as the moves come: the removed volume per column of
   // equal program time (the program's time is known from the path).
   static constexpr int kLoadW = 1000, kLoadLeft = 70, kLoadRight = 20;
