@@ -123,7 +123,8 @@ absl::Status MapFits(int32_t cols, int32_t rows, int64_t limit) {
                                   " cells"));
 }
 
-// GetDeviation's answer (also a Simulate stream's DeviationRequest).
+}  // namespace
+
 absl::StatusOr<pb::Deviation> ComputeDeviation(const Session& session,
                                                const pb::DeviationRequest& req,
                                                int64_t max_message_bytes) {
@@ -252,6 +253,8 @@ absl::StatusOr<pb::Deviation> ComputeDeviation(const Session& session,
   }
   return out;
 }
+
+namespace {
 
 // The kind of request a RequestError answers.
 pb::RequestKind KindOf(pb::SimulateRequest::RequestCase c) {

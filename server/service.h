@@ -21,6 +21,16 @@
 
 namespace swarf::server {
 
+// GetDeviation's answer, also a Simulate stream's DeviationRequest: the
+// session's machined surface against its design, read band by band under
+// the session's shared lock (a batch applied meanwhile restarts the pass).
+// FailedPrecondition without a design; InvalidArgument for bad options;
+// ResourceExhausted when the answer would exceed max_message_bytes.
+// Thread-safe.
+absl::StatusOr<::swarf::v1::Deviation> ComputeDeviation(
+    const Session& session, const ::swarf::v1::DeviationRequest& req,
+    int64_t max_message_bytes);
+
 // Metadata naming the session on every session call (for load balancers).
 inline constexpr char kSessionMetadata[] = "x-swarf-session";
 // Response metadata naming the replica that served the call.

@@ -36,6 +36,7 @@
 #include "server/convert.h"
 #include "server/program.h"
 #include "server/registry.h"
+#include "server/service.h"
 #include "server/session.h"
 #include "swarf/v1/swarf.pb.h"
 #include "tests/fuzz/fuzz_check.h"
@@ -80,7 +81,7 @@ std::shared_ptr<Session> NewSession(SchemeKind scheme, int32_t nx,
   spec.id = "fuzz";
   spec.stock = {0, 0, 10, 10, 0, nx, ny};
   spec.scheme = scheme;
-  spec.tools = {{1, Cutter::Ball(1.0)}, {2, Cutter::Ball(0.25)}};
+  spec.tools = {{1, Cutter::Ball(1.0), {}}, {2, Cutter::Ball(0.25), {}}};
   auto s = Session::Create(std::move(spec));
   FUZZ_CHECK(s.ok());
   return *s;
@@ -440,6 +441,50 @@ void FuzzProgram(const Session& s, const pb::ProgramChunk& c) {
   FUZZ_CHECK(moves == p->moves && moves == p->path.move_count());
 }
 
+// The design the streams' sessions get: a plane sloping along x from 0.2 to
+// 0.7 mm below the top, a little larger than the stock (every node has
+// design above it), so that the stream's cuts both gouge and leave excess.
+constexpr char kStreamDesign[] =
+    "solid fuzz\n"
+    "facet normal 0 0 1\nouter loop\nvertex -1 -1 -0.15\n"
+    "vertex 11 -1 -0.75\nvertex 11 11 -0.75\nendloop\nendfacet\n"
+    "facet normal 0 0 1\nouter loop\nvertex -1 -1 -0.15\n"
+    "vertex 11 11 -0.75\nvertex -1 11 -0.15\nendloop\nendfacet\n"
+    "endsolid fuzz\n";
+
+void FuzzDeviation(const Session& s, const pb::DeviationRequest& req) {
+  auto d = ComputeDeviation(s, req, Limits{}.max_message_bytes);
+  if (!d.ok()) {
+    // The options only: the session has a design.
+    FUZZ_CHECK(d.status().code() == absl::StatusCode::kInvalidArgument);
+    return;
+  }
+  FUZZ_CHECK(d->triangles() == 2);
+  FUZZ_CHECK(d->nodes() == 71 * 11 && d->samples() >= d->nodes());
+  for (double v :
+       {d->gouge_max(), d->excess_max(), d->excess_mean(),
+        d->gouge_volume_mm3(), d->excess_volume_mm3(), d->normal_gouge_max(),
+        d->normal_excess_max(), d->out_of_tolerance_area_mm2()}) {
+    FUZZ_CHECK(std::isfinite(v) && v >= 0);
+  }
+  FUZZ_CHECK(d->allowance() == req.allowance());
+  FUZZ_CHECK(d->tolerance() ==
+             (req.has_tolerance() ? req.tolerance().value() : 0.01));
+  const int listed = req.max_moves() > 0 ? req.max_moves() : 50;
+  const int64_t moves =
+      s.Read([](const Workpiece& wp) { return wp.move_count(); });
+  for (const auto* list : {&d->gouge_moves(), &d->excess_moves()}) {
+    FUZZ_CHECK(list->size() <= listed);
+    double last = kInf;
+    for (const pb::DeviationMove& m : *list) {
+      FUZZ_CHECK(m.move() >= 0 && m.move() < moves);
+      FUZZ_CHECK(m.depth() > 0 && m.depth() <= last);  // deepest first
+      last = m.depth();
+    }
+  }
+  FUZZ_CHECK(d->gouge_move() >= -1 && d->gouge_move() < moves);
+}
+
 void FuzzSimulate(Session& s, const pb::SimulateRequest& req) {
   switch (req.request_case()) {
     case pb::SimulateRequest::kMoves:
@@ -471,6 +516,8 @@ void FuzzSimulate(Session& s, const pb::SimulateRequest& req) {
                        r.precision(), r.include_derivatives(),
                        r.include_owners(), /*fill=*/false);
     }
+    case pb::SimulateRequest::kDeviation:
+      return FuzzDeviation(s, req.deviation());
     case pb::SimulateRequest::REQUEST_NOT_SET:
       return;
   }
@@ -480,6 +527,10 @@ void FuzzStream(SchemeKind scheme, const uint8_t* data, size_t size) {
   // 70 x 10 elements (2 x 1 tiles): the per-element passes of stats and
   // marks stay cheap.
   std::shared_ptr<Session> s = NewSession(scheme, 70, 10);
+  DesignChunk design;
+  design.data = kStreamDesign;
+  design.last = true;
+  FUZZ_CHECK(s->AddDesignChunk(design).ok());
   google::protobuf::io::ArrayInputStream in(data, static_cast<int>(size));
   google::protobuf::io::CodedInputStream coded(&in);
   for (int k = 0; k < kMaxStreamRequests; ++k) {

@@ -95,6 +95,18 @@ pb::SimulateRequest Marks(uint64_t id) {
   return r;
 }
 
+pb::SimulateRequest Deviation(uint64_t id, double allowance, int samples,
+                              int max_moves) {
+  pb::SimulateRequest r;
+  pb::DeviationRequest* d = r.mutable_deviation();
+  d->set_request_id(id);
+  d->set_allowance(allowance);
+  d->mutable_tolerance()->set_value(0.02);
+  d->mutable_samples_per_edge()->set_value(samples);
+  d->set_max_moves(max_moves);
+  return r;
+}
+
 pb::SimulateRequest Subscribe(uint64_t id) {
   pb::SimulateRequest r;
   r.mutable_subscribe()->set_request_id(id);
@@ -169,6 +181,12 @@ int main(int argc, char** argv) {
   seeds.Write(
       "stream_zmap", kStream + kZmap,
       Stream({Batch(1, 1, line), Tiles(2, true, true), Stats(3, 0, 0)}));
+  // The deviation from the streams' design: answered, then a negative
+  // allowance, too many samples and a negative move count (each refused).
+  seeds.Write("stream_deviation", kStream,
+              Stream({Batch(1, 1, line), Deviation(2, 0.1, 3, 1),
+                      Deviation(3, -1, 3, 0), Deviation(4, 0, 65, 0),
+                      Deviation(5, 0, 0, -1)}));
   seeds.Write("stream_gap_dup", kStream,
               Stream({Batch(1, 1, line), Batch(1, 1, line), Batch(3, 1, line),
                       Batch(2, 1, {2, 2, -1})}));
