@@ -25,9 +25,11 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "absl/status/status.h"
+#include "client/outputs/deviation.h"
 #include "core/valuation.h"
 #include "core/workpiece.h"
 #include "google/protobuf/io/coded_stream.h"
@@ -460,8 +462,13 @@ void FuzzDeviation(const Session& s, const pb::DeviationRequest& req) {
     FUZZ_CHECK(d.status().code() == absl::StatusCode::kInvalidArgument);
     return;
   }
+  // Every node has design above it.
+  const auto [nodes, moves] = s.Read([](const Workpiece& wp) {
+    return std::pair<int64_t, int64_t>(
+        int64_t{wp.grid().nodes_x()} * wp.grid().nodes_y(), wp.move_count());
+  });
   FUZZ_CHECK(d->triangles() == 2);
-  FUZZ_CHECK(d->nodes() == 71 * 11 && d->samples() >= d->nodes());
+  FUZZ_CHECK(d->nodes() == nodes && d->samples() >= d->nodes());
   for (double v :
        {d->gouge_max(), d->excess_max(), d->excess_mean(),
         d->gouge_volume_mm3(), d->excess_volume_mm3(), d->normal_gouge_max(),
@@ -469,11 +476,10 @@ void FuzzDeviation(const Session& s, const pb::DeviationRequest& req) {
     FUZZ_CHECK(std::isfinite(v) && v >= 0);
   }
   FUZZ_CHECK(d->allowance() == req.allowance());
-  FUZZ_CHECK(d->tolerance() ==
-             (req.has_tolerance() ? req.tolerance().value() : 0.01));
-  const int listed = req.max_moves() > 0 ? req.max_moves() : 50;
-  const int64_t moves =
-      s.Read([](const Workpiece& wp) { return wp.move_count(); });
+  const cli::DeviationOptions defaults;
+  FUZZ_CHECK(d->tolerance() == (req.has_tolerance() ? req.tolerance().value()
+                                                    : defaults.tolerance));
+  const int listed = req.max_moves() > 0 ? req.max_moves() : defaults.max_lines;
   for (const auto* list : {&d->gouge_moves(), &d->excess_moves()}) {
     FUZZ_CHECK(list->size() <= listed);
     double last = kInf;
