@@ -269,59 +269,6 @@ int32_t Passing(const double* __restrict pass, int32_t n,
   return count;
 }
 
-// The tangent planes held for a block's moves (HeldPlane), by their index
-// in the block: the point each touches, the plane, and 1 where one is held
-// (else 0). Entries to the block's padded() are written (stale ones 0).
-struct BlockPlanes {
-  std::vector<double> x, y, w, wx, wy, slack, held;
-  void Reset(int32_t capacity) {
-    const int32_t size = RowMoves::Padded(capacity);
-    if (static_cast<int32_t>(held.size()) >= size) return;
-    for (std::vector<double>* v : {&x, &y, &w, &wx, &wy, &slack, &held}) {
-      v->resize(size);
-    }
-  }
-  void Set(int32_t q, double px, double py,
-           const BallSweep::SupportPlane& plane) {
-    x[q] = px;
-    y[q] = py;
-    w[q] = plane.w;
-    wx[q] = plane.wx;
-    wy[q] = plane.wy;
-    slack[q] = plane.slack;
-    held[q] = 1;
-  }
-};
-
-// pass[q] = 0 for q < n where move q's held plane, moved to (xc, yc), less
-// its slack is at or above `cap` over the whole box of offsets `range`
-// ({min dx, max dx, min dy, max dy} from (xc, yc)): then the move lowers no
-// point there below cap (the test plane_above makes first, the same
-// operations, so the same outcome). One vectorized loop over a block's
-// moves instead of a branch and a plane's loads for each in turn.
-SWARF_TARGET_CLONES
-void DropHeldPlanesAbove(const BlockPlanes& planes, int32_t n, double xc,
-                         double yc, const double range[4], double cap,
-                         double* __restrict pass) {
-  const double* __restrict x = planes.x.data();
-  const double* __restrict y = planes.y.data();
-  const double* __restrict w = planes.w.data();
-  const double* __restrict wx = planes.wx.data();
-  const double* __restrict wy = planes.wy.data();
-  const double* __restrict slack = planes.slack.data();
-  const double* __restrict held = planes.held.data();
-  const double dx_lo = range[0], dx_hi = range[1], dy_lo = range[2],
-               dy_hi = range[3];
-#pragma omp simd
-  for (int32_t q = 0; q < n; ++q) {
-    const double moved = w[q] + (wx[q] * (xc - x[q]) + wy[q] * (yc - y[q]));
-    const double lowest = moved - slack[q] +
-                          std::min(wx[q] * dx_lo, wx[q] * dx_hi) +
-                          std::min(wy[q] * dy_lo, wy[q] * dy_hi);
-    pass[q] = held[q] != 0 && lowest >= cap ? 0.0 : pass[q];
-  }
-}
-
 // *to = the moves of `from` that may cut into `box` below `cap`
 // (MovesThatMayCut), in order. Scratch: pass of from.padded() entries,
 // passing of from.size().
@@ -705,28 +652,18 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     // The indices of those that pass (Passing).
     thread_local std::vector<int32_t> passing;
     Grow(&passing, bin_moves.size());
-    // The tangent plane last taken for each of the bin's moves (by index in
-    // the bin), the point it touches and the row it was taken on. A plane is
-    // below the whole sweep (SupportingPlane's contract), so it serves the
-    // next elements too, moved to their centres, until it fails to show the
-    // move above one: in this row, tested at the box's corners and then at
-    // the points; in the bin's later rows, at the corners only (a plane
-    // from an earlier row that fails there mostly fails at the points too:
-    // a new one is taken at once). On BM_PlateValuation 1.2 planes are
-    // taken an element, 2.2 when each row forgot its planes.
+    // The tangent plane last taken for each of a row's near moves (by index
+    // in the bin), and the point it touches. A plane is below the whole
+    // sweep (SupportingPlane's contract), so it serves the row's next
+    // elements too, moved to their centres, until it fails to show the move
+    // above one: about a third of the planes are taken on the plate job.
     struct HeldPlane {
       double x = 0, y = 0;
       BallSweep::SupportPlane plane{};
       bool held = false;
-      int32_t row = -1;  // the element row it was taken on
     };
     thread_local std::vector<HeldPlane> held;
     Grow(&held, bin_moves.size());
-    for (int32_t k = 0; k < bin_size; ++k) held[k].held = false;
-    // The held planes of the block's moves, in block order, for
-    // DropHeldPlanesAbove (kept in step with `held`).
-    thread_local BlockPlanes block_planes;
-    block_planes.Reset(bin_size);
     // The bin's sums in locals (registers), stored once at the end.
     Partial p = partials[b];
     for (int32_t ej = ej0; ej < ej1; ++ej) {
@@ -840,6 +777,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
                           passing.data(), &near);
       std::fill_n(top_ok.begin(), ei1 - ei0, 0);
       top_row = ej;
+      for (int32_t q = 0; q < near.size(); ++q) held[near.k[q]].held = false;
       // The cell of the row's last one-cell elements and their max (-1:
       // none), put in the map when the cell changes and at the row's end.
       int64_t one_cell = -1;
@@ -860,16 +798,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
                                ey1};
           KeepMovesThatMayCut(near, block_box, block_cap, pass.data(),
                               passing.data(), &block);
-          for (int32_t q = 0; q < block.size(); ++q) {
-            const HeldPlane& hp = held[block.k[q]];
-            if (hp.held) {
-              block_planes.Set(q, hp.x, hp.y, hp.plane);
-            } else {
-              block_planes.held[q] = 0;
-            }
-          }
-          std::fill(block_planes.held.begin() + block.size(),
-                    block_planes.held.begin() + block.padded(), 0.0);
         }
         RowElement& el = elements[w];
         const ElementCorners& e = el.e;
@@ -908,13 +836,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
                  PlaneAtOrAbove(plane, odx, ody, el.own_padded, oest);
         };
         MovesThatMayCut(block, box, cap, pass.data());
-        DropHeldPlanesAbove(block_planes, block.padded(), xc, yc, range, cap,
-                            pass.data());
         const int32_t element_count =
             Passing(pass.data(), block.size(), passing.data());
         for (int32_t u = 0; u < element_count; ++u) {
-          const int32_t bq = passing[u];
-          const int32_t ck = block.k[bq];
+          const int32_t ck = block.k[passing[u]];
           // A corner's owner is in est already.
           const int32_t id = static_cast<int32_t>(ids[ck]);
           if (id == owners[0] || id == owners[1] || id == owners[2] ||
@@ -935,22 +860,17 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           const Sweep& sweep = bin_sweep(ck);
           if (const BallSweep* ball = sweep.ball()) {
             HeldPlane& hp = held[ck];
-            if (hp.held && hp.row == ej) {
+            if (hp.held) {
               // Its height at this element's centre (rounding far inside
               // the slack).
               BallSweep::SupportPlane moved = hp.plane;
               moved.w += moved.wx * (xc - hp.x) + moved.wy * (yc - hp.y);
-              // Not above cap at the box's corners (DropHeldPlanesAbove,
-              // for a plane of any row): the points.
-              if (PlaneAtOrAbove(moved, odx, ody, el.own_padded, oest)) {
-                continue;
-              }
+              if (plane_above(moved)) continue;
             }
             const std::optional<BallSweep::SupportPlane> plane =
                 ball->SupportingPlane(xc, yc);
             if (plane.has_value()) {
-              hp = {xc, yc, *plane, true, ej};
-              block_planes.Set(bq, xc, yc, *plane);
+              hp = {xc, yc, *plane, true};
               if (plane_above(*plane)) continue;
             }
           }
@@ -1045,7 +965,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       pass = std::vector<double>();
       passing = std::vector<int32_t>();
       held = std::vector<HeldPlane>();
-      block_planes = BlockPlanes();
     }
   });
 
