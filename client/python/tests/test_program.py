@@ -106,24 +106,34 @@ def test_program_resumes_across_a_killed_server(tmp_path):
                               tools=POCKET_TOOLS, delete_on_exit=True) as ref:
             whole = ref.run_program(POCKET, batch_points=300)
             reference = ref.heights().z
-        s = c.create_session((0, 0, 100, 80, 0), spacing=0.5,
-                             tools=POCKET_TOOLS, session_id="prog")
-        restarter = []
+        # The server applies the program without waiting for the client to
+        # read its acks: on a loaded machine it may have finished when the
+        # client reads the third, and the kill then interrupts nothing (no
+        # resume). Such a run is still checked, and another session tries
+        # again, until one is killed mid-program.
+        for attempt in range(5):
+            s = c.create_session((0, 0, 100, 80, 0), spacing=0.5,
+                                 tools=POCKET_TOOLS,
+                                 session_id=f"prog{attempt}")
+            restarter = []
 
-        def kill_at_the_third(ack) -> None:
-            if ack.seq == 3 and not restarter:
-                server.kill()
-                t = threading.Timer(0.5, server.start)
-                t.start()
-                restarter.append(t)
+            def kill_at_the_third(ack) -> None:
+                if ack.seq == 3 and not restarter:
+                    server.kill()
+                    t = threading.Timer(0.5, server.start)
+                    t.start()
+                    restarter.append(t)
 
-        done = s.run_program(POCKET, batch_points=300,
-                             progress=kill_at_the_third)
-        restarter[0].join()
+            done = s.run_program(POCKET, batch_points=300,
+                                 progress=kill_at_the_third)
+            restarter[0].join()
+            assert done.last_seq == whole.last_seq > 3
+            assert s.refresh().last_seq == whole.last_seq
+            np.testing.assert_array_equal(bits(s.heights().z),
+                                          bits(reference))
+            if done.resumed >= 1:
+                break
         assert done.resumed >= 1
-        assert done.last_seq == whole.last_seq > 3
-        assert s.refresh().last_seq == whole.last_seq
-        np.testing.assert_array_equal(bits(s.heights().z), bits(reference))
         c.close()
     finally:
         server.stop()
