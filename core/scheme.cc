@@ -232,7 +232,7 @@ template <bool kLifted, bool kAll>
     } else {
       const bool holds = inside[q] != 0;
       any[q] = holds ? 1.0 : any[q];
-      w[q] = holds & (p < w[q]) ? p : w[q];
+      w[q] = (holds & (p < w[q])) ? p : w[q];
     }
   }
 }
@@ -299,7 +299,8 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
     box_y0 = box_y1 = y[0];
     bool finite = true;
     for (int32_t q = 0; q < n_in; ++q) {
-      finite &= std::isfinite(x[q]) & std::isfinite(y[q]);
+      finite &= static_cast<int>(std::isfinite(x[q])) &
+                static_cast<int>(std::isfinite(y[q]));
       box_x0 = std::min(box_x0, x[q]);
       box_x1 = std::max(box_x1, x[q]);
       box_y0 = std::min(box_y0, y[q]);

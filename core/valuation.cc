@@ -65,10 +65,10 @@ void QuarterMaxima(const double* __restrict err, const double* __restrict si,
   for (int32_t q = 0; q < n; ++q) {
     const double e = err[q];
     const bool right = si[q] >= sx, up = sj[q] >= sy;
-    m0 = MaxOf(m0, !right & !up ? e : 0.0);
-    m1 = MaxOf(m1, right & !up ? e : 0.0);
-    m2 = MaxOf(m2, !right & up ? e : 0.0);
-    m3 = MaxOf(m3, right & up ? e : 0.0);
+    m0 = MaxOf(m0, (!right & !up) ? e : 0.0);
+    m1 = MaxOf(m1, (right & !up) ? e : 0.0);
+    m2 = MaxOf(m2, (!right & up) ? e : 0.0);
+    m3 = MaxOf(m3, (right & up) ? e : 0.0);
   }
   m[0] = m0;
   m[1] = m1;

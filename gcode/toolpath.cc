@@ -460,7 +460,9 @@ absl::StatusOr<Toolpath> ReadToolpathFile(const std::string& path,
   if (opt.subroutine_dir.empty()) {
     const size_t slash = path.find_last_of('/');
     opt.subroutine_dir = slash == std::string::npos ? "." : path.substr(0, slash);
-    if (opt.subroutine_dir.empty()) opt.subroutine_dir = "/";
+    // assign(1, '/'), not = "/": GCC 12 warns (-Wrestrict) on the latter
+    // inlined here, a false positive (GCC bug 105329).
+    if (opt.subroutine_dir.empty()) opt.subroutine_dir.assign(1, '/');
   }
   const ToolpathFormat f = format.value_or(DetectToolpathFormat(*data));
   absl::StatusOr<Toolpath> tp = f == ToolpathFormat::kGcode

@@ -679,9 +679,9 @@ class SimulateReactor
  public:
   SimulateReactor(grpc::CallbackServerContext* ctx, Registry* registry,
                   Executor* executor, TokenStore* tokens,
-                  SwarfService::StreamCounter* streams,
-                  const ProxyTrust& trust, const std::string& replica)
-      : ctx_(ctx), registry_(registry), executor_(executor) {
+                  SwarfService::StreamCounter* streams, const ProxyTrust& trust,
+                  const std::string& replica)
+      : registry_(registry), executor_(executor) {
     ctx->AddInitialMetadata(kReplicaMetadata, replica);
     auto session = SessionOf(registry, tokens, ctx, "");
     if (!session.ok()) {
@@ -1343,7 +1343,6 @@ class SimulateReactor
     pending_push_.clear();
   }
 
-  grpc::CallbackServerContext* const ctx_;
   Registry* const registry_;
   Executor* const executor_;
   std::shared_ptr<Session> session_;

@@ -25,11 +25,6 @@ using ::testing::AllOf;
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
 
-absl::StatusOr<Toolpath> Run(const std::string& text,
-                             const GcodeOptions& options = {}) {
-  return ParseGcode(text, options);
-}
-
 Toolpath MustRun(const std::string& text, const GcodeOptions& options = {}) {
   absl::StatusOr<Toolpath> tp = ParseGcode(text, options);
   EXPECT_TRUE(tp.ok()) << tp.status() << "\nprogram:\n" << text;
@@ -472,7 +467,9 @@ void ExpectPath(const Toolpath& tp, const std::vector<Pt>& want) {
     EXPECT_NEAR(p.position.x, want[i].x, 1e-12) << i;
     EXPECT_NEAR(p.position.y, want[i].y, 1e-12) << i;
     EXPECT_NEAR(p.position.z, want[i].z, 1e-12) << i;
-    if (i > 0) EXPECT_EQ(p.rapid, want[i].rapid) << i;
+    if (i > 0) {
+      EXPECT_EQ(p.rapid, want[i].rapid) << i;
+    }
   }
 }
 

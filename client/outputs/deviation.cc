@@ -11,7 +11,6 @@
 namespace swarf::cli {
 namespace {
 
-constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr int32_t kBandRows = 8;  // node rows a task compares
 
 uint64_t LineKey(const SourceLine& s) {
