@@ -3,6 +3,11 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "core/flag_words.h"
+#include "core/target_clones.h"
 
 namespace swarf {
 namespace {
@@ -18,6 +23,18 @@ std::pair<int32_t, int32_t> BinRange(double a, double b, double origin,
           static_cast<int32_t>(hi < bins - 1.0 ? hi : bins - 1.0)};
 }
 
+// flag[k] = 1 where part q (of mask + 1) holds one of move k's diagonals
+// bx + by, the first first[k] and count[k] more, else 0, for k < n: the
+// part's first diagonal of the move's is first + ((q - first) & mask).
+SWARF_TARGET_CLONES
+void InPart(const int32_t* __restrict first, const int32_t* __restrict more,
+            int32_t n, int32_t q, int32_t mask, uint8_t* __restrict flag) {
+#pragma omp simd
+  for (int32_t k = 0; k < n; ++k) {
+    flag[k] = ((q - first[k]) & mask) <= more[k] ? 1 : 0;
+  }
+}
+
 // Adds move first_id + k to each bin of bins[k] in turn, as
 // add(bin, id) (returning the bytes the bin grew by), the bins shared among
 // the pool's threads, each adding the ids of its own bins in order; returns
@@ -28,36 +45,53 @@ template <typename Add>
 int64_t AddInParts(int32_t bins_x, uint32_t first_id,
                    std::span<const MoveIndex::BinRect> bins, ThreadPool& pool,
                    Add add) {
-  // A power of two (the pool's size rounded up, at most 64), so that a
-  // part is a mask, not a division: every part visits every move, and with
-  // a division each, and a move's rows walked in every part, the index of
-  // a raster of short moves took 6 times the instructions on 16 threads
-  // that it took on 2.
+  // Every part looks at every move. With a division each (its first bin
+  // in the part) and its rows walked in every part, the index of a raster
+  // of short moves took 6 times the instructions on 16 threads that it
+  // took on 2. Now the parts are a power of two (the pool's size rounded
+  // up, at most 64), a move's first bin in a part is a mask, and a part
+  // visits only the moves it holds a bin of: 1.3 times.
   const int32_t parts = static_cast<int32_t>(
       std::bit_ceil(static_cast<uint32_t>(std::clamp(pool.size(), 1, 64))));
   const int32_t mask = parts - 1;
+  // A move's bins lie on the diagonals bx + by from bx0 + by0 to bx1 +
+  // by1: the first and how many more, taken once a move (an empty
+  // rectangle's count is negative). Each part flags the moves that have
+  // one of its diagonals a block at a time, in a vectorized loop, and
+  // visits those alone (most parts, for a short move, have none of its).
+  const size_t n = bins.size();
+  std::vector<int32_t> first(n), more(n);
+  for (size_t k = 0; k < n; ++k) {
+    const MoveIndex::BinRect& r = bins[k];
+    first[k] = r.bx0 + r.by0;
+    more[k] = (r.bx1 - r.bx0) + (r.by1 - r.by0);
+  }
+  constexpr int32_t kBlock = 256;
   std::vector<int64_t> grew(parts, 0);
   pool.ParallelFor(parts, [&](int64_t part) {
     const int32_t q = static_cast<int32_t>(part);
     int64_t bytes = 0;
-    for (size_t k = 0; k < bins.size(); ++k) {
-      const MoveIndex::BinRect& r = bins[k];
-      // The move's bins lie on the diagonals bx + by from bx0 + by0 to
-      // bx1 + by1, and this part's first is bx0 + by0 + skip: it has none
-      // of them when skip is past them (most parts, for a short move; an
-      // empty rectangle's span is negative).
-      int32_t skip = (q - (r.bx0 + r.by0)) & mask;
-      if (skip > (r.bx1 - r.bx0) + (r.by1 - r.by0)) continue;
-      const uint32_t id = first_id + static_cast<uint32_t>(k);
-      // The first bx >= bx0 with (bx + by) % parts == q is bx0 + skip, skip
-      // in [0, parts): one down (mod parts) from one row to the next.
-      for (int32_t by = r.by0; by <= r.by1; ++by) {
-        const size_t row = static_cast<size_t>(by) * bins_x;
-        for (int32_t x = r.bx0 + skip; x <= r.bx1; x += parts) {
-          bytes += add(row + x, id);
+    alignas(8) uint8_t flag[FlagBytes(kBlock)];
+    for (size_t k0 = 0; k0 < n; k0 += kBlock) {
+      const int32_t m = static_cast<int32_t>(std::min<size_t>(kBlock, n - k0));
+      InPart(first.data() + k0, more.data() + k0, m, q, mask, flag);
+      ClearFlagTail(flag, m);
+      ForEachFlagged(flag, m, [&](int32_t b) {
+        const size_t k = k0 + b;
+        const MoveIndex::BinRect& r = bins[k];
+        const uint32_t id = first_id + static_cast<uint32_t>(k);
+        // The first bx >= bx0 with (bx + by) % parts == q is bx0 + skip,
+        // skip in [0, parts): one down (mod parts) from one row to the
+        // next.
+        int32_t skip = (q - first[k]) & mask;
+        for (int32_t by = r.by0; by <= r.by1; ++by) {
+          const size_t row = static_cast<size_t>(by) * bins_x;
+          for (int32_t x = r.bx0 + skip; x <= r.bx1; x += parts) {
+            bytes += add(row + x, id);
+          }
+          skip = (skip - 1) & mask;
         }
-        skip = (skip - 1) & mask;
-      }
+      });
     }
     grew[part] = bytes;
   });
