@@ -24,7 +24,7 @@ std::pair<int32_t, int32_t> BinRange(double a, double b, double origin,
 }
 
 // flag[k] = 1 where part q (of mask + 1) holds one of move k's diagonals
-// bx + by, the first first[k] and count[k] more, else 0, for k < n: the
+// bx + by, first[k] and the more[k] after it, else 0, for k < n: the
 // part's first diagonal of the move's is first + ((q - first) & mask).
 SWARF_TARGET_CLONES
 void InPart(const int32_t* __restrict first, const int32_t* __restrict more,
@@ -55,9 +55,10 @@ int64_t AddInParts(int32_t bins_x, uint32_t first_id,
       std::bit_ceil(static_cast<uint32_t>(std::clamp(pool.size(), 1, 64))));
   const int32_t mask = parts - 1;
   // A move's bins lie on the diagonals bx + by from bx0 + by0 to bx1 +
-  // by1: the first and how many more, taken once a move (an empty
-  // rectangle's count is negative). Each part flags the moves that have
-  // one of its diagonals a block at a time, in a vectorized loop, and
+  // by1: the first and how many more, taken once a move (negative for a
+  // rectangle empty along both axes; one empty along x alone may be
+  // flagged, and its rows add nothing). Each part flags the moves that
+  // have one of its diagonals a block at a time, in a vectorized loop, and
   // visits those alone (most parts, for a short move, have none of its).
   const size_t n = bins.size();
   std::vector<int32_t> first(n), more(n);

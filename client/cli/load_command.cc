@@ -4,6 +4,7 @@
 #include <chrono>
 #include <cmath>
 #include <iostream>
+#include <limits>
 #include <mutex>
 #include <random>
 #include <string>
@@ -54,8 +55,9 @@ std::vector<pb::SimulateRequest> RasterBatches(int64_t moves, int64_t batch,
     pb::MoveBatch* b = reqs.emplace_back().mutable_moves();
     b->set_seq(seq);
     b->set_tool_id(1);
-    b->mutable_xyz()->Reserve(
-        static_cast<int>(3 * std::min(batch, moves + 1 - k)));
+    // A batch past protobuf's int sizes is the server's to refuse.
+    b->mutable_xyz()->Reserve(static_cast<int>(std::min<int64_t>(
+        3 * std::min(batch, moves + 1 - k), std::numeric_limits<int>::max())));
     for (int64_t n = 0; n < batch && k <= moves; ++n, ++k) {
       const int64_t row = k / per_row, col = k % per_row;
       const double x = 0.5 + 0.1 * (row % 2 == 0 ? col : per_row - 1 - col);
