@@ -8,6 +8,7 @@
 
 #include "core/flag_words.h"
 #include "core/target_clones.h"
+#include "core/unfilled_vector.h"
 
 namespace swarf {
 namespace {
@@ -60,8 +61,9 @@ int64_t AddInParts(int32_t bins_x, uint32_t first_id,
   // flagged, and its rows add nothing). Each part flags the moves that
   // have one of its diagonals a block at a time, in a vectorized loop, and
   // visits those alone (most parts, for a short move, have none of its).
+  // Unfilled: every entry is written below, before any part reads it.
   const size_t n = bins.size();
-  std::vector<int32_t> first(n), more(n);
+  UnfilledVector<int32_t> first(n), more(n);
   for (size_t k = 0; k < n; ++k) {
     const MoveIndex::BinRect& r = bins[k];
     first[k] = r.bx0 + r.by0;
