@@ -102,19 +102,18 @@ struct GuardedValue {
   int32_t move = -1;
 };
 
-// Whether corner k has no shortfalls (most corners): then each lerp of
-// them is +0 at any finite point.
-bool Unlifted(const ElementCorners& e, int k) {
-  const double* d = e.guard.lift[k];
-  return d[0] == 0 && d[1] == 0 && d[2] == 0 && d[3] == 0;
-}
-
-// The bilinear interpolation of corner k's shortfalls, at the element's
-// fractions (s, t).
-double LiftAt(const ElementCorners& e, int k, double s, double t) {
-  if (Unlifted(e, k)) return 0.0;
-  const double* d = e.guard.lift[k];
-  return std::lerp(std::lerp(d[0], d[1], s), std::lerp(d[3], d[2], s), t);
+// Corner k's patch lifted by the bilinear interpolation of its shortfalls
+// (Guard::lift_uv): one quadric, evaluated as the patch is, for the cost of
+// the patch alone (the lerps of the shortfalls a point took more than the
+// patch). Corner k's own height is kept exactly (u = v = 0 there); an
+// unlifted corner's jet is e.c[k] itself.
+SurfaceJet LiftedJet(const ElementCorners& e, int k) {
+  SurfaceJet j = e.c[k];
+  const double* l = e.guard.lift_uv[k];
+  j.wx += l[0];
+  j.wy += l[1];
+  j.wxy += l[2];
+  return j;
 }
 
 // The true surface at (x, y) where it is below v: a cut between the nodes.
@@ -161,54 +160,20 @@ BoxSide CapsuleBoxSide(const CornerReach::Capsule& c, double x0, double y0,
   return BoxSide::kMixed;
 }
 
-// std::lerp(a, b, t) (libstdc++'s, which BilinearHeight uses) as selects,
-// for vectorized loops: the same operations on every path.
-inline double LerpSelect(double a, double b, double t) {
-  const bool opposite = ((a <= 0) & (b >= 0)) | ((a >= 0) & (b <= 0));
-  const double r1 = t * b + (1 - t) * a;
-  const double x = a + t * (b - a);
-  const double r2 =
-      (t > 1) == (b > a) ? (b < x ? x : b) : (b > x ? x : b);
-  return opposite ? r1 : (t == 1 ? b : r2);
-}
-
-// out[q] = std::lerp(a, b, t[q]) for loop-invariant a and b: their tests
-// decided once (the vectorizer takes no select on a scalar condition).
-// Inlined into its callers' clones.
-inline void LerpInvariant(double a, double b, const double* __restrict t,
-                          int32_t n, double* __restrict out) {
-  if ((a <= 0 && b >= 0) || (a >= 0 && b <= 0)) {
-#pragma omp simd
-    for (int32_t q = 0; q < n; ++q) out[q] = t[q] * b + (1 - t[q]) * a;
-  } else if (b > a) {
-#pragma omp simd
-    for (int32_t q = 0; q < n; ++q) {
-      const double x = a + t[q] * (b - a);
-      out[q] = t[q] == 1 ? b : t[q] > 1 ? (b < x ? x : b) : (b > x ? x : b);
-    }
-  } else {
-#pragma omp simd
-    for (int32_t q = 0; q < n; ++q) {
-      const double x = a + t[q] * (b - a);
-      out[q] = t[q] == 1 ? b : t[q] > 1 ? (b > x ? x : b) : (b < x ? x : b);
-    }
-  }
-}
-
 // Points per call of SmoothChunk (a multiple of 8).
 constexpr int32_t kGuardedChunk = 64;
 
 // SmoothChunk's arrays for one corner's pass.
 struct CornerPoints {
-  const double *x, *y, *inside, *l0, *l1, *t;
+  const double *x, *y, *inside;
   double *any, *w;
 };
 
-// A corner's lifted patch (lifted by LerpSelect(l0, l1, t) where kLifted,
-// else by +0) over SmoothChunk's points, and the running minimum where the
-// corner holds them (kAll: it holds them all, `inside` is not read). One
-// loop for both, vectorized in its caller's clone.
-template <bool kLifted, bool kAll>
+// A corner's lifted patch (LiftedJet) over SmoothChunk's points, and the
+// running minimum where the corner holds them (kAll: it holds them all,
+// `inside` is not read). One loop for both, vectorized in its caller's
+// clone.
+template <bool kAll>
 [[gnu::always_inline]] inline void LowerByCorner(const SurfaceJet& j, double xk,
                                                  double yk, double z_low,
                                                  const CornerPoints& pts,
@@ -216,15 +181,11 @@ template <bool kLifted, bool kAll>
   const double* __restrict x = pts.x;
   const double* __restrict y = pts.y;
   const double* __restrict inside = pts.inside;
-  const double* __restrict l0 = pts.l0;
-  const double* __restrict l1 = pts.l1;
-  const double* __restrict t = pts.t;
   double* __restrict any = pts.any;
   double* __restrict w = pts.w;
 #pragma omp simd
   for (int32_t q = 0; q < n; ++q) {
-    const double lift = kLifted ? LerpSelect(l0[q], l1[q], t[q]) : 0.0;
-    const double raw = EvaluatePatch(j, xk, yk, x[q], y[q]) + lift;
+    const double raw = EvaluatePatch(j, xk, yk, x[q], y[q]);
     const double p = raw < z_low ? z_low : raw;  // std::max(raw, z_low)
     if constexpr (kAll) {
       any[q] = 1.0;
@@ -277,15 +238,11 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
   }
   // Flags as doubles (0 or 1) beside the doubles, and loop-invariant tests
   // outside the loops, so that every loop is selects the vectorizer takes.
-  double in_store[4][kGuardedChunk], s[kGuardedChunk], t[kGuardedChunk];
+  double in_store[4][kGuardedChunk];
   const double* in[4];  // corner k's flags: in_store[k], or all 1 or all 0
-  double w[kGuardedChunk], any[kGuardedChunk], l0[kGuardedChunk],
-      l1[kGuardedChunk];
-  const double lx = e.x1 - e.x0, ly = e.y1 - e.y0;
+  double w[kGuardedChunk], any[kGuardedChunk];
 #pragma omp simd
   for (int32_t q = 0; q < n; ++q) {
-    s[q] = (x[q] - e.x0) / lx;
-    t[q] = (y[q] - e.y0) / ly;
     w[q] = e.z_top;
     any[q] = 0;
   }
@@ -354,26 +311,13 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
         }
       }
     }
-    // The lift (LiftAt): lerps of the shortfalls, the first two over s.
-    const double* d = e.guard.lift[k];
-    const SurfaceJet& j = e.c[k];
+    const SurfaceJet j = LiftedJet(e, k);
     const double xk = c.x[k], yk = c.y[k], z_low = r.z_low;
-    const CornerPoints pts{x, y, in[k], l0, l1, t, any, w};
-    const bool every = side == BoxSide::kInside;
-    if (Unlifted(e, k)) {  // no lerps to take
-      if (every) {
-        LowerByCorner<false, true>(j, xk, yk, z_low, pts, n);
-      } else {
-        LowerByCorner<false, false>(j, xk, yk, z_low, pts, n);
-      }
+    const CornerPoints pts{x, y, in[k], any, w};
+    if (side == BoxSide::kInside) {
+      LowerByCorner<true>(j, xk, yk, z_low, pts, n);
     } else {
-      LerpInvariant(d[0], d[1], s, n, l0);
-      LerpInvariant(d[3], d[2], s, n, l1);
-      if (every) {
-        LowerByCorner<true, true>(j, xk, yk, z_low, pts, n);
-      } else {
-        LowerByCorner<true, false>(j, xk, yk, z_low, pts, n);
-      }
+      LowerByCorner<false>(j, xk, yk, z_low, pts, n);
     }
   }
   // Hidden points (no corner holds them, or a corner out of its reach is
@@ -408,17 +352,15 @@ GuardedValue Guarded(const ElementCorners& e, double x, double y) {
   GuardedValue v;
   v.w = e.z_top;
   if (e.guard.smooth || e.surfaces == nullptr) {
-    const double s = (x - e.x0) / (e.x1 - e.x0);
-    const double t = (y - e.y0) / (e.y1 - e.y0);
     bool any = false;
     bool in[4];
     for (int k = 0; k < 4; ++k) {
       in[k] = e.guard.inside[k] || e.reach[k].Contains(x, y);
       if (!in[k]) continue;
       any = true;
-      const double p = std::max(
-          EvaluatePatch(e.c[k], c.x[k], c.y[k], x, y) + LiftAt(e, k, s, t),
-          e.reach[k].z_low);
+      const double p =
+          std::max(EvaluatePatch(LiftedJet(e, k), c.x[k], c.y[k], x, y),
+                   e.reach[k].z_low);
       if (p < v.w) {
         v.w = p;
         v.corner = k;
@@ -604,6 +546,24 @@ void CornerResiduals(const ElementCorners& e, const CornerXY& c,
   }
 }
 
+// Guard::lift_uv[k] from lift[k] (d): the lift is the bilinear
+//   L(s, t) = (1 - s)(1 - t) d0 + s (1 - t) d1 + s t d2 + (1 - s) t d3
+// over the element's fractions s and t, 0 at corner k (d[k] = 0). About that
+// corner it is its s and t slopes there over the sides, and its twist.
+void LiftTerms(ElementCorners* e, int k) {
+  const double* d = e->guard.lift[k];
+  double* l = e->guard.lift_uv[k];
+  if (d[0] == 0 && d[1] == 0 && d[2] == 0 && d[3] == 0) {
+    l[0] = l[1] = l[2] = 0;
+    return;
+  }
+  const double lx = e->x1 - e->x0, ly = e->y1 - e->y0;
+  const bool right = k == 1 || k == 2, top = k >= 2;
+  l[0] = (top ? d[2] - d[3] : d[1] - d[0]) / lx;
+  l[1] = (right ? d[2] - d[1] : d[3] - d[0]) / ly;
+  l[2] = (d[0] - d[1] + d[2] - d[3]) / (lx * ly);
+}
+
 }  // namespace
 
 void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4],
@@ -662,6 +622,7 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4],
       if (r > 0) e->guard.lift[k][q] = r;
       if (r > tau) smooth = false;
     }
+    LiftTerms(e, k);
   }
   e->guard.smooth = smooth;
   // A capsule is convex: holding the element's corners, it holds it all.
@@ -771,12 +732,7 @@ class GuardedScheme final : public Scheme {
     } else if (v.corner >= 0 && v.w > e.reach[v.corner].z_low) {
       const CornerXY c = CornersOf(e);
       const int k = v.corner;
-      PatchGradient(e.c[k], c.x[k], c.y[k], x, y, gx, gy);
-      // The lift's: bilinear in (s, t).
-      double lx, ly;
-      BilinearGradientOf(e, e.guard.lift[k], x, y, &lx, &ly);
-      *gx += lx;
-      *gy += ly;
+      PatchGradient(LiftedJet(e, k), c.x[k], c.y[k], x, y, gx, gy);
     }
     return v.w;
   }

@@ -92,6 +92,10 @@ struct ElementCorners {
     bool smooth = false;  // the patches hold over the whole element
     bool inside[4] = {};  // reach[k] holds the whole element
     double lift[4][4] = {};  // [k][q]: patch k's shortfall at corner q
+    // [k]: the bilinear interpolation of lift[k] over the element as
+    // a * u + b * v + c * u * v, (u, v) the offset from corner k (lift[k][k]
+    // is 0): {a, b, c}, added to patch k's wx, wy and wxy (LiftedJet).
+    double lift_uv[4][3] = {};
   } guard;
 };
 

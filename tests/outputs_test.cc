@@ -1427,8 +1427,13 @@ TEST(OutputsGoldenTest, GuardedSceneFiguresAreUnchanged) {
 
   auto relief = RenderRelief(g, {});
   ASSERT_TRUE(relief.ok());
+  // Changed on purpose (the guarded lift folded into its patch, Guard::
+  // lift_uv: the same quadric, rounded otherwise): 72 of its 11,011 pixels
+  // by at most 5 levels. Its pixels lie on nodes, where the four lifted
+  // patches meet at the node's height to a rounding with different slopes:
+  // the rounding picks the patch whose slope shades the pixel.
   EXPECT_EQ(Fnv(relief->pixels().data(), relief->pixels().size()),
-            0xa783bb551d1dba40u);
+            0x47914857c4534032u);
 
   auto found = FindCuttingMarks(*wp, {});
   ASSERT_TRUE(found.ok());
