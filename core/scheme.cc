@@ -549,7 +549,8 @@ void CornerResiduals(const ElementCorners& e, const CornerXY& c,
 // Guard::lift_uv[k] from lift[k] (d): the lift is the bilinear
 //   L(s, t) = (1 - s)(1 - t) d0 + s (1 - t) d1 + s t d2 + (1 - s) t d3
 // over the element's fractions s and t, 0 at corner k (d[k] = 0). About that
-// corner it is its s and t slopes there over the sides, and its twist.
+// corner it is a u + b v + c u v: a and b its slopes along s and t there
+// over the element's width and height, c its twist over their product.
 void LiftTerms(ElementCorners* e, int k) {
   const double* d = e->guard.lift[k];
   double* l = e->guard.lift_uv[k];

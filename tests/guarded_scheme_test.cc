@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "core/scheme.h"
+#include "core/surface_jet.h"
 #include "core/valuation.h"
 #include "core/workpiece.h"
 #include "gtest/gtest.h"
@@ -257,6 +258,63 @@ TEST(CornerReachTest, FootprintOfAMove) {
 // kFull at one of them (nor at any sign of the offsets), over random jets
 // and element sizes; and it passes where the region clearly holds the
 // element (a ball's sphere under a fine grid), so it saves the tests.
+// Guard::lift_uv is lift[k]'s bilinear interpolation over the element
+// (std::lerp over its fractions s and t, as the lift was taken at every
+// point) about corner k: patch k with those terms added to its slopes and
+// twist is the patch plus that lift, to a rounding, at the corners (where
+// it is the shortfall itself) and inside.
+TEST(GuardedSchemeTest, LiftTermsAreTheBilinearLiftAboutTheirCorner) {
+  std::mt19937_64 rng(31);
+  std::uniform_real_distribution<double> u(0, 1);
+  int lifted = 0;
+  for (int scene = 0; scene < 4; ++scene) {
+    const StockSpec stock{0, 0, 6, 6, 0, 30 + scene, 30 + scene};
+    std::vector<Move> moves;
+    for (int k = 0; k < 6; ++k) {
+      const double r = 0.2 + 1.3 * u(rng);
+      moves.push_back({{6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)},
+                       {6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)},
+                       r});
+    }
+    auto wp = Cut(stock, SchemeKind::kGuarded, moves);
+    for (int32_t ej = 0; ej < stock.ny; ++ej) {
+      for (int32_t ei = 0; ei < stock.nx; ++ei) {
+        const ElementCorners e = wp->Corners(ei, ej);
+        const double xs[4] = {e.x0, e.x1, e.x1, e.x0};
+        const double ys[4] = {e.y0, e.y0, e.y1, e.y1};
+        for (int k = 0; k < 4; ++k) {
+          const double* d = e.guard.lift[k];
+          const double* l = e.guard.lift_uv[k];
+          ASSERT_EQ(d[k], 0);
+          if (d[0] == 0 && d[1] == 0 && d[2] == 0 && d[3] == 0) {
+            EXPECT_TRUE(l[0] == 0 && l[1] == 0 && l[2] == 0);
+            continue;
+          }
+          ++lifted;
+          SurfaceJet j = e.c[k];
+          j.wx += l[0];
+          j.wy += l[1];
+          j.wxy += l[2];
+          for (int p = 0; p < 14; ++p) {
+            const double s = p < 4 ? (p == 1 || p == 2 ? 1 : 0) : u(rng);
+            const double t = p < 4 ? (p >= 2 ? 1 : 0) : u(rng);
+            const double x = p < 4 ? xs[p] : e.x0 + s * (e.x1 - e.x0);
+            const double y = p < 4 ? ys[p] : e.y0 + t * (e.y1 - e.y0);
+            const double lift = std::lerp(std::lerp(d[0], d[1], s),
+                                          std::lerp(d[3], d[2], s), t);
+            const double want =
+                EvaluatePatch(e.c[k], xs[k], ys[k], x, y) + lift;
+            EXPECT_NEAR(EvaluatePatch(j, xs[k], ys[k], x, y), want, 1e-13)
+                << "scene " << scene << " element " << ei << ", " << ej
+                << " corner " << k << " point " << p << " lift " << lift;
+          }
+        }
+      }
+    }
+  }
+  EXPECT_GT(lifted, 100);
+}
+
 TEST(GuardedSchemeTest, SurelyTrustedImpliesTrustAtEveryCorner) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> slope(-4, 4), curv(-6, 6),
