@@ -405,6 +405,9 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
         ASSERT_EQ(f.guard.smooth, e.guard.smooth);
         ASSERT_EQ(std::memcmp(f.guard.lift, e.guard.lift, sizeof f.guard.lift),
                   0);
+        ASSERT_EQ(std::memcmp(f.guard.lift_uv, e.guard.lift_uv,
+                              sizeof f.guard.lift_uv),
+                  0);
         ASSERT_TRUE(f.candidates == e.candidates);
         // With the nodes' SurelyTrusted taken for a larger element, or
         // none taken: the same element.
@@ -420,6 +423,9 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
           ASSERT_EQ(g.guard.smooth, e.guard.smooth) << scale;
           ASSERT_EQ(
               std::memcmp(g.guard.lift, e.guard.lift, sizeof g.guard.lift), 0);
+          ASSERT_EQ(std::memcmp(g.guard.lift_uv, e.guard.lift_uv,
+                                sizeof g.guard.lift_uv),
+                    0);
           ASSERT_EQ(std::memcmp(g.guard.inside, e.guard.inside,
                                 sizeof g.guard.inside),
                     0);
@@ -514,6 +520,9 @@ TEST(GuardedSchemeTest, FillCornersOverwritesEveryField) {
                     0);
           ASSERT_EQ(std::memcmp(reused.guard.lift, want.guard.lift,
                                 sizeof want.guard.lift),
+                    0);
+          ASSERT_EQ(std::memcmp(reused.guard.lift_uv, want.guard.lift_uv,
+                                sizeof want.guard.lift_uv),
                     0);
           // Prepared (guard, and candidates for the exact scheme): the next
           // fill overwrites those too.
