@@ -258,6 +258,20 @@ TEST(CornerReachTest, FootprintOfAMove) {
 // kFull at one of them (nor at any sign of the offsets), over random jets
 // and element sizes; and it passes where the region clearly holds the
 // element (a ball's sphere under a fine grid), so it saves the tests.
+// n straight moves of balls 0.2 to 1.5 mm across, between random tips over
+// a 6 x 6 mm stock, from 1 mm above its top to 2 mm below.
+std::vector<Move> RandomBallMoves(std::mt19937_64& rng, int n) {
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Move> moves;
+  for (int k = 0; k < n; ++k) {
+    const double r = 0.2 + 1.3 * u(rng);
+    moves.push_back({{6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)},
+                     {6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)},
+                     r});
+  }
+  return moves;
+}
+
 // Guard::lift_uv is lift[k]'s bilinear interpolation over the element
 // (std::lerp over its fractions s and t, as the lift was taken at every
 // point) about corner k: patch k with those terms added to its slopes and
@@ -269,14 +283,7 @@ TEST(GuardedSchemeTest, LiftTermsAreTheBilinearLiftAboutTheirCorner) {
   int lifted = 0;
   for (int scene = 0; scene < 4; ++scene) {
     const StockSpec stock{0, 0, 6, 6, 0, 30 + scene, 30 + scene};
-    std::vector<Move> moves;
-    for (int k = 0; k < 6; ++k) {
-      const double r = 0.2 + 1.3 * u(rng);
-      moves.push_back({{6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)},
-                       {6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)},
-                       r});
-    }
-    auto wp = Cut(stock, SchemeKind::kGuarded, moves);
+    auto wp = Cut(stock, SchemeKind::kGuarded, RandomBallMoves(rng, 6));
     for (int32_t ej = 0; ej < stock.ny; ++ej) {
       for (int32_t ei = 0; ei < stock.nx; ++ei) {
         const ElementCorners e = wp->Corners(ei, ej);
@@ -466,15 +473,8 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
 // scheme, with the reaches passed in or taken by FillCorners.
 TEST(GuardedSchemeTest, FillCornersOverwritesEveryField) {
   std::mt19937_64 rng(29);
-  std::uniform_real_distribution<double> u(0, 1);
   const StockSpec stock{0, 0, 6, 6, 0, 24, 24};
-  std::vector<Move> moves;
-  for (int k = 0; k < 6; ++k) {
-    const double r = 0.2 + 1.3 * u(rng);
-    moves.push_back({{6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)},
-                     {6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)},
-                     r});
-  }
+  const std::vector<Move> moves = RandomBallMoves(rng, 6);
   for (SchemeKind kind : {SchemeKind::kGuarded, SchemeKind::kExact,
                           SchemeKind::kTaylor, SchemeKind::kZmap}) {
     auto wp = Cut(stock, kind, moves);
