@@ -253,11 +253,6 @@ TEST(CornerReachTest, FootprintOfAMove) {
   EXPECT_FALSE(above.Contains(2, 0));
 }
 
-// SurelyTrusted, the one test PrepareGuarded makes for a patch at the
-// element's three other corners, never passes where Trust would not give
-// kFull at one of them (nor at any sign of the offsets), over random jets
-// and element sizes; and it passes where the region clearly holds the
-// element (a ball's sphere under a fine grid), so it saves the tests.
 // n straight moves of balls 0.2 to 1.5 mm across, between random tips over
 // a 6 x 6 mm stock, from 1 mm above its top to 2 mm below.
 std::vector<Move> RandomBallMoves(std::mt19937_64& rng, int n) {
@@ -322,6 +317,11 @@ TEST(GuardedSchemeTest, LiftTermsAreTheBilinearLiftAboutTheirCorner) {
   EXPECT_GT(lifted, 100);
 }
 
+// SurelyTrusted, the one test PrepareGuarded makes for a patch at the
+// element's three other corners, never passes where Trust would not give
+// kFull at one of them (nor at any sign of the offsets), over random jets
+// and element sizes; and it passes where the region clearly holds the
+// element (a ball's sphere under a fine grid), so it saves the tests.
 TEST(GuardedSchemeTest, SurelyTrustedImpliesTrustAtEveryCorner) {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> slope(-4, 4), curv(-6, 6),
