@@ -216,12 +216,25 @@ void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
   // Blocks of rows by chunks of columns, each with one sampler:
   // neighbouring rows share nodes. A band of tile rows has only a few
   // blocks of rows (four at a pixel a node): whole rows left most of a
-  // many-core machine idle.
+  // many-core machine idle. Where a band has fewer than four items a
+  // thread (a picture coarser than the grid: the full plate's band is one
+  // block, 8 chunks of 512 columns for 16 threads), the chunks are
+  // narrower, down to 64 columns. A pixel's value does not depend on its
+  // chunk (SurfaceSampler is SurfaceGrid::HeightAndGradient bit for bit).
   constexpr int kBlockRows = 16;
   constexpr int kChunkColumns = 512;
+  constexpr int kMinChunkColumns = 64;
   const int64_t blocks =
       (static_cast<int64_t>(rows.size()) + kBlockRows - 1) / kBlockRows;
-  const int chunks = (f.width + kChunkColumns - 1) / kChunkColumns;
+  const int64_t wanted = 4 * static_cast<int64_t>(ThreadPool::Default().size());
+  int chunk_columns = kChunkColumns;
+  if (blocks > 0 &&
+      blocks * ((f.width + chunk_columns - 1) / chunk_columns) < wanted) {
+    const int64_t chunks_wanted = (wanted + blocks - 1) / blocks;
+    chunk_columns = static_cast<int>(std::max<int64_t>(
+        kMinChunkColumns, (f.width + chunks_wanted - 1) / chunks_wanted));
+  }
+  const int chunks = (f.width + chunk_columns - 1) / chunk_columns;
   const GridGeometry g(band.spec);
   auto node_column = [&](int px) {  // as SurfaceSampler finds the element
     return g.ElementX(std::clamp(f.X(px), band.spec.x0, band.spec.x1));
@@ -231,8 +244,8 @@ void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
   ThreadPool::Default().ParallelFor(blocks * chunks, [&](int64_t item) {
     const int64_t block = item / chunks;
     const int chunk = static_cast<int>(item % chunks);
-    const int px0 = chunk * kChunkColumns;
-    const int px1 = std::min(f.width, px0 + kChunkColumns);
+    const int px0 = chunk * chunk_columns;
+    const int px1 = std::min(f.width, px0 + chunk_columns);
     SurfaceSampler sampler(band, node_column(px0), node_column(px1 - 1) + 1);
     const size_t r0 = static_cast<size_t>(block) * kBlockRows;
     const size_t r1 = std::min(rows.size(), r0 + kBlockRows);
