@@ -1213,20 +1213,30 @@ CornerReach MoveSweeps::Reach(int32_t id, double z_top) const {
 // lies within it of the move).
 struct ReachLanes {
   std::vector<float> x0, x1, y0, y1, low, z_r, r2;
-  void Clear() {
-    for (auto* v : {&x0, &x1, &y0, &y1, &low, &z_r, &r2}) v->clear();
-  }
+  void Clear() { n_ = 0; }
+  // Lane n_, the arrays grown where full. They only grow: a thread refills
+  // them bin after bin, and a push_back on each of seven arrays a move cost
+  // more than the lanes' own values.
   void Add(float ax0, float ax1, float ay0, float ay1, float alow, float az_r,
            float ar2) {
-    x0.push_back(ax0);
-    x1.push_back(ax1);
-    y0.push_back(ay0);
-    y1.push_back(ay1);
-    low.push_back(alow);
-    z_r.push_back(az_r);
-    r2.push_back(ar2);
+    if (n_ == x0.size()) {
+      for (auto* v : {&x0, &x1, &y0, &y1, &low, &z_r, &r2}) {
+        v->resize(std::max<size_t>(1024, 2 * n_));
+      }
+    }
+    x0[n_] = ax0;
+    x1[n_] = ax1;
+    y0[n_] = ay0;
+    y1[n_] = ay1;
+    low[n_] = alow;
+    z_r[n_] = az_r;
+    r2[n_] = ar2;
+    ++n_;
   }
-  size_t size() const { return x0.size(); }
+  size_t size() const { return n_; }
+
+ private:
+  size_t n_ = 0;
 };
 
 // A bin's moves in its order, and blocks of kReachBlock of them, each the
@@ -1304,6 +1314,10 @@ const MoveBinReach* MoveSweeps::BinReachOf(int32_t bin) const {
   b.ids.clear();
   b.serial = 0;  // not valid until filled
   Move scratch;
+  // The block's union as its moves come: std::min and std::max keep the
+  // first of equal values, as std::min_element and std::max_element over
+  // the block would.
+  float bx0 = 0, bx1 = 0, by0 = 0, by1 = 0, blow = 0, bz_r = 0, br2 = 0;
   for (const uint32_t k : index_->Bin(bin)) {
     if (b.ids.size() == kMaxReachMoves) {
       b.bin = -1;
@@ -1325,21 +1339,30 @@ const MoveBinReach* MoveSweeps::BinReachOf(int32_t bin) const {
       z_r = -std::numeric_limits<float>::infinity();
       r2 = FloatUp(reach * reach);
     }
-    b.move.Add(FloatDown(std::min(p.x, q.x)), FloatUp(std::max(p.x, q.x)),
-               FloatDown(std::min(p.y, q.y)), FloatUp(std::max(p.y, q.y)),
-               FloatDown(std::min(p.z, q.z)), z_r, r2);
+    const float x0 = FloatDown(std::min(p.x, q.x));
+    const float x1 = FloatUp(std::max(p.x, q.x));
+    const float y0 = FloatDown(std::min(p.y, q.y));
+    const float y1 = FloatUp(std::max(p.y, q.y));
+    const float low = FloatDown(std::min(p.z, q.z));
+    b.move.Add(x0, x1, y0, y1, low, z_r, r2);
+    if (b.ids.size() % kReachBlock == 0) {
+      bx0 = x0, bx1 = x1, by0 = y0, by1 = y1, blow = low, bz_r = z_r, br2 = r2;
+    } else {
+      bx0 = std::min(bx0, x0);
+      bx1 = std::max(bx1, x1);
+      by0 = std::min(by0, y0);
+      by1 = std::max(by1, y1);
+      blow = std::min(blow, low);
+      bz_r = std::min(bz_r, z_r);
+      br2 = std::max(br2, r2);
+    }
     b.ids.push_back(k);
+    if (b.ids.size() % kReachBlock == 0) {
+      b.block.Add(bx0, bx1, by0, by1, blow, bz_r, br2);
+    }
   }
-  const ReachLanes& m = b.move;
-  for (size_t q0 = 0; q0 < m.size(); q0 += kReachBlock) {
-    const size_t q1 = std::min(m.size(), q0 + kReachBlock);
-    b.block.Add(*std::min_element(&m.x0[q0], &m.x0[0] + q1),
-                *std::max_element(&m.x1[q0], &m.x1[0] + q1),
-                *std::min_element(&m.y0[q0], &m.y0[0] + q1),
-                *std::max_element(&m.y1[q0], &m.y1[0] + q1),
-                *std::min_element(&m.low[q0], &m.low[0] + q1),
-                *std::min_element(&m.z_r[q0], &m.z_r[0] + q1),
-                *std::max_element(&m.r2[q0], &m.r2[0] + q1));
+  if (b.ids.size() % kReachBlock != 0) {
+    b.block.Add(bx0, bx1, by0, by1, blow, bz_r, br2);
   }
   b.serial = serial_;
   b.bin = bin;
