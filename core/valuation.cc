@@ -21,6 +21,8 @@ namespace {
 // Elements of a row (at most MoveIndex::kBinElements) whose near moves are
 // taken together before each element's own test.
 constexpr int32_t kBlockElements = 4;
+// Rows of a bin whose moves are taken together before each row's own test.
+constexpr int32_t kBandRows = 4;
 
 struct Partial {
   double sum = 0, sum_sq = 0, max = -1, max_x = 0, max_y = 0;
@@ -469,8 +471,9 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     const int32_t bin_size = static_cast<int32_t>(ids.size());
     // This thread's, reused (a bin's moves are about 1,250 on the plate
     // job; larger arrays are given back once the bin is done).
-    thread_local RowMoves bin_moves, near, block;
+    thread_local RowMoves bin_moves, band, near, block;
     bin_moves.Reset(bin_size);
+    band.Reset(bin_size);
     near.Reset(bin_size);
     block.Reset(bin_size);
     for (int32_t k = 0; k < bin_size; ++k) {
@@ -615,9 +618,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     // scalar remainder, which cost as much as the rest of a call.
     const size_t padded = (lattice + 7) & ~size_t{7};
     thread_local std::vector<RowElement> elements;
-    Grow(&elements, MoveIndex::kBinElements);
-    // Every per-element array of a row has `padded` entries an element.
-    const size_t row_size = MoveIndex::kBinElements * padded;
+    Grow(&elements, kBandRows * MoveIndex::kBinElements);
+    // Every per-element array of a band's rows has `padded` entries an
+    // element.
+    const size_t row_size = kBandRows * MoveIndex::kBinElements * padded;
     thread_local std::vector<double> row_xs, row_ys, row_est, row_oxs, row_oys,
         row_oest;
     for (std::vector<double>* v :
@@ -666,299 +670,356 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     Grow(&held, bin_moves.size());
     // The bin's sums in locals (registers), stored once at the end.
     Partial p = partials[b];
-    for (int32_t ej = ej0; ej < ej1; ++ej) {
-      const double ey0 = grid.NodeY(ej), ey1 = grid.NodeY(ej + 1);
-      if (ey0 > region.y1 || ey1 < region.y0) continue;
-      const double* const row_y = &lattice_y[static_cast<size_t>(ej) * n];
-      const int64_t* const row_cell =
-          mapped ? &cell_of_y[static_cast<size_t>(ej) * n] : nullptr;
-      int32_t row_elements = 0;
-      double row_cap = -std::numeric_limits<double>::infinity();
-      for (int32_t ei = ei0; ei < ei1; ++ei) {
-        const double ex0 = grid.NodeX(ei), ex1 = grid.NodeX(ei + 1);
-        if (ex0 > region.x1 || ex1 < region.x0) continue;
-        const size_t at = static_cast<size_t>(ej - ej0) * region_w + (ei - ei0);
-        const NodeValue* const corner[4] = {&nodes[at], &nodes[at + 1],
-                                            &nodes[at + region_w + 1],
-                                            &nodes[at + region_w]};
-        const double* const col_x = &lattice_x[static_cast<size_t>(ei) * n];
-        const int64_t* const col_cell =
-            mapped ? &cell_of_x[static_cast<size_t>(ei) * n] : nullptr;
-        // The coordinates grow with si and sj, so the first and last
-        // lattice points bound them all.
-        const bool all_in = region.Contains(col_x[0], row_y[0]) &&
-                            region.Contains(col_x[n - 1], row_y[n - 1]);
-        const size_t off = static_cast<size_t>(row_elements) * padded;
-        double* const xs = row_xs.data() + off;
-        double* const ys = row_ys.data() + off;
-        // With every point in and at most two map cells across and two
-        // down (cells at least as large as elements, as swarf run asks),
-        // the max of each of the four quarters they make; else a cell per
-        // point.
-        const bool quarters = mapped && all_in &&
-                              col_cell[n - 1] - col_cell[0] <= 1 &&
-                              row_cell[n - 1] - row_cell[0] <= options.map_cols;
-        const bool per_point = mapped && !quarters;
-        int32_t count = 0;
-        for_each_point(col_x, row_y, all_in, [&](int32_t si, int32_t sj) {
-          xs[count] = col_x[si];
-          ys[count] = row_y[sj];
-          if (per_point) row_cells[off + count] = row_cell[sj] + col_cell[si];
-          ++count;
-        });
-        if (count == 0) continue;
-        RowElement& el = elements[row_elements++];
-        el.all_in = all_in;
-        el.from_left = all_in && row_elements > 1 &&
-                       elements[row_elements - 2].all_in &&
-                       elements[row_elements - 2].ei == ei - 1 &&
-                       col_x[0] == lattice_x[static_cast<size_t>(ei) * n - 1];
-        el.from_below = all_in && top_row == ej - 1 && top_ok[ei - ei0] &&
-                        row_y[0] == lattice_y[static_cast<size_t>(ej) * n - 1];
-        double* const oxs = row_oxs.data() + off;
-        double* const oys = row_oys.data() + off;
-        const std::vector<int32_t>& list =
-            own_lists[(el.from_left ? 1 : 0) | (el.from_below ? 2 : 0)];
-        el.own_list = list.data();
-        const int32_t own = all_in ? static_cast<int32_t>(list.size()) : count;
-        for (int32_t q = 0; q < own; ++q) {
-          oxs[q] = xs[el.own_list[q]];
-          oys[q] = ys[el.own_list[q]];
-        }
-        el.own = own;
-        // own >= 1: the right edge and the inside are never shared.
-        el.own_padded = (own + 7) & ~7;
-        std::fill(oxs + own, oxs + el.own_padded, oxs[own - 1]);
-        std::fill(oys + own, oys + el.own_padded, oys[own - 1]);
-        if (guarded) {
-          const CornerReach* r = &reaches[at];
-          const CornerReach* const reach[4] = {r, r + 1, r + region_w + 1,
-                                               r + region_w};
-          wp.FillCorners(ei, ej, corner, reach, &el.e);
-          const PatchTrustRegion* t = &regions[at];
-          const PatchTrustRegion* const trust[4] = {t, t + 1, t + region_w + 1,
-                                                    t + region_w};
-          const bool sure[4] = {sure_trust[at] != 0, sure_trust[at + 1] != 0,
-                                sure_trust[at + region_w + 1] != 0,
-                                sure_trust[at + region_w] != 0};
-          PrepareGuarded(&el.e, trust, sure);
-        } else {
-          el.e = wp.CornersOf(ei, ej, corner);
-        }
-        el.ei = ei;
-        el.count = count;
-        el.quarters = quarters;
-        // An upper bound of the exact surface at each sample: the sweeps
-        // that own the corners (exact heights of real moves). Only moves
-        // that dip below the element's highest bound inside the element
-        // can lower a sample further; the rest of the bin is skipped.
-        // Heights() is bit-identical to Height(), several samples at once.
-        // Own points only: the cap bounds the surface where this element
-        // evaluates it.
-        double* const oest = row_oest.data() + off;
+    // The rows are taken in bands of kBandRows: each row's elements are
+    // set up (points, corners, caps), then the bin's moves that may cut
+    // into the band below its highest cap are taken once, then each row
+    // takes its near moves from those and its elements are evaluated, in
+    // row order. A move that may cut into a row below the row's cap may cut
+    // into the band below the band's (the tests only widen with the box
+    // and the cap): the same near moves, in the same order, as when each
+    // row tested the whole bin (about 1,250 moves on the plate job, of
+    // which about 220 are near a row).
+    struct BandRow {
+      double ey0 = 0, ey1 = 0, cap = 0;
+      const int64_t* cell = nullptr;
+      int32_t elements = 0;
+      Rect box;
+    };
+    BandRow band_row[kBandRows];
+    for (int32_t band_j0 = ej0; band_j0 < ej1; band_j0 += kBandRows) {
+      const int32_t band_j1 = std::min(band_j0 + kBandRows, ej1);
+      int32_t band_rows = 0;
+      for (int32_t ej = band_j0; ej < band_j1; ++ej) {
+        const double ey0 = grid.NodeY(ej), ey1 = grid.NodeY(ej + 1);
+        if (ey0 > region.y1 || ey1 < region.y0) continue;
+        const double* const row_y = &lattice_y[static_cast<size_t>(ej) * n];
+        const int64_t* const row_cell =
+            mapped ? &cell_of_y[static_cast<size_t>(ej) * n] : nullptr;
+        // This row's elements and their arrays follow the band's earlier
+        // rows'.
+        const size_t base =
+            static_cast<size_t>(band_rows) * MoveIndex::kBinElements;
+        int32_t row_elements = 0;
+        double row_cap = -std::numeric_limits<double>::infinity();
+        for (int32_t ei = ei0; ei < ei1; ++ei) {
+          const double ex0 = grid.NodeX(ei), ex1 = grid.NodeX(ei + 1);
+          if (ex0 > region.x1 || ex1 < region.x0) continue;
+          const size_t at =
+              static_cast<size_t>(ej - ej0) * region_w + (ei - ei0);
+          const NodeValue* const corner[4] = {&nodes[at], &nodes[at + 1],
+                                              &nodes[at + region_w + 1],
+                                              &nodes[at + region_w]};
+          const double* const col_x = &lattice_x[static_cast<size_t>(ei) * n];
+          const int64_t* const col_cell =
+              mapped ? &cell_of_x[static_cast<size_t>(ei) * n] : nullptr;
+          // The coordinates grow with si and sj, so the first and last
+          // lattice points bound them all.
+          const bool all_in = region.Contains(col_x[0], row_y[0]) &&
+                              region.Contains(col_x[n - 1], row_y[n - 1]);
+          const size_t off = (base + row_elements) * padded;
+          double* const xs = row_xs.data() + off;
+          double* const ys = row_ys.data() + off;
+          // With every point in and at most two map cells across and two
+          // down (cells at least as large as elements, as swarf run asks),
+          // the max of each of the four quarters they make; else a cell per
+          // point.
+          const bool quarters =
+              mapped && all_in && col_cell[n - 1] - col_cell[0] <= 1 &&
+              row_cell[n - 1] - row_cell[0] <= options.map_cols;
+          const bool per_point = mapped && !quarters;
+          int32_t count = 0;
+          for_each_point(col_x, row_y, all_in, [&](int32_t si, int32_t sj) {
+            xs[count] = col_x[si];
+            ys[count] = row_y[sj];
+            if (per_point) row_cells[off + count] = row_cell[sj] + col_cell[si];
+            ++count;
+          });
+          if (count == 0) continue;
+          RowElement& el = elements[base + row_elements++];
+          el.all_in = all_in;
+          el.from_left = all_in && row_elements > 1 &&
+                         elements[base + row_elements - 2].all_in &&
+                         elements[base + row_elements - 2].ei == ei - 1 &&
+                         col_x[0] == lattice_x[static_cast<size_t>(ei) * n - 1];
+          el.from_below =
+              all_in && top_row == ej - 1 && top_ok[ei - ei0] &&
+              row_y[0] == lattice_y[static_cast<size_t>(ej) * n - 1];
+          double* const oxs = row_oxs.data() + off;
+          double* const oys = row_oys.data() + off;
+          const std::vector<int32_t>& list =
+              own_lists[(el.from_left ? 1 : 0) | (el.from_below ? 2 : 0)];
+          el.own_list = list.data();
+          const int32_t own =
+              all_in ? static_cast<int32_t>(list.size()) : count;
+          for (int32_t q = 0; q < own; ++q) {
+            oxs[q] = xs[el.own_list[q]];
+            oys[q] = ys[el.own_list[q]];
+          }
+          el.own = own;
+          // own >= 1: the right edge and the inside are never shared.
+          el.own_padded = (own + 7) & ~7;
+          std::fill(oxs + own, oxs + el.own_padded, oxs[own - 1]);
+          std::fill(oys + own, oys + el.own_padded, oys[own - 1]);
+          if (guarded) {
+            const CornerReach* r = &reaches[at];
+            const CornerReach* const reach[4] = {r, r + 1, r + region_w + 1,
+                                                 r + region_w};
+            wp.FillCorners(ei, ej, corner, reach, &el.e);
+            const PatchTrustRegion* t = &regions[at];
+            const PatchTrustRegion* const trust[4] = {
+                t, t + 1, t + region_w + 1, t + region_w};
+            const bool sure[4] = {sure_trust[at] != 0, sure_trust[at + 1] != 0,
+                                  sure_trust[at + region_w + 1] != 0,
+                                  sure_trust[at + region_w] != 0};
+            PrepareGuarded(&el.e, trust, sure);
+          } else {
+            el.e = wp.CornersOf(ei, ej, corner);
+          }
+          el.ei = ei;
+          el.count = count;
+          el.quarters = quarters;
+          // An upper bound of the exact surface at each sample: the sweeps
+          // that own the corners (exact heights of real moves). Only moves
+          // that dip below the element's highest bound inside the element
+          // can lower a sample further; the rest of the bin is skipped.
+          // Heights() is bit-identical to Height(), several samples at once.
+          // Own points only: the cap bounds the surface where this element
+          // evaluates it.
+          double* const oest = row_oest.data() + off;
 #pragma omp simd
-        for (int32_t q = 0; q < el.own_padded; ++q) oest[q] = z_top;
-        const int32_t* owners = el.e.owner;
-        for (int k = 0; k < 4; ++k) {
-          bool seen = owners[k] < 0;
-          for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
-          if (seen) continue;
-          lower_by(owner_sweep(owners[k]), oxs, oys, el.own_padded, oest);
+          for (int32_t q = 0; q < el.own_padded; ++q) oest[q] = z_top;
+          const int32_t* owners = el.e.owner;
+          for (int k = 0; k < 4; ++k) {
+            bool seen = owners[k] < 0;
+            for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
+            if (seen) continue;
+            lower_by(owner_sweep(owners[k]), oxs, oys, el.own_padded, oest);
+          }
+          el.cap = Highest(oest, own);
+          el.box = Rect{el.e.x0, el.e.y0, el.e.x1, el.e.y1};
+          row_cap = std::max(row_cap, el.cap);
         }
-        el.cap = Highest(oest, own);
-        el.box = Rect{el.e.x0, el.e.y0, el.e.x1, el.e.y1};
-        row_cap = std::max(row_cap, el.cap);
+        if (row_elements == 0) continue;
+        // The elements' boxes share the row's y0 and y1.
+        band_row[band_rows++] = {
+            ey0,
+            ey1,
+            row_cap,
+            row_cell,
+            row_elements,
+            Rect{elements[base].box.x0, ey0,
+                 elements[base + row_elements - 1].box.x1, ey1}};
+        // The next row's elements take their bottom edges' points from
+        // this row's that are all in.
+        std::fill_n(top_ok.begin(), ei1 - ei0, 0);
+        for (int32_t w = 0; w < row_elements; ++w) {
+          if (elements[base + w].all_in)
+            top_ok[elements[base + w].ei - ei0] = 1;
+        }
+        top_row = ej;
       }
-      if (row_elements == 0) continue;
-      // The elements' boxes share the row's y0 and y1.
-      const Rect row_box{elements[0].box.x0, ey0,
-                         elements[row_elements - 1].box.x1, ey1};
-      KeepMovesThatMayCut(bin_moves, row_box, row_cap, pass.data(),
-                          passing.data(), &near);
-      std::fill_n(top_ok.begin(), ei1 - ei0, 0);
-      top_row = ej;
-      for (int32_t q = 0; q < near.size(); ++q) held[near.k[q]].held = false;
-      // The cell of the row's last one-cell elements and their max (-1:
-      // none), put in the map when the cell changes and at the row's end.
-      int64_t one_cell = -1;
-      float one_cell_max = 0;
-      for (int32_t w = 0; w < row_elements; ++w) {
-        // A block of the row's elements takes the near moves that may cut
-        // into it below its highest cap, and each element tests those alone
-        // (the tests only widen with the box and the cap, so the same moves
-        // pass an element's own test; a row's near moves are about 220 on
-        // the plate job).
-        if (w % kBlockElements == 0) {
-          const int32_t w1 = std::min(w + kBlockElements, row_elements);
-          double block_cap = elements[w].cap;
-          for (int32_t v = w + 1; v < w1; ++v) {
-            block_cap = std::max(block_cap, elements[v].cap);
-          }
-          const Rect block_box{elements[w].box.x0, ey0, elements[w1 - 1].box.x1,
-                               ey1};
-          KeepMovesThatMayCut(near, block_box, block_cap, pass.data(),
-                              passing.data(), &block);
-        }
-        RowElement& el = elements[w];
-        const ElementCorners& e = el.e;
-        const int32_t count = el.count;
-        const size_t off = static_cast<size_t>(w) * padded;
-        const double* const xs = row_xs.data() + off;
-        const double* const ys = row_ys.data() + off;
-        const double* const oxs = row_oxs.data() + off;
-        const double* const oys = row_oys.data() + off;
-        double* const oest = row_oest.data() + off;
-        const int32_t own = el.own;
-        double* const est = row_est.data() + off;
-        const int32_t* owners = e.owner;
-        const double cap = el.cap;
-        const Rect& box = el.box;
-        const double xc = 0.5 * (box.x0 + box.x1), yc = 0.5 * (box.y0 + box.y1);
-        // The own points' offsets from the centre, for the tangent planes
-        // there (taken once, not for every plane).
-        double* const odx = offset_x.data();
-        double* const ody = offset_y.data();
-        double range[4];
-        OffsetsFrom(oxs, oys, el.own_padded, xc, yc, odx, ody, range);
-        const double dx_lo = range[0], dx_hi = range[1], dy_lo = range[2],
-                     dy_hi = range[3];
-        // Whether a plane through (xc, yc) is at or above every own point's
-        // est. First at the corners of the offsets' box, where it is lowest
-        // (products and sums round monotonically; any other rounding is far
-        // inside the slack), against the cap, which no est exceeds (they
-        // only go down): about half the planes on the plate job are shown
-        // above there, without the points.
-        auto plane_above = [&](const BallSweep::SupportPlane& plane) {
-          const double lowest = plane.w - plane.slack +
-                                std::min(plane.wx * dx_lo, plane.wx * dx_hi) +
-                                std::min(plane.wy * dy_lo, plane.wy * dy_hi);
-          return lowest >= cap ||
-                 PlaneAtOrAbove(plane, odx, ody, el.own_padded, oest);
-        };
-        MovesThatMayCut(block, box, cap, pass.data());
-        const int32_t element_count =
-            Passing(pass.data(), block.size(), passing.data());
-        for (int32_t u = 0; u < element_count; ++u) {
-          const int32_t ck = block.k[passing[u]];
-          // A corner's owner is in est already.
-          const int32_t id = static_cast<int32_t>(ids[ck]);
-          if (id == owners[0] || id == owners[1] || id == owners[2] ||
-              id == owners[3]) {
-            continue;
-          }
-          // Not tested against its footprint below cap (FootprintBounds):
-          // that ruled out 0.2% (the 100 mm plate) to 5% (cameo) of the
-          // moves that pass here, for more than their heights cost. A move
-          // it rules out is nowhere in the box below cap, so not below est
-          // at any sample: its heights change none.
-          // A ball's tangent plane at the element's centre is below its
-          // surface: where that plane is above est at every own point, so
-          // are its heights (about 9 of 10 moves that pass here on the
-          // plate job, 8 of 10 on cameo; a point and a plane take a third
-          // of the heights' instructions, but two roots and two divisions
-          // in a row: fewer of their cycles).
-          const Sweep& sweep = bin_sweep(ck);
-          if (const BallSweep* ball = sweep.ball()) {
-            HeldPlane& hp = held[ck];
-            if (hp.held) {
-              // Its height at this element's centre (rounding far inside
-              // the slack).
-              BallSweep::SupportPlane moved = hp.plane;
-              moved.w += moved.wx * (xc - hp.x) + moved.wy * (yc - hp.y);
-              if (plane_above(moved)) continue;
-            }
-            const std::optional<BallSweep::SupportPlane> plane =
-                ball->SupportingPlane(xc, yc);
-            if (plane.has_value()) {
-              hp = {xc, yc, *plane, true};
-              if (plane_above(*plane)) continue;
-            }
-          }
-          lower_by(sweep, oxs, oys, el.own_padded, oest);
-        }
-        for (int32_t q = 0; q < own; ++q) est[el.own_list[q]] = oest[q];
-        if (el.from_left) {
-          const double* const left = est - padded;  // element w - 1
-          for (int32_t sj = 1; sj <= edge; ++sj) {
-            const int32_t q = edge + (sj - 1) * n;
-            est[q] = left[q + n - 1];
-          }
-        }
-        double* const top_of =
-            &top_est[static_cast<size_t>(el.ei - ei0) * edge];
-        if (el.from_below) std::copy_n(top_of, edge, est);
-        if (el.all_in) {
-          std::copy_n(est + top, edge, top_of);
-          top_ok[el.ei - ei0] = 1;
-        }
-        scheme.ReconstructMany(e, xs, ys, count, rec.data());
-        const double element_max = ErrorsOf(rec.data(), est, count, err.data());
-        const int64_t* const col_cell =
-            mapped ? &cell_of_x[static_cast<size_t>(el.ei) * n] : nullptr;
-        // The first column and row in the second cell (n: none).
-        int32_t sx = 1, sy = 1;
-        if (el.quarters) {
-          while (sx < n && col_cell[sx] == col_cell[0]) ++sx;
-          while (sy < n && row_cell[sy] == row_cell[0]) ++sy;
-        }
-        if (el.quarters && sx == n && sy == n) {
-          // One cell (the usual case: cells larger than elements), mostly
-          // the last element's too: the row's run of one cell goes in once
-          // (the same max in any order), not an atomic an element.
-          const int64_t c = row_cell[0] + col_cell[0];
-          const float m = static_cast<float>(element_max);
-          if (c != one_cell) {
-            if (one_cell >= 0) map_max(one_cell, one_cell_max);
-            one_cell = c;
-            one_cell_max = m;
-          } else if (m > one_cell_max) {
-            one_cell_max = m;
-          }
-        } else if (el.quarters) {
-          double q_max[4];
-          QuarterMaxima(err.data(), point_si.data(), point_sj.data(), count, sx,
-                        sy, q_max);
-          // The float of the largest error is the largest of the floats
-          // (the conversion keeps the order).
-          const float m[4] = {
-              static_cast<float>(q_max[0]), static_cast<float>(q_max[1]),
-              static_cast<float>(q_max[2]), static_cast<float>(q_max[3])};
-          map_max(row_cell[0] + col_cell[0], m[0]);
-          if (sx < n) map_max(row_cell[0] + col_cell[sx], m[1]);
-          if (sy < n) map_max(row_cell[sy] + col_cell[0], m[2]);
-          if (sx < n && sy < n) map_max(row_cell[sy] + col_cell[sx], m[3]);
-        } else if (mapped) {
-          // An element's samples mostly share a map cell: their max goes
-          // in once per run of one cell (the same max: cells start at 0
-          // and take only larger values).
-          const int64_t* const cells = row_cells.data() + off;
-          int64_t run_cell = -1;
-          float run_max = 0;
-          for (int32_t q = 0; q < count; ++q) {
-            const int64_t c = cells[q];
-            if (c != run_cell) {
-              if (run_cell >= 0) map_max(run_cell, run_max);
-              run_cell = c;
-              run_max = 0;
-            }
-            const float ef = static_cast<float>(err[q]);
-            if (ef > run_max) run_max = ef;
-          }
-          if (run_cell >= 0) map_max(run_cell, run_max);
-        }
-        const int32_t max_q =
-            Accumulate(err.data(), count, &p.sum, &p.sum_sq, &p.max);
-        p.n += count;
-        if (max_q >= 0) {
-          p.max_x = xs[max_q];
-          p.max_y = ys[max_q];
-        }
+      if (band_rows == 0) continue;
+      double band_cap = band_row[0].cap;
+      Rect band_box = band_row[0].box;
+      for (int32_t r = 1; r < band_rows; ++r) {
+        band_cap = std::max(band_cap, band_row[r].cap);
+        band_box.x0 = std::min(band_box.x0, band_row[r].box.x0);
+        band_box.x1 = std::max(band_box.x1, band_row[r].box.x1);
+        band_box.y1 = band_row[r].box.y1;
       }
-      if (one_cell >= 0) map_max(one_cell, one_cell_max);
+      KeepMovesThatMayCut(bin_moves, band_box, band_cap, pass.data(),
+                          passing.data(), &band);
+      for (int32_t r = 0; r < band_rows; ++r) {
+        const BandRow& row = band_row[r];
+        const double ey0 = row.ey0, ey1 = row.ey1;
+        const int64_t* const row_cell = row.cell;
+        const int32_t row_elements = row.elements;
+        const size_t base = static_cast<size_t>(r) * MoveIndex::kBinElements;
+        KeepMovesThatMayCut(band, row.box, row.cap, pass.data(), passing.data(),
+                            &near);
+        for (int32_t q = 0; q < near.size(); ++q) held[near.k[q]].held = false;
+        // The cell of the row's last one-cell elements and their max (-1:
+        // none), put in the map when the cell changes and at the row's end.
+        int64_t one_cell = -1;
+        float one_cell_max = 0;
+        for (int32_t w = 0; w < row_elements; ++w) {
+          // A block of the row's elements takes the near moves that may cut
+          // into it below its highest cap, and each element tests those alone
+          // (the tests only widen with the box and the cap, so the same moves
+          // pass an element's own test; a row's near moves are about 220 on
+          // the plate job).
+          if (w % kBlockElements == 0) {
+            const int32_t w1 = std::min(w + kBlockElements, row_elements);
+            double block_cap = elements[base + w].cap;
+            for (int32_t v = w + 1; v < w1; ++v) {
+              block_cap = std::max(block_cap, elements[base + v].cap);
+            }
+            const Rect block_box{elements[base + w].box.x0, ey0,
+                                 elements[base + w1 - 1].box.x1, ey1};
+            KeepMovesThatMayCut(near, block_box, block_cap, pass.data(),
+                                passing.data(), &block);
+          }
+          RowElement& el = elements[base + w];
+          const ElementCorners& e = el.e;
+          const int32_t count = el.count;
+          const size_t off = (base + w) * padded;
+          const double* const xs = row_xs.data() + off;
+          const double* const ys = row_ys.data() + off;
+          const double* const oxs = row_oxs.data() + off;
+          const double* const oys = row_oys.data() + off;
+          double* const oest = row_oest.data() + off;
+          const int32_t own = el.own;
+          double* const est = row_est.data() + off;
+          const int32_t* owners = e.owner;
+          const double cap = el.cap;
+          const Rect& box = el.box;
+          const double xc = 0.5 * (box.x0 + box.x1),
+                       yc = 0.5 * (box.y0 + box.y1);
+          // The own points' offsets from the centre, for the tangent planes
+          // there (taken once, not for every plane).
+          double* const odx = offset_x.data();
+          double* const ody = offset_y.data();
+          double range[4];
+          OffsetsFrom(oxs, oys, el.own_padded, xc, yc, odx, ody, range);
+          const double dx_lo = range[0], dx_hi = range[1], dy_lo = range[2],
+                       dy_hi = range[3];
+          // Whether a plane through (xc, yc) is at or above every own point's
+          // est. First at the corners of the offsets' box, where it is lowest
+          // (products and sums round monotonically; any other rounding is far
+          // inside the slack), against the cap, which no est exceeds (they
+          // only go down): about half the planes on the plate job are shown
+          // above there, without the points.
+          auto plane_above = [&](const BallSweep::SupportPlane& plane) {
+            const double lowest = plane.w - plane.slack +
+                                  std::min(plane.wx * dx_lo, plane.wx * dx_hi) +
+                                  std::min(plane.wy * dy_lo, plane.wy * dy_hi);
+            return lowest >= cap ||
+                   PlaneAtOrAbove(plane, odx, ody, el.own_padded, oest);
+          };
+          MovesThatMayCut(block, box, cap, pass.data());
+          const int32_t element_count =
+              Passing(pass.data(), block.size(), passing.data());
+          for (int32_t u = 0; u < element_count; ++u) {
+            const int32_t ck = block.k[passing[u]];
+            // A corner's owner is in est already.
+            const int32_t id = static_cast<int32_t>(ids[ck]);
+            if (id == owners[0] || id == owners[1] || id == owners[2] ||
+                id == owners[3]) {
+              continue;
+            }
+            // Not tested against its footprint below cap (FootprintBounds):
+            // that ruled out 0.2% (the 100 mm plate) to 5% (cameo) of the
+            // moves that pass here, for more than their heights cost. A move
+            // it rules out is nowhere in the box below cap, so not below est
+            // at any sample: its heights change none.
+            // A ball's tangent plane at the element's centre is below its
+            // surface: where that plane is above est at every own point, so
+            // are its heights (about 9 of 10 moves that pass here on the
+            // plate job, 8 of 10 on cameo; a point and a plane take a third
+            // of the heights' instructions, but two roots and two divisions
+            // in a row: fewer of their cycles).
+            const Sweep& sweep = bin_sweep(ck);
+            if (const BallSweep* ball = sweep.ball()) {
+              HeldPlane& hp = held[ck];
+              if (hp.held) {
+                // Its height at this element's centre (rounding far inside
+                // the slack).
+                BallSweep::SupportPlane moved = hp.plane;
+                moved.w += moved.wx * (xc - hp.x) + moved.wy * (yc - hp.y);
+                if (plane_above(moved)) continue;
+              }
+              const std::optional<BallSweep::SupportPlane> plane =
+                  ball->SupportingPlane(xc, yc);
+              if (plane.has_value()) {
+                hp = {xc, yc, *plane, true};
+                if (plane_above(*plane)) continue;
+              }
+            }
+            lower_by(sweep, oxs, oys, el.own_padded, oest);
+          }
+          for (int32_t q = 0; q < own; ++q) est[el.own_list[q]] = oest[q];
+          if (el.from_left) {
+            const double* const left = est - padded;  // element w - 1
+            for (int32_t sj = 1; sj <= edge; ++sj) {
+              const int32_t q = edge + (sj - 1) * n;
+              est[q] = left[q + n - 1];
+            }
+          }
+          double* const top_of =
+              &top_est[static_cast<size_t>(el.ei - ei0) * edge];
+          if (el.from_below) std::copy_n(top_of, edge, est);
+          if (el.all_in) std::copy_n(est + top, edge, top_of);
+          scheme.ReconstructMany(e, xs, ys, count, rec.data());
+          const double element_max =
+              ErrorsOf(rec.data(), est, count, err.data());
+          const int64_t* const col_cell =
+              mapped ? &cell_of_x[static_cast<size_t>(el.ei) * n] : nullptr;
+          // The first column and row in the second cell (n: none).
+          int32_t sx = 1, sy = 1;
+          if (el.quarters) {
+            while (sx < n && col_cell[sx] == col_cell[0]) ++sx;
+            while (sy < n && row_cell[sy] == row_cell[0]) ++sy;
+          }
+          if (el.quarters && sx == n && sy == n) {
+            // One cell (the usual case: cells larger than elements), mostly
+            // the last element's too: the row's run of one cell goes in once
+            // (the same max in any order), not an atomic an element.
+            const int64_t c = row_cell[0] + col_cell[0];
+            const float m = static_cast<float>(element_max);
+            if (c != one_cell) {
+              if (one_cell >= 0) map_max(one_cell, one_cell_max);
+              one_cell = c;
+              one_cell_max = m;
+            } else if (m > one_cell_max) {
+              one_cell_max = m;
+            }
+          } else if (el.quarters) {
+            double q_max[4];
+            QuarterMaxima(err.data(), point_si.data(), point_sj.data(), count,
+                          sx, sy, q_max);
+            // The float of the largest error is the largest of the floats
+            // (the conversion keeps the order).
+            const float m[4] = {
+                static_cast<float>(q_max[0]), static_cast<float>(q_max[1]),
+                static_cast<float>(q_max[2]), static_cast<float>(q_max[3])};
+            map_max(row_cell[0] + col_cell[0], m[0]);
+            if (sx < n) map_max(row_cell[0] + col_cell[sx], m[1]);
+            if (sy < n) map_max(row_cell[sy] + col_cell[0], m[2]);
+            if (sx < n && sy < n) map_max(row_cell[sy] + col_cell[sx], m[3]);
+          } else if (mapped) {
+            // An element's samples mostly share a map cell: their max goes
+            // in once per run of one cell (the same max: cells start at 0
+            // and take only larger values).
+            const int64_t* const cells = row_cells.data() + off;
+            int64_t run_cell = -1;
+            float run_max = 0;
+            for (int32_t q = 0; q < count; ++q) {
+              const int64_t c = cells[q];
+              if (c != run_cell) {
+                if (run_cell >= 0) map_max(run_cell, run_max);
+                run_cell = c;
+                run_max = 0;
+              }
+              const float ef = static_cast<float>(err[q]);
+              if (ef > run_max) run_max = ef;
+            }
+            if (run_cell >= 0) map_max(run_cell, run_max);
+          }
+          const int32_t max_q =
+              Accumulate(err.data(), count, &p.sum, &p.sum_sq, &p.max);
+          p.n += count;
+          if (max_q >= 0) {
+            p.max_x = xs[max_q];
+            p.max_y = ys[max_q];
+          }
+        }
+        if (one_cell >= 0) map_max(one_cell, one_cell_max);
+      }
     }
     partials[b] = p;
     constexpr int32_t kKeptMoves = 1 << 16;
     bin_moves.Trim(kKeptMoves);
+    band.Trim(kKeptMoves);
     near.Trim(kKeptMoves);
     block.Trim(kKeptMoves);
     if (bin_size > kKeptMoves) {
