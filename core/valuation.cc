@@ -592,13 +592,13 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     const size_t lattice = static_cast<size_t>(n) * n - 4;
     // A row of the bin's elements is taken in two passes: each element's
     // points and the upper bound of the exact surface its corners' owners
-    // give (its cap), then the bin's moves that may cut below the highest
-    // cap anywhere in the row, once, and each element's own test among
-    // those alone. A move that may cut into an element below its cap may
-    // cut into the row below the row's cap (the tests only widen with the
-    // box and the cap): the same moves lower each element as when every
-    // element tested the whole bin (on the plate job, about 400 moves an
-    // element, of which 5 passed).
+    // give (its cap), then the moves that may cut below the highest cap
+    // anywhere in the row (from its band's, below), once, and each
+    // element's own test among those alone. A move that may cut into an
+    // element below its cap may cut into the row below the row's cap (the
+    // tests only widen with the box and the cap): the same moves lower each
+    // element as when every element tested the whole bin (on the plate
+    // job, about 400 moves an element, of which 5 passed).
     // An element's points on its left edge are its left neighbour's on its
     // right edge, and those on its bottom edge the lower neighbour's on its
     // top edge (n - 2 on each edge, of n * n - 4): where the coordinates
@@ -630,8 +630,9 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
          {&row_xs, &row_ys, &row_est, &row_oxs, &row_oys, &row_oest}) {
       Grow(v, row_size);
     }
-    // The top edges' exact heights of the last row taken (row `top_row`),
-    // per element of the bin's row; top_ok where they were all in.
+    // The top edges' exact heights of the last row evaluated, per element
+    // of the bin's row; top_ok where the elements of the last row set up
+    // (row `top_row`, evaluated before the next row) were all in.
     thread_local std::vector<double> top_est;
     thread_local std::vector<char> top_ok;
     Grow(&top_est, static_cast<size_t>(ei1 - ei0) * edge);
