@@ -480,9 +480,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     block.Reset(bin_size);
     for (int32_t k = 0; k < bin_size; ++k) {
       const Move m = wp.move(static_cast<int32_t>(ids[k]));
-      bin_moves.Add(FootprintCapsule(m.from, m.to, m.cutter, z_top).Bounds(),
-                    SweepLowest(m.from, m.to, m.cutter),
-                    FootprintGap::Of(m.from, m.to, m.cutter), k);
+      bin_moves.Add(
+          FootprintCapsuleEnds(m.from, m.to, m.cutter, z_top).Bounds(),
+          SweepLowest(m.from, m.to, m.cutter),
+          FootprintGap::Of(m.from, m.to, m.cutter), k);
     }
     // A bin move's sweep, built when an element first needs its heights
     // (on the plate job about 1 in 8 of the bin's moves is).

@@ -1130,7 +1130,7 @@ CornerReach ReachOf(const Move& m, double z_top) {
   r.bounded = true;
   r.z_low = std::min(m.from.z, m.to.z);
   // Where the sweep is below the top (beyond, the top is lower anyway).
-  const Capsule c = FootprintCapsule(m.from, m.to, m.cutter, z_top);
+  const Capsule c = FootprintCapsuleEnds(m.from, m.to, m.cutter, z_top);
   if (c.empty) {
     r.empty = true;
     return r;

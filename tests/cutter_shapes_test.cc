@@ -612,7 +612,8 @@ TEST_P(ReferenceTest, SweepContract) {
 
 // FootprintCapsule and FootprintBounds, which do not build the sweep, give
 // the sweep's own footprint bit for bit, at every cap (above the move, at
-// its tips, through it, below it); SweepLowest its lowest height.
+// its tips, through it, below it), and FootprintCapsuleEnds its ends and
+// radius (its direction left 0); SweepLowest its lowest height.
 TEST_P(ReferenceTest, FootprintWithoutTheSweep) {
   const Sweep sweep = MakeSweep();
   const MoveCase& m = move();
@@ -622,7 +623,9 @@ TEST_P(ReferenceTest, FootprintWithoutTheSweep) {
   for (double cap : {lo - 1, lo, 0.5 * (lo + hi), hi, hi + 0.1, hi + 50}) {
     const Capsule a = sweep.Footprint(cap);
     const Capsule b = FootprintCapsule(m.from, m.to, cutter(), cap);
+    const Capsule e = FootprintCapsuleEnds(m.from, m.to, cutter(), cap);
     ASSERT_EQ(a.empty, b.empty) << "cap " << cap;
+    ASSERT_EQ(a.empty, e.empty) << "cap " << cap;
     const std::optional<Rect> r = FootprintBounds(m.from, m.to, cutter(), cap);
     ASSERT_EQ(r.has_value(), !a.empty) << "cap " << cap;
     if (a.empty) continue;
@@ -636,6 +639,14 @@ TEST_P(ReferenceTest, FootprintWithoutTheSweep) {
     EXPECT_EQ(a.length, b.length);
     EXPECT_EQ(a.inv_ux, b.inv_ux);
     EXPECT_EQ(a.inv_uy, b.inv_uy);
+    EXPECT_EQ(a.x0, e.x0);
+    EXPECT_EQ(a.y0, e.y0);
+    EXPECT_EQ(a.x1, e.x1);
+    EXPECT_EQ(a.y1, e.y1);
+    EXPECT_EQ(a.radius, e.radius);
+    EXPECT_EQ(e.ux, 0.0);
+    EXPECT_EQ(e.uy, 0.0);
+    EXPECT_EQ(e.length, 0.0);
     const Rect ab = a.Bounds();
     EXPECT_EQ(r->x0, ab.x0);
     EXPECT_EQ(r->y0, ab.y0);

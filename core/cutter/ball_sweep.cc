@@ -471,10 +471,7 @@ BallSweep::Capsule BallSweep::FootprintEnds(const Vec3& a, const Vec3& b,
 std::optional<Rect> BallSweep::FootprintBounds(const Vec3& tip_from,
                                                const Vec3& tip_to,
                                                double radius, double cap) {
-  // The centres as the constructor places them.
-  const Vec3 a{tip_from.x, tip_from.y, tip_from.z + radius};
-  const Vec3 b{tip_to.x, tip_to.y, tip_to.z + radius};
-  const Capsule c = FootprintEnds(a, b, radius, radius * radius, cap);
+  const Capsule c = FootprintEndsOf(tip_from, tip_to, radius, cap);
   if (c.empty) return std::nullopt;
   return c.Bounds();
 }
@@ -482,12 +479,19 @@ std::optional<Rect> BallSweep::FootprintBounds(const Vec3& tip_from,
 BallSweep::Capsule BallSweep::FootprintOf(const Vec3& tip_from,
                                            const Vec3& tip_to, double radius,
                                            double cap) {
-  const Vec3 a{tip_from.x, tip_from.y, tip_from.z + radius};
-  const Vec3 b{tip_to.x, tip_to.y, tip_to.z + radius};
-  Capsule c = FootprintEnds(a, b, radius, radius * radius, cap);
+  Capsule c = FootprintEndsOf(tip_from, tip_to, radius, cap);
   if (c.empty) return c;
   FillDirection(&c);
   return c;
+}
+
+BallSweep::Capsule BallSweep::FootprintEndsOf(const Vec3& tip_from,
+                                              const Vec3& tip_to, double radius,
+                                              double cap) {
+  // The centres as the constructor places them.
+  const Vec3 a{tip_from.x, tip_from.y, tip_from.z + radius};
+  const Vec3 b{tip_to.x, tip_to.y, tip_to.z + radius};
+  return FootprintEnds(a, b, radius, radius * radius, cap);
 }
 
 BallSweep::Capsule BallSweep::Footprint(double cap) const {

@@ -240,6 +240,11 @@ class BallSweep {
   // radius).Footprint(cap), without building the sweep.
   static Capsule FootprintOf(const Vec3& tip_from, const Vec3& tip_to,
                              double radius, double cap);
+  // FootprintOf's ends, radius and `empty` (the same bits) without its
+  // direction (ux, uy, length, inv_ux, inv_uy left 0): for callers that
+  // read only those, such as Bounds().
+  static Capsule FootprintEndsOf(const Vec3& tip_from, const Vec3& tip_to,
+                                 double radius, double cap);
   // Footprint(cap)'s radius. Footprint(c)'s segment for any c >= cap,
   // widened by this radius, also holds every point where the sweep is
   // below cap (a lower cap only shortens the segment and the radius).

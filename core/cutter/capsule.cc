@@ -146,6 +146,13 @@ void FillDirection(Capsule* c) {
 
 Capsule TipFootprint(const Vec3& a, const Vec3& b, const Cutter& cutter,
                      double cap) {
+  Capsule c = TipFootprintEnds(a, b, cutter, cap);
+  if (!c.empty) FillDirection(&c);
+  return c;
+}
+
+Capsule TipFootprintEnds(const Vec3& a, const Vec3& b, const Cutter& cutter,
+                         double cap) {
   Capsule c;
   // Only tips below the cap put the tool below it.
   const double z_lim = cap + kFootprintMargin;
@@ -168,7 +175,6 @@ Capsule TipFootprint(const Vec3& a, const Vec3& b, const Cutter& cutter,
   c.x1 = a.x + t1 * (b.x - a.x);
   c.y1 = a.y + t1 * (b.y - a.y);
   c.radius = rho * (1 + 1e-12) + kFootprintMargin;
-  FillDirection(&c);
   return c;
 }
 

@@ -112,6 +112,10 @@ void RowNodeRangesAt(const Capsule& c, const double* radii, int32_t j0,
 // the ball sweep has its own, tighter by construction.
 Capsule TipFootprint(const Vec3& tip_from, const Vec3& tip_to,
                      const Cutter& c, double cap);
+// TipFootprint's ends, radius and `empty` (the same bits) without its
+// direction (ux, uy, length, inv_ux, inv_uy left 0).
+Capsule TipFootprintEnds(const Vec3& tip_from, const Vec3& tip_to,
+                         const Cutter& c, double cap);
 
 }  // namespace swarf
 

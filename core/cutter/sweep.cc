@@ -38,6 +38,15 @@ Capsule FootprintCapsule(const Vec3& tip_from, const Vec3& tip_to,
   return TipFootprint(tip_from, tip_to, s, cap);
 }
 
+Capsule FootprintCapsuleEnds(const Vec3& tip_from, const Vec3& tip_to,
+                             const Cutter& cutter, double cap) {
+  const Cutter s = SweptCutter(cutter);
+  if (s.kind == CutterKind::kBall) {
+    return BallSweep::FootprintEndsOf(tip_from, tip_to, s.radius, cap);
+  }
+  return TipFootprintEnds(tip_from, tip_to, s, cap);
+}
+
 double SweepLowest(const Vec3& tip_from, const Vec3& tip_to,
                    const Cutter& cutter) {
   const Cutter s = SweptCutter(cutter);
@@ -54,7 +63,7 @@ std::optional<Rect> FootprintBounds(const Vec3& tip_from, const Vec3& tip_to,
   if (SweptAsBall(cutter)) {
     return BallSweep::FootprintBounds(tip_from, tip_to, cutter.radius, cap);
   }
-  const Capsule c = FootprintCapsule(tip_from, tip_to, cutter, cap);
+  const Capsule c = FootprintCapsuleEnds(tip_from, tip_to, cutter, cap);
   if (c.empty) return std::nullopt;
   return c.Bounds();
 }

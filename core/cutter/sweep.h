@@ -164,6 +164,11 @@ std::optional<Rect> FootprintBounds(const Vec3& tip_from, const Vec3& tip_to,
 // cutter).Footprint(cap), without building the sweep.
 Capsule FootprintCapsule(const Vec3& tip_from, const Vec3& tip_to,
                          const Cutter& cutter, double cap);
+// FootprintCapsule's ends, radius and `empty` (the same bits) without its
+// direction (ux, uy, length, inv_ux, inv_uy left 0), which costs a hypot
+// and divisions: for callers that read only those, such as Bounds().
+Capsule FootprintCapsuleEnds(const Vec3& tip_from, const Vec3& tip_to,
+                             const Cutter& cutter, double cap);
 // The lowest height the tool reaches on the move, bit-identical to
 // Sweep(tip_from, tip_to, cutter).lowest(), without building the sweep.
 double SweepLowest(const Vec3& tip_from, const Vec3& tip_to,
