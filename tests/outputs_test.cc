@@ -16,6 +16,7 @@
 #include <iterator>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <numbers>
 #include <optional>
 #include <random>
@@ -255,6 +256,43 @@ TEST(FormatInOrderTest, PiecesComeInOrderOneAtATime) {
     EXPECT_FALSE(overlapped) << n;
     EXPECT_EQ(pieces, (n + per_chunk - 1) / per_chunk) << n;
     EXPECT_EQ(text, serial) << n << " " << per_chunk << " " << at_once;
+  }
+}
+
+// With chunks of any sizes (the marks files' chunks of even cost), each
+// chunk is formatted once, with its own items, and the pieces join into
+// the serial text: one item, uneven chunks over several groups.
+TEST(FormatInOrderTest, ChunksOfAnySizeComeInOrder) {
+  auto item = [](int64_t k) { return absl::StrCat(k, ";"); };
+  for (const auto& [first, at_once] :
+       std::vector<std::pair<std::vector<int64_t>, int64_t>>{
+           {{0, 1}, 1},
+           {{0, 1, 2, 50, 51, 400, 401, 1000}, 2},
+           {{0, 300, 301, 302, 1000}, 32}}) {
+    const int64_t n = first.back();
+    std::string serial;
+    for (int64_t k = 0; k < n; ++k) serial += item(k);
+    std::string text;
+    std::vector<std::pair<int64_t, int64_t>> made;
+    std::mutex mu;
+    FormatInOrder(
+        first, at_once,
+        [&](int64_t a, int64_t b, std::string* out) {
+          EXPECT_TRUE(out->empty());
+          {
+            std::lock_guard<std::mutex> lock(mu);
+            made.emplace_back(a, b);
+          }
+          for (int64_t k = a; k < b; ++k) *out += item(k);
+        },
+        [&](std::string_view piece) { text += piece; });
+    std::sort(made.begin(), made.end());
+    std::vector<std::pair<int64_t, int64_t>> want;
+    for (size_t c = 0; c + 1 < first.size(); ++c) {
+      want.emplace_back(first[c], first[c + 1]);
+    }
+    EXPECT_EQ(made, want) << n;
+    EXPECT_EQ(text, serial) << n;
   }
 }
 

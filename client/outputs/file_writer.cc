@@ -46,13 +46,16 @@ void FileWriter::Write(std::string_view data) {
   if (buffer_.size() >= kBufferBytes) Flush();
 }
 
-void FormatInOrder(
-    int64_t n, int64_t per_chunk, int64_t chunks_at_once,
+namespace {
+
+// FormatInOrder over `chunks` chunks, chunk c holding items [first_of(c),
+// first_of(c + 1)).
+void FormatChunksInOrder(
+    int64_t chunks, const std::function<int64_t(int64_t)>& first_of,
+    int64_t chunks_at_once,
     const std::function<void(int64_t, int64_t, std::string*)>& format,
     const std::function<void(std::string_view)>& put) {
-  if (n <= 0) return;
-  per_chunk = std::max<int64_t>(per_chunk, 1);
-  const int64_t chunks = (n + per_chunk - 1) / per_chunk;
+  if (chunks <= 0) return;
   const int64_t group = std::min(chunks, std::max<int64_t>(chunks_at_once, 1));
   // Two groups' pieces: one is put, on a thread of its own, while the next
   // is made. Put after its group was made, a file's writes (serialised by
@@ -66,9 +69,8 @@ void FormatInOrder(
     std::vector<std::string>& p = pieces[made];
     p.resize(group);
     ThreadPool::Default().ParallelFor(nc, [&](int64_t k) {
-      const int64_t first = (c0 + k) * per_chunk;
       p[k].clear();
-      format(first, std::min(n, first + per_chunk), &p[k]);
+      format(first_of(c0 + k), first_of(c0 + k + 1), &p[k]);
     });
     if (putting.valid()) putting.get();  // the other group is put
     if (c0 + nc == chunks) {
@@ -79,6 +81,30 @@ void FormatInOrder(
       for (int64_t k = 0; k < nc; ++k) put(p[k]);
     });
   }
+}
+
+}  // namespace
+
+void FormatInOrder(
+    int64_t n, int64_t per_chunk, int64_t chunks_at_once,
+    const std::function<void(int64_t, int64_t, std::string*)>& format,
+    const std::function<void(std::string_view)>& put) {
+  if (n <= 0) return;
+  per_chunk = std::max<int64_t>(per_chunk, 1);
+  FormatChunksInOrder(
+      (n + per_chunk - 1) / per_chunk,
+      [n, per_chunk](int64_t c) { return std::min(n, c * per_chunk); },
+      chunks_at_once, format, put);
+}
+
+void FormatInOrder(
+    std::span<const int64_t> first, int64_t chunks_at_once,
+    const std::function<void(int64_t, int64_t, std::string*)>& format,
+    const std::function<void(std::string_view)>& put) {
+  if (first.size() < 2) return;
+  FormatChunksInOrder(
+      static_cast<int64_t>(first.size()) - 1,
+      [first](int64_t c) { return first[c]; }, chunks_at_once, format, put);
 }
 
 void FileWriter::WriteChunks(

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <functional>
+#include <span>
 #include <string>
 #include <string_view>
 
@@ -51,6 +52,15 @@ class FileWriter {
 // twice that many chunks' bytes are held. Returns once every piece is put.
 // The same pieces in order as formatting every item on one thread.
 void FormatInOrder(int64_t n, int64_t per_chunk, int64_t chunks_at_once,
+                   const std::function<void(int64_t first, int64_t last,
+                                            std::string* out)>& format,
+                   const std::function<void(std::string_view piece)>& put);
+
+// The same with chunks of any sizes: chunk c holds items [first[c],
+// first[c + 1]) (first ascending, first[0] = 0, first.back() = n; at least
+// one chunk). For items of uneven cost (polylines of a few to thousands of
+// vertices), chunks of even cost keep the threads evenly busy.
+void FormatInOrder(std::span<const int64_t> first, int64_t chunks_at_once,
                    const std::function<void(int64_t first, int64_t last,
                                             std::string* out)>& format,
                    const std::function<void(std::string_view piece)>& put);

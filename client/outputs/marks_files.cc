@@ -1,14 +1,16 @@
 #include "client/outputs/marks_files.h"
 
 #include <algorithm>
+#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <cerrno>
 #include <functional>
+#include <span>
 #include <string_view>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -84,32 +86,59 @@ std::vector<MarkPolyline> FilterMarks(std::vector<MarkPolyline> marks,
 
 namespace {
 
-// Polylines per chunk formatted by one task.
-constexpr size_t kChunkPolylines = 1024;
+// A polyline's formatting cost in vertices: its own text (colour,
+// owners, tags) counted as this many more.
+constexpr int64_t kPolylineWeight = 4;
+// The most vertices a chunk is cut for (a polyline longer than that is
+// a chunk of its own): with ChunksAtOnce, it bounds the text held at a
+// time (about 0.7 MB a chunk), whatever the number of marks.
+constexpr int64_t kChunkWeight = 16384;
 
-// A streamed batch's chunks: a few per thread, so that a batch of a few
-// long polylines is still formatted in parallel. Each polyline's text is
-// its own whatever the chunk, so the bytes are the same.
-size_t BatchChunk(size_t n) {
-  const size_t per =
-      n / (4 * static_cast<size_t>(ThreadPool::Default().size()));
-  return std::clamp<size_t>(per, 1, kChunkPolylines);
+// Chunks formatted at once before they are written: ChunkBounds' four a
+// thread, so that a batch is one group (each group waits for its slowest
+// chunk), and at least 32.
+int64_t ChunksAtOnce() {
+  return std::max<int64_t>(32, 4 * ThreadPool::Default().size());
 }
 
-// Chunks formatted at once before they are written: the text held at a
-// time is this many chunks', whatever the number of marks.
-constexpr size_t kChunksAtOnce = 32;
+// The first polyline of each chunk, then n: chunks of about even cost
+// (vertices_of(k) + kPolylineWeight a polyline), about four a thread, so
+// that polylines of a few to thousands of vertices (a plate's passes)
+// still keep every thread evenly busy. Each polyline's text is its own
+// whatever the chunk, so the bytes are the same.
+std::vector<int64_t> ChunkBounds(
+    size_t n, const std::function<size_t(size_t)>& vertices_of) {
+  int64_t total = 0;
+  for (size_t k = 0; k < n; ++k) {
+    total += static_cast<int64_t>(vertices_of(k)) + kPolylineWeight;
+  }
+  const int64_t threads = ThreadPool::Default().size();
+  const int64_t target =
+      std::clamp<int64_t>(total / (4 * threads), 1, kChunkWeight);
+  std::vector<int64_t> first = {0};
+  int64_t weight = 0;
+  for (size_t k = 0; k < n; ++k) {
+    if (weight >= target) {
+      first.push_back(static_cast<int64_t>(k));
+      weight = 0;
+    }
+    weight += static_cast<int64_t>(vertices_of(k)) + kPolylineWeight;
+  }
+  first.push_back(static_cast<int64_t>(n));
+  return first;
+}
 
-// format(k, &text) appends polyline k's text; windows of kChunksAtOnce
-// chunks of polylines are formatted at once on ThreadPool::Default(), then
-// put in order and dropped.
-void EmitChunks(size_t n,
+// format(k, &text) appends polyline k's text; chunks of polylines
+// (ChunkBounds), ChunksAtOnce() at a time, are formatted on
+// ThreadPool::Default(), then put in order and dropped.
+void EmitChunks(std::span<const MarkPolyline> marks,
                 const std::function<void(size_t, std::string*)>& format,
-                const std::function<void(std::string_view)>& put,
-                size_t chunk_polylines = kChunkPolylines) {
+                const std::function<void(std::string_view)>& put) {
+  if (marks.empty()) return;
+  const std::vector<int64_t> bounds = ChunkBounds(
+      marks.size(), [&](size_t k) { return marks[k].vertices.size(); });
   FormatInOrder(
-      static_cast<int64_t>(n), static_cast<int64_t>(chunk_polylines),
-      kChunksAtOnce,
+      bounds, ChunksAtOnce(),
       [&](int64_t first, int64_t last, std::string* out) {
         for (int64_t k = first; k < last; ++k) {
           format(static_cast<size_t>(k), out);
@@ -153,7 +182,7 @@ void EmitMarksJson(const std::vector<MarkPolyline>& marks, bool vertex_owners,
                    const std::function<void(std::string_view)>& put) {
   put(kMarksJsonHead);
   EmitChunks(
-      marks.size(),
+      marks,
       [&](size_t k, std::string* out) {
         AppendMarkJson(marks[k], vertex_owners, k == 0, out);
       },
@@ -190,11 +219,11 @@ MarksJsonWriter::~MarksJsonWriter() = default;
 absl::Status MarksJsonWriter::Append(std::span<const MarkPolyline> batch) {
   if (!file_->status().ok()) return file_->status();
   EmitChunks(
-      batch.size(),
+      batch,
       [&](size_t k, std::string* out) {
         AppendMarkJson(batch[k], false, count_ + k == 0, out);
       },
-      [&](std::string_view p) { file_->Write(p); }, BatchChunk(batch.size()));
+      [&](std::string_view p) { file_->Write(p); });
   count_ += batch.size();
   return file_->status();
 }
@@ -277,7 +306,7 @@ void EmitMarksSvg(const StockSpec& stock,
   const double stroke = SvgStroke(stock);
   put(MarksSvgHead(stock, marks.size(), stroke));
   EmitChunks(
-      marks.size(),
+      marks,
       [&](size_t k, std::string* out) { AppendMarkSvg(marks[k], stroke, out); },
       put);
   put(kMarksSvgTail);
@@ -315,11 +344,9 @@ absl::Status MarksSvgWriter::Append(std::span<const MarkPolyline> batch) {
   if (!body_->status().ok()) return body_->status();
   const double stroke = SvgStroke(stock_);
   EmitChunks(
-      batch.size(),
-      [&](size_t k, std::string* out) {
-        AppendMarkSvg(batch[k], stroke, out);
-      },
-      [&](std::string_view p) { body_->Write(p); }, BatchChunk(batch.size()));
+      batch,
+      [&](size_t k, std::string* out) { AppendMarkSvg(batch[k], stroke, out); },
+      [&](std::string_view p) { body_->Write(p); });
   count_ += batch.size();
   return body_->status();
 }
