@@ -29,13 +29,11 @@ Sweep::Sweep(const Vec3& tip_from, const Vec3& tip_to, const Cutter& cutter)
 
 Capsule FootprintCapsule(const Vec3& tip_from, const Vec3& tip_to,
                          const Cutter& cutter, double cap) {
-  const Cutter s = SweptCutter(cutter);
-  if (s.kind == CutterKind::kBall) {
-    return BallSweep::FootprintOf(tip_from, tip_to, s.radius, cap);
-  }
-  // The profile sweeps' own (ProfileSweep::Footprint), with the cutter they
-  // are built for.
-  return TipFootprint(tip_from, tip_to, s, cap);
+  // As BallSweep::FootprintOf and TipFootprint: the ends, then the
+  // direction.
+  Capsule c = FootprintCapsuleEnds(tip_from, tip_to, cutter, cap);
+  if (!c.empty) FillDirection(&c);
+  return c;
 }
 
 Capsule FootprintCapsuleEnds(const Vec3& tip_from, const Vec3& tip_to,
@@ -44,6 +42,8 @@ Capsule FootprintCapsuleEnds(const Vec3& tip_from, const Vec3& tip_to,
   if (s.kind == CutterKind::kBall) {
     return BallSweep::FootprintEndsOf(tip_from, tip_to, s.radius, cap);
   }
+  // The profile sweeps' own (ProfileSweep::Footprint), with the cutter they
+  // are built for.
   return TipFootprintEnds(tip_from, tip_to, s, cap);
 }
 
