@@ -404,12 +404,18 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       own_lists[c].push_back(q);
     }
   }
-  // Each point's column and row in the lattice, in the all-in order.
+  // Each point's column and row in the lattice, in the all-in order, as
+  // doubles (QuarterMaxima) and as indices (an all-in element's points are
+  // gathered through them: the nested loop's tests cost more than the
+  // copies).
   std::vector<double> point_si, point_sj;
+  std::vector<int32_t> point_i, point_j;
   for_each_point(lattice_x.data(), lattice_y.data(), /*all_in=*/true,
                  [&](int32_t si, int32_t sj) {
                    point_si.push_back(si);
                    point_sj.push_back(sj);
+                   point_i.push_back(si);
+                   point_j.push_back(sj);
                  });
   pool.ParallelFor(bins, [&](int64_t b) {
     const int32_t bx = static_cast<int32_t>(b % index.bins_x());
@@ -732,12 +738,31 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
               row_cell[n - 1] - row_cell[0] <= options.map_cols;
           const bool per_point = mapped && !quarters;
           int32_t count = 0;
-          for_each_point(col_x, row_y, all_in, [&](int32_t si, int32_t sj) {
-            xs[count] = col_x[si];
-            ys[count] = row_y[sj];
-            if (per_point) row_cells[off + count] = row_cell[sj] + col_cell[si];
-            ++count;
-          });
+          if (all_in) {
+            // for_each_point's order, every point in.
+            const int32_t* const pi = point_i.data();
+            const int32_t* const pj = point_j.data();
+            count = static_cast<int32_t>(lattice);
+            for (int32_t q = 0; q < count; ++q) {
+              xs[q] = col_x[pi[q]];
+              ys[q] = row_y[pj[q]];
+            }
+            if (per_point) {
+              int64_t* const cells = row_cells.data() + off;
+              for (int32_t q = 0; q < count; ++q) {
+                cells[q] = row_cell[pj[q]] + col_cell[pi[q]];
+              }
+            }
+          } else {
+            for_each_point(col_x, row_y, false, [&](int32_t si, int32_t sj) {
+              xs[count] = col_x[si];
+              ys[count] = row_y[sj];
+              if (per_point) {
+                row_cells[off + count] = row_cell[sj] + col_cell[si];
+              }
+              ++count;
+            });
+          }
           if (count == 0) continue;
           RowElement& el = elements[base + row_elements++];
           el.all_in = all_in;
