@@ -476,15 +476,6 @@ std::optional<Rect> BallSweep::FootprintBounds(const Vec3& tip_from,
   return c.Bounds();
 }
 
-BallSweep::Capsule BallSweep::FootprintOf(const Vec3& tip_from,
-                                           const Vec3& tip_to, double radius,
-                                           double cap) {
-  Capsule c = FootprintEndsOf(tip_from, tip_to, radius, cap);
-  if (c.empty) return c;
-  FillDirection(&c);
-  return c;
-}
-
 BallSweep::Capsule BallSweep::FootprintEndsOf(const Vec3& tip_from,
                                               const Vec3& tip_to, double radius,
                                               double cap) {

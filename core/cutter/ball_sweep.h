@@ -236,13 +236,10 @@ class BallSweep {
   static std::optional<Rect> FootprintBounds(const Vec3& tip_from,
                                              const Vec3& tip_to,
                                              double radius, double cap);
-  // The footprint itself, bit-identical to BallSweep(tip_from, tip_to,
-  // radius).Footprint(cap), without building the sweep.
-  static Capsule FootprintOf(const Vec3& tip_from, const Vec3& tip_to,
-                             double radius, double cap);
-  // FootprintOf's ends, radius and `empty` (the same bits) without its
-  // direction (ux, uy, length, inv_ux, inv_uy left 0): for callers that
-  // read only those, such as Bounds().
+  // The footprint's ends, radius and `empty`, bit-identical to
+  // BallSweep(tip_from, tip_to, radius).Footprint(cap)'s, without building
+  // the sweep and without its direction (ux, uy, length, inv_ux, inv_uy
+  // left 0; FillDirection adds them).
   static Capsule FootprintEndsOf(const Vec3& tip_from, const Vec3& tip_to,
                                  double radius, double cap);
   // Footprint(cap)'s radius. Footprint(c)'s segment for any c >= cap,

@@ -29,7 +29,7 @@ Sweep::Sweep(const Vec3& tip_from, const Vec3& tip_to, const Cutter& cutter)
 
 Capsule FootprintCapsule(const Vec3& tip_from, const Vec3& tip_to,
                          const Cutter& cutter, double cap) {
-  // As BallSweep::FootprintOf and TipFootprint: the ends, then the
+  // As BallSweep::Footprint and TipFootprint: the ends, then the
   // direction.
   Capsule c = FootprintCapsuleEnds(tip_from, tip_to, cutter, cap);
   if (!c.empty) FillDirection(&c);
