@@ -468,7 +468,14 @@ void FuzzDeviation(const Session& s, const pb::DeviationRequest& req) {
         int64_t{wp.grid().nodes_x()} * wp.grid().nodes_y(), wp.move_count());
   });
   FUZZ_CHECK(d->triangles() == 2);
-  FUZZ_CHECK(d->nodes() == nodes && d->samples() >= d->nodes());
+  // Samples between nodes: an n x n lattice minus its corners per element,
+  // none for n <= 2 (0 and 1 mean nodes only); from n = 3, 5 an element.
+  const cli::DeviationOptions defaults;
+  const int per_edge = req.has_samples_per_edge()
+                           ? req.samples_per_edge().value()
+                           : defaults.samples_per_edge;
+  FUZZ_CHECK(d->nodes() == nodes);
+  FUZZ_CHECK(per_edge >= 3 ? d->samples() >= d->nodes() : d->samples() == 0);
   for (double v :
        {d->gouge_max(), d->excess_max(), d->excess_mean(),
         d->gouge_volume_mm3(), d->excess_volume_mm3(), d->normal_gouge_max(),
@@ -476,7 +483,6 @@ void FuzzDeviation(const Session& s, const pb::DeviationRequest& req) {
     FUZZ_CHECK(std::isfinite(v) && v >= 0);
   }
   FUZZ_CHECK(d->allowance() == req.allowance());
-  const cli::DeviationOptions defaults;
   FUZZ_CHECK(d->tolerance() == (req.has_tolerance() ? req.tolerance().value()
                                                     : defaults.tolerance));
   const int listed = req.max_moves() > 0 ? req.max_moves() : defaults.max_lines;
