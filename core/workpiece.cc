@@ -1294,7 +1294,8 @@ void MayBeBelow(const ReachLanes& b, size_t q0, size_t n, double x, double y,
     const double misses = FootprintGap::Misses(
         1.0, double{x0[q]}, double{x1[q]}, double{y0[q]}, double{y1[q]},
         double{z_r[q]}, double{r2[q]}, point, cap);
-    pass[q] = ((misses == 0) & (double{low[q]} < cap)) ? 1 : 0;
+    // && (not &): GCC 12 vectorizes this form, not the other.
+    pass[q] = (misses == 0 && double{low[q]} < cap) ? 1 : 0;
   }
 }
 
