@@ -10,8 +10,11 @@ namespace swarf::design {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
 // Node rows a rasterizing task owns: tasks never write the same node.
 constexpr int32_t kBandRows = 16;
+// Nodes of a row a triangle is tested against at once before its nodes.
+constexpr int32_t kRasterRun = 16;
 
 // Lists of items per bucket, compressed: bucket b holds
 // items[start[b] .. start[b + 1]), in item order. visit(t, add) calls
@@ -29,6 +32,38 @@ void BuildBuckets(int64_t buckets, int32_t n, const Visit& visit,
   for (int32_t t = 0; t < n; ++t) {
     visit(t, [&](int64_t b) { (*items)[fill[b]++] = t; });
   }
+}
+
+// True when no point of r is inside p's triangle as HeightAt tests it
+// (with its 1e-12 margin). The barycentric coordinates are affine, so over
+// r they are extreme at its corners; the corners' values are widened by
+// 1e-9 of their scale, where rounding (at a point of r and at the corners)
+// moves them by about 1e-15 of it. A plane with a non-finite part is kept.
+bool SurelyOutside(const TopEnvelope::Plane& p, const Rect& r) {
+  if (!std::isfinite(p.xa + p.ya + p.m00 + p.m01 + p.m10 + p.m11)) {
+    return false;
+  }
+  constexpr double kEdge = 1e-12;
+  const double rx[2] = {r.x0 - p.xa, r.x1 - p.xa};
+  const double ry[2] = {r.y0 - p.ya, r.y1 - p.ya};
+  double max_b = -kInf, max_c = -kInf, min_sum = kInf;
+  for (const double dx : rx) {
+    for (const double dy : ry) {
+      const double wb = p.m00 * dx + p.m01 * dy;
+      const double wc = p.m10 * dx + p.m11 * dy;
+      max_b = std::max(max_b, wb);
+      max_c = std::max(max_c, wc);
+      min_sum = std::min(min_sum, wb + wc);
+    }
+  }
+  const double reach = std::max(
+      {std::fabs(rx[0]), std::fabs(rx[1]), std::fabs(ry[0]), std::fabs(ry[1])});
+  const double slack_b =
+      1e-9 * ((std::fabs(p.m00) + std::fabs(p.m01)) * reach + 1);
+  const double slack_c =
+      1e-9 * ((std::fabs(p.m10) + std::fabs(p.m11)) * reach + 1);
+  return max_b < -kEdge - slack_b || max_c < -kEdge - slack_c ||
+         min_sum > 1 + kEdge + slack_b + slack_c;
 }
 
 }  // namespace
@@ -148,14 +183,25 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
     for (int64_t k = band_count[band]; k < band_count[band + 1]; ++k) {
       const int32_t t = band_tris[k];
       const NodeBox& nb = boxes[t];
+      const Plane& plane = env.planes_[t];
       for (int32_t j = std::max(jb0, nb.j0); j <= std::min(jb1, nb.j1); ++j) {
         const double y = grid.NodeY(j);
         float* row = &env.nodes_[int64_t{j} * nxn];
-        for (int32_t i = nb.i0; i <= nb.i1; ++i) {
-          const double z = HeightAt(env.planes_[t], grid.NodeX(i), y);
-          if (std::isnan(z)) continue;
-          const float zf = static_cast<float>(z);
-          if (!(row[i] >= zf)) row[i] = zf;  // NaN or lower
+        // The row's nodes kRasterRun at a time, passing over the runs the
+        // triangle surely misses (a long thin triangle's box holds many).
+        for (int32_t r0 = nb.i0; r0 <= nb.i1; r0 += kRasterRun) {
+          const int32_t r1 = std::min(nb.i1, r0 + kRasterRun - 1);
+          if (nb.i1 - nb.i0 >= kRasterRun &&
+              SurelyOutside(plane,
+                            Rect{grid.NodeX(r0), y, grid.NodeX(r1), y})) {
+            continue;
+          }
+          for (int32_t i = r0; i <= r1; ++i) {
+            const double z = HeightAt(plane, grid.NodeX(i), y);
+            if (std::isnan(z)) continue;
+            const float zf = static_cast<float>(z);
+            if (!(row[i] >= zf)) row[i] = zf;  // NaN or lower
+          }
         }
       }
     }
@@ -182,6 +228,22 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
     return std::clamp(static_cast<int32_t>(std::floor((v - o) / env.bsize_)),
                       0, n - 1);
   };
+  // The points At and Candidates look up in bin (bx, by): its square,
+  // widened against the rounding of the bin's floor, and by a bin more
+  // beyond the first and last rows and columns (points outside the bounds
+  // are clamped into them).
+  const double bin_slack = 1e-6 * env.bsize_;
+  auto bin_rect = [&](int32_t bx, int32_t by) {
+    return Rect{
+        env.bx0_ + (bx - (bx == 0 ? 1 : 0)) * env.bsize_ - bin_slack,
+        env.by0_ + (by - (by == 0 ? 1 : 0)) * env.bsize_ - bin_slack,
+        env.bx0_ + (bx + (bx == env.bnx_ - 1 ? 2 : 1)) * env.bsize_ + bin_slack,
+        env.by0_ + (by + (by == env.bny_ - 1 ? 2 : 1)) * env.bsize_ +
+            bin_slack};
+  };
+  // A triangle goes in the bins its XY bounds meet, less those it surely
+  // misses: a long thin one (a fan's, as CAD exports planar faces) would
+  // be in every bin of its bounds, and scanned there for every point.
   BuildBuckets(nbins, ntri,
                [&](int32_t t, const auto& add) {
                  if (vertical(t)) return;
@@ -189,8 +251,13 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
                  const int32_t bx1 = cell(xy[t].x1, env.bx0_, env.bnx_);
                  const int32_t by0 = cell(xy[t].y0, env.by0_, env.bny_);
                  const int32_t by1 = cell(xy[t].y1, env.by0_, env.bny_);
+                 const bool one = bx0 == bx1 && by0 == by1;
                  for (int32_t by = by0; by <= by1; ++by) {
                    for (int32_t bx = bx0; bx <= bx1; ++bx) {
+                     if (!one &&
+                         SurelyOutside(env.planes_[t], bin_rect(bx, by))) {
+                       continue;
+                     }
                      add(int64_t{by} * env.bnx_ + bx);
                    }
                  }
@@ -219,6 +286,9 @@ void TopEnvelope::Candidates(const Rect& r, std::vector<int32_t>* out) const {
         if (bb[0] > r.x1 || bb[2] < r.x0 || bb[1] > r.y1 || bb[3] < r.y0) {
           continue;
         }
+        // A long thin triangle (a fan's) meets many rectangles' bounds
+        // that it misses.
+        if (SurelyOutside(planes_[t], r)) continue;
         if (std::find(out->begin(), out->end(), t) == out->end()) {
           out->push_back(t);
         }

@@ -45,8 +45,9 @@ class TopEnvelope {
   // z_d at any point, NaN where no design lies above it.
   double At(double x, double y) const;
   // The same for points of a small rectangle r, from its candidates: the
-  // non-vertical triangles whose XY bounds meet r (Candidates replaces
-  // `out`'s contents), then AtAmong(out, x, y) == At(x, y) for (x, y) in r.
+  // non-vertical triangles whose XY bounds meet r, less those that surely
+  // hold no point of r, in bin order (Candidates replaces `out`'s
+  // contents), then AtAmong(out, x, y) == At(x, y) for (x, y) in r.
   void Candidates(const Rect& r, std::vector<int32_t>* out) const;
   // AtAmong at n points at once: out[q] for (x[q], y[q]), bit for bit the
   // same (a loop over the points per triangle, which vectorizes).

@@ -2,26 +2,26 @@
 // flat floor, one raster line run deeper, a pocket wall left or cut by e, an
 // overhang), the readers' bad input, STEP against STL of the same part, and
 // `swarf run --design` end to end (stats.json, deviation.png, exit status 3).
+#include "client/outputs/deviation.h"
+
 #include <unistd.h>
 
+#include <BRepMesh_IncrementalMesh.hxx>
 #include <BRepPrimAPI_MakeBox.hxx>
 #include <STEPControl_Writer.hxx>
 #include <StlAPI_Writer.hxx>
-#include <BRepMesh_IncrementalMesh.hxx>
-
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
 #include <vector>
 
-#include <nlohmann/json.hpp>
-
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "client/cli/commands.h"
-#include "client/outputs/deviation.h"
 #include "client/outputs/png_image.h"
 #include "client/outputs/surface_grid.h"
 #include "core/workpiece.h"
@@ -276,6 +276,91 @@ TEST(TopEnvelopeTest, ASlopeIsInterpolatedExactly) {
     }
   }
   EXPECT_NEAR(env->At(3.1, 4.7), z(3.1, 4.7), 1e-12);
+}
+
+// A pyramid whose faces are fans of long thin triangles from its apex, over
+// a fan of its underside (as CAD exports planar faces): each small
+// rectangle's candidates are the few slivers that can hold its points,
+// and the envelope from them (and At's) is every triangle's, bit for bit,
+// at every point of the rectangle (its corners and edges too), as are the
+// nodes'.
+TEST(TopEnvelopeTest, AFansCandidatesAreTheSliversOverTheRectangle) {
+  std::vector<double> soup;
+  const Vec3 apex{10, 10, 1}, under{10, 10, -5};
+  constexpr int kPerSide = 40;
+  std::vector<Vec3> rim;
+  for (int k = 0; k < 4 * kPerSide; ++k) {
+    const double f = 20.0 * (k % kPerSide) / kPerSide;
+    const int side = k / kPerSide;
+    const double x = side == 0 ? f : side == 1 ? 20 : side == 2 ? 20 - f : 0;
+    const double y = side == 0 ? 0 : side == 1 ? f : side == 2 ? 20 : 20 - f;
+    rim.push_back({x, y, 0});
+  }
+  for (size_t k = 0; k < rim.size(); ++k) {
+    const Vec3& a = rim[k];
+    const Vec3& b = rim[(k + 1) % rim.size()];
+    for (const Vec3& p : {apex, a, b, under, b, a}) {
+      soup.insert(soup.end(), {p.x, p.y, p.z});
+    }
+  }
+  const DesignMesh m = Mesh(soup);
+  const GridGeometry g(Stock(20, 0.1));
+  auto env = design::TopEnvelope::Build(m, g);
+  ASSERT_TRUE(env.ok()) << env.status();
+  std::vector<design::TopEnvelope::Plane> planes;
+  for (int32_t t = 0; t < static_cast<int32_t>(m.triangles.size()); ++t) {
+    planes.push_back(design::TopEnvelope::PlaneOf(m, t));
+  }
+  std::vector<int32_t> candidates;
+  size_t most_away = 0;  // away from the apex
+  int compared = 0;
+  for (double y0 = 0; y0 < 20; y0 += 0.7) {
+    for (double x0 = 0; x0 < 20; x0 += 0.3) {
+      const Rect r{x0, y0, x0 + 0.1, y0 + 0.1};
+      env->Candidates(r, &candidates);
+      if (std::hypot(x0 - 10, y0 - 10) > 3) {
+        most_away = std::max(most_away, candidates.size());
+      }
+      std::vector<double> xs, ys;
+      for (int t = 0; t <= 4; ++t) {
+        for (int s = 0; s <= 4; ++s) {
+          xs.push_back(s == 4 ? r.x1 : r.x0 + s * 0.1 / 4);
+          ys.push_back(t == 4 ? r.y1 : r.y0 + t * 0.1 / 4);
+        }
+      }
+      std::vector<double> zs(xs.size());
+      env->AtManyAmong(candidates, xs.data(), ys.data(),
+                       static_cast<int32_t>(xs.size()), zs.data());
+      for (size_t q = 0; q < xs.size(); ++q) {
+        // Every triangle, as the envelope's own test sees it.
+        double want = std::numeric_limits<double>::quiet_NaN();
+        for (int32_t t = 0; t < static_cast<int32_t>(m.triangles.size()); ++t) {
+          const double z =
+              design::TopEnvelope::HeightAt(planes[t], xs[q], ys[q]);
+          if (!std::isnan(z) && !(want >= z)) want = z;
+        }
+        ASSERT_FALSE(std::isnan(want)) << xs[q] << " " << ys[q];
+        ASSERT_EQ(zs[q], want) << xs[q] << " " << ys[q];
+        ASSERT_EQ(env->At(xs[q], ys[q]), want) << xs[q] << " " << ys[q];
+        ++compared;
+      }
+    }
+  }
+  EXPECT_EQ(compared, 29 * 67 * 25);
+  // The nodes, rasterized run by run: every triangle's too.
+  for (int32_t j = 0; j < g.nodes_y(); ++j) {
+    for (int32_t i = 0; i < g.nodes_x(); ++i) {
+      double want = std::numeric_limits<double>::quiet_NaN();
+      for (const design::TopEnvelope::Plane& p : planes) {
+        const double z =
+            design::TopEnvelope::HeightAt(p, g.NodeX(i), g.NodeY(j));
+        if (!std::isnan(z) && !(want >= z)) want = z;
+      }
+      ASSERT_EQ(env->AtNode(i, j), static_cast<float>(want)) << i << " " << j;
+    }
+  }
+  // Two or three slivers of each fan; by their XY bounds alone, dozens.
+  EXPECT_LE(most_away, 8u);
 }
 
 TEST(ClosestPointTest, DistancesToABoxAndItsUndersideIsIgnored) {
