@@ -10,7 +10,6 @@ namespace swarf::design {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
-constexpr double kInf = std::numeric_limits<double>::infinity();
 // Node rows a rasterizing task owns: tasks never write the same node.
 constexpr int32_t kBandRows = 16;
 // Nodes of a row a triangle is tested against at once before its nodes.
@@ -36,28 +35,22 @@ void BuildBuckets(int64_t buckets, int32_t n, const Visit& visit,
 
 // True when no point of r is inside p's triangle as HeightAt tests it
 // (with its 1e-12 margin). The barycentric coordinates are affine, so over
-// r they are extreme at its corners; the corners' values are widened by
-// 1e-9 of their scale, where rounding (at a point of r and at the corners)
-// moves them by about 1e-15 of it. A plane with a non-finite part is kept.
+// r they are extreme at the corners their coefficients' signs pick; those
+// values are widened by 1e-9 of their scale, where rounding (at a point of
+// r and here) moves them by about 1e-15 of it. A NaN fails every
+// comparison: such a triangle is kept.
 bool SurelyOutside(const TopEnvelope::Plane& p, const Rect& r) {
-  if (!std::isfinite(p.xa + p.ya + p.m00 + p.m01 + p.m10 + p.m11)) {
-    return false;
-  }
   constexpr double kEdge = 1e-12;
-  const double rx[2] = {r.x0 - p.xa, r.x1 - p.xa};
-  const double ry[2] = {r.y0 - p.ya, r.y1 - p.ya};
-  double max_b = -kInf, max_c = -kInf, min_sum = kInf;
-  for (const double dx : rx) {
-    for (const double dy : ry) {
-      const double wb = p.m00 * dx + p.m01 * dy;
-      const double wc = p.m10 * dx + p.m11 * dy;
-      max_b = std::max(max_b, wb);
-      max_c = std::max(max_c, wc);
-      min_sum = std::min(min_sum, wb + wc);
-    }
-  }
-  const double reach = std::max(
-      {std::fabs(rx[0]), std::fabs(rx[1]), std::fabs(ry[0]), std::fabs(ry[1])});
+  const double x0 = r.x0 - p.xa, x1 = r.x1 - p.xa;
+  const double y0 = r.y0 - p.ya, y1 = r.y1 - p.ya;
+  const double max_b =
+      p.m00 * (p.m00 > 0 ? x1 : x0) + p.m01 * (p.m01 > 0 ? y1 : y0);
+  const double max_c =
+      p.m10 * (p.m10 > 0 ? x1 : x0) + p.m11 * (p.m11 > 0 ? y1 : y0);
+  const double sx = p.m00 + p.m10, sy = p.m01 + p.m11;
+  const double min_sum = sx * (sx > 0 ? x0 : x1) + sy * (sy > 0 ? y0 : y1);
+  const double reach = std::max(std::max(std::fabs(x0), std::fabs(x1)),
+                                std::max(std::fabs(y0), std::fabs(y1)));
   const double slack_b =
       1e-9 * ((std::fabs(p.m00) + std::fabs(p.m01)) * reach + 1);
   const double slack_c =
