@@ -122,6 +122,13 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
     const Vec3& c = mesh.vertices[tri[2]];
     xy[t] = {std::min({a.x, b.x, c.x}), std::min({a.y, b.y, c.y}),
              std::max({a.x, b.x, c.x}), std::max({a.y, b.y, c.y})};
+    // HeightAt's 1e-12 margin holds points up to about 2e-12 of the
+    // triangle's extent beyond its bounds: widened by twice that, the
+    // bins, the candidates and the nodes keep them (a triangle 1e-19 mm
+    // across beside the origin held a point its float bounds left out).
+    const double pad =
+        4e-12 * std::max(xy[t].x1 - xy[t].x0, xy[t].y1 - xy[t].y0);
+    xy[t] = {xy[t].x0 - pad, xy[t].y0 - pad, xy[t].x1 + pad, xy[t].y1 + pad};
     auto down = [](double v) {
       return std::nextafter(static_cast<float>(v), -HUGE_VALF);
     };

@@ -3,11 +3,15 @@
 // hang or hit undefined behaviour; an error is InvalidArgument (or
 // ResourceExhausted over the limit) naming the input; an accepted mesh has
 // finite welded vertices, valid non-degenerate triangles and bounds that
-// cover the vertices, and its envelope is finite or NaN at every node.
+// cover the vertices, and its envelope is finite or NaN at every node and
+// is every triangle's at the nodes and at points of some elements (the
+// bins, candidates and rasterized runs skip only triangles that miss).
 
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <limits>
+#include <vector>
 
 #include "absl/strings/match.h"
 #include "design/design_mesh.h"
@@ -32,6 +36,50 @@ void CheckMesh(const DesignMesh& m) {
   for (const auto& t : m.triangles) {
     for (int k = 0; k < 3; ++k) FUZZ_CHECK(t[k] >= 0 && t[k] < n);
     FUZZ_CHECK(t[0] != t[1] && t[1] != t[2] && t[0] != t[2]);
+  }
+}
+
+// The envelope of every triangle at (x, y), as HeightAt tests each: what
+// the bins, the candidates and the rasterized nodes must give (they skip
+// only triangles that surely miss). == rather than the bits: triangles
+// tied at +0 and -0 may come in another order.
+double EveryTriangle(const DesignMesh& m, double x, double y) {
+  double best = std::numeric_limits<double>::quiet_NaN();
+  for (int32_t t = 0; t < static_cast<int32_t>(m.triangles.size()); ++t) {
+    const double z = TopEnvelope::HeightAt(TopEnvelope::PlaneOf(m, t), x, y);
+    if (!std::isnan(z) && !(best >= z)) best = z;
+  }
+  return best;
+}
+
+bool Same(double a, double b) {
+  return (std::isnan(a) && std::isnan(b)) || a == b;
+}
+
+void CheckEnvelope(const DesignMesh& m, const TopEnvelope& env,
+                   const GridGeometry& g) {
+  for (int32_t j = 0; j < g.nodes_y(); ++j) {
+    for (int32_t i = 0; i < g.nodes_x(); ++i) {
+      const double want = EveryTriangle(m, g.NodeX(i), g.NodeY(j));
+      FUZZ_CHECK(Same(env.AtNode(i, j), static_cast<float>(want)));
+    }
+  }
+  // Elements along the diagonal, a 4 x 4 lattice in each.
+  std::vector<int32_t> candidates;
+  for (int32_t e = 0; e < std::min(g.nx(), g.ny()); e += 3) {
+    const Rect r{g.NodeX(e), g.NodeY(e), g.NodeX(e + 1), g.NodeY(e + 1)};
+    env.Candidates(r, &candidates);
+    double xs[16], ys[16], zs[16];
+    for (int q = 0; q < 16; ++q) {
+      xs[q] = q % 4 == 3 ? r.x1 : r.x0 + (q % 4) * (r.x1 - r.x0) / 3;
+      ys[q] = q / 4 == 3 ? r.y1 : r.y0 + (q / 4) * (r.y1 - r.y0) / 3;
+    }
+    env.AtManyAmong(candidates, xs, ys, 16, zs);
+    for (int q = 0; q < 16; ++q) {
+      const double want = EveryTriangle(m, xs[q], ys[q]);
+      FUZZ_CHECK(Same(zs[q], want));
+      FUZZ_CHECK(Same(env.At(xs[q], ys[q]), want));
+    }
   }
 }
 
@@ -66,6 +114,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     }
     const double at = env->At(0.5 * (m->x.lo + m->x.hi), 0.5 * (m->y.lo + m->y.hi));
     FUZZ_CHECK(std::isnan(at) || std::isfinite(at));
+    CheckEnvelope(*m, *env, GridGeometry(spec));
   }
   return 0;
 }
