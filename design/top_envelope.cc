@@ -251,10 +251,10 @@ absl::StatusOr<TopEnvelope> TopEnvelope::Build(const DesignMesh& mesh,
                  const int32_t bx1 = cell(xy[t].x1, env.bx0_, env.bnx_);
                  const int32_t by0 = cell(xy[t].y0, env.by0_, env.bny_);
                  const int32_t by1 = cell(xy[t].y1, env.by0_, env.bny_);
-                 // Bounds over 16 bins or fewer: all of them. A mesh of
-                 // small triangles has many that span a few bins, and the
-                 // tests (serial here, twice a bin) would cost more than
-                 // the few bins they leave out.
+                 // A triangle whose bounds span 16 bins or fewer goes in
+                 // all of them: a mesh of small triangles has many that
+                 // span a few, and the tests (serial here, twice a bin)
+                 // would cost more than the few bins they leave out.
                  const bool few =
                      int64_t{bx1 - bx0 + 1} * (by1 - by0 + 1) <= 16;
                  for (int32_t by = by0; by <= by1; ++by) {
