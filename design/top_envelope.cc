@@ -10,6 +10,9 @@ namespace swarf::design {
 namespace {
 
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+// HeightAt's margin on the barycentric coordinates: a point on an edge is
+// inside whatever the rounding.
+constexpr double kEdge = 1e-12;
 // Node rows a rasterizing task owns: tasks never write the same node.
 constexpr int32_t kBandRows = 16;
 // Nodes of a row a triangle is tested against at once before its nodes.
@@ -40,7 +43,6 @@ void BuildBuckets(int64_t buckets, int32_t n, const Visit& visit,
 // r and here) moves them by about 1e-15 of it. A NaN fails every
 // comparison: such a triangle is kept.
 bool SurelyOutside(const TopEnvelope::Plane& p, const Rect& r) {
-  constexpr double kEdge = 1e-12;
   const double x0 = r.x0 - p.xa, x1 = r.x1 - p.xa;
   const double y0 = r.y0 - p.ya, y1 = r.y1 - p.ya;
   const double max_b =
@@ -84,7 +86,6 @@ double TopEnvelope::HeightAt(const Plane& p, double x, double y) {
   const double rx = x - p.xa, ry = y - p.ya;
   const double wb = p.m00 * rx + p.m01 * ry;
   const double wc = p.m10 * rx + p.m11 * ry;
-  constexpr double kEdge = 1e-12;
   // NaN (a vertical triangle) fails every comparison.
   if (!(wb >= -kEdge && wc >= -kEdge && wb + wc <= 1 + kEdge)) return kNaN;
   return std::min(std::max(p.za + wb * p.dzb + wc * p.dzc, p.zlo), p.zhi);
@@ -306,7 +307,6 @@ void TopEnvelope::AtManyAmong(const std::vector<int32_t>& candidates,
                               const double* x, const double* y, int32_t n,
                               double* out) const {
   for (int32_t q = 0; q < n; ++q) out[q] = kNaN;
-  constexpr double kEdge = 1e-12;
   for (int32_t t : candidates) {
     const Plane& p = planes_[t];
     // HeightAt, branch-free: the same arithmetic, so the same bits. The
