@@ -213,6 +213,11 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
     if (cap.empty) return;
     const int32_t id = static_cast<int32_t>(first_id + m);
     int32_t n = 0;
+    // The nodes gathered for the chunk, and those passed over in the
+    // shadow of the previous move (below): the chunks end where they
+    // would with every node gathered, so that the drops are summed in the
+    // same groups, bit for bit.
+    int32_t vn = 0;
     // What the move cut here (with `cuts`): drop sums, the deepest node.
     double drop_sum = 0, max_drop = 0, max_z = 0, over = 0;
     int32_t max_k = -1;
@@ -229,6 +234,8 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       ForEachFlagged(flag, n, lower_at);
     };
     auto flush = [&] {
+      vn = 0;
+      if (n == 0) return;  // only shadowed nodes: none lowered
       sweep.Heights(cx, cy, n, h);
       int32_t low = 0;
       if (cuts != nullptr) {
@@ -343,6 +350,23 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
         }
       }
     }
+    // A ball move that starts where the path's previous move ended leaves
+    // the nodes of its shadow (BallSweep::ShadowAfter) as they are: that
+    // move was applied before it, and it is surely above them there (on a
+    // raster of short moves, about a third of a move's nodes).
+    std::optional<BallSweep::Shadow> shadow;
+    if constexpr (std::is_same_v<S, BallSweep>) {
+      if (m > 0) {
+        if (const BallSweep* prev = sweeps[m - 1].ball()) {
+          shadow = sweep.ShadowAfter(*prev);
+        }
+      }
+    }
+    int32_t shadow_lo[kTileSize], shadow_hi[kTileSize];
+    if (shadow.has_value() && rows > 0) {
+      BallSweep::ShadowRows(*shadow, y0, dy, j_lo, rows, x0, inv_dx, i_max,
+                            shadow_lo, shadow_hi);
+    }
     for (int32_t q = 0; q < rows; ++q) {
       const int32_t i_lo = row_lo[q], i_hi = row_hi[q];
       if (i_lo > i_hi) continue;
@@ -350,11 +374,28 @@ int64_t Workpiece::CutTile(int32_t t, Tile* tile,
       const double y = y0 + j * dy;  // as GridGeometry::NodeY
       const int32_t k0 = (j - j_base) * kTileSize - i_base;  // node i's: k0 + i
       const int32_t count = i_hi - i_lo + 1;
-      if (n + count > kChunk) flush();
-      GatherRow(x0, dx, i_lo, count, y, k0, w, cx + n, cy + n, ck + n, cw + n);
-      n += count;
+      if (vn + count > kChunk) flush();
+      // The shadow's nodes [s0, s1] of the span are passed over (none:
+      // s0 = i_hi + 1, s1 = i_hi): the span is gathered in up to two parts.
+      int32_t s0 = i_hi + 1, s1 = i_hi;
+      if (shadow.has_value() && shadow_lo[q] <= i_hi && shadow_hi[q] >= i_lo &&
+          shadow_lo[q] <= shadow_hi[q]) {
+        s0 = std::max(i_lo, shadow_lo[q]);
+        s1 = std::min(i_hi, shadow_hi[q]);
+      }
+      if (s0 > i_lo) {
+        GatherRow(x0, dx, i_lo, s0 - i_lo, y, k0, w, cx + n, cy + n, ck + n,
+                  cw + n);
+        n += s0 - i_lo;
+      }
+      if (s1 < i_hi) {
+        GatherRow(x0, dx, s1 + 1, i_hi - s1, y, k0, w, cx + n, cy + n, ck + n,
+                  cw + n);
+        n += i_hi - s1;
+      }
+      vn += count;
     }
-    if (n > 0) flush();
+    if (vn > 0) flush();
     if (cuts != nullptr && max_k >= 0) {
       MoveCut c;
       const double area = dx * dy;

@@ -616,6 +616,123 @@ TEST(BallHeightLowerBoundTest, AtOrBelowTheHeight) {
               5 * std::tan(M_PI / 6) + 2 - 2 / std::cos(M_PI / 6), 1e-4);
 }
 
+// The nodes ShadowRows gives for `next` after `prev`, on a grid of
+// spacing d about the shared centre (offset by a fraction of d), each
+// checked: `next` there is +inf or above `prev` (code values, strictly),
+// so it lowers no node prev was applied to. Returns how many are finite.
+int64_t CheckShadowNodes(const BallSweep& prev, const BallSweep& next, double d,
+                         double offset) {
+  const std::optional<BallSweep::Shadow> s = next.ShadowAfter(prev);
+  if (!s.has_value()) return 0;
+  const double r = next.radius();
+  const double x0 = s->cx - 1.2 * r + offset * d;
+  const double y0 = s->cy - 1.2 * r + 0.7 * offset * d;
+  const int32_t n = static_cast<int32_t>(2.4 * r / d) + 1;
+  std::vector<int32_t> lo(n), hi(n);
+  BallSweep::ShadowRows(*s, y0, d, 0, n, x0, 1 / d, n - 1, lo.data(),
+                        hi.data());
+  int64_t nodes = 0;
+  for (int32_t j = 0; j < n; ++j) {
+    const double y = y0 + j * d;
+    for (int32_t i = lo[j]; i <= hi[j]; ++i) {
+      const double x = x0 + i * d;
+      const double above = next.Height(x, y), below = prev.Height(x, y);
+      if (above == kInf) continue;
+      EXPECT_GT(above, below) << Where(x, y);
+      ++nodes;
+    }
+  }
+  return nodes;
+}
+
+// A level pass along x continued by the next move: the shadow is the
+// half-plane behind the shared centre (the previous move's cylinder is
+// lower there; beyond the ball the next move is +inf), all but margins
+// well under a node.
+TEST(BallSweepShadowTest, ALevelPassShadowsTheDiscBehind) {
+  const double r = 2, d = 0.05;
+  const BallSweep prev({10, 20, -1}, {10.1, 20, -1}, r);
+  const BallSweep next({10.1, 20, -1}, {10.2, 20, -1}, r);
+  const std::optional<BallSweep::Shadow> s = next.ShadowAfter(prev);
+  ASSERT_TRUE(s.has_value());
+  // The nodes at least a node's width inside the half-plane.
+  const double x0 = 10.1 - 2.4 + 0.013, y0 = 20 - 2.4 + 0.007;
+  const int32_t n = static_cast<int32_t>(4.8 / d) + 1;
+  int64_t want = 0;
+  for (int32_t i = 0; i < n; ++i) want += n * (x0 + i * d - 10.1 < -d);
+  std::vector<int32_t> lo(n), hi(n);
+  BallSweep::ShadowRows(*s, y0, d, 0, n, x0, 1 / d, n - 1, lo.data(),
+                        hi.data());
+  int64_t got = 0;
+  for (int32_t j = 0; j < n; ++j) {
+    for (int32_t i = lo[j]; i <= hi[j]; ++i) {
+      const double qx = x0 + i * d - 10.1, qy = y0 + j * d - 20;
+      EXPECT_LT(qx, 0) << qy;
+      ++got;
+    }
+  }
+  EXPECT_GE(got, want);
+  EXPECT_GT(want, 4400);  // about half of (4.8 / 0.05)^2 = 9,216
+  // Inside the ball's disc (about half of pi r^2 / d^2 = 5,027).
+  EXPECT_GT(CheckShadowNodes(prev, next, d, 0.3), 2400);
+}
+
+// Random turns between two moves (on, across and back along the path),
+// slopes up to the limit, radii from 0.1 to 5 mm, lengths from 0.01 to
+// 300 mm, 900 mm from the origin, on grids of 1/100 to 1/10 of the radius:
+// at every shadowed node the next move is above the previous one.
+TEST(BallSweepShadowTest, TheNextMoveIsAboveThePreviousInItsShadow) {
+  std::mt19937_64 rng(23);
+  std::uniform_real_distribution<double> unit(0, 1);
+  int64_t nodes = 0;
+  int shadows = 0;
+  for (int k = 0; k < 300; ++k) {
+    const double r = 0.1 + 4.9 * unit(rng);
+    const double base = k % 3 == 0 ? 900 : 0;
+    auto step = [&](const Vec3& from, double heading) {
+      const double len = std::pow(10.0, -2 + 4.5 * unit(rng));
+      const double slope = k % 5 == 0 ? 19 * unit(rng) : 0.3 * unit(rng);
+      const double dz = (unit(rng) < 0.5 ? -1 : 1) * slope * len;
+      return Vec3{from.x + len * std::cos(heading),
+                  from.y + len * std::sin(heading), from.z + dz};
+    };
+    const double heading = 2 * M_PI * unit(rng);
+    const double turn = k % 4 == 0 ? 0 : (2 * unit(rng) - 1) * M_PI;
+    const Vec3 a{base + 3 * unit(rng), base - 2 * unit(rng), -unit(rng)};
+    const Vec3 b = step(a, heading);
+    const Vec3 c = step(b, heading + turn);
+    const BallSweep prev(a, b, r), next(b, c, r);
+    const double d = r / (10 + 90 * unit(rng));
+    const int64_t here = CheckShadowNodes(prev, next, d, unit(rng));
+    shadows += here > 0;
+    nodes += here;
+  }
+  EXPECT_GT(shadows, 150);
+  EXPECT_GT(nodes, 100000);
+}
+
+// No shadow where the premise fails: another radius, a start one ulp off
+// the previous end, a vertical or zero-length move, a move steeper than
+// the limit.
+TEST(BallSweepShadowTest, NoneWithoutASharedBallOrOnSteepMoves) {
+  const Vec3 a{0, 0, 0}, b{1, 0, -0.1}, c{2, 0.5, -0.2};
+  EXPECT_TRUE(BallSweep(b, c, 1).ShadowAfter(BallSweep(a, b, 1)).has_value());
+  EXPECT_FALSE(
+      BallSweep(b, c, 1.5).ShadowAfter(BallSweep(a, b, 1)).has_value());
+  const Vec3 b_off{std::nextafter(1.0, 2.0), 0, -0.1};
+  EXPECT_FALSE(
+      BallSweep(b_off, c, 1).ShadowAfter(BallSweep(a, b, 1)).has_value());
+  const Vec3 below{1, 0, -3};
+  EXPECT_FALSE(
+      BallSweep(b, c, 1).ShadowAfter(BallSweep({1, 0, 2}, b, 1)).has_value());
+  EXPECT_FALSE(
+      BallSweep(b, below, 1).ShadowAfter(BallSweep(a, b, 1)).has_value());
+  EXPECT_FALSE(BallSweep(b, b, 1).ShadowAfter(BallSweep(a, b, 1)).has_value());
+  const Vec3 steep{1.01, 0, 1};  // about 89 degrees
+  EXPECT_FALSE(
+      BallSweep(b, steep, 1).ShadowAfter(BallSweep(a, b, 1)).has_value());
+}
+
 TEST(BallSweepRimTest, SphereRimIsFinite) {
   for (double r : {1e-3, 1.0, 5.0, 1e3}) {
     // At the origin so that tip +- r and the offsets below are exact.

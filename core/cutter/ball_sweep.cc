@@ -1,6 +1,7 @@
 #include "core/cutter/ball_sweep.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 
@@ -145,6 +146,91 @@ void BallSweep::FootprintRadii(const double* __restrict caps, int32_t n,
     const double below = std::sqrt(MaxOf(0.0, r2 - h * h));
     const double rho = z_min > caps[q] ? below : r;
     out[q] = rho * (1 + 1e-12) + kFootprintMargin;
+  }
+}
+
+std::optional<BallSweep::Shadow> BallSweep::ShadowAfter(
+    const BallSweep& prev) const {
+  auto same = [](double a, double b) {
+    return std::bit_cast<uint64_t>(a) == std::bit_cast<uint64_t>(b);
+  };
+  if (kind_ != kGeneral || prev.kind_ != kGeneral || !same(r_, prev.r_) ||
+      !same(a_.x, prev.b_.x) || !same(a_.y, prev.b_.y) ||
+      !same(a_.z, prev.b_.z)) {
+    return std::nullopt;
+  }
+  // As BallHeightLowerBound: no steeper than about 87 degrees.
+  constexpr double kMinG = 0.05;
+  if (g_ < kMinG || prev.g_ < kMinG) return std::nullopt;
+  const double r = r_;
+  // Both heights' rounding, generously: a sphere's height near its rim is
+  // off by up to about sqrt(ulp) r (the root of a rounded r^2 - d^2), and
+  // elsewhere each height is within some thousands of ulps of what it is
+  // computed from (the coordinates, offsets along a move up to its length
+  // and 2r over g).
+  const double scale = 1 + std::fabs(a_.x) + std::fabs(a_.y) + std::fabs(a_.z) +
+                       std::fabs(prev.a_.x) + std::fabs(prev.a_.y) +
+                       std::fabs(prev.a_.z) + r + (len_ + 2 * r) / g_ +
+                       (prev.len_ + 2 * r) / prev.g_;
+  const double err = 1e-6 * (1 + r) + 1e-10 * scale;
+  // prev's gap g'^2 delta^2 / 2r is 4 err; prev must be longer than delta
+  // (else its contact may be its start's, closer than delta to its end).
+  const double delta = std::sqrt(8 * r * err) / prev.g_;
+  if (!(prev.len_ > 2 * delta)) return std::nullopt;
+  // With q from the shared centre and root = sqrt(r^2 - n^2) in [0, r]
+  // (n the distance to a move's axis): this sweep's contact lies at
+  // (q . h - k3 root) / g from its start, prev's at (q . h' - k3' root') /
+  // g' from its end (eq. 12-13 solved for the contact); each bound holds
+  // for every root (a move that climbs needs none: its k3 root only
+  // helps), with err to spare against the rounding of the contacts. Where |q| >
+  // r this sweep's height is +inf (its start ball misses, and its contact is
+  // before its start); elsewhere prev's line meets its cylinder at a root of at
+  // least g' delta.
+  Shadow s;
+  s.cx = a_.x;
+  s.cy = a_.y;
+  s.h1 = h1_;
+  s.h2 = h2_;
+  s.c_this = -std::max(0.0, -k3_) * r - err;
+  s.p1 = prev.h1_;
+  s.p2 = prev.h2_;
+  s.c_prev = -std::max(0.0, -prev.k3_) * r - delta * prev.g_ - err;
+  return s;
+}
+
+SWARF_TARGET_CLONES
+void BallSweep::ShadowRows(const Shadow& s, double y0, double dy, int32_t j0,
+                           int32_t n, double x0, double inv_dx, int32_t i_max,
+                           int32_t* __restrict out_lo,
+                           int32_t* __restrict out_hi) {
+  const double cx = s.cx, cy = s.cy;
+  const double h2 = s.h2, c_this = s.c_this, p2 = s.p2, c_prev = s.c_prev;
+  // Each half-plane bounds qx from above or below, or (a1 = 0) holds on a
+  // whole row or on none: decided once, so that the loop is selects only.
+  const bool h_up = s.h1 > 0, h_down = s.h1 < 0, h_flat = s.h1 == 0;
+  const bool p_up = s.p1 > 0, p_down = s.p1 < 0, p_flat = s.p1 == 0;
+  const double h_inv = h_flat ? 0 : 1 / s.h1, p_inv = p_flat ? 0 : 1 / s.p1;
+  const double top = i_max + 1.0;
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) {
+    const double qy = (y0 + (j0 + q) * dy) - cy;
+    double lo = -kInf, hi = kInf;
+    const double rh = c_this - qy * h2, rp = c_prev - qy * p2;
+    hi = h_up ? MinOf(hi, rh * h_inv) : hi;
+    lo = h_down ? MaxOf(lo, rh * h_inv) : lo;
+    hi = p_up ? MinOf(hi, rp * p_inv) : hi;
+    lo = p_down ? MaxOf(lo, rp * p_inv) : lo;
+    const bool crossed = !(lo < hi);
+    const bool none = (h_flat & (rh < 0)) | (p_flat & (rp < 0)) | crossed;
+    // A node inside each end, on [0, i_max], as doubles (selects on
+    // doubles' comparisons).
+    const double fa = MinOf(MaxOf((cx + lo - x0) * inv_dx, -2.0), top + 1);
+    const double fb = MinOf(MaxOf((cx + hi - x0) * inv_dx, -2.0), top + 1);
+    const double i_lo = MaxOf(std::ceil(fa) + 1, 0.0);
+    const double i_hi = MinOf(std::floor(fb) - 1, top - 1);
+    const bool empty = none | (i_lo > i_hi);
+    out_lo[q] = static_cast<int32_t>(empty ? 1.0 : i_lo);
+    out_hi[q] = static_cast<int32_t>(empty ? 0.0 : i_hi);
   }
 }
 

@@ -252,6 +252,31 @@ class BallSweep {
   // vectorized loop.
   void FootprintRadii(const double* caps, int32_t n, double* out) const;
 
+  // Where this sweep surely lowers nothing that `prev` was applied to:
+  // `prev` is a move of the same radius whose end centre is this sweep's
+  // start centre, bit for bit (a path's previous move). There this
+  // sweep's height is its start ball's, which is prev's ball at its end,
+  // and prev's contact lies at least `delta` before its end: prev's height
+  // along its move is convex with curvature at least g^2 / r, so prev's
+  // height is lower by g^2 delta^2 / 2r, four times both heights' rounding
+  // or more (where this sweep's start ball misses, its height is +inf).
+  // Heights only go down, so a node prev was applied to is below this
+  // sweep there. With q = (x - cx, y - cy): q . (h1, h2) <= c_this and
+  // q . (p1, p2) <= c_prev. nullopt where there is none: another radius or
+  // start, a point or vertical move, or one steeper than about 87 degrees
+  // (the rounding grows with the slope).
+  struct Shadow {
+    double cx, cy, h1, h2, c_this, p1, p2, c_prev;
+  };
+  std::optional<Shadow> ShadowAfter(const BallSweep& prev) const;
+  // For the rows j0 + q (q < n) at y = y0 + (j0 + q) dy: the nodes x0 +
+  // i dx (i in [lo[q], hi[q]], within [0, i_max]) inside s by a node's
+  // width at each end (more than the rounding of the range); lo > hi where
+  // none. Vectorized.
+  static void ShadowRows(const Shadow& s, double y0, double dy, int32_t j0,
+                         int32_t n, double x0, double inv_dx, int32_t i_max,
+                         int32_t* lo, int32_t* hi);
+
  private:
   friend struct BallSweepKernels;  // the kernels over many frames
   enum Kind : uint8_t { kPoint, kVertical, kGeneral };
