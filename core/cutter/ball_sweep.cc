@@ -180,12 +180,12 @@ std::optional<BallSweep::Shadow> BallSweep::ShadowAfter(
   // With q from the shared centre and root = sqrt(r^2 - n^2) in [0, r]
   // (n the distance to a move's axis): this sweep's contact lies at
   // (q . h - k3 root) / g from its start, prev's at (q . h' - k3' root') /
-  // g' from its end (eq. 12-13 solved for the contact); each bound holds
+  // g' from its end (eq. 12-13 solved for the contact). Each bound holds
   // for every root (a move that climbs needs none: its k3 root only
-  // helps), with err to spare against the rounding of the contacts. Where |q| >
-  // r this sweep's height is +inf (its start ball misses, and its contact is
-  // before its start); elsewhere prev's line meets its cylinder at a root of at
-  // least g' delta.
+  // helps), with err to spare against the rounding of the contacts. Where
+  // |q| > r this sweep's height is +inf (its start ball misses, and its
+  // contact is before its start); elsewhere prev's line meets its
+  // cylinder at a root of at least g' delta.
   Shadow s;
   s.cx = a_.x;
   s.cy = a_.y;
