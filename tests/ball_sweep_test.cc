@@ -649,7 +649,7 @@ int64_t CheckShadowNodes(const BallSweep& prev, const BallSweep& next, double d,
 // half-plane behind the shared centre (the previous move's cylinder is
 // lower there; beyond the ball the next move is +inf), all but margins
 // well under a node.
-TEST(BallSweepShadowTest, ALevelPassShadowsTheDiscBehind) {
+TEST(BallSweepShadowTest, ALevelPassShadowsTheHalfPlaneBehind) {
   const double r = 2, d = 0.05;
   const BallSweep prev({10, 20, -1}, {10.1, 20, -1}, r);
   const BallSweep next({10.1, 20, -1}, {10.2, 20, -1}, r);
