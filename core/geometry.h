@@ -3,13 +3,24 @@
 #define SWARF_CORE_GEOMETRY_H_
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 
 namespace swarf {
 
 struct Vec3 {
   double x = 0, y = 0, z = 0;
 };
+
+// Whether a and b are the same bits (0 and -0 differ; a NaN equals its own
+// bits): for values one computation must have carried over unchanged.
+inline bool SameBits(double a, double b) {
+  return std::bit_cast<uint64_t>(a) == std::bit_cast<uint64_t>(b);
+}
+inline bool SameBits(const Vec3& a, const Vec3& b) {
+  return SameBits(a.x, b.x) && SameBits(a.y, b.y) && SameBits(a.z, b.z);
+}
 
 // Axis-aligned rectangle in the XY plane, [x0,x1] x [y0,y1].
 struct Rect {

@@ -2,16 +2,8 @@
 
 #include <algorithm>
 #include <bit>
-#include <cstring>
 
 namespace swarf {
-namespace {
-
-bool SameBits(const Vec3& a, const Vec3& b) {
-  return std::memcmp(&a, &b, sizeof(Vec3)) == 0;
-}
-
-}  // namespace
 
 MoveList::CutterKey MoveList::KeyOf(const Cutter& c) {
   return {static_cast<uint64_t>(c.kind),

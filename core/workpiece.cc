@@ -1669,10 +1669,6 @@ constexpr float kMaxStoredDerivative = static_cast<float>(kMaxDerivative);
 // a grid step stay finite.
 constexpr double kMinCutHeight = -2 * kMaxCoordinate;
 
-bool SameBits(double a, double b) {
-  return std::memcmp(&a, &b, sizeof a) == 0;
-}
-
 }  // namespace
 
 void Workpiece::SaveState(

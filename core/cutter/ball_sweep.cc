@@ -1,7 +1,6 @@
 #include "core/cutter/ball_sweep.h"
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <cstring>
 
@@ -151,12 +150,8 @@ void BallSweep::FootprintRadii(const double* __restrict caps, int32_t n,
 
 std::optional<BallSweep::Shadow> BallSweep::ShadowAfter(
     const BallSweep& prev) const {
-  auto same = [](double a, double b) {
-    return std::bit_cast<uint64_t>(a) == std::bit_cast<uint64_t>(b);
-  };
-  if (kind_ != kGeneral || prev.kind_ != kGeneral || !same(r_, prev.r_) ||
-      !same(a_.x, prev.b_.x) || !same(a_.y, prev.b_.y) ||
-      !same(a_.z, prev.b_.z)) {
+  if (kind_ != kGeneral || prev.kind_ != kGeneral || !SameBits(r_, prev.r_) ||
+      !SameBits(a_, prev.b_)) {
     return std::nullopt;
   }
   // As BallHeightLowerBound: no steeper than about 87 degrees.
