@@ -166,6 +166,7 @@ enum class Step {
   kMarksJson,
   kSurfaceStl,
   kSurfaceWrl,
+  kLatticeRows,
 };
 
 // One step as swarf run does it (run_outputs.cc, run_report.cc).
@@ -225,6 +226,15 @@ absl::Status RunStep(Step step, Job& job, benchmark::State& state) {
     case Step::kSurfaceWrl:
       return WriteVrml(*job.mesh, base + "surface.wrl",
                        SurfaceColors(*job.mesh, job.stock.z_top));
+    case Step::kLatticeRows: {
+      // The meshes' share of swarf run's pass over the grid (subdivision 1,
+      // the heights read again later: each lattice row's lowest height).
+      auto lattice = NewLattice(job.grid->spec, 1, /*heights=*/false);
+      if (!lattice.ok()) return lattice.status();
+      FillLatticeRows(*job.grid, 0, job.grid->spec.ny, &*lattice);
+      benchmark::DoNotOptimize(lattice->row_min.data());
+      return absl::OkStatus();
+    }
   }
   return absl::InternalError("unknown step");
 }
@@ -260,7 +270,8 @@ void BM_Output(benchmark::State& state, const char* job_name, Step step) {
   SWARF_OUTPUT_BENCH(job, file, MarksSvg);   \
   SWARF_OUTPUT_BENCH(job, file, MarksJson);  \
   SWARF_OUTPUT_BENCH(job, file, SurfaceStl); \
-  SWARF_OUTPUT_BENCH(job, file, SurfaceWrl)
+  SWARF_OUTPUT_BENCH(job, file, SurfaceWrl); \
+  SWARF_OUTPUT_BENCH(job, file, LatticeRows)
 
 SWARF_OUTPUT_BENCHES(bear, "bear.nc");
 SWARF_OUTPUT_BENCHES(cameo, "cameo.nc");
