@@ -5,7 +5,6 @@
 #include <charconv>
 #include <cmath>
 #include <cstring>
-#include <optional>
 #include <string>
 #include <string_view>
 
@@ -265,26 +264,38 @@ void FillLatticeRows(const SurfaceGrid& grid, int32_t e0, int32_t e1,
   ThreadPool::Default().ParallelFor(j1 - j0, [&](int64_t r) {
     const int64_t j = j0 + r;
     const int32_t ej = static_cast<int32_t>(std::min(j / s, ny - 1));
+    // The row's place among the nodes' rows, once a row: divisions a
+    // vertex (three 64-bit ones) took most of the full plate's lattice
+    // time at s = 1.
+    const bool node_row = j % s == 0;
+    const int32_t nj = static_cast<int32_t>(j / s);
     double lo = grid.spec.z_top;
     double* const row = l.z.empty() ? nullptr : &l.z[j * (big_nx + 1)];
+    // An element's corners, one object for the row: a std::optional of
+    // them an element had its storage cleared (rep stos) for every
+    // element, most of the lattice's time at s = 1, where no corners are
+    // needed.
+    ElementCorners e;
     for (int32_t ei = 0; ei < nx; ++ei) {
       // Corners once per element for its s (s + 1 in the last) vertices,
       // and only where one lies between nodes (never at s = 1).
-      std::optional<ElementCorners> e;
-      const int64_t i_end = ei == nx - 1 ? big_nx : (ei + 1) * int64_t{s} - 1;
-      for (int64_t i = ei * int64_t{s}; i <= i_end; ++i) {
+      bool have_e = false;
+      // Vertex i = ei s + k: a node where k is 0 or s (node ei + k / s).
+      const int64_t k_end = ei == nx - 1 ? s : s - 1;
+      for (int64_t k = 0; k <= k_end; ++k) {
+        const int64_t i = ei * int64_t{s} + k;
         // At a node its simulated height is exact; eq. (2) there can sit
         // below it where a neighbour's patch, extrapolated across a steep
         // element, undershoots. The patches fill in between nodes.
         double z;
-        if (i % s == 0 && j % s == 0) {
-          z = std::min(
-              grid.jet(static_cast<int32_t>(i / s), static_cast<int32_t>(j / s))
-                  .w,
-              grid.spec.z_top);
+        if (node_row && (k == 0 || k == s)) {
+          z = std::min(grid.jet(k == 0 ? ei : ei + 1, nj).w, grid.spec.z_top);
         } else {
-          if (!e.has_value()) e = grid.Corners(ei, ej);
-          z = scheme.Reconstruct(*e, l.xs[i], l.ys[j]);
+          if (!have_e) {
+            e = grid.Corners(ei, ej);
+            have_e = true;
+          }
+          z = scheme.Reconstruct(e, l.xs[i], l.ys[j]);
         }
         if (row != nullptr) row[i] = z;
         lo = std::min(lo, z);
