@@ -264,17 +264,16 @@ void FillLatticeRows(const SurfaceGrid& grid, int32_t e0, int32_t e1,
   ThreadPool::Default().ParallelFor(j1 - j0, [&](int64_t r) {
     const int64_t j = j0 + r;
     const int32_t ej = static_cast<int32_t>(std::min(j / s, ny - 1));
-    // The row's place among the nodes' rows, once a row: divisions a
-    // vertex (three 64-bit ones) took most of the full plate's lattice
-    // time at s = 1.
+    // The row's place among the nodes' rows, once a row (not three 64-bit
+    // divisions a vertex).
     const bool node_row = j % s == 0;
     const int32_t nj = static_cast<int32_t>(j / s);
     double lo = grid.spec.z_top;
     double* const row = l.z.empty() ? nullptr : &l.z[j * (big_nx + 1)];
-    // An element's corners, one object for the row: a std::optional of
-    // them an element had its storage cleared (rep stos) for every
-    // element, most of the lattice's time at s = 1, where no corners are
-    // needed.
+    // One element's corners at a time, in one object for the row: a
+    // std::optional of them declared for each element had its storage
+    // cleared each time, most of the pass's time at s = 1, where no
+    // corners are needed.
     ElementCorners e;
     for (int32_t ei = 0; ei < nx; ++ei) {
       // Corners once per element for its s (s + 1 in the last) vertices,
