@@ -507,17 +507,22 @@ double GuardedHeight(const ElementCorners& e, double x, double y) {
 
 namespace {
 
-// out[q] = r.Contains(c.x[q], c.y[q]), inlined: the segment's terms are
-// the same for the four points.
-void ReachHolds(const CornerReach& r, const CornerXY& c, bool out[4]) {
+// out[q] = r.Contains(c.x[q], c.y[q]) as 1 or 0, inlined: the segment's
+// terms are the same for the four points. Returns whether it holds all
+// four.
+bool ReachHolds(const CornerReach& r, const CornerXY& c, double out[4]) {
   if (!r.bounded || r.empty) {
-    for (int q = 0; q < 4; ++q) out[q] = !r.bounded;
-    return;
+    for (int q = 0; q < 4; ++q) out[q] = r.bounded ? 0.0 : 1.0;
+    return !r.bounded;
   }
   const double r2 = r.capsule.radius * r.capsule.radius;
+  bool all = true;
   for (int q = 0; q < 4; ++q) {
-    out[q] = CapsuleDistance2(r.capsule, c.x[q], c.y[q]) <= r2;
+    const bool in = CapsuleDistance2(r.capsule, c.x[q], c.y[q]) <= r2;
+    out[q] = in ? 1.0 : 0.0;
+    all &= in;
   }
+  return all;
 }
 
 // Whether a.Contains and b.Contains are one function.
@@ -546,6 +551,30 @@ void CornerResiduals(const ElementCorners& e, const CornerXY& c,
   }
 }
 
+// lift[k][q] = shortfall[k][q] where corner q (q != k) is in corner k's
+// reach (holds[k][q] != 0) and the patch passes below it, else 0; returns
+// whether such a shortfall passes tau. The sixteen pairs in one vectorized
+// pass: an element's pairs took a branch each.
+SWARF_TARGET_CLONES
+bool CornerLifts(const double (&shortfall)[4][4], const double (&holds)[4][4],
+                 double tau, double (&lift)[4][4]) {
+  static constexpr double kOffDiagonal[16] = {0, 1, 1, 1, 1, 0, 1, 1,
+                                              1, 1, 0, 1, 1, 1, 1, 0};
+  const double* __restrict r = &shortfall[0][0];
+  const double* __restrict h = &holds[0][0];
+  double* __restrict l = &lift[0][0];
+  double over = 0;
+#pragma omp simd reduction(max : over)
+  for (int i = 0; i < 16; ++i) {
+    // Non-short-circuit: with && GCC loads r[i] under a mask, branching.
+    const double ri = r[i];
+    const bool seen = (h[i] != 0) & (kOffDiagonal[i] != 0);
+    l[i] = (seen & (ri > 0)) ? ri : 0.0;
+    over = std::max(over, (seen & (ri > tau)) ? 1.0 : 0.0);
+  }
+  return over != 0;
+}
+
 // Guard::lift_uv[k] from lift[k] (d): the lift is the bilinear
 //   L(s, t) = (1 - s)(1 - t) d0 + s (1 - t) d1 + s t d2 + (1 - s) t d3
 // over the element's fractions s and t, 0 at corner k (d[k] = 0). About that
@@ -570,67 +599,62 @@ void LiftTerms(ElementCorners* e, int k) {
 void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4],
                     const bool* sure) {
   const CornerXY c = CornersOf(*e);
-  e->guard = {};
+  ElementCorners::Guard& g = e->guard;
   const double hx = e->x1 - e->x0, hy = e->y1 - e->y0;
   const double tau = kGuardConsistency * std::max(hx, hy);
-  bool smooth = true;
-  for (int k = 0; k < 4; ++k) smooth &= e->owner[k] >= 0;
   // Whether corner k's reach holds corner q: for the lifts and for the
   // whole element, tested once, and once for corners with one reach
   // (neighbouring nodes mostly share an owner, and with it the reach).
-  bool holds[4][4];
+  double holds[4][4];
   for (int k = 0; k < 4; ++k) {
     int same = k;
     for (int p = 0; p < k && same == k; ++p) {
       if (SameReach(e->reach[p], e->reach[k])) same = p;
     }
+    // A capsule is convex: holding the element's corners, it holds it all.
     if (same != k) {
       for (int q = 0; q < 4; ++q) holds[k][q] = holds[same][q];
+      g.inside[k] = g.inside[same];
     } else {
-      ReachHolds(e->reach[k], c, holds[k]);
+      g.inside[k] = ReachHolds(e->reach[k], c, holds[k]);
     }
   }
   double shortfall[4][4];
   CornerResiduals(*e, c, shortfall);
-  for (int k = 0; k < 4; ++k) {
-    // The trust region is convex: trusted at the other corners, the patch
-    // is trusted over the whole element. Read in place (not copied), and
-    // computed only where not given.
-    PatchTrustRegion computed;
-    const PatchTrustRegion* region = nullptr;
-    if (smooth) {
-      if (trust != nullptr) {
-        region = trust[k];
-      } else {
-        computed = TrustRegion(e->c[k]);
-        region = &computed;
-      }
+  // Every lift and the consistency test at once (a node outside the
+  // owner's reach says nothing of its surface): whether the element is
+  // smooth does not depend on the order of its tests, so the trust regions
+  // are read only where the rest holds.
+  const bool disagrees = CornerLifts(shortfall, holds, tau, g.lift);
+  bool smooth = !disagrees && e->owner[0] >= 0 && e->owner[1] >= 0 &&
+                e->owner[2] >= 0 && e->owner[3] >= 0;
+  for (int k = 0; k < 4; ++k) LiftTerms(e, k);
+  // The trust region is convex: trusted at the other corners, the patch is
+  // trusted over the whole element. Read in place (not copied), and
+  // computed only where not given. Most regions hold the whole element:
+  // one test for the three corners (a test the caller may have taken for
+  // the node).
+  PatchTrustRegion computed;
+  for (int k = 0; k < 4 && smooth; ++k) {
+    const PatchTrustRegion* region;
+    if (trust != nullptr) {
+      region = trust[k];
+    } else {
+      computed = TrustRegion(e->c[k]);
+      region = &computed;
     }
-    // Most regions hold the whole element: one test for the three corners
-    // (a test the caller may have taken for the node).
-    const bool each = smooth && !(trust != nullptr && sure != nullptr
-                                      ? sure[k]
-                                      : SurelyTrustedAt(*region, hx, hy));
+    if (trust != nullptr && sure != nullptr
+            ? sure[k]
+            : SurelyTrustedAt(*region, hx, hy)) {
+      continue;
+    }
     for (int q = 0; q < 4; ++q) {
       if (q == k) continue;
       const double dx = c.x[q] - c.x[k], dy = c.y[q] - c.y[k];
-      if (each && smooth && TrustAt(*region, dx, dy) != PatchTrust::kFull) {
-        smooth = false;
-      }
-      // A node outside the owner's reach says nothing of its surface.
-      if (!holds[k][q]) continue;
-      const double r = shortfall[k][q];
-      if (r > 0) e->guard.lift[k][q] = r;
-      if (r > tau) smooth = false;
+      if (TrustAt(*region, dx, dy) != PatchTrust::kFull) smooth = false;
     }
-    LiftTerms(e, k);
   }
-  e->guard.smooth = smooth;
-  // A capsule is convex: holding the element's corners, it holds it all.
-  for (int k = 0; k < 4; ++k) {
-    e->guard.inside[k] =
-        holds[k][0] && holds[k][1] && holds[k][2] && holds[k][3];
-  }
+  g.smooth = smooth;
   // Elsewhere the exact surface: every move that can be the lowest in the
   // element (an uncut one too: a cut may pass between its nodes).
   if (!smooth && e->surfaces != nullptr) e->surfaces->FillCandidates(e);
