@@ -230,17 +230,23 @@ absl::Status SurfaceGrid::Validate() const {
 
 ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej,
                                     bool prepare) const {
+  ElementCorners e;
+  FillCorners(ei, ej, &e);
+  if (prepare) GetScheme(scheme).Prepare(&e);
+  return e;
+}
+
+void SurfaceGrid::FillCorners(int32_t ei, int32_t ej, ElementCorners* e) const {
   // Same construction as Workpiece::Corners so that reconstructions agree
   // bit for bit.
   const GridGeometry g(spec);
-  ElementCorners e;
-  e.ei = ei;
-  e.ej = ej;
-  e.x0 = g.NodeX(ei);
-  e.x1 = g.NodeX(ei + 1);
-  e.y0 = g.NodeY(ej);
-  e.y1 = g.NodeY(ej + 1);
-  e.z_top = spec.z_top;
+  e->ei = ei;
+  e->ej = ej;
+  e->x0 = g.NodeX(ei);
+  e->x1 = g.NodeX(ei + 1);
+  e->y0 = g.NodeY(ej);
+  e->y1 = g.NodeY(ej + 1);
+  e->z_top = spec.z_top;
   const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
   const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
   // Looked up once: an element a pixel, the lookups cost a fifth of this.
@@ -248,19 +254,24 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej,
   const bool uses_reach = s.uses_reach();
   const int64_t moves = move_count();
   for (int k = 0; k < 4; ++k) {
-    e.c[k] = jet(is[k], js[k]);
+    e->c[k] = jet(is[k], js[k]);
     const int32_t o = owner(is[k], js[k]);
-    e.owner[k] = o;
+    e->owner[k] = o;
     if (o >= 0 && o < moves && uses_reach) {
-      e.reach[k] = surfaces->Reach(o, spec.z_top);
+      // A reach is its owner's: neighbouring nodes mostly share one.
+      e->reach[k] = k > 0 && e->owner[k - 1] == o
+                        ? e->reach[k - 1]
+                        : surfaces->Reach(o, spec.z_top);
+    } else {
+      e->reach[k] = CornerReach{};
     }
   }
+  e->surfaces = nullptr;
+  e->candidates.clear();
   if (s.uses_candidates() && surfaces != nullptr) {
-    surfaces->FillCandidates(&e);
+    surfaces->FillCandidates(e);
   }
-  if (uses_reach) e.surfaces = surfaces.get();
-  if (prepare) s.Prepare(&e);
-  return e;
+  if (uses_reach) e->surfaces = surfaces.get();
 }
 
 double SurfaceGrid::Height(double x, double y) const {
@@ -327,7 +338,9 @@ void SurfaceSampler::Select(int32_t ei, int32_t ej) {
   if (scheme_.kind() == SchemeKind::kGuarded) {
     // Prepared from the nodes' regions (a node serves four elements);
     // PrepareGuarded reads them for cut corners only.
-    e_ = grid_.Corners(ei, ej, /*prepare=*/false);
+    // Filled in place (an element a pixel: a copy of the corners cost a
+    // sixth of this); PrepareGuarded writes every field of the guard.
+    grid_.FillCorners(ei, ej, &e_);
     const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
     const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
     static const PatchTrustRegion kNone;

@@ -113,6 +113,9 @@ struct SurfaceGrid {
   // Element (ei, ej), 0 <= ei < nx, 0 <= ej < ny; prepared
   // (Scheme::Prepare) unless `prepare` is false (the caller prepares it).
   ElementCorners Corners(int32_t ei, int32_t ej, bool prepare = true) const;
+  // Corners(ei, ej, false) into *e, which may hold another element's:
+  // every field but e->guard is written (Scheme::Prepare writes that).
+  void FillCorners(int32_t ei, int32_t ej, ElementCorners* e) const;
   // The scheme's reconstruction at any point of the stock (clamped to the
   // stock rectangle), as Workpiece::Reconstruct.
   double Height(double x, double y) const;
