@@ -2,6 +2,9 @@
 #ifndef SWARF_CORE_SURFACE_JET_H_
 #define SWARF_CORE_SURFACE_JET_H_
 
+#include <bit>
+#include <cstdint>
+
 namespace swarf {
 
 // Height (mm) and its first (dimensionless) and second (1/mm) partial
@@ -28,6 +31,17 @@ inline void PatchGradient(const SurfaceJet& n, double xn, double yn, double x,
   const double u = x - xn, v = y - yn;
   *gx = n.wx + n.wxx * u + n.wxy * v;
   *gy = n.wy + n.wxy * u + n.wyy * v;
+}
+
+// Whether a and b have the same slopes and curvatures, bit for bit (their
+// heights aside): then every function of those alone (TrustRegion) agrees
+// on them.
+inline bool SameShape(const SurfaceJet& a, const SurfaceJet& b) {
+  return std::bit_cast<uint64_t>(a.wx) == std::bit_cast<uint64_t>(b.wx) &&
+         std::bit_cast<uint64_t>(a.wy) == std::bit_cast<uint64_t>(b.wy) &&
+         std::bit_cast<uint64_t>(a.wxx) == std::bit_cast<uint64_t>(b.wxx) &&
+         std::bit_cast<uint64_t>(a.wxy) == std::bit_cast<uint64_t>(b.wxy) &&
+         std::bit_cast<uint64_t>(a.wyy) == std::bit_cast<uint64_t>(b.wyy);
 }
 
 }  // namespace swarf

@@ -80,16 +80,6 @@ void QuarterMaxima(const double* __restrict err, const double* __restrict si,
   m[3] = m3;
 }
 
-// Whether a and b have the same slopes and curvatures, bit for bit (their
-// heights aside): then every function of those alone agrees on them.
-bool SameShape(const SurfaceJet& a, const SurfaceJet& b) {
-  return std::bit_cast<uint64_t>(a.wx) == std::bit_cast<uint64_t>(b.wx) &&
-         std::bit_cast<uint64_t>(a.wy) == std::bit_cast<uint64_t>(b.wy) &&
-         std::bit_cast<uint64_t>(a.wxx) == std::bit_cast<uint64_t>(b.wxx) &&
-         std::bit_cast<uint64_t>(a.wxy) == std::bit_cast<uint64_t>(b.wxy) &&
-         std::bit_cast<uint64_t>(a.wyy) == std::bit_cast<uint64_t>(b.wyy);
-}
-
 // At least n entries in *v (the existing ones kept, not zeroed).
 template <typename T>
 void Grow(std::vector<T>* v, size_t n) {

@@ -317,7 +317,15 @@ const PatchTrustRegion* SurfaceSampler::Region(int32_t i, int32_t j) {
   }
   const int32_t c = i - i0_;
   if (!has_[k][c]) {
-    regions_[k][c] = TrustRegion(grid_.jet(i, j));
+    // A region is a function of the jet's shape alone: along a straight
+    // move's cylinder neighbouring nodes mostly share theirs, and a region
+    // costs four transcendental functions.
+    const SurfaceJet& jet = grid_.jet(i, j);
+    if (c > 0 && has_[k][c - 1] && SameShape(grid_.jet(i - 1, j), jet)) {
+      regions_[k][c] = regions_[k][c - 1];
+    } else {
+      regions_[k][c] = TrustRegion(jet);
+    }
     has_[k][c] = 1;
   }
   return &regions_[k][c];
