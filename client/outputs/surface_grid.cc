@@ -302,9 +302,14 @@ SurfaceSampler::SurfaceSampler(const SurfaceGrid& grid, int32_t i0, int32_t i1)
     : grid_(grid), scheme_(GetScheme(grid.scheme)) {
   i0_ = std::clamp(i0, 0, grid.nodes_x() - 1);
   columns_ = std::clamp(i1, i0_, grid.nodes_x() - 1) - i0_ + 1;
+  const GridGeometry g(grid.spec);
+  for (int32_t i = i0_; i + 1 < i0_ + columns_; ++i) {
+    widest_ = std::max(widest_, g.NodeX(i + 1) - g.NodeX(i));
+  }
 }
 
-const PatchTrustRegion* SurfaceSampler::Region(int32_t i, int32_t j) {
+const PatchTrustRegion* SurfaceSampler::Region(int32_t i, int32_t j,
+                                               bool* sure) {
   int k = 0;
   while (k < kRows && row_[k] != j) ++k;
   if (k == kRows) {
@@ -313,21 +318,34 @@ const PatchTrustRegion* SurfaceSampler::Region(int32_t i, int32_t j) {
     next_ = (next_ + 1) % kRows;
     row_[k] = j;
     regions_[k].resize(columns_);
-    has_[k].assign(columns_, 0);
+    has_[k].assign(columns_, kNotYet);
+    // The taller of the row's (up to two) rows of elements.
+    const GridGeometry g(grid_.spec);
+    double hy = 0;
+    if (j > 0) hy = std::max(hy, g.NodeY(j) - g.NodeY(j - 1));
+    if (j < g.ny()) hy = std::max(hy, g.NodeY(j + 1) - g.NodeY(j));
+    tallest_[k] = hy;
   }
   const int32_t c = i - i0_;
-  if (!has_[k][c]) {
+  if (has_[k][c] == kNotYet) {
     // A region is a function of the jet's shape alone: along a straight
     // move's cylinder neighbouring nodes mostly share theirs, and a region
-    // costs four transcendental functions.
+    // costs four transcendental functions. Whether it surely holds the
+    // node's elements is taken at the widest and tallest of them in the
+    // sampler's columns and the node's row (PrepareGuarded's `sure`), so
+    // it is the same for a copy.
     const SurfaceJet& jet = grid_.jet(i, j);
-    if (c > 0 && has_[k][c - 1] && SameShape(grid_.jet(i - 1, j), jet)) {
+    if (c > 0 && has_[k][c - 1] != kNotYet &&
+        SameShape(grid_.jet(i - 1, j), jet)) {
       regions_[k][c] = regions_[k][c - 1];
+      has_[k][c] = has_[k][c - 1];
     } else {
       regions_[k][c] = TrustRegion(jet);
+      has_[k][c] =
+          SurelyTrusted(regions_[k][c], widest_, tallest_[k]) ? kSure : kTested;
     }
-    has_[k][c] = 1;
   }
+  *sure = has_[k][c] == kSure;
   return &regions_[k][c];
 }
 
@@ -353,10 +371,12 @@ void SurfaceSampler::Select(int32_t ei, int32_t ej) {
     const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
     static const PatchTrustRegion kNone;
     const PatchTrustRegion* trust[4];
+    bool sure[4];
     for (int k = 0; k < 4; ++k) {
-      trust[k] = e_.owner[k] >= 0 ? Region(is[k], js[k]) : &kNone;
+      sure[k] = false;
+      trust[k] = e_.owner[k] >= 0 ? Region(is[k], js[k], &sure[k]) : &kNone;
     }
-    PrepareGuarded(&e_, trust);
+    PrepareGuarded(&e_, trust, sure);
   } else {
     e_ = grid_.Corners(ei, ej);
   }

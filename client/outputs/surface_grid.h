@@ -156,7 +156,9 @@ class SurfaceSampler {
 
  private:
   void Select(int32_t ei, int32_t ej);
-  const PatchTrustRegion* Region(int32_t i, int32_t j);
+  // Node (i, j)'s trust region, and in *sure whether it surely holds each
+  // of the node's elements that Select may take (SurelyTrusted).
+  const PatchTrustRegion* Region(int32_t i, int32_t j, bool* sure);
 
   const SurfaceGrid& grid_;
   const Scheme& scheme_;
@@ -167,7 +169,10 @@ class SurfaceSampler {
   static constexpr int kRows = 4;
   int32_t row_[kRows] = {-1, -1, -1, -1};
   std::vector<PatchTrustRegion> regions_[kRows];
+  enum : uint8_t { kNotYet, kTested, kSure };
   std::vector<uint8_t> has_[kRows];
+  double tallest_[kRows] = {};  // the row's taller element row
+  double widest_ = 0;           // the widest element in the columns
   int next_ = 0;
 };
 
