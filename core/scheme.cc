@@ -6,6 +6,7 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
+#include "core/stock.h"
 #include "core/target_clones.h"
 
 namespace swarf {
@@ -658,6 +659,17 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4],
   // Elsewhere the exact surface: every move that can be the lowest in the
   // element (an uncut one too: a cut may pass between its nodes).
   if (!smooth && e->surfaces != nullptr) e->surfaces->FillCandidates(e);
+}
+
+void SetElementFrame(const GridGeometry& grid, double z_top, int32_t ei,
+                     int32_t ej, ElementCorners* e) {
+  e->ei = ei;
+  e->ej = ej;
+  e->x0 = grid.NodeX(ei);
+  e->x1 = grid.NodeX(ei + 1);
+  e->y0 = grid.NodeY(ej);
+  e->y1 = grid.NodeY(ej + 1);
+  e->z_top = z_top;
 }
 
 double MinOfPatches(const ElementCorners& e, double x, double y) {

@@ -99,6 +99,13 @@ struct ElementCorners {
   } guard;
 };
 
+// Sets e's indices, rectangle and stock top for element (ei, ej) of
+// `grid` (top z_top): every holder of nodes builds its corners' frame here,
+// so that reconstructions agree bit for bit.
+class GridGeometry;
+void SetElementFrame(const GridGeometry& grid, double z_top, int32_t ei,
+                     int32_t ej, ElementCorners* e);
+
 class Scheme {
  public:
   virtual ~Scheme() = default;

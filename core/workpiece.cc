@@ -1544,13 +1544,7 @@ void Workpiece::FillCorners(int32_t ei, int32_t ej,
                             const NodeValue* const nodes[4],
                             const CornerReach* const reaches[4],
                             ElementCorners* e) const {
-  e->ei = ei;
-  e->ej = ej;
-  e->x0 = grid_.NodeX(ei);
-  e->x1 = grid_.NodeX(ei + 1);
-  e->y0 = grid_.NodeY(ej);
-  e->y1 = grid_.NodeY(ej + 1);
-  e->z_top = spec().z_top;
+  SetElementFrame(grid_, spec().z_top, ei, ej, e);
   const bool reach = scheme_->uses_reach();
   for (int k = 0; k < 4; ++k) {
     const NodeValue& n = *nodes[k];

@@ -239,14 +239,7 @@ ElementCorners SurfaceGrid::Corners(int32_t ei, int32_t ej,
 void SurfaceGrid::FillCorners(int32_t ei, int32_t ej, ElementCorners* e) const {
   // Same construction as Workpiece::Corners so that reconstructions agree
   // bit for bit.
-  const GridGeometry g(spec);
-  e->ei = ei;
-  e->ej = ej;
-  e->x0 = g.NodeX(ei);
-  e->x1 = g.NodeX(ei + 1);
-  e->y0 = g.NodeY(ej);
-  e->y1 = g.NodeY(ej + 1);
-  e->z_top = spec.z_top;
+  SetElementFrame(GridGeometry(spec), spec.z_top, ei, ej, e);
   const int32_t is[4] = {ei, ei + 1, ei + 1, ei};
   const int32_t js[4] = {ej, ej, ej + 1, ej + 1};
   // Looked up once: an element a pixel, the lookups cost a fifth of this.
