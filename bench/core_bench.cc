@@ -445,6 +445,18 @@ void BM_PlateValuation(benchmark::State& state) {
 }
 BENCHMARK(BM_PlateValuation)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// The cutting marks of the plate's finishing (guarded): the creases between
+// neighbouring passes, each vertex projected onto its exact crease and
+// tested for a third surface below it (MoveSweeps::LowestAt).
+void BM_PlateMarks(benchmark::State& state) {
+  const auto wp =
+      CutWorkpiece(PlateFinishingRaster(), kPlateStock, SchemeKind::kGuarded);
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(FindCuttingMarks(*wp, {})->size());
+  }
+}
+BENCHMARK(BM_PlateMarks)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 }  // namespace
 }  // namespace swarf
 

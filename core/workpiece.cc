@@ -1254,25 +1254,15 @@ CornerReach MoveSweeps::Reach(int32_t id, double z_top) const {
 // lies within it of the move).
 struct ReachLanes {
   std::vector<float> x0, x1, y0, y1, low, z_r, r2;
-  void Clear() { n_ = 0; }
-  // Lane n_, the arrays grown where full. They only grow: a thread refills
-  // them bin after bin, and a push_back on each of seven arrays a move cost
-  // more than the lanes' own values.
-  void Add(float ax0, float ax1, float ay0, float ay1, float alow, float az_r,
-           float ar2) {
-    if (n_ == x0.size()) {
+  // n lanes, each written before it is read. The arrays only grow: a
+  // thread refills them bin after bin.
+  void Resize(size_t n) {
+    if (n > x0.size()) {
       for (auto* v : {&x0, &x1, &y0, &y1, &low, &z_r, &r2}) {
-        v->resize(std::max<size_t>(1024, 2 * n_));
+        v->resize(std::max<size_t>(1024, 2 * n));
       }
     }
-    x0[n_] = ax0;
-    x1[n_] = ax1;
-    y0[n_] = ay0;
-    y1[n_] = ay1;
-    low[n_] = alow;
-    z_r[n_] = az_r;
-    r2[n_] = ar2;
-    ++n_;
+    n_ = n;
   }
   size_t size() const { return n_; }
 
@@ -1303,25 +1293,32 @@ constexpr size_t kReachBlock = 16;
 // v rounded to a float not above (FloatDown) or below (FloatUp) it: moved
 // by 2^-22 of itself first, more than the half float ulp that rounding to
 // nearest can add (and 1e-30 for v near 0), without a call to nextafter.
-float FloatDown(double v) {
+[[gnu::always_inline]] inline float FloatDown(double v) {
   return static_cast<float>(v - (std::fabs(v) * 0x1p-22 + 1e-30));
 }
-float FloatUp(double v) {
+[[gnu::always_inline]] inline float FloatUp(double v) {
   return static_cast<float>(v + (std::fabs(v) * 0x1p-22 + 1e-30));
 }
 
 // pass[q] = 0 where lane q0 + q surely is not below cap at (x, y): its
-// lowest tip is not, or FootprintGap::Misses at cap, with the point
-// widened by Misses' own slack again against the rounding of these values.
-// The exact tests, at a cap w <= cap, pass no move this rejects: a lower
-// cap only rejects more. A block's union passes where any of its moves
-// does: its gap is no larger, its z_r - cap no larger and r2 no smaller,
-// so its reach no smaller.
+// lowest tip is not, or the point lies beyond its reach below cap. Below
+// cap, a ball reaches within sqrt(r2 - h^2) of its centres' XY segment
+// (h = z_r - cap > 0: its lowest centre above cap; else within r), another
+// shape within r2's root (FootprintGap's reach), and that segment lies in
+// the tips' XY box: a point farther than the reach from the box (Euclidean,
+// not FootprintGap's larger-of-the-gaps, which passed the corners of the
+// box's reach square: about a fifth of its area) is beyond it. The point
+// is widened by FootprintGap's slack and each gap less it again, against
+// the rounding of these values. The exact tests, at a cap w <= cap, pass
+// no move this rejects: a lower cap only rejects more. A block's union
+// passes where any of its moves does: its box holds theirs, its z_r is no
+// larger and its r2 no smaller, so its reach no smaller.
 SWARF_TARGET_CLONES
 void MayBeBelow(const ReachLanes& b, size_t q0, size_t n, double x, double y,
                 double cap, uint8_t* __restrict pass) {
   constexpr double kSlack = 1e-6;
-  const Rect point{x - kSlack, y - kSlack, x + kSlack, y + kSlack};
+  const double px0 = x - kSlack, px1 = x + kSlack;
+  const double py0 = y - kSlack, py1 = y + kSlack;
   const float* __restrict x0 = b.x0.data() + q0;
   const float* __restrict x1 = b.x1.data() + q0;
   const float* __restrict y0 = b.y0.data() + q0;
@@ -1331,12 +1328,102 @@ void MayBeBelow(const ReachLanes& b, size_t q0, size_t n, double x, double y,
   const float* __restrict r2 = b.r2.data() + q0;
 #pragma omp simd
   for (size_t q = 0; q < n; ++q) {
-    // As a ball for every shape: z_r -inf makes the reach r2 itself.
-    const double misses = FootprintGap::Misses(
-        1.0, double{x0[q]}, double{x1[q]}, double{y0[q]}, double{y1[q]},
-        double{z_r[q]}, double{r2[q]}, point, cap);
+    const double gx =
+        MaxOf(MaxOf(px0 - double{x1[q]}, double{x0[q]} - px1) - kSlack, 0.0);
+    const double gy =
+        MaxOf(MaxOf(py0 - double{y1[q]}, double{y0[q]} - py1) - kSlack, 0.0);
+    // z_r -inf (not a ball) makes the reach r2 itself.
+    const double h = double{z_r[q]} - cap;
+    const double rho2 = h > 0 ? double{r2[q]} - h * h : double{r2[q]};
+    // Where rho2 < 0 the move is above cap everywhere; only a point off
+    // the box (a gap) is counted as missed, as FootprintGap counts it.
+    const bool beyond = gx * gx + gy * gy > MaxOf(rho2, 0.0);
     // && (not &): GCC 12 vectorizes this form, not the other.
-    pass[q] = (misses == 0 && double{low[q]} < cap) ? 1 : 0;
+    pass[q] = (!beyond && double{low[q]} < cap) ? 1 : 0;
+  }
+}
+
+// Moves' tips, radii and whether each is swept as a ball (1 or 0), a chunk
+// of a bin's at a time.
+struct MoveChunk {
+  static constexpr size_t kSize = 64;
+  double px[kSize], py[kSize], pz[kSize], qx[kSize], qy[kSize], qz[kSize],
+      r[kSize], ball[kSize];
+};
+
+// Lanes at..at + n - 1 of *out from the chunk's first n moves: for a ball,
+// z_r its lowest centre and r2 its radius squared; for another shape, z_r
+// -inf and r2 the square of its radius widened as FootprintBounds widens
+// it (the footprint's axis is a part of the move). Both forms are computed
+// and one selected, so that the loop vectorizes.
+SWARF_TARGET_CLONES
+void FillReachLanes(const MoveChunk& c, size_t n, size_t at, ReachLanes* out) {
+  float* __restrict x0 = out->x0.data() + at;
+  float* __restrict x1 = out->x1.data() + at;
+  float* __restrict y0 = out->y0.data() + at;
+  float* __restrict y1 = out->y1.data() + at;
+  float* __restrict low = out->low.data() + at;
+  float* __restrict z_r = out->z_r.data() + at;
+  float* __restrict r2 = out->r2.data() + at;
+  constexpr float kNoBall = -std::numeric_limits<float>::infinity();
+#pragma omp simd
+  for (size_t q = 0; q < n; ++q) {
+    const double r = c.r[q];
+    const double z_min = MinOf(c.pz[q], c.qz[q]);
+    const double reach = r * (1 + 1e-9) + 1e-6;
+    const bool ball = c.ball[q] != 0;
+    const float ball_z_r = FloatDown(z_min + r);
+    const float ball_r2 = FloatUp(r * r);
+    const float other_r2 = FloatUp(reach * reach);
+    z_r[q] = ball ? ball_z_r : kNoBall;
+    r2[q] = ball ? ball_r2 : other_r2;
+    x0[q] = FloatDown(MinOf(c.px[q], c.qx[q]));
+    x1[q] = FloatUp(MaxOf(c.px[q], c.qx[q]));
+    y0[q] = FloatDown(MinOf(c.py[q], c.qy[q]));
+    y1[q] = FloatUp(MaxOf(c.py[q], c.qy[q]));
+    low[q] = FloatDown(z_min);
+  }
+}
+
+// Each block of kReachBlock of m's lanes (the last may be shorter) into its
+// lane of *blocks (sized for them): the union of its moves' lanes, as the
+// moves come (std::min and std::max keep the first of equal values).
+void BlockUnions(const ReachLanes& m, ReachLanes* blocks) {
+  const size_t n = m.size();
+  const float* __restrict x0 = m.x0.data();
+  const float* __restrict x1 = m.x1.data();
+  const float* __restrict y0 = m.y0.data();
+  const float* __restrict y1 = m.y1.data();
+  const float* __restrict low = m.low.data();
+  const float* __restrict z_r = m.z_r.data();
+  const float* __restrict r2 = m.r2.data();
+  float* __restrict bx0 = blocks->x0.data();
+  float* __restrict bx1 = blocks->x1.data();
+  float* __restrict by0 = blocks->y0.data();
+  float* __restrict by1 = blocks->y1.data();
+  float* __restrict blow = blocks->low.data();
+  float* __restrict bz_r = blocks->z_r.data();
+  float* __restrict br2 = blocks->r2.data();
+  for (size_t k = 0, q0 = 0; q0 < n; ++k, q0 += kReachBlock) {
+    const size_t q1 = std::min(n, q0 + kReachBlock);
+    float ux0 = x0[q0], ux1 = x1[q0], uy0 = y0[q0], uy1 = y1[q0],
+          ulow = low[q0], uz_r = z_r[q0], ur2 = r2[q0];
+    for (size_t q = q0 + 1; q < q1; ++q) {
+      ux0 = std::min(ux0, x0[q]);
+      ux1 = std::max(ux1, x1[q]);
+      uy0 = std::min(uy0, y0[q]);
+      uy1 = std::max(uy1, y1[q]);
+      ulow = std::min(ulow, low[q]);
+      uz_r = std::min(uz_r, z_r[q]);
+      ur2 = std::max(ur2, r2[q]);
+    }
+    bx0[k] = ux0;
+    bx1[k] = ux1;
+    by0[k] = uy0;
+    by1[k] = uy1;
+    blow[k] = ulow;
+    bz_r[k] = uz_r;
+    br2[k] = ur2;
   }
 }
 
@@ -1351,61 +1438,40 @@ const MoveBinReach* MoveSweeps::BinReachOf(int32_t bin) const {
   }
   MoveBinReach& b = cache[next];
   next = (next + 1) % kReachBins;
-  b.move.Clear();
-  b.block.Clear();
-  b.ids.clear();
   b.serial = 0;  // not valid until filled
-  Move scratch;
-  // The block's union as its moves come: std::min and std::max keep the
-  // first of equal values, as std::min_element and std::max_element over
-  // the block would.
-  float bx0 = 0, bx1 = 0, by0 = 0, by1 = 0, blow = 0, bz_r = 0, br2 = 0;
+  b.ids.clear();
   for (const uint32_t k : index_->Bin(bin)) {
     if (b.ids.size() == kMaxReachMoves) {
       b.bin = -1;
       return nullptr;
     }
-    const MoveView m = ViewAt(k, &scratch);
-    const Vec3& p = *m.from;
-    const Vec3& q = *m.to;
-    const double r = m.cutter->radius;
-    float z_r, r2;
-    if (SweptAsBall(*m.cutter)) {
-      z_r = FloatDown(std::min(p.z, q.z) + r);
-      r2 = FloatUp(r * r);
-    } else {
-      // The footprint's axis is a part of the move and its radius at most
-      // the cutter's, which FootprintBounds widens by 1e-9 mm and 1e-12 of
-      // it.
-      const double reach = r * (1 + 1e-9) + 1e-6;
-      z_r = -std::numeric_limits<float>::infinity();
-      r2 = FloatUp(reach * reach);
-    }
-    const float x0 = FloatDown(std::min(p.x, q.x));
-    const float x1 = FloatUp(std::max(p.x, q.x));
-    const float y0 = FloatDown(std::min(p.y, q.y));
-    const float y1 = FloatUp(std::max(p.y, q.y));
-    const float low = FloatDown(std::min(p.z, q.z));
-    b.move.Add(x0, x1, y0, y1, low, z_r, r2);
-    if (b.ids.size() % kReachBlock == 0) {
-      bx0 = x0, bx1 = x1, by0 = y0, by1 = y1, blow = low, bz_r = z_r, br2 = r2;
-    } else {
-      bx0 = std::min(bx0, x0);
-      bx1 = std::max(bx1, x1);
-      by0 = std::min(by0, y0);
-      by1 = std::max(by1, y1);
-      blow = std::min(blow, low);
-      bz_r = std::min(bz_r, z_r);
-      br2 = std::max(br2, r2);
-    }
     b.ids.push_back(k);
-    if (b.ids.size() % kReachBlock == 0) {
-      b.block.Add(bx0, bx1, by0, by1, blow, bz_r, br2);
+  }
+  const size_t n = b.ids.size();
+  b.move.Resize(n);
+  // The moves' values a chunk at a time, then their lanes in one
+  // vectorized pass: built move by move, a lane cost about 180
+  // instructions (the marks' junction test fills a bin's lanes about once
+  // for each bin a crease crosses).
+  MoveChunk chunk;
+  Move scratch;
+  for (size_t q0 = 0; q0 < n; q0 += MoveChunk::kSize) {
+    const size_t c = std::min(MoveChunk::kSize, n - q0);
+    for (size_t q = 0; q < c; ++q) {
+      const MoveView m = ViewAt(b.ids[q0 + q], &scratch);
+      chunk.px[q] = m.from->x;
+      chunk.py[q] = m.from->y;
+      chunk.pz[q] = m.from->z;
+      chunk.qx[q] = m.to->x;
+      chunk.qy[q] = m.to->y;
+      chunk.qz[q] = m.to->z;
+      chunk.r[q] = m.cutter->radius;
+      chunk.ball[q] = SweptAsBall(*m.cutter) ? 1.0 : 0.0;
     }
+    FillReachLanes(chunk, c, q0, &b.move);
   }
-  if (b.ids.size() % kReachBlock != 0) {
-    b.block.Add(bx0, bx1, by0, by1, blow, bz_r, br2);
-  }
+  b.block.Resize((n + kReachBlock - 1) / kReachBlock);
+  BlockUnions(b.move, &b.block);
   b.serial = serial_;
   b.bin = bin;
   b.moves = moves;
@@ -1448,17 +1514,22 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
     for (const uint32_t k : index_->Bin(bin)) try_move(k);
   } else {
     // Only the moves the widened boxes pass (w <= cap: the exact tests
-    // pass no others), in the same order: the same result. Blocks first.
+    // pass no others), in the same order: the same result. Blocks first,
+    // then the moves of each run of passing blocks in one call (a stretch
+    // of the path near the point; a call a block cost more than its lanes).
     constexpr size_t kChunk = 256;
-    uint8_t block_pass[kChunk], pass[kReachBlock];
+    uint8_t block_pass[kChunk], pass[kChunk * kReachBlock];
     const size_t blocks = reach->block.size();
     for (size_t b0 = 0; b0 < blocks; b0 += kChunk) {
       const size_t c = std::min(kChunk, blocks - b0);
       MayBeBelow(reach->block, b0, c, x, y, cap, block_pass);
-      for (size_t b = 0; b < c; ++b) {
+      for (size_t b = 0, e; b < c; b = e) {
+        e = b + 1;
         if (block_pass[b] == 0) continue;
+        while (e < c && block_pass[e] != 0) ++e;
         const size_t q0 = (b0 + b) * kReachBlock;
-        const size_t n = std::min(kReachBlock, reach->ids.size() - q0);
+        const size_t n =
+            std::min((e - b) * kReachBlock, reach->ids.size() - q0);
         MayBeBelow(reach->move, q0, n, x, y, cap, pass);
         for (size_t q = 0; q < n; ++q) {
           if (pass[q] != 0) try_move(reach->ids[q0 + q]);
