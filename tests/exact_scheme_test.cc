@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <memory>
+#include <numbers>
 #include <random>
 #include <span>
 #include <string_view>
@@ -175,6 +176,77 @@ TEST(ExactSchemeTest, LowestAtIsTheLowestOfAllMoves) {
       // Most points lie under some move below their cap.
       EXPECT_GT(lowered, 1000);
     }
+  }
+}
+
+// At the edge of a move's footprint below the cap, beside every side and
+// corner of its tips' box (where the bin's lanes test the reach), LowestAt
+// still finds the move wherever it dips below the cap. On rays from the
+// move's ends and middle, a point where its height crosses the cap is
+// found by bisection down to adjacent doubles, and points from 1e-3 mm to
+// none either side of it are asked, for every shape and for caps near and
+// far above the move's lowest tip. The lanes may pass too many moves,
+// never one that is below the cap: with their reach squared 1e-5 of itself
+// short this fails (the random points above pass even 1e-4); their own
+// margins (FloatUp, the slacks) are a few 1e-6.
+TEST(ExactSchemeTest, LowestAtAtTheEdgeOfTheFootprint) {
+  const StockSpec spec{0, 0, 20, 20, 0, 80, 80};
+  const Cutter cutters[] = {
+      Cutter::Ball(1.5), Cutter::Flat(1.5), Cutter::BullNose(1.5, 0.5),
+      Cutter::Cone(1.5, 45, 0.3), Cutter::TaperedBall(1.5, 0.6, 10)};
+  for (const Cutter& c : cutters) {
+    SCOPED_TRACE(static_cast<int>(c.kind));
+    // A ramp along a diagonal, and a move of no length.
+    const std::vector<Move> moves = {{{6, 6, -1}, {10, 9, -1.6}, c},
+                                     {{14, 12, -0.8}, {14, 12, -0.8}, c}};
+    auto wp = Workpiece::Create(spec, SchemeKind::kTaylor);
+    ASSERT_TRUE(wp.ok());
+    ASSERT_TRUE((*wp)->Apply(moves).ok());
+    const MoveSurfaces& s = (*wp)->surfaces();
+    const GridGeometry& grid = (*wp)->grid();
+    int32_t asked = 0;
+    for (size_t m = 0; m < moves.size(); ++m) {
+      const Move& mv = moves[m];
+      const Vec3 mid{0.5 * (mv.from.x + mv.to.x), 0.5 * (mv.from.y + mv.to.y),
+                     0.5 * (mv.from.z + mv.to.z)};
+      const double lowest = std::min(mv.from.z, mv.to.z);
+      for (const double above : {0.02, 0.4, 1.2}) {
+        const double cap = lowest + above;
+        for (const Vec3& o : {mv.from, mv.to, mid}) {
+          for (int d = 0; d < 16; ++d) {
+            const double a = d * std::numbers::pi / 8;
+            const double ux = std::cos(a), uy = std::sin(a);
+            auto height = [&](double t) {
+              return s.Height(static_cast<int32_t>(m), o.x + t * ux,
+                              o.y + t * uy);
+            };
+            double t_in = 0, t_out = 4;  // beyond every reach here
+            if (!(height(t_in) < cap) || height(t_out) < cap) continue;
+            for (;;) {
+              const double t = 0.5 * (t_in + t_out);
+              if (!(t > t_in && t < t_out)) break;
+              (height(t) < cap ? t_in : t_out) = t;
+            }
+            for (const double e : {1e-3, 1e-6, 1e-9, 0.0}) {
+              for (const double t : {t_in - e, t_out + e}) {
+                const double x = o.x + t * ux, y = o.y + t * uy;
+                int32_t want_id;
+                const double want =
+                    LowestOfAll(s, moves.size(), x, y, cap, &want_id);
+                int32_t id = -2;
+                const double w = s.LowestAt(grid.ElementX(x), grid.ElementY(y),
+                                            x, y, cap, &id);
+                ASSERT_EQ(w, want) << x << "," << y << " cap " << cap;
+                ASSERT_EQ(id, want_id) << x << "," << y << " cap " << cap;
+                ++asked;
+              }
+            }
+          }
+        }
+      }
+    }
+    // Most rays cross the cap.
+    EXPECT_GT(asked, 1000);
   }
 }
 
