@@ -1309,10 +1309,11 @@ constexpr size_t kReachBlock = 16;
 // not FootprintGap's larger-of-the-gaps, which passed the corners of the
 // box's reach square: about a fifth of its area) is beyond it. The point
 // is widened by FootprintGap's slack and each gap less it again, against
-// the rounding of these values. The exact tests, at a cap w <= cap, pass
-// no move this rejects: a lower cap only rejects more. A block's union
-// passes where any of its moves does: its box holds theirs, its z_r is no
-// larger and its r2 no smaller, so its reach no smaller.
+// the rounding of these values. So no move this rejects is below cap at
+// the point, nor below any w <= cap: the exact tests would find none of
+// them lower (ExactSchemeTest.LowestAtAtTheEdgeOfTheFootprint). A block's
+// union passes where any of its moves does: its box holds theirs, its z_r
+// is no larger and its r2 no smaller, so its reach no smaller.
 SWARF_TARGET_CLONES
 void MayBeBelow(const ReachLanes& b, size_t q0, size_t n, double x, double y,
                 double cap, uint8_t* __restrict pass) {
