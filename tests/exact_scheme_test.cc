@@ -211,7 +211,8 @@ TEST(ExactSchemeTest, LowestAtAtTheEdgeOfTheFootprint) {
                      0.5 * (mv.from.z + mv.to.z)};
       const double lowest = std::min(mv.from.z, mv.to.z);
       for (const double above : {0.02, 0.4, 1.2}) {
-        const double cap = lowest + above;
+        // At most the stock's top: the bins list the moves below it.
+        const double cap = std::min(lowest + above, spec.z_top);
         for (const Vec3& o : {mv.from, mv.to, mid}) {
           for (int d = 0; d < 16; ++d) {
             const double a = d * std::numbers::pi / 8;
