@@ -1317,7 +1317,7 @@ constexpr size_t kReachBlock = 16;
 SWARF_TARGET_CLONES
 void MayBeBelow(const ReachLanes& b, size_t q0, size_t n, double x, double y,
                 double cap, uint8_t* __restrict pass) {
-  constexpr double kSlack = 1e-6;
+  constexpr double kSlack = FootprintGap::kSlack;
   const double px0 = x - kSlack, px1 = x + kSlack;
   const double py0 = y - kSlack, py1 = y + kSlack;
   const float* __restrict x0 = b.x0.data() + q0;
@@ -1334,8 +1334,8 @@ void MayBeBelow(const ReachLanes& b, size_t q0, size_t n, double x, double y,
     const double gy =
         MaxOf(MaxOf(py0 - double{y1[q]}, double{y0[q]} - py1) - kSlack, 0.0);
     // z_r -inf (not a ball) makes the reach r2 itself.
-    const double h = double{z_r[q]} - cap;
-    const double rho2 = h > 0 ? double{r2[q]} - h * h : double{r2[q]};
+    const double rho2 =
+        FootprintGap::ReachSquared(double{z_r[q]}, double{r2[q]}, cap);
     // Where rho2 < 0 the move is above cap everywhere; only a point off
     // the box (a gap) is counted as missed, as FootprintGap counts it.
     const bool beyond = gx * gx + gy * gy > MaxOf(rho2, 0.0);
@@ -1514,8 +1514,8 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
   if (reach == nullptr) {
     for (const uint32_t k : index_->Bin(bin)) try_move(k);
   } else {
-    // Only the moves the widened boxes pass (w <= cap: the exact tests
-    // pass no others), in the same order: the same result. Blocks first,
+    // Only the moves the widened boxes pass (w <= cap: no other is below
+    // it here), in the same order: the same result. Blocks first,
     // then the moves of each run of passing blocks in one call (a stretch
     // of the path near the point; a call a block cost more than its lanes).
     constexpr size_t kChunk = 256;

@@ -129,17 +129,24 @@ struct FootprintGap {
             std::min(tip_from.z, tip_to.z) + cutter.radius,
             cutter.radius * cutter.radius};
   }
+  // The margin a gap must clear (mm).
+  static constexpr double kSlack = 1e-6;
+  // The square of the footprint's radius below cap, sqrt(r^2 - h^2) with
+  // h = z_r - cap where the lowest centre is above cap, else r (negative
+  // where the ball lies wholly above cap). A select, for vector loops.
+  static double ReachSquared(double z_r, double r2, double cap) {
+    const double h = z_r - cap;
+    return h > 0 ? r2 - h * h : r2;
+  }
   // 1 where it surely misses, else 0, from the parts (selects only).
   static double Misses(double ball, double x0, double x1, double y0, double y1,
                        double z_r, double r2, const Rect& box, double cap) {
-    constexpr double kSlack = 1e-6;
     // std::max by value: selects (by reference they were branches).
     auto max = [](double a, double b) { return a < b ? b : a; };
     const double gap =
         max(max(box.x0 - x1, x0 - box.x1), max(box.y0 - y1, y0 - box.y1)) -
         kSlack;
-    const double h = z_r - cap;
-    const double rho2 = h > 0 ? r2 - h * h : r2;
+    const double rho2 = ReachSquared(z_r, r2, cap);
     const double m = gap > 0 ? ball : 0.0;
     return gap * gap > rho2 ? m : 0.0;
   }
