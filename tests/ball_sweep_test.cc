@@ -9,6 +9,7 @@
 #include <optional>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/cutter/sweep.h"
@@ -921,45 +922,86 @@ TEST(BallSweepFootprintTest, BoundsWithoutTheSweepAreBitIdentical) {
   EXPECT_LT(empty, 19000);
 }
 
-// The quick test skips only what FootprintBounds would: boxes and points
-// placed around the footprint's bounds, down to a micrometre from them.
-TEST(BallSweepFootprintTest, SurelyMissesOnlyWhatTheBoundsMiss) {
+// The distance from the segment (ax, ay)-(bx, by) to `box` (0 where they
+// meet), exactly enough for the test below: two convex sets apart are
+// nearest at a vertex of one of them, and the segment meets the box where
+// its clip to the box (Liang-Barsky) is not empty.
+double SegmentToBox(double ax, double ay, double bx, double by,
+                    const Rect& box) {
+  double t0 = 0, t1 = 1;
+  const double dx = bx - ax, dy = by - ay;
+  bool meets = true;
+  for (const auto [p, q] : {std::pair{-dx, ax - box.x0},
+                            std::pair{dx, box.x1 - ax},
+                            std::pair{-dy, ay - box.y0},
+                            std::pair{dy, box.y1 - ay}}) {
+    if (p == 0) {
+      if (q < 0) meets = false;
+      continue;
+    }
+    const double t = q / p;
+    if (p < 0) t0 = std::max(t0, t);
+    if (p > 0) t1 = std::min(t1, t);
+  }
+  if (meets && t0 <= t1) return 0;
+  auto to_box = [&](double x, double y) {
+    return std::hypot(std::max({box.x0 - x, x - box.x1, 0.0}),
+                      std::max({box.y0 - y, y - box.y1, 0.0}));
+  };
+  auto to_segment = [&](double x, double y) {
+    const double l2 = dx * dx + dy * dy;
+    const double t =
+        l2 > 0 ? std::clamp(((x - ax) * dx + (y - ay) * dy) / l2, 0.0, 1.0)
+               : 0.0;
+    return std::hypot(x - (ax + t * dx), y - (ay + t * dy));
+  };
+  return std::min({to_box(ax, ay), to_box(bx, by), to_segment(box.x0, box.y0),
+                   to_segment(box.x1, box.y0), to_segment(box.x1, box.y1),
+                   to_segment(box.x0, box.y1)});
+}
+
+// The quick test skips only what the footprint itself misses: boxes and
+// points placed all around it (beside its ends, its sides and the corners
+// of its bounds), from half a millimetre inside it to a micrometre and
+// more outside. It skips boxes at the corners of the bounds, which those
+// meet and the footprint does not.
+TEST(BallSweepFootprintTest, SurelyMissesOnlyWhatTheFootprintMisses) {
   std::mt19937_64 rng(23);
   std::uniform_real_distribution<double> unit(0, 1);
-  int skipped = 0, close = 0;
+  int skipped = 0, close = 0, in_bounds = 0;
   for (int k = 0; k < 50000; ++k) {
     const auto [a, b, r, cap] = RandomFootprintCase(rng, k);
     const Cutter ball = Cutter::Ball(r);
+    const Capsule c = FootprintCapsule(a, b, ball, cap);
     const std::optional<Rect> f = FootprintBounds(a, b, ball, cap);
-    // A box beside the bounds (or the tips' box when empty), at a gap of
-    // 10^-e mm, e in [0, 6], or overlapping them; every other one a point.
-    const Rect near = f.value_or(Rect{std::min(a.x, b.x), std::min(a.y, b.y),
-                                      std::max(a.x, b.x), std::max(a.y, b.y)});
+    // The segment and radius to place around: the footprint's, or the
+    // tips' and the ball's where it is empty.
+    const double ax = c.empty ? a.x : c.x0, ay = c.empty ? a.y : c.y0;
+    const double bx = c.empty ? b.x : c.x1, by = c.empty ? b.y : c.y1;
+    const double rho = c.empty ? r : c.radius;
+    // A point at rho + gap from the segment's end or middle, in a random
+    // direction (gap 10^-e mm, e in [0, 6], or -0.5: inside); every other
+    // case a box from there away from the segment.
     const double gap = unit(rng) < 0.2 ? -0.5 : std::pow(10.0, -6 * unit(rng));
     const double size = k % 2 == 0 ? 0 : unit(rng);
-    Rect box;
-    switch (k % 4) {
-      case 0:
-        box = {near.x1 + gap, near.y0, near.x1 + gap + size, near.y0 + size};
-        break;
-      case 1:
-        box = {near.x0 - gap - size, near.y1 - size, near.x0 - gap, near.y1};
-        break;
-      case 2:
-        box = {near.x0, near.y1 + gap, near.x0 + size, near.y1 + gap + size};
-        break;
-      default:
-        box = {near.x1 - size, near.y0 - gap - size, near.x1, near.y0 - gap};
-        break;
-    }
+    const double t = k % 3 == 0 ? 0 : (k % 3 == 1 ? 1 : 0.5);
+    const double theta = 2 * M_PI * unit(rng);
+    const double ux = std::cos(theta), uy = std::sin(theta);
+    const double px = ax + t * (bx - ax) + (rho + gap) * ux;
+    const double py = ay + t * (by - ay) + (rho + gap) * uy;
+    const Rect box{ux < 0 ? px - size : px, uy < 0 ? py - size : py,
+                   ux < 0 ? px : px + size, uy < 0 ? py : py + size};
     if (!FootprintSurelyMisses(a, b, ball, box, cap)) continue;
     ++skipped;
     if (gap < 1e-4) ++close;
-    ASSERT_FALSE(f.has_value() && f->Intersects(box))
-        << k << ": skipped a box the footprint's bounds meet";
+    if (f.has_value() && f->Intersects(box)) ++in_bounds;
+    if (c.empty) continue;  // nothing below cap to meet
+    ASSERT_GT(SegmentToBox(c.x0, c.y0, c.x1, c.y1, box), c.radius)
+        << k << ": skipped a box the footprint meets";
   }
-  EXPECT_GT(skipped, 5000);  // it does skip, some within 0.1 um
+  EXPECT_GT(skipped, 10000);  // it does skip, some within 0.1 um
   EXPECT_GT(close, 100);
+  EXPECT_GT(in_bounds, 1000);  // and at the corners of the bounds
   // Other shapes: never sure.
   EXPECT_FALSE(FootprintSurelyMisses({0, 0, 0}, {1, 0, 0}, Cutter::Flat(1),
                                      {50, 50, 60, 60}, 0));

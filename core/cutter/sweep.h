@@ -104,13 +104,14 @@ class Sweep {
 // A quick, conservative test done before FootprintBounds where many moves
 // are tried against a box: SurelyMisses is true only where the footprint
 // below `cap` of the move between the two tips surely misses `box`
-// (FootprintBounds(...) does not meet it); false where unsure. For the ball:
-// the footprint's axis is a part of the move, so it lies in the tips' XY box
-// widened by its radius sqrt(r^2 - h^2) (h: the lowest ball centre above
-// cap; r where below), and the box must clear that by more than the
-// footprint's margins (1e-9 mm and a relative 1e-12) and the rounding of
-// its clipped ends: 1e-6 mm. No root and no division, where FootprintBounds
-// takes both and a call. Other shapes: false. The move's parts are taken
+// (FootprintCapsule(...) does not meet it, though its bounds may: at their
+// corners); false where unsure. For the ball: the footprint's axis is a
+// part of the move, so it lies within its radius sqrt(r^2 - h^2) (h: the
+// lowest ball centre above cap; r where below) of the tips' XY box, and the
+// box must lie farther than that from it by more than the footprint's
+// margins (1e-9 mm and a relative 1e-12) and the rounding of its clipped
+// ends: 1e-6 mm. No root and no division, where FootprintBounds takes both
+// and a call. Other shapes: false. The move's parts are taken
 // once (Of), for testing one move against many boxes; branch-free, so that
 // loops over many moves' parts vectorize.
 struct FootprintGap {
@@ -138,17 +139,21 @@ struct FootprintGap {
     const double h = z_r - cap;
     return h > 0 ? r2 - h * h : r2;
   }
-  // 1 where it surely misses, else 0, from the parts (selects only).
+  // 1 where it surely misses, else 0, from the parts (selects only). The
+  // footprint below cap lies within the reach of the centres' XY segment,
+  // which lies in the tips' box: a box farther than the reach from it
+  // (Euclidean: the gaps on both axes count) is missed. Each gap is less
+  // the slack, so the margin is at least the slack in any direction.
+  // Where the reach is negative (the ball above cap everywhere) only a box
+  // off the tips' box (a gap) is counted as missed.
   static double Misses(double ball, double x0, double x1, double y0, double y1,
                        double z_r, double r2, const Rect& box, double cap) {
     // std::max by value: selects (by reference they were branches).
     auto max = [](double a, double b) { return a < b ? b : a; };
-    const double gap =
-        max(max(box.x0 - x1, x0 - box.x1), max(box.y0 - y1, y0 - box.y1)) -
-        kSlack;
-    const double rho2 = ReachSquared(z_r, r2, cap);
-    const double m = gap > 0 ? ball : 0.0;
-    return gap * gap > rho2 ? m : 0.0;
+    const double gx = max(max(box.x0 - x1, x0 - box.x1) - kSlack, 0.0);
+    const double gy = max(max(box.y0 - y1, y0 - box.y1) - kSlack, 0.0);
+    const double rho2 = max(ReachSquared(z_r, r2, cap), 0.0);
+    return gx * gx + gy * gy > rho2 ? ball : 0.0;
   }
   bool SurelyMisses(const Rect& box, double cap) const {
     return Misses(ball, x0, x1, y0, y1, z_r, r2, box, cap) != 0;
