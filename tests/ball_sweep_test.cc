@@ -931,10 +931,9 @@ double SegmentToBox(double ax, double ay, double bx, double by,
   double t0 = 0, t1 = 1;
   const double dx = bx - ax, dy = by - ay;
   bool meets = true;
-  for (const auto [p, q] : {std::pair{-dx, ax - box.x0},
-                            std::pair{dx, box.x1 - ax},
-                            std::pair{-dy, ay - box.y0},
-                            std::pair{dy, box.y1 - ay}}) {
+  for (const auto [p, q] :
+       {std::pair{-dx, ax - box.x0}, std::pair{dx, box.x1 - ax},
+        std::pair{-dy, ay - box.y0}, std::pair{dy, box.y1 - ay}}) {
     if (p == 0) {
       if (q < 0) meets = false;
       continue;
