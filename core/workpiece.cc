@@ -1308,9 +1308,8 @@ constexpr size_t kReachBlock = 16;
 // the tips' XY box: a point farther than the reach from the box is beyond
 // it (FootprintGap::Misses). The point is widened by FootprintGap's slack
 // (and Misses takes each gap less it again), against the rounding of these
-// float values. So no move this rejects is below cap at
-// the point, nor below any w <= cap: the exact tests would find none of
-// them lower (ExactSchemeTest.LowestAtAtTheEdgeOfTheFootprint). A block's
+// float values. So no move this rejects is below cap at the point, nor
+// below any w <= cap: the exact tests would find none of them lower (ExactSchemeTest.LowestAtAtTheEdgeOfTheFootprint). A block's
 // union passes where any of its moves does: its box holds theirs, its z_r
 // is no larger and its r2 no smaller, so its reach no smaller.
 SWARF_TARGET_CLONES

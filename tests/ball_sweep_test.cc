@@ -948,11 +948,7 @@ double SegmentToBox(double ax, double ay, double bx, double by,
                       std::max({box.y0 - y, y - box.y1, 0.0}));
   };
   auto to_segment = [&](double x, double y) {
-    const double l2 = dx * dx + dy * dy;
-    const double t =
-        l2 > 0 ? std::clamp(((x - ax) * dx + (y - ay) * dy) / l2, 0.0, 1.0)
-               : 0.0;
-    return std::hypot(x - (ax + t * dx), y - (ay + t * dy));
+    return static_cast<double>(DistanceToPath({ax, ay, 0}, {bx, by, 0}, x, y));
   };
   return std::min({to_box(ax, ay), to_box(bx, by), to_segment(box.x0, box.y0),
                    to_segment(box.x1, box.y0), to_segment(box.x1, box.y1),
