@@ -237,6 +237,39 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
     x[q] = x_in[n_in - 1];
     y[q] = y_in[n_in - 1];
   }
+  // Every corner's reach holding every point (the usual smooth interior):
+  // the four lifted patches' running minimum in registers, the same
+  // operations in the same order as the corner passes below, and no point
+  // hidden (every corner holds it), so no flags and no hidden test.
+  if ((e.guard.inside[0] || !e.reach[0].bounded) &&
+      (e.guard.inside[1] || !e.reach[1].bounded) &&
+      (e.guard.inside[2] || !e.reach[2].bounded) &&
+      (e.guard.inside[3] || !e.reach[3].bounded)) {
+    const CornerXY c = CornersOf(e);
+    const SurfaceJet j0 = LiftedJet(e, 0), j1 = LiftedJet(e, 1),
+                     j2 = LiftedJet(e, 2), j3 = LiftedJet(e, 3);
+    const double z0 = e.reach[0].z_low, z1 = e.reach[1].z_low,
+                 z2 = e.reach[2].z_low, z3 = e.reach[3].z_low;
+    const double top = e.z_top;
+    double w[kGuardedChunk];
+    // LowerByCorner's step: std::max(raw, z_low), then the minimum.
+    auto lower = [](double w, double raw, double z_low) {
+      const double p = raw < z_low ? z_low : raw;
+      return p < w ? p : w;
+    };
+#pragma omp simd
+    for (int32_t q = 0; q < n; ++q) {
+      double v = top;
+      v = lower(v, EvaluatePatch(j0, c.x[0], c.y[0], x[q], y[q]), z0);
+      v = lower(v, EvaluatePatch(j1, c.x[1], c.y[1], x[q], y[q]), z1);
+      v = lower(v, EvaluatePatch(j2, c.x[2], c.y[2], x[q], y[q]), z2);
+      v = lower(v, EvaluatePatch(j3, c.x[3], c.y[3], x[q], y[q]), z3);
+      w[q] = v;
+    }
+#pragma omp simd
+    for (int32_t q = 0; q < n_in; ++q) out[q] = w[q];
+    return;
+  }
   // Flags as doubles (0 or 1) beside the doubles, and loop-invariant tests
   // outside the loops, so that every loop is selects the vectorizer takes.
   double in_store[4][kGuardedChunk];

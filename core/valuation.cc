@@ -30,15 +30,20 @@ struct Partial {
   int64_t n = 0;
 };
 
-// The largest of v[0..n), n >= 1. Heights are never NaN (minima that start
-// at the stock top), so the order of comparison does not matter: a
-// vectorized reduction, in registers.
+// The largest of v[0..n), n a positive multiple of 8. Heights are never
+// NaN (minima that start at the stock top), so the order of comparison
+// does not matter: eight lanes, in registers (an omp simd reduction over
+// any n took its remainder and its lanes through the stack).
 SWARF_TARGET_CLONES
 double Highest(const double* v, int32_t n) {
-  double m = v[0];
-#pragma omp simd reduction(max : m)
-  for (int32_t q = 1; q < n; ++q) m = MaxOf(m, v[q]);
-  return m;
+  double m[8];
+  for (int32_t q = 0; q < 8; ++q) m[q] = v[q];
+  for (int32_t q0 = 8; q0 < n; q0 += 8) {
+#pragma omp simd
+    for (int32_t q = 0; q < 8; ++q) m[q] = MaxOf(m[q], v[q0 + q]);
+  }
+  return MaxOf(MaxOf(MaxOf(m[0], m[1]), MaxOf(m[2], m[3])),
+               MaxOf(MaxOf(m[4], m[5]), MaxOf(m[6], m[7])));
 }
 
 // err[q] = SampleError(rec[q], est[q]) for q < n, and the largest of them
@@ -91,6 +96,14 @@ SWARF_TARGET_CLONES
 void LowerTo(const double* __restrict h, int32_t n, double* __restrict est) {
 #pragma omp simd
   for (int32_t q = 0; q < n; ++q) est[q] = MinOf(est[q], h[q]);
+}
+
+// est[q] = MinOf(top, est[q]) for q < n: in place, the values LowerTo(est,
+// n, t) gives an array t that holds top.
+SWARF_TARGET_CLONES
+void HoldTo(double top, int32_t n, double* __restrict est) {
+#pragma omp simd
+  for (int32_t q = 0; q < n; ++q) est[q] = MinOf(top, est[q]);
 }
 
 // dx[q] = x[q] - xc and dy[q] = y[q] - yc for q < n (n >= 1), and their
@@ -197,20 +210,25 @@ struct RowMoves {
 };
 
 // Whether plane (touching its surface at (xc, yc)) less its slack is at or
-// above est[q] at each point q < n, given as its offsets from (xc, yc)
-// (dx[q], dy[q]): then that surface lowers none of them.
+// above est[q] at each point q < n (a positive multiple of 8), given as
+// its offsets from (xc, yc) (dx[q], dy[q]): then that surface lowers none
+// of them. Eight lanes, in registers, as Highest.
 SWARF_TARGET_CLONES
 bool PlaneAtOrAbove(const BallSweep::SupportPlane& plane,
                     const double* __restrict dx, const double* __restrict dy,
                     int32_t n, const double* __restrict est) {
   const double w = plane.w - plane.slack, wx = plane.wx, wy = plane.wy;
-  double below = 0;
-#pragma omp simd reduction(max : below)
-  for (int32_t q = 0; q < n; ++q) {
-    const double l = w + wx * dx[q] + wy * dy[q];
-    below = std::max(below, l >= est[q] ? 0.0 : 1.0);
+  double below[8] = {};
+  for (int32_t q0 = 0; q0 < n; q0 += 8) {
+#pragma omp simd
+    for (int32_t q = 0; q < 8; ++q) {
+      const double l = w + wx * dx[q0 + q] + wy * dy[q0 + q];
+      below[q] = MaxOf(below[q], l >= est[q0 + q] ? 0.0 : 1.0);
+    }
   }
-  return below == 0;
+  return MaxOf(MaxOf(MaxOf(below[0], below[1]), MaxOf(below[2], below[3])),
+               MaxOf(MaxOf(below[4], below[5]), MaxOf(below[6], below[7]))) ==
+         0;
 }
 
 // pass[q] = 1 where move q may cut into `box` below `cap`: its box meets it,
@@ -608,6 +626,9 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       double cap = 0;
       int32_t ei = 0, count = 0, own = 0, own_padded = 0;
       const int32_t* own_list = nullptr;  // own_lists[...]
+      // Its points' coordinates (count) and its own points' (own_padded):
+      // the bin's lines' for an all-in element, else the band's arrays.
+      const double *xs = nullptr, *ys = nullptr, *oxs = nullptr, *oys = nullptr;
       bool quarters = false, all_in = false, from_left = false,
            from_below = false;
     };
@@ -626,6 +647,38 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
          {&row_xs, &row_ys, &row_est, &row_oxs, &row_oys, &row_oest}) {
       Grow(v, row_size);
     }
+    // An all-in element's x coordinates depend on its column alone, and its
+    // y coordinates on its row alone: they are laid out once a bin for each
+    // column and row (its points in for_each_point's order, then its own
+    // points for each own_lists[c], padded with copies of the last), not
+    // gathered for every element (on the 30 mm plate, a sixth of the
+    // traversal's own instructions).
+    const size_t line_size = (1 + std::size(own_lists)) * padded;
+    thread_local std::vector<double> line_xs, line_ys;
+    Grow(&line_xs, MoveIndex::kBinElements * line_size);
+    Grow(&line_ys, MoveIndex::kBinElements * line_size);
+    auto lay_out_lines = [&](const std::vector<double>& lattice_line,
+                             int32_t e0, int32_t e1,
+                             const std::vector<int32_t>& point_index,
+                             double* out) {
+      for (int32_t e = e0; e < e1; ++e) {
+        const double* const line = &lattice_line[static_cast<size_t>(e) * n];
+        double* const points = out + static_cast<size_t>(e - e0) * line_size;
+        for (size_t q = 0; q < lattice; ++q) points[q] = line[point_index[q]];
+        for (size_t c = 0; c < std::size(own_lists); ++c) {
+          const std::vector<int32_t>& list = own_lists[c];
+          double* const own = points + (1 + c) * padded;
+          const size_t count = list.size();
+          for (size_t q = 0; q < count; ++q) own[q] = points[list[q]];
+          if (count > 0) {
+            std::fill(own + count, own + ((count + 7) & ~size_t{7}),
+                      own[count - 1]);
+          }
+        }
+      }
+    };
+    lay_out_lines(lattice_x, ei0, ei1, point_i, line_xs.data());
+    lay_out_lines(lattice_y, ej0, ej1, point_j, line_ys.data());
     // The top edges' exact heights of the last row evaluated, per element
     // of the bin's row; top_ok where the elements of the last row set up
     // (row `top_row`, evaluated before the next row) were all in.
@@ -716,8 +769,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           const bool all_in = region.Contains(col_x[0], row_y[0]) &&
                               region.Contains(col_x[n - 1], row_y[n - 1]);
           const size_t off = (base + row_elements) * padded;
-          double* const xs = row_xs.data() + off;
-          double* const ys = row_ys.data() + off;
           // With every point in and at most two map cells across and two
           // down (cells at least as large as elements, as swarf run asks),
           // the max of each of the four quarters they make; else a cell per
@@ -727,22 +778,25 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
               row_cell[n - 1] - row_cell[0] <= options.map_cols;
           const bool per_point = mapped && !quarters;
           int32_t count = 0;
+          // The column's and the row's laid-out lines (lay_out_lines).
+          const double* const col_line =
+              line_xs.data() + static_cast<size_t>(ei - ei0) * line_size;
+          const double* const row_line =
+              line_ys.data() + static_cast<size_t>(ej - ej0) * line_size;
           if (all_in) {
             // for_each_point's order, every point in.
-            const int32_t* const pi = point_i.data();
-            const int32_t* const pj = point_j.data();
             count = static_cast<int32_t>(lattice);
-            for (int32_t q = 0; q < count; ++q) {
-              xs[q] = col_x[pi[q]];
-              ys[q] = row_y[pj[q]];
-            }
             if (per_point) {
+              const int32_t* const pi = point_i.data();
+              const int32_t* const pj = point_j.data();
               int64_t* const cells = row_cells.data() + off;
               for (int32_t q = 0; q < count; ++q) {
                 cells[q] = row_cell[pj[q]] + col_cell[pi[q]];
               }
             }
           } else {
+            double* const xs = row_xs.data() + off;
+            double* const ys = row_ys.data() + off;
             for_each_point(col_x, row_y, false, [&](int32_t si, int32_t sj) {
               xs[count] = col_x[si];
               ys[count] = row_y[sj];
@@ -762,22 +816,35 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           el.from_below =
               all_in && top_row == ej - 1 && top_ok[ei - ei0] &&
               row_y[0] == lattice_y[static_cast<size_t>(ej) * n - 1];
-          double* const oxs = row_oxs.data() + off;
-          double* const oys = row_oys.data() + off;
-          const std::vector<int32_t>& list =
-              own_lists[(el.from_left ? 1 : 0) | (el.from_below ? 2 : 0)];
+          const int32_t variant =
+              (el.from_left ? 1 : 0) | (el.from_below ? 2 : 0);
+          const std::vector<int32_t>& list = own_lists[variant];
           el.own_list = list.data();
           const int32_t own =
               all_in ? static_cast<int32_t>(list.size()) : count;
-          for (int32_t q = 0; q < own; ++q) {
-            oxs[q] = xs[el.own_list[q]];
-            oys[q] = ys[el.own_list[q]];
-          }
           el.own = own;
           // own >= 1: the right edge and the inside are never shared.
           el.own_padded = (own + 7) & ~7;
-          std::fill(oxs + own, oxs + el.own_padded, oxs[own - 1]);
-          std::fill(oys + own, oys + el.own_padded, oys[own - 1]);
+          if (all_in) {
+            el.xs = col_line;
+            el.ys = row_line;
+            el.oxs = col_line + (1 + variant) * padded;
+            el.oys = row_line + (1 + variant) * padded;
+          } else {
+            // Every point is its own (own_lists[0] lists them in order).
+            double* const oxs = row_oxs.data() + off;
+            double* const oys = row_oys.data() + off;
+            el.xs = row_xs.data() + off;
+            el.ys = row_ys.data() + off;
+            std::copy_n(el.xs, own, oxs);
+            std::copy_n(el.ys, own, oys);
+            std::fill(oxs + own, oxs + el.own_padded, oxs[own - 1]);
+            std::fill(oys + own, oys + el.own_padded, oys[own - 1]);
+            el.oxs = oxs;
+            el.oys = oys;
+          }
+          const double* const oxs = el.oxs;
+          const double* const oys = el.oys;
           if (guarded) {
             const CornerReach* r = &reaches[at];
             const CornerReach* const reach[4] = {r, r + 1, r + region_w + 1,
@@ -803,17 +870,27 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           // Heights() is bit-identical to Height(), several samples at once.
           // Own points only: the cap bounds the surface where this element
           // evaluates it.
+          // The first owner's heights go straight into est, then held to
+          // the top: the same values as lowering a top-filled est.
           double* const oest = row_oest.data() + off;
-#pragma omp simd
-          for (int32_t q = 0; q < el.own_padded; ++q) oest[q] = z_top;
           const int32_t* owners = el.e.owner;
+          bool first = true;
           for (int k = 0; k < 4; ++k) {
             bool seen = owners[k] < 0;
             for (int q = 0; q < k && !seen; ++q) seen = owners[q] == owners[k];
             if (seen) continue;
-            lower_by(owner_sweep(owners[k]), oxs, oys, el.own_padded, oest);
+            const Sweep& sweep = owner_sweep(owners[k]);
+            if (first) {
+              sweep.Heights(oxs, oys, el.own_padded, oest);
+              HoldTo(z_top, el.own_padded, oest);
+              first = false;
+            } else {
+              lower_by(sweep, oxs, oys, el.own_padded, oest);
+            }
           }
-          el.cap = Highest(oest, own);
+          if (first) std::fill_n(oest, el.own_padded, z_top);
+          // The padding's est is the last own point's.
+          el.cap = Highest(oest, el.own_padded);
           el.box = Rect{el.e.x0, el.e.y0, el.e.x1, el.e.y1};
           row_cap = std::max(row_cap, el.cap);
         }
@@ -881,10 +958,10 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           const ElementCorners& e = el.e;
           const int32_t count = el.count;
           const size_t off = (base + w) * padded;
-          const double* const xs = row_xs.data() + off;
-          const double* const ys = row_ys.data() + off;
-          const double* const oxs = row_oxs.data() + off;
-          const double* const oys = row_oys.data() + off;
+          const double* const xs = el.xs;
+          const double* const ys = el.ys;
+          const double* const oxs = el.oxs;
+          const double* const oys = el.oys;
           double* const oest = row_oest.data() + off;
           const int32_t own = el.own;
           double* const est = row_est.data() + off;
