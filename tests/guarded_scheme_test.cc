@@ -360,7 +360,9 @@ TEST(GuardedSchemeTest, SurelyTrustedImpliesTrustAtEveryCorner) {
 // The points of an element at once (ReconstructMany: smooth elements in
 // vectorized loops, capsules decided for the whole element where they can
 // be) and the height with its gradient (HeightAndGradient) are Reconstruct
-// and Gradient bit for bit: on every element of random scenes, at the
+// and Gradient bit for bit: on every element of random scenes and of
+// rasters of short moves (smooth elements whose corners' reaches all hold
+// them, and some whose do not: ReconstructMany's two paths), at the
 // valuation's 5 x 5 lattice, random points, the edges and corners, and just
 // outside the element, and a few points at a time. Preparing an element
 // from its nodes' trust regions (and their SurelyTrusted, or none) gives
@@ -369,17 +371,32 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
   std::mt19937_64 rng(27);
   std::uniform_real_distribution<double> u(0, 1);
   const Scheme& guarded = GetScheme(SchemeKind::kGuarded);
-  int smooth = 0;
-  for (int scene = 0; scene < 4; ++scene) {
+  int smooth = 0, smooth_all_held = 0, smooth_some_not_held = 0;
+  for (int scene = 0; scene < 6; ++scene) {
     const StockSpec stock{0, 0, 6, 6, 0, 24 + scene, 24 + scene};
     std::vector<Move> moves;
-    for (int k = 0; k < 6; ++k) {
-      const double r = 0.2 + 1.3 * u(rng);
-      const Vec3 a{6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)};
-      Vec3 b{6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)};
-      if (k % 3 == 0) b = {a.x, a.y, a.z - 2 * u(rng)};
-      if (k % 3 == 1) b.z = a.z;
-      moves.push_back({a, b, r});
+    if (scene < 4) {
+      for (int k = 0; k < 6; ++k) {
+        const double r = 0.2 + 1.3 * u(rng);
+        const Vec3 a{6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)};
+        Vec3 b{6 * u(rng), 6 * u(rng), 1 - 3 * u(rng)};
+        if (k % 3 == 0) b = {a.x, a.y, a.z - 2 * u(rng)};
+        if (k % 3 == 1) b.z = a.z;
+        moves.push_back({a, b, r});
+      }
+    } else {
+      // A finishing raster of short moves over a wavy surface, as a CAM
+      // post writes one: smooth elements whose corners' owners do not all
+      // reach over the element.
+      const double r = 0.6 + 0.3 * u(rng), step = 0.2 + 0.2 * u(rng);
+      auto z = [](double x, double y) {
+        return -0.4 - 0.3 * std::sin(0.9 * x + 0.4 * y);
+      };
+      for (double y = 0.3; y < 6; y += 0.5) {
+        for (double x = 0; x < 6; x += step) {
+          moves.push_back({{x, y, z(x, y)}, {x + step, y, z(x + step, y)}, r});
+        }
+      }
     }
     auto wp = Cut(stock, SchemeKind::kGuarded, moves);
     for (int32_t ej = 0; ej < stock.ny; ++ej) {
@@ -399,6 +416,13 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
           ys.push_back(e.y0 + (e.y1 - e.y0) * u(rng));
         }
         smooth += e.guard.smooth;
+        if (e.guard.smooth) {
+          bool all_held = true;
+          for (int k = 0; k < 4; ++k) {
+            all_held &= e.guard.inside[k] || !e.reach[k].bounded;
+          }
+          (all_held ? smooth_all_held : smooth_some_not_held) += 1;
+        }
         // Prepared with the nodes' trust regions (as the valuation does):
         // the same element.
         ElementCorners f = wp->Corners(ei, ej, /*prepare=*/false);
@@ -466,6 +490,10 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
     }
   }
   EXPECT_GT(smooth, 200);  // the batched kernel's elements
+  // Both of its paths: every corner's reach holding the element (the four
+  // patches in one pass), and some not (a pass and flags a corner).
+  EXPECT_GT(smooth_all_held, 1000);
+  EXPECT_GT(smooth_some_not_held, 40);
 }
 
 // FillCorners over an ElementCorners that held another element (prepared,
