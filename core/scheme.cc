@@ -170,6 +170,21 @@ struct CornerPoints {
   double *any, *w;
 };
 
+// A running minimum w lowered by a patch's value raw held at or above its
+// owner's lowest tip z_low: std::min(w, std::max(raw, z_low)), by value.
+[[gnu::always_inline]] inline double LowerByPatch(double w, double raw,
+                                                  double z_low) {
+  const double p = raw < z_low ? z_low : raw;
+  return p < w ? p : w;
+}
+
+// Whether corner k's reach surely holds every point of the element: it
+// holds the element's corners (a capsule is convex), or it is unbounded.
+[[gnu::always_inline]] inline bool ReachHoldsAll(const ElementCorners& e,
+                                                 int k) {
+  return e.guard.inside[k] || !e.reach[k].bounded;
+}
+
 // A corner's lifted patch (LiftedJet) over SmoothChunk's points, and the
 // running minimum where the corner holds them (kAll: it holds them all,
 // `inside` is not read). One loop for both, vectorized in its caller's
@@ -187,11 +202,11 @@ template <bool kAll>
 #pragma omp simd
   for (int32_t q = 0; q < n; ++q) {
     const double raw = EvaluatePatch(j, xk, yk, x[q], y[q]);
-    const double p = raw < z_low ? z_low : raw;  // std::max(raw, z_low)
     if constexpr (kAll) {
       any[q] = 1.0;
-      w[q] = p < w[q] ? p : w[q];
+      w[q] = LowerByPatch(w[q], raw, z_low);
     } else {
+      const double p = raw < z_low ? z_low : raw;  // std::max(raw, z_low)
       const bool holds = inside[q] != 0;
       any[q] = holds ? 1.0 : any[q];
       w[q] = (holds & (p < w[q])) ? p : w[q];
@@ -241,10 +256,8 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
   // the four lifted patches' running minimum in registers, the same
   // operations in the same order as the corner passes below, and no point
   // hidden (every corner holds it), so no flags and no hidden test.
-  if ((e.guard.inside[0] || !e.reach[0].bounded) &&
-      (e.guard.inside[1] || !e.reach[1].bounded) &&
-      (e.guard.inside[2] || !e.reach[2].bounded) &&
-      (e.guard.inside[3] || !e.reach[3].bounded)) {
+  if (ReachHoldsAll(e, 0) && ReachHoldsAll(e, 1) && ReachHoldsAll(e, 2) &&
+      ReachHoldsAll(e, 3)) {
     const CornerXY c = CornersOf(e);
     const SurfaceJet j0 = LiftedJet(e, 0), j1 = LiftedJet(e, 1),
                      j2 = LiftedJet(e, 2), j3 = LiftedJet(e, 3);
@@ -252,18 +265,13 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
                  z2 = e.reach[2].z_low, z3 = e.reach[3].z_low;
     const double top = e.z_top;
     double w[kGuardedChunk];
-    // LowerByCorner's step: std::max(raw, z_low), then the minimum.
-    auto lower = [](double w, double raw, double z_low) {
-      const double p = raw < z_low ? z_low : raw;
-      return p < w ? p : w;
-    };
 #pragma omp simd
     for (int32_t q = 0; q < n; ++q) {
       double v = top;
-      v = lower(v, EvaluatePatch(j0, c.x[0], c.y[0], x[q], y[q]), z0);
-      v = lower(v, EvaluatePatch(j1, c.x[1], c.y[1], x[q], y[q]), z1);
-      v = lower(v, EvaluatePatch(j2, c.x[2], c.y[2], x[q], y[q]), z2);
-      v = lower(v, EvaluatePatch(j3, c.x[3], c.y[3], x[q], y[q]), z3);
+      v = LowerByPatch(v, EvaluatePatch(j0, c.x[0], c.y[0], x[q], y[q]), z0);
+      v = LowerByPatch(v, EvaluatePatch(j1, c.x[1], c.y[1], x[q], y[q]), z1);
+      v = LowerByPatch(v, EvaluatePatch(j2, c.x[2], c.y[2], x[q], y[q]), z2);
+      v = LowerByPatch(v, EvaluatePatch(j3, c.x[3], c.y[3], x[q], y[q]), z3);
       w[q] = v;
     }
 #pragma omp simd
@@ -304,7 +312,7 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
     const CornerReach& r = e.reach[k];
     // in[k][q]: e.guard.inside[k] || r.Contains(x[q], y[q]); decided for
     // all the points at once where it can be (no flags to fill).
-    const bool all = e.guard.inside[k] || !r.bounded;
+    const bool all = ReachHoldsAll(e, k);
     const bool none = !all && r.empty;
     BoxSide side = all ? BoxSide::kInside : none ? BoxSide::kOutside
                                                   : BoxSide::kMixed;

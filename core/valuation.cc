@@ -30,6 +30,12 @@ struct Partial {
   int64_t n = 0;
 };
 
+// The largest of eight lanes (none NaN: in any order).
+[[gnu::always_inline]] inline double LanesMax(const double m[8]) {
+  return MaxOf(MaxOf(MaxOf(m[0], m[1]), MaxOf(m[2], m[3])),
+               MaxOf(MaxOf(m[4], m[5]), MaxOf(m[6], m[7])));
+}
+
 // The largest of v[0..n), n a positive multiple of 8. Heights are never
 // NaN (minima that start at the stock top), so the order of comparison
 // does not matter: eight lanes, in registers (an omp simd reduction over
@@ -42,8 +48,7 @@ double Highest(const double* v, int32_t n) {
 #pragma omp simd
     for (int32_t q = 0; q < 8; ++q) m[q] = MaxOf(m[q], v[q0 + q]);
   }
-  return MaxOf(MaxOf(MaxOf(m[0], m[1]), MaxOf(m[2], m[3])),
-               MaxOf(MaxOf(m[4], m[5]), MaxOf(m[6], m[7])));
+  return LanesMax(m);
 }
 
 // err[q] = SampleError(rec[q], est[q]) for q < n, and the largest of them
@@ -226,9 +231,7 @@ bool PlaneAtOrAbove(const BallSweep::SupportPlane& plane,
       below[q] = MaxOf(below[q], l >= est[q0 + q] ? 0.0 : 1.0);
     }
   }
-  return MaxOf(MaxOf(MaxOf(below[0], below[1]), MaxOf(below[2], below[3])),
-               MaxOf(MaxOf(below[4], below[5]), MaxOf(below[6], below[7]))) ==
-         0;
+  return LanesMax(below) == 0;
 }
 
 // pass[q] = 1 where move q may cut into `box` below `cap`: its box meets it,
@@ -641,10 +644,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     // Every per-element array of a band's rows has `padded` entries an
     // element.
     const size_t row_size = kBandRows * MoveIndex::kBinElements * padded;
-    thread_local std::vector<double> row_xs, row_ys, row_est, row_oxs, row_oys,
-        row_oest;
-    for (std::vector<double>* v :
-         {&row_xs, &row_ys, &row_est, &row_oxs, &row_oys, &row_oest}) {
+    thread_local std::vector<double> row_xs, row_ys, row_est, row_oest;
+    for (std::vector<double>* v : {&row_xs, &row_ys, &row_est, &row_oest}) {
       Grow(v, row_size);
     }
     // An all-in element's x coordinates depend on its column alone, and its
@@ -831,17 +832,14 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             el.oxs = col_line + (1 + variant) * padded;
             el.oys = row_line + (1 + variant) * padded;
           } else {
-            // Every point is its own (own_lists[0] lists them in order).
-            double* const oxs = row_oxs.data() + off;
-            double* const oys = row_oys.data() + off;
-            el.xs = row_xs.data() + off;
-            el.ys = row_ys.data() + off;
-            std::copy_n(el.xs, own, oxs);
-            std::copy_n(el.ys, own, oys);
-            std::fill(oxs + own, oxs + el.own_padded, oxs[own - 1]);
-            std::fill(oys + own, oys + el.own_padded, oys[own - 1]);
-            el.oxs = oxs;
-            el.oys = oys;
+            // Every point is its own (own_lists[0] lists them in order):
+            // the points, padded, serve as the own points.
+            double* const xs = row_xs.data() + off;
+            double* const ys = row_ys.data() + off;
+            std::fill(xs + own, xs + el.own_padded, xs[own - 1]);
+            std::fill(ys + own, ys + el.own_padded, ys[own - 1]);
+            el.xs = el.oxs = xs;
+            el.ys = el.oys = ys;
           }
           const double* const oxs = el.oxs;
           const double* const oys = el.oys;
