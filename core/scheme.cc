@@ -170,11 +170,17 @@ struct CornerPoints {
   double *any, *w;
 };
 
-// A running minimum w lowered by a patch's value raw held at or above its
-// owner's lowest tip z_low: std::min(w, std::max(raw, z_low)), by value.
+// A patch's value raw held at or above its owner's lowest tip z_low:
+// std::max(raw, z_low), by value.
+[[gnu::always_inline]] inline double HeldAtTip(double raw, double z_low) {
+  return raw < z_low ? z_low : raw;
+}
+
+// A running minimum w lowered by a patch's value raw held at its owner's
+// lowest tip: std::min(w, HeldAtTip(raw, z_low)), by value.
 [[gnu::always_inline]] inline double LowerByPatch(double w, double raw,
                                                   double z_low) {
-  const double p = raw < z_low ? z_low : raw;
+  const double p = HeldAtTip(raw, z_low);
   return p < w ? p : w;
 }
 
@@ -206,7 +212,7 @@ template <bool kAll>
       any[q] = 1.0;
       w[q] = LowerByPatch(w[q], raw, z_low);
     } else {
-      const double p = raw < z_low ? z_low : raw;  // std::max(raw, z_low)
+      const double p = HeldAtTip(raw, z_low);
       const bool holds = inside[q] != 0;
       any[q] = holds ? 1.0 : any[q];
       w[q] = (holds & (p < w[q])) ? p : w[q];
