@@ -137,26 +137,27 @@ void OffsetsFrom(const double* __restrict x, const double* __restrict y,
 }
 
 // Adds err[0..n) to the sums in sample order (the same additions as one
-// loop over the samples) and returns the index of the first error above
-// *max (-1: none), updating *max. Not inlined: inlined into the element
-// loop, the sums were spilled to the stack, one store and load a sample on
-// the chain of additions.
-[[gnu::noinline]] int32_t Accumulate(const double* err, int32_t n, double* sum,
-                                     double* sum_sq, double* max) {
-  double s = *sum, s2 = *sum_sq, m = *max;
-  int32_t at = -1;
+// loop over the samples). Not inlined: inlined into the element loop, the
+// sums were spilled to the stack, one store and load a sample on the chain
+// of additions.
+[[gnu::noinline]] void Accumulate(const double* err, int32_t n, double* sum,
+                                  double* sum_sq) {
+  double s = *sum, s2 = *sum_sq;
   for (int32_t q = 0; q < n; ++q) {
     s += err[q];
     s2 += err[q] * err[q];
-    if (err[q] > m) {
-      m = err[q];
-      at = q;
-    }
   }
   *sum = s;
   *sum_sq = s2;
-  *max = m;
-  return at;
+}
+
+// The first q < n with err[q] == top, -1 if none (top NaN, or not among
+// them).
+int32_t FirstOf(const double* err, int32_t n, double top) {
+  for (int32_t q = 0; q < n; ++q) {
+    if (err[q] == top) return q;
+  }
+  return -1;
 }
 
 // Moves of a bin, in bin order, as arrays: their footprint boxes, lowest
@@ -1098,12 +1099,20 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             }
             if (run_cell >= 0) map_max(run_cell, run_max);
           }
-          const int32_t max_q =
-              Accumulate(err.data(), count, &p.sum, &p.sum_sq, &p.max);
+          Accumulate(err.data(), count, &p.sum, &p.sum_sq);
           p.n += count;
-          if (max_q >= 0) {
-            p.max_x = xs[max_q];
-            p.max_y = ys[max_q];
+          // The bin's largest error so far and its first point: taking
+          // each error above the largest in sample order ends at the first
+          // point of the element's largest (ErrorsOf's, which passes NaNs
+          // over as that comparison does) where that is above it; else
+          // nothing changes. Mostly it is not above.
+          if (element_max > p.max) {
+            const int32_t max_q = FirstOf(err.data(), count, element_max);
+            if (max_q >= 0) {
+              p.max = element_max;
+              p.max_x = xs[max_q];
+              p.max_y = ys[max_q];
+            }
           }
         }
         if (one_cell >= 0) map_max(one_cell, one_cell_max);
