@@ -74,8 +74,8 @@ double SpanTop(const double* __restrict w, int32_t n, double cap) {
   }
   // The rest as the block of 8 that ends at n: its first nodes were taken
   // already, and a maximum does not change for a value taken twice (one by
-  // one, the rest cost a quarter of the function's instructions on the
-  // plate job).
+  // one, the rest cost a sixth of the function's instructions on the 30 mm
+  // plate).
   double m[4];
 #pragma omp simd
   for (int32_t q = 0; q < 4; ++q) m[q] = std::max(w[n - 8 + q], w[n - 4 + q]);
