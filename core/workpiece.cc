@@ -51,6 +51,16 @@ struct Workpiece::TileJets {
 
 namespace {
 
+// The highest of w[0..8) (heights, never NaN): two vectors of 4 and their
+// lanes, not a reduction loop, which the vectorizer takes for doubles only
+// with finite math.
+[[gnu::always_inline]] inline double BlockTop(const double* __restrict w) {
+  double m[4];
+#pragma omp simd
+  for (int32_t q = 0; q < 4; ++q) m[q] = std::max(w[q], w[q + 4]);
+  return MaxOf(MaxOf(m[0], m[1]), MaxOf(m[2], m[3]));
+}
+
 // The highest of w[0..n) (heights, never NaN), or a value at or above cap
 // as soon as a block of 8 reaches it: callers need the exact top only
 // below cap. Without NaNs, maxima in any order are the same.
@@ -59,12 +69,7 @@ double SpanTop(const double* __restrict w, int32_t n, double cap) {
   double top = -kInf;
   int32_t i = 0;
   for (; i + 8 <= n; i += 8) {
-    // Two vectors of 4 and their lanes: not a reduction loop, which the
-    // vectorizer takes for doubles only with finite math.
-    double m[4];
-#pragma omp simd
-    for (int32_t q = 0; q < 4; ++q) m[q] = std::max(w[i + q], w[i + q + 4]);
-    top = MaxOf(top, MaxOf(MaxOf(m[0], m[1]), MaxOf(m[2], m[3])));
+    top = MaxOf(top, BlockTop(w + i));
     if (!(top < cap)) return top;
   }
   if (i == n) return top;
@@ -76,10 +81,7 @@ double SpanTop(const double* __restrict w, int32_t n, double cap) {
   // already, and a maximum does not change for a value taken twice (one by
   // one, the rest cost a sixth of the function's instructions on the 30 mm
   // plate).
-  double m[4];
-#pragma omp simd
-  for (int32_t q = 0; q < 4; ++q) m[q] = std::max(w[n - 8 + q], w[n - 4 + q]);
-  return MaxOf(top, MaxOf(MaxOf(m[0], m[1]), MaxOf(m[2], m[3])));
+  return MaxOf(top, BlockTop(w + n - 8));
 }
 
 // A row's nodes i_lo .. i_lo + count - 1 into a chunk: their coordinates
