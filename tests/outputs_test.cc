@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <limits>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -311,6 +312,52 @@ TEST(ImageTest, EveryPixelIsTheFill) {
             << "pixel " << x << ", " << y;
       }
     }
+  }
+}
+
+// The vectorized row against the calls it stands for, pixel by pixel: the
+// ramp's stops and the halves between them, t at and beyond both ends,
+// untouched stock (height 0), shades of every kind, a row longer than its
+// chunks and not a multiple of the vector lanes.
+TEST(ColormapTest, ShadedTintRowIsTheCallsByteForByte) {
+  const double depth = 2.5;
+  std::vector<float> height, shade;
+  for (double t : {-0.5, 0.0, 1e-12, 0.125, 0.25, 0.375, 0.5, 0.75, 1.0, 1.5}) {
+    for (double s : {0.25, 0.5, 1.0, 1.3, 0.0, -0.5}) {
+      height.push_back(static_cast<float>((t - 1) * depth));
+      shade.push_back(static_cast<float>(s));
+    }
+  }
+  const float kInfF = std::numeric_limits<float>::infinity();
+  for (float s : {std::nanf(""), kInfF, -kInfF}) {
+    height.push_back(-1.0f);
+    shade.push_back(s);
+    height.push_back(0.0f);
+    shade.push_back(s);
+  }
+  // Heights whose channels land half way between two integers, or next to.
+  for (int k = 0; k < 4; ++k) {
+    for (double u = 0; u <= 1; u += 1.0 / 64) {
+      height.push_back(static_cast<float>(((k + u) / 4 - 1) * depth));
+      shade.push_back(1.0f);
+    }
+  }
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> h(-3.0f, 0.2f), s(0.2f, 1.4f);
+  while (height.size() < 1003) {
+    const float z = h(rng);
+    height.push_back(z > 0 ? 0.0f : z);
+    shade.push_back(s(rng));
+  }
+  const int32_t n = static_cast<int32_t>(height.size());
+  std::vector<uint8_t> row(3 * static_cast<size_t>(n));
+  ShadedTintRow(height.data(), shade.data(), n, depth, row.data());
+  for (int32_t q = 0; q < n; ++q) {
+    const Rgb base =
+        height[q] < 0 ? HeightTint(1 + height[q] / depth) : kStockColor;
+    const Rgb want = Scale(base, std::isfinite(shade[q]) ? shade[q] : 1.0);
+    ASSERT_EQ((Rgb{row[3 * q], row[3 * q + 1], row[3 * q + 2]}), want)
+        << "pixel " << q << ": height " << height[q] << ", shade " << shade[q];
   }
 }
 

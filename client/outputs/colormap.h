@@ -2,6 +2,8 @@
 #ifndef SWARF_CLIENT_COLORMAP_H_
 #define SWARF_CLIENT_COLORMAP_H_
 
+#include <cstdint>
+
 #include "client/outputs/png_image.h"
 
 namespace swarf::cli {
@@ -26,6 +28,15 @@ Rgb AngleColor(double angle_deg);
 
 // `c` times `factor` per channel, rounded and clamped to [0, 255].
 Rgb Scale(Rgb c, double factor);
+
+// A relief row: for q < n, rgb[3 q .. 3 q + 2] = Scale(base, s) with base
+// HeightTint(1 + height[q] / depth) where height[q] < 0, else kStockColor,
+// and s shade[q] where finite, else 1. The same bytes as those calls
+// wherever a channel times s is below 2^63 in magnitude (relief shades are
+// about 0.25 to 1.3), a row at a time (vectorized: one pixel at a time, the
+// calls were a tenth of relief.png's and marks.png's time).
+void ShadedTintRow(const float* height, const float* shade, int32_t n,
+                   double depth, uint8_t* rgb);
 
 }  // namespace swarf::cli
 

@@ -287,18 +287,10 @@ void ReliefSampler::AddBand(const SurfaceGrid& band, int32_t e0, int32_t e1) {
 }
 
 void ReliefSampler::ColorRow(int py, uint8_t* rgb) const {
-  const double depth = spec_.z_top - lowest_;
-  for (int px = 0; px < frame_.width; ++px) {
-    const size_t k = static_cast<size_t>(py) * frame_.width + px;
-    // Only what lies exactly at the top is untouched stock.
-    const Rgb base =
-        height_[k] < 0 ? HeightTint(1 + height_[k] / depth) : kStockColor;
-    const double s = std::isfinite(shade_[k]) ? shade_[k] : 1.0;
-    const Rgb c = Scale(base, s);
-    rgb[3 * px] = c.r;
-    rgb[3 * px + 1] = c.g;
-    rgb[3 * px + 2] = c.b;
-  }
+  // Only what lies exactly at the top (height 0) is untouched stock.
+  const size_t k = static_cast<size_t>(py) * frame_.width;
+  ShadedTintRow(&height_[k], &shade_[k], frame_.width, spec_.z_top - lowest_,
+                rgb);
 }
 
 Image ReliefSampler::ToImage() const {
