@@ -822,6 +822,94 @@ TEST(MarksTest, PictureDrawsThePolylinesOverTheRelief) {
 // an arc sampled 20 times finer is the same arc within 0.05 px (vertices
 // that close are dropped). Blending segment by segment darkened the edges
 // once per segment passing near.
+// The vertices a picture keeps, against the rule written out one vertex at
+// a time (the first and last kept; each run as long as every vertex inside
+// lies within 0.05 px of its chord, its angle within 0.25 degrees of the
+// chord's, and at most 32 vertices): straight lines, a tight arc, and
+// vertices jittered about both limits.
+TEST(MarksTest, KeeperKeepsTheVerticesOfTheRule) {
+  auto rule = [](const std::vector<double>& xs, const std::vector<double>& ys,
+                 const std::vector<double>& an) {
+    auto spans = [&](size_t a, size_t b) {
+      const double dx = xs[b] - xs[a], dy = ys[b] - ys[a];
+      const double len2 = dx * dx + dy * dy;
+      for (size_t i = a + 1; i < b; ++i) {
+        double t =
+            len2 > 0 ? ((xs[i] - xs[a]) * dx + (ys[i] - ys[a]) * dy) / len2 : 0;
+        t = std::clamp(t, 0.0, 1.0);
+        const double ex = xs[a] + t * dx - xs[i], ey = ys[a] + t * dy - ys[i];
+        if (!(ex * ex + ey * ey <= 0.05 * 0.05)) return false;
+        const double angle = an[a] + t * (an[b] - an[a]);
+        if (!(std::fabs(an[i] - angle) <= 0.25)) return false;
+      }
+      return true;
+    };
+    std::vector<size_t> kept = {0};
+    for (size_t a = 0; a + 1 < xs.size();) {
+      size_t b = a + 1;
+      while (b + 1 < xs.size() && b + 1 - a <= 32 && spans(a, b + 1)) ++b;
+      kept.push_back(b);
+      a = b;
+    }
+    return kept;
+  };
+  // One mm a pixel, y down: pixel (x, -y).
+  const PixelFrame frame{400, 400, 0, 0, 1, 1};
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> jitter(-1, 1);
+  std::vector<MarkPolyline> lines;
+  for (int kind = 0; kind < 6; ++kind) {
+    MarkPolyline p;
+    const int n = 40 + 37 * kind;
+    for (int k = 0; k < n; ++k) {
+      double x = 10 + 0.1 * k, y = -20 - 5 * kind, angle = 30;
+      if (kind == 1) {  // an arc of radius 3 px
+        x = 50 + 3 * std::cos(0.02 * k);
+        y = -50 - 3 * std::sin(0.02 * k);
+      } else if (kind == 2) {  // about the distance limit
+        y += 0.05 * jitter(rng);
+      } else if (kind == 3) {  // about the angle limit
+        angle += 0.25 * jitter(rng);
+      } else if (kind == 4) {  // both, and repeated points
+        x = 10 + 0.1 * (k / 3);
+        y += 0.06 * jitter(rng);
+        angle += 0.3 * jitter(rng);
+      } else if (kind == 5) {  // a turn, angles rising
+        x = k < n / 2 ? 10 + 0.2 * k : 10 + 0.2 * (n / 2);
+        y = k < n / 2 ? -100 : -100 - 0.2 * (k - n / 2);
+        angle = 10 + 0.01 * k;
+      }
+      p.vertices.push_back({x, y, 0});
+      p.angle_deg.push_back(angle);
+    }
+    lines.push_back(std::move(p));
+  }
+  MarkKeeper keeper(frame);
+  for (const MarkPolyline& p : lines) ASSERT_TRUE(keeper.Add(p).ok());
+  size_t q = 0;
+  ASSERT_TRUE(keeper
+                  .Take([&](const KeptPolyline& kept) {
+                    const MarkPolyline& p = lines[q++];
+                    std::vector<double> xs, ys, an;
+                    for (size_t k = 0; k < p.vertices.size(); ++k) {
+                      xs.push_back(frame.PixelX(p.vertices[k].x));
+                      ys.push_back(frame.PixelY(p.vertices[k].y));
+                      an.push_back(p.angle_deg[k]);
+                    }
+                    const std::vector<size_t> want = rule(xs, ys, an);
+                    EXPECT_EQ(kept.x.size(), want.size()) << "polyline " << q;
+                    for (size_t k = 0; k < std::min(want.size(), kept.x.size());
+                         ++k) {
+                      EXPECT_EQ(kept.x[k], xs[want[k]]);
+                      EXPECT_EQ(kept.y[k], ys[want[k]]);
+                      EXPECT_EQ(kept.angle[k], an[want[k]]);
+                    }
+                    return absl::OkStatus();
+                  })
+                  .ok());
+  EXPECT_EQ(q, lines.size());
+}
+
 TEST(MarksTest, PolylineIsBlendedOncePerPixel) {
   PixelFrame f;
   f.width = 120;

@@ -13,7 +13,9 @@
 #include "absl/strings/str_format.h"
 #include "client/outputs/colormap.h"
 #include "client/outputs/text.h"
+#include "core/target_clones.h"
 #include "core/thread_pool.h"
+#include "core/value_minmax.h"
 
 namespace swarf::cli {
 namespace {
@@ -579,6 +581,7 @@ class PolylineStroke {
 // a pixel apart in a picture of a few thousand pixels: each cost a stroke
 // and changed nothing to be seen. The first and last are kept; a vertex is
 // kept at least every kMaxRun. Into *kept (its old entries dropped).
+SWARF_TARGET_CLONES
 void KeptVertices(std::span<const double> xs, std::span<const double> ys,
                   std::span<const double> angles, std::vector<size_t>* kept) {
   constexpr double kDropPx = 0.05, kDropDeg = 0.25;
@@ -588,19 +591,28 @@ void KeptVertices(std::span<const double> xs, std::span<const double> ys,
   if (n == 0) return;
   kept->push_back(0);
   // Whether every vertex strictly between a and b lies near segment a-b.
-  auto spans = [&](size_t a, size_t b) {
-    const double dx = xs[b] - xs[a], dy = ys[b] - ys[a];
+  // Every vertex is tested, in vector lanes (one by one, stopping at the
+  // first that fails, this was most of keeping the marks' vertices: most
+  // runs pass, and each is tested again as it grows).
+  const double* __restrict x = xs.data();
+  const double* __restrict y = ys.data();
+  const double* __restrict ang = angles.data();
+  auto spans = [&](size_t a, size_t b) __attribute__((always_inline)) {
+    const double ax = x[a], ay = y[a], aa = ang[a];
+    const double dx = x[b] - ax, dy = y[b] - ay, da = ang[b] - aa;
     const double len2 = dx * dx + dy * dy;
+    double fails = 0;
+#pragma omp simd reduction(max : fails)
     for (size_t i = a + 1; i < b; ++i) {
-      double t =
-          len2 > 0 ? ((xs[i] - xs[a]) * dx + (ys[i] - ys[a]) * dy) / len2 : 0;
-      t = std::clamp(t, 0.0, 1.0);
-      const double ex = xs[a] + t * dx - xs[i], ey = ys[a] + t * dy - ys[i];
-      if (!(ex * ex + ey * ey <= kDropPx * kDropPx)) return false;
-      const double angle = angles[a] + t * (angles[b] - angles[a]);
-      if (!(std::fabs(angles[i] - angle) <= kDropDeg)) return false;
+      double t = len2 > 0 ? ((x[i] - ax) * dx + (y[i] - ay) * dy) / len2 : 0;
+      t = MinOf(MaxOf(t, 0.0), 1.0);  // std::clamp, NaN kept as it keeps it
+      const double ex = ax + t * dx - x[i], ey = ay + t * dy - y[i];
+      const double angle = aa + t * da;
+      const bool near = (ex * ex + ey * ey <= kDropPx * kDropPx) &
+                        (std::fabs(ang[i] - angle) <= kDropDeg);
+      fails = MaxOf(fails, near ? 0.0 : 1.0);
     }
-    return true;
+    return fails == 0;
   };
   size_t a = 0;
   while (a + 1 < n) {
