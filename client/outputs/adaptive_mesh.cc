@@ -276,8 +276,9 @@ int64_t Cross(P o, P a, P b) {
 // Triangulates a convex polygon (counter-clockwise, collinear vertices
 // allowed, positive area) without degenerate triangles: repeatedly cuts off
 // a corner whose triangle has area and leaves a polygon with area, the one
-// with the shortest cut.
-void ClipEars(std::vector<P> poly, std::vector<P>* out) {
+// with the shortest cut. *poly is used up (its vertices erased as cut).
+void ClipEars(std::vector<P>* polygon, std::vector<P>* out) {
+  std::vector<P>& poly = *polygon;
   while (poly.size() > 3) {
     const size_t n = poly.size();
     size_t best = n;
@@ -669,8 +670,10 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
         const Leaf& f = leaves[k];
         auto measure = [&] {
           // The sides' lattice vertices that are corners, counter-clockwise
-          // from (i0, j0).
-          std::vector<P> ring;
+          // from (i0, j0): this thread's, reused (a vector a leaf, grown as
+          // it filled, was several mallocs a leaf).
+          thread_local std::vector<P> ring;
+          ring.clear();
           auto side_vertex = [&](int64_t i, int64_t j) {
             if (used(index(i, j))) ring.push_back({i, j});
           };
@@ -695,7 +698,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
           } else {
             if (ear == nullptr) ear = new std::vector<P>();
             ear->clear();
-            ClipEars(std::move(ring), ear);
+            ClipEars(&ring, ear);
             shape[k] = kEars;
             t = ear;
           }
