@@ -530,49 +530,71 @@ void StrokeCoverage(int max_x, int max_y, const PixelSegment& s, double width,
 class PolylineStroke {
  public:
   explicit PolylineStroke(const PixelTile& tile)
-      : tile_(tile), width_(tile.col1 - tile.col0) {
+      : tile_(tile), width_(tile.col1 - tile.col0), b_(buffers_) {
     const size_t area =
         static_cast<size_t>(width_) * std::max(0, tile.row1 - tile.row0);
-    coverage_.assign(area, 0);
-    angle_.resize(area);
+    // Zero past what earlier tiles used (every entry they touched was
+    // cleared by Blend or the destructor); angles are written before read.
+    if (b_.coverage.size() < area) {
+      b_.coverage.resize(area, 0);
+      b_.angle.resize(area);
+    }
   }
+  ~PolylineStroke() { Clear(); }
+  PolylineStroke(const PolylineStroke&) = delete;
+  PolylineStroke& operator=(const PolylineStroke&) = delete;
+
   void Add(int max_x, int max_y, const PixelSegment& s, double width) {
+    double* const coverage_of = b_.coverage.data();
+    double* const angle_of = b_.angle.data();
     StrokeCoverage(max_x, max_y, s, width, tile_,
                    [&](int px, int py, double coverage, double angle) {
                      const size_t k =
                          static_cast<size_t>(py - tile_.row0) * width_ +
                          (px - tile_.col0);
-                     if (coverage_[k] == 0) touched_.push_back(k);
+                     if (coverage_of[k] == 0) b_.touched.push_back(k);
                      // The first of equal coverages: the segments' order.
-                     if (coverage > coverage_[k]) {
-                       coverage_[k] = coverage;
-                       angle_[k] = angle;
+                     if (coverage > coverage_of[k]) {
+                       coverage_of[k] = coverage;
+                       angle_of[k] = angle;
                      }
                    });
   }
   // Blends the polyline's pixels (in the order first covered) and clears
   // them for the next polyline.
   void Blend(Image& image, bool halo) {
-    for (const size_t k : touched_) {
+    for (const size_t k : b_.touched) {
       const int px = tile_.col0 + static_cast<int>(k % width_);
       const int py = tile_.row0 + static_cast<int>(k / width_);
-      const double c = coverage_[k];
+      const double c = b_.coverage[k];
       if (halo) {
         image.Blend(px, py, kHalo, 0.75 * std::min(c, 1.0));
       } else {
-        image.Blend(px, py, AngleColor(angle_[k]), c);
+        image.Blend(px, py, AngleColor(b_.angle[k]), c);
       }
-      coverage_[k] = 0;
     }
-    touched_.clear();
+    Clear();
   }
 
  private:
+  // Per pixel of the tile, row-major: this thread's, reused from tile to
+  // tile (allocated and zeroed for each, they were a sixth of the strokes'
+  // instructions), all coverages 0 between tiles.
+  struct Buffers {
+    std::vector<double> coverage, angle;
+    std::vector<size_t> touched;
+  };
+  void Clear() {
+    for (const size_t k : b_.touched) b_.coverage[k] = 0;
+    b_.touched.clear();
+  }
+  static thread_local Buffers buffers_;
+
   const PixelTile tile_;
   const int width_;
-  std::vector<double> coverage_, angle_;  // per pixel of the tile
-  std::vector<size_t> touched_;
+  Buffers& b_;
 };
+thread_local PolylineStroke::Buffers PolylineStroke::buffers_;
 
 // The vertices of a polyline of n vertices (in pixels: xs, ys, angles) to
 // stroke: each vertex dropped that lies within kDropPx of the segment
