@@ -89,15 +89,14 @@ void ShadedTintChannels(const float* __restrict height,
                         int32_t* __restrict out_r, int32_t* __restrict out_g,
                         int32_t* __restrict out_b) {
   constexpr double kLastStop = std::size(kHeight) - 1;
-  const RampLanes& l = kHeightLanes;
   // Channel c of a pixel: its tint (segment k's mix, picked by selects,
   // not loaded by index: every lane takes one, k in range whatever t is) or
   // the stock's, then Scale's rounding and clamp (clamping first truncates
   // the same).
-  auto channel = [&l](int c, bool cut, double k, double u, double stock,
-                      double s) {
-    const double* p = l.p[c];
-    const double* d = l.d[c];
+  auto channel = [](int c, bool cut, double k, double u, double stock,
+                    double s) {
+    const double* p = kHeightLanes.p[c];
+    const double* d = kHeightLanes.d[c];
     const double pk = k < 1 ? p[0] : k < 2 ? p[1] : k < 3 ? p[2] : p[3];
     const double dk = k < 1 ? d[0] : k < 2 ? d[1] : k < 3 ? d[2] : d[3];
     const double tint = RoundHalfAway(pk + dk * u);
