@@ -91,8 +91,7 @@ void ShadedTintChannels(const float* __restrict height,
   constexpr double kLastStop = std::size(kHeight) - 1;
   // Channel c of a pixel: its tint (segment k's mix, picked by selects,
   // not loaded by index: every lane takes one, k in range whatever t is) or
-  // the stock's, then Scale's rounding and clamp (clamping first truncates
-  // the same).
+  // the stock's, then Scale's rounding and clamp.
   auto channel = [](int c, bool cut, double k, double u, double stock,
                     double s) {
     const double* p = kHeightLanes.p[c];
@@ -101,8 +100,7 @@ void ShadedTintChannels(const float* __restrict height,
     const double dk = k < 1 ? d[0] : k < 2 ? d[1] : k < 3 ? d[2] : d[3];
     const double tint = RoundHalfAway(pk + dk * u);
     const double v = (cut ? tint : stock) * s;
-    const double rounded = v + std::copysign(0.49999999999999994, v);
-    return static_cast<int32_t>(MinOf(MaxOf(rounded, 0.0), 255.0));
+    return static_cast<int32_t>(MinOf(MaxOf(RoundHalfAway(v), 0.0), 255.0));
   };
 #pragma omp simd
   for (int32_t q = 0; q < n; ++q) {
