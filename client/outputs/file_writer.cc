@@ -69,8 +69,16 @@ void FormatChunksInOrder(
     std::vector<std::string>& p = pieces[made];
     p.resize(group);
     ThreadPool::Default().ParallelFor(nc, [&](int64_t k) {
-      p[k].clear();
-      format(first_of(c0 + k), first_of(c0 + k + 1), &p[k]);
+      // Formatted into a string of this thread's stack, its buffer (and
+      // capacity) taken from the piece and handed back: the pieces' own
+      // string objects share cache lines, and a writer's many small
+      // appends, each storing the length, kept those lines moving between
+      // the threads' cores (marks.json in single appends took 1.35 times
+      // the time).
+      std::string text = std::move(p[k]);
+      text.clear();
+      format(first_of(c0 + k), first_of(c0 + k + 1), &text);
+      p[k] = std::move(text);
     });
     if (putting.valid()) putting.get();  // the other group is put
     if (c0 + nc == chunks) {
