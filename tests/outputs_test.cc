@@ -1688,6 +1688,20 @@ TEST(MarksTest, JsonAndSvgInChunksAreOneDocument) {
       p.vertex_owners.push_back({static_cast<int32_t>(v), -1});
     }
   }
+  // marks.json's own writer against JsonWriter's edges: no vertices, the
+  // numbers JsonWriter writes as null or in exponent form, -0, the ends of
+  // the owners' range.
+  const double inf = std::numeric_limits<double>::infinity();
+  MarkPolyline& empty = marks.emplace_back();
+  empty.owners = {std::numeric_limits<int32_t>::min(),
+                  std::numeric_limits<int32_t>::max()};
+  MarkPolyline& odd = marks.emplace_back();
+  odd.closed = true;
+  odd.vertices = {{std::nan(""), inf, -inf},
+                  {-0.0, 1e300, 5e-324},
+                  {123456789.125, -1e-7, 0.1}};
+  odd.angle_deg = {std::nan(""), -0.0, inf};
+  odd.vertex_owners = {{-7, 0}, {2147483647, -2147483647}, {1, 2}};
   for (bool vertex_owners : {false, true}) {
     JsonWriter j;
     j.BeginObject().Key("polylines").BeginArray();

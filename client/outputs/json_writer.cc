@@ -73,21 +73,31 @@ JsonWriter& JsonWriter::String(std::string_view s) {
   return *this;
 }
 
-JsonWriter& JsonWriter::Double(double v) {
-  Separate();
+void AppendJsonDouble(double v, std::string* out) {
   if (!std::isfinite(v)) {
-    out_ += "null";
-    return *this;
+    *out += "null";
+    return;
   }
   char buf[32];
   auto [end, ec] = std::to_chars(buf, buf + sizeof buf, v);
-  out_.append(buf, end);
+  out->append(buf, end);
+}
+
+void AppendJsonInt(int64_t v, std::string* out) {
+  char buf[24];
+  const std::to_chars_result r = std::to_chars(buf, buf + sizeof buf, v);
+  out->append(buf, r.ptr);
+}
+
+JsonWriter& JsonWriter::Double(double v) {
+  Separate();
+  AppendJsonDouble(v, &out_);
   return *this;
 }
 
 JsonWriter& JsonWriter::Int(int64_t v) {
   Separate();
-  out_ += std::to_string(v);
+  AppendJsonInt(v, &out_);
   return *this;
 }
 

@@ -9,6 +9,12 @@
 
 namespace swarf::cli {
 
+// Appends v as JsonWriter::Double writes it (shortest round-trip form;
+// null when not finite), for writers that build JSON text themselves.
+void AppendJsonDouble(double v, std::string* out);
+// Appends v as JsonWriter::Int writes it.
+void AppendJsonInt(int64_t v, std::string* out);
+
 // Builds compact JSON text. Doubles are written in shortest round-trip form;
 // non-finite doubles become null. Callers nest Begin/End calls correctly.
 class JsonWriter {
