@@ -464,7 +464,12 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
     absl::StatusOr<Lattice> l = window(rr);
     if (!l.ok()) return l.status();
     pool.ParallelFor(roots_x, [&](int64_t rx) {
-      std::vector<TreeNode>& t = trees[rr * roots_x + rx];
+      // Built in the thread's own vector, then copied out at its size:
+      // built in place, each push_back stored the tree's end in `trees`,
+      // whose vector objects share cache lines with the trees that other
+      // threads build beside it (and its growth reallocated).
+      thread_local std::vector<TreeNode> t;
+      t.clear();
       t.push_back({Leaf{rx * kRoot, rr * kRoot, kRoot, kRoot}});
       for (size_t q = 0; q < t.size(); ++q) {
         const Leaf f = t[q].f;
@@ -492,7 +497,8 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
           }
         }
       }
-      t.shrink_to_fit();  // kept until the conforming passes end
+      // Kept until the conforming passes end.
+      trees[rr * roots_x + rx].assign(t.begin(), t.end());
     });
   }
   // Both written on every thread, every entry (below).
@@ -528,10 +534,17 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
     // level (counts first, then their prefix).
     std::vector<int64_t> first(static_cast<size_t>(levels) * n_trees + 1, 0);
     pool.ParallelFor(n_trees, [&](int64_t b) {
+      // Counted in the thread's own array, then stored once a level: the
+      // trees beside it, counted on other threads, share cache lines of
+      // `first`.
+      thread_local std::vector<int64_t> count;
+      count.assign(levels, 0);
       const std::vector<TreeNode>& t = trees[b];
       for (size_t q = 0; q < t.size(); ++q) {
-        if (t[q].kid[0] < 0) ++first[depth[b][q] * n_trees + b + 1];
+        if (t[q].kid[0] < 0) ++count[depth[b][q]];
       }
+      for (int lv = 0; lv < levels; ++lv)
+        first[lv * n_trees + b + 1] = count[lv];
     });
     for (size_t k = 1; k < first.size(); ++k) first[k] += first[k - 1];
     leaves.resize(first.back());
