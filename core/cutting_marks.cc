@@ -1133,11 +1133,17 @@ std::vector<MarkPolyline> Chain(
   const int64_t scan_chunks = (2 * n + kScanChunk - 1) / kScanChunk;
   {
     std::vector<std::vector<int64_t>> found(scan_chunks);
+    // Each chunk's list is filled as a local and moved in, as below: the
+    // lists' own vector objects share cache lines, and a thread's
+    // push_backs into one (each storing its end) would keep them moving
+    // between the cores filling its neighbours.
     pool.ParallelFor(scan_chunks, [&](int64_t c) {
+      std::vector<int64_t> f;
       for (int64_t k = c * kScanChunk;
            k < std::min(2 * n, (c + 1) * kScanChunk); ++k) {
-        if (other[k] < 0) found[c].push_back(k);
+        if (other[k] < 0) f.push_back(k);
       }
+      found[c] = std::move(f);
     });
     for (const std::vector<int64_t>& f : found) {
       open_ends.insert(open_ends.end(), f.begin(), f.end());
@@ -1172,10 +1178,12 @@ std::vector<MarkPolyline> Chain(
   {
     std::vector<std::vector<int64_t>> unused(scan_chunks);
     pool.ParallelFor(scan_chunks, [&](int64_t c) {
+      std::vector<int64_t> u;
       for (int64_t s = c * kScanChunk / 2;
            s < std::min(n, (c + 1) * kScanChunk / 2); ++s) {
-        if (!used[s]) unused[c].push_back(s);
+        if (!used[s]) u.push_back(s);
       }
+      unused[c] = std::move(u);
     });
     for (const std::vector<int64_t>& u : unused) {
       for (const int64_t s : u) {
@@ -1206,6 +1214,7 @@ std::vector<MarkPolyline> Chain(
     std::vector<std::vector<std::pair<uint64_t, int32_t>>> kept(bounds.size() -
                                                                 1);
     pool.ParallelFor(static_cast<int64_t>(bounds.size()) - 1, [&](int64_t b) {
+      std::vector<std::pair<uint64_t, int32_t>> bucket;  // see `found`
       const size_t end = bounds[b + 1];
       for (size_t i = bounds[b]; i < end;) {
         size_t j = i;
@@ -1219,10 +1228,11 @@ std::vector<MarkPolyline> Chain(
             const auto g = ghosts->find(inc[i].key);
             if (g != ghosts->end()) count += g->second;
           }
-          if (count > 0) kept[b].emplace_back(inc[i].key, count);
+          if (count > 0) bucket.emplace_back(inc[i].key, count);
         }
         i = j;
       }
+      kept[b] = std::move(bucket);
     });
     next_ghosts->clear();
     for (const auto& bucket : kept) {
@@ -1710,8 +1720,13 @@ absl::Status FindCuttingMarks(
   auto find_window = [&](int32_t w0, int32_t wn,
                          std::vector<std::vector<Segment>>* out) {
     out->assign(wn, {});
-    wp.pool().ParallelFor(wn,
-                          [&](int64_t b) { find_band(w0 + b, &(*out)[b]); });
+    // Each band's segments as a local, moved in: the bands' vector objects
+    // share cache lines, and each segment's push_back stores its band's end.
+    wp.pool().ParallelFor(wn, [&](int64_t b) {
+      std::vector<Segment> found;
+      find_band(w0 + b, &found);
+      (*out)[b] = std::move(found);
+    });
   };
   find_window(0, std::min(window, bands), &band_segments);
   for (int32_t w0 = 0, wn = std::min(window, bands); w0 < bands;) {
