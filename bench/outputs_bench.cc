@@ -8,6 +8,7 @@
 // against stats.json.
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -15,10 +16,11 @@
 #include <string>
 #include <vector>
 
+#include "client/cli/run_report.h"
+#include "client/outputs/grid_bands.h"
 #include "client/outputs/marks_files.h"
 #include "client/outputs/pictures.h"
 #include "client/outputs/png_image.h"
-#include "client/cli/run_report.h"
 #include "client/outputs/surface_grid.h"
 #include "client/outputs/surface_mesh.h"
 #include "core/cutting_marks.h"
@@ -167,6 +169,7 @@ enum class Step {
   kSurfaceStl,
   kSurfaceWrl,
   kLatticeRows,
+  kTileRows,
 };
 
 // One step as swarf run does it (run_outputs.cc, run_report.cc).
@@ -235,6 +238,27 @@ absl::Status RunStep(Step step, Job& job, benchmark::State& state) {
       benchmark::DoNotOptimize(lattice->row_min.data());
       return absl::OkStatus();
     }
+    case Step::kTileRows: {
+      // swarf run's pass over its embedded session's grid, band by band
+      // (TileRowBands over SetTileRows), without the visitors' work: the
+      // "tiles" of stats.json's output steps.
+      const Workpiece& wp = *job.wp;
+      TileRowBands bands(
+          wp.spec(), wp.scheme().kind(),
+          [&wp](SurfaceGrid* band, int32_t t0, int32_t t1, bool heights_only) {
+            return band->SetTileRows(wp, t0, t1, heights_only);
+          },
+          std::shared_ptr<const MoveSource>(std::shared_ptr<void>(),
+                                            &wp.moves()),
+          std::shared_ptr<const MoveSweeps>(std::shared_ptr<void>(),
+                                            &wp.sweeps()));
+      double lowest = wp.spec().z_top;
+      return bands.ForEach([&](const SurfaceGrid& band, int32_t, int32_t) {
+        lowest = std::min(lowest, band.jets.back().w);
+        benchmark::DoNotOptimize(lowest);
+        return absl::OkStatus();
+      });
+    }
   }
   return absl::InternalError("unknown step");
 }
@@ -260,18 +284,19 @@ void BM_Output(benchmark::State& state, const char* job_name, Step step) {
       ->MeasureProcessCPUTime()                                   \
       ->UseRealTime()
 
-#define SWARF_OUTPUT_BENCHES(job, file)      \
-  SWARF_OUTPUT_BENCH(job, file, Simulate);   \
-  SWARF_OUTPUT_BENCH(job, file, ErrorStats); \
-  SWARF_OUTPUT_BENCH(job, file, Marks);      \
-  SWARF_OUTPUT_BENCH(job, file, ReliefPng);  \
-  SWARF_OUTPUT_BENCH(job, file, ErrorPng);   \
-  SWARF_OUTPUT_BENCH(job, file, MarksPng);   \
-  SWARF_OUTPUT_BENCH(job, file, MarksSvg);   \
-  SWARF_OUTPUT_BENCH(job, file, MarksJson);  \
-  SWARF_OUTPUT_BENCH(job, file, SurfaceStl); \
-  SWARF_OUTPUT_BENCH(job, file, SurfaceWrl); \
-  SWARF_OUTPUT_BENCH(job, file, LatticeRows)
+#define SWARF_OUTPUT_BENCHES(job, file)       \
+  SWARF_OUTPUT_BENCH(job, file, Simulate);    \
+  SWARF_OUTPUT_BENCH(job, file, ErrorStats);  \
+  SWARF_OUTPUT_BENCH(job, file, Marks);       \
+  SWARF_OUTPUT_BENCH(job, file, ReliefPng);   \
+  SWARF_OUTPUT_BENCH(job, file, ErrorPng);    \
+  SWARF_OUTPUT_BENCH(job, file, MarksPng);    \
+  SWARF_OUTPUT_BENCH(job, file, MarksSvg);    \
+  SWARF_OUTPUT_BENCH(job, file, MarksJson);   \
+  SWARF_OUTPUT_BENCH(job, file, SurfaceStl);  \
+  SWARF_OUTPUT_BENCH(job, file, SurfaceWrl);  \
+  SWARF_OUTPUT_BENCH(job, file, LatticeRows); \
+  SWARF_OUTPUT_BENCH(job, file, TileRows)
 
 SWARF_OUTPUT_BENCHES(bear, "bear.nc");
 SWARF_OUTPUT_BENCHES(cameo, "cameo.nc");
