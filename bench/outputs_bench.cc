@@ -252,6 +252,7 @@ absl::Status RunStep(Step step, Job& job, benchmark::State& state) {
                                             &wp.moves()),
           std::shared_ptr<const MoveSweeps>(std::shared_ptr<void>(),
                                             &wp.sweeps()));
+      bands.SetFillWritesEveryNode();  // as swarf run's
       double lowest = wp.spec().z_top;
       return bands.ForEach([&](const SurfaceGrid& band, int32_t, int32_t) {
         lowest = std::min(lowest, band.jets.back().w);

@@ -186,6 +186,7 @@ absl::StatusOr<pb::Deviation> ComputeDeviation(const Session& session,
     }
     cli::TileRowBands bands(start.spec, start.scheme, std::move(fill),
                             std::move(start.moves));
+    bands.SetFillWritesEveryNode();  // SetTileRows
     return cli::MeasureDeviation(bands, design->envelope(), design->index(),
                                  lines, o,
                                  [](int32_t, int32_t, const float*) {});

@@ -195,24 +195,93 @@ TEST(StreamedOutputsTest, BandsWriteTheWholeGridsFilesByteForByte) {
                  absl::StrCat(name, " tile rows, the workpiece's sweeps"));
       // As swarf run reads its embedded session: the tiles set on the
       // workpiece's threads (SetTileRows), the mesh's heights read alone
-      // (ReadNodeHeights).
-      TileRowBands direct(
-          Stock(), scheme,
-          [&own](SurfaceGrid* band, int32_t t0, int32_t t1, bool heights_only) {
-            return band->SetTileRows(own, t0, t1, heights_only);
-          },
-          std::shared_ptr<const MoveSource>(std::shared_ptr<void>(),
-                                            &own.moves()),
-          std::shared_ptr<const MoveSweeps>(std::shared_ptr<void>(),
-                                            &own.sweeps()),
-          int64_t{2} * 64 * 161);
-      direct.SetHeightsFill([&own](int32_t j0, int32_t j1, double* z) {
-        ReadNodeHeights(own, j0, j1, z);
-        return absl::OkStatus();
-      });
-      ExpectSame(Write(direct, &raster, mp, options), want,
-                 absl::StrCat(name, " tiles read from the workpiece"));
+      // (ReadNodeHeights), the bands not filled first (SetFillWritesEveryNode:
+      // a node left unset would hold the last band's or a fresh
+      // allocation's bytes).
+      for (bool every : {false, true}) {
+        TileRowBands direct(
+            Stock(), scheme,
+            [&own](SurfaceGrid* band, int32_t t0, int32_t t1,
+                   bool heights_only) {
+              return band->SetTileRows(own, t0, t1, heights_only);
+            },
+            std::shared_ptr<const MoveSource>(std::shared_ptr<void>(),
+                                              &own.moves()),
+            std::shared_ptr<const MoveSweeps>(std::shared_ptr<void>(),
+                                              &own.sweeps()),
+            int64_t{2} * 64 * 161);
+        direct.SetHeightsFill([&own](int32_t j0, int32_t j1, double* z) {
+          ReadNodeHeights(own, j0, j1, z);
+          return absl::OkStatus();
+        });
+        if (every) direct.SetFillWritesEveryNode();
+        ExpectSame(Write(direct, &raster, mp, options), want,
+                   absl::StrCat(name, " tiles read from the workpiece",
+                                every ? ", bands resized" : ""));
+      }
     }
+  }
+}
+
+// SetTileRows writes every node of its tile rows that a band holds, those
+// of untouched tiles too: a band resized over any bytes (ResizeBand) then
+// holds what the whole grid copied from the workpiece holds, with and
+// without the derivatives.
+TEST(StreamedOutputsTest, SetTileRowsWritesEveryNodeOfAResizedBand) {
+  for (SchemeKind scheme : {SchemeKind::kTaylor, SchemeKind::kGuarded}) {
+    auto wp = Workpiece::Create(Stock(), scheme);
+    ASSERT_TRUE(wp.ok());
+    ASSERT_TRUE((*wp)->Apply(Moves()).ok());
+    const Workpiece& own = **wp;
+    auto grid = SurfaceGrid::FromWorkpiece(own);
+    ASSERT_TRUE(grid.ok());
+    int untouched = 0;
+    for (int32_t t = 0; t < own.tiles_x() * own.tiles_y(); ++t) {
+      untouched += !own.TileAllocated(t);
+    }
+    EXPECT_GT(untouched, 0) << "the test wants untouched tiles too";
+    auto band = SurfaceGrid::Band(Stock(), scheme, 0, 1);
+    ASSERT_TRUE(band.ok());
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const int32_t ny = Stock().ny;
+    for (bool heights_only : {false, true}) {
+      for (const auto& [j0, j1] : std::vector<std::pair<int32_t, int32_t>>{
+               {0, ny}, {3, 70}, {64, 64}, {63, 128}, {ny - 1, ny}}) {
+        // Whatever the storage held: not the top, not a number.
+        band->ResizeBand(0, ny + 1);
+        std::fill(band->jets.begin(), band->jets.end(),
+                  SurfaceJet{nan, nan, nan, nan, nan, nan});
+        std::fill(band->owners.begin(), band->owners.end(), 7);
+        band->ResizeBand(j0, j1 - j0 + 1);
+        ASSERT_TRUE(band->SetTileRows(own, j0 / kTileSize, j1 / kTileSize + 1,
+                                      heights_only)
+                        .ok());
+        ASSERT_EQ(band->held_rows(), j1 - j0 + 1);
+        for (int32_t j = j0; j <= j1; ++j) {
+          for (int32_t i = 0; i < grid->nodes_x(); ++i) {
+            const SurfaceJet& got = band->jet(i, j);
+            const SurfaceJet& want = grid->jet(i, j);
+            const bool same =
+                heights_only ? got.w == want.w && got.wx == 0 && got.wy == 0 &&
+                                   got.wxx == 0 && got.wxy == 0 &&
+                                   got.wyy == 0 && band->owner(i, j) == -1
+                             : got.w == want.w && got.wx == want.wx &&
+                                   got.wy == want.wy && got.wxx == want.wxx &&
+                                   got.wxy == want.wxy && got.wyy == want.wyy &&
+                                   band->owner(i, j) == grid->owner(i, j);
+            ASSERT_TRUE(same)
+                << "node (" << i << ", " << j << ") of rows " << j0 << ".."
+                << j1 << (heights_only ? ", heights only" : "");
+          }
+        }
+      }
+    }
+    // Another workpiece's grid is refused, not written past the band.
+    auto other =
+        SurfaceGrid::Band(StockSpec{0, 0, 40, 33, 5, 80, 66}, scheme, 0, 1);
+    ASSERT_TRUE(other.ok());
+    EXPECT_EQ(other->SetTileRows(own, 0, 1).code(),
+              absl::StatusCode::kInvalidArgument);
   }
 }
 

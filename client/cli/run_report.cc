@@ -431,6 +431,7 @@ absl::Status CollectAndWrite(Connection& conn, const std::string& id,
         },
         options.moves, options.sweeps);
     if (options.workpiece != nullptr) {
+      bands->SetFillWritesEveryNode();  // SetTileRows
       bands->SetHeightsFill([&](int32_t j0, int32_t j1, double* z) {
         ReadNodeHeights(*options.workpiece, j0, j1, z);
         return absl::OkStatus();

@@ -33,7 +33,7 @@ absl::Status InMemoryBands::ForEach(const BandVisitor& visit) {
   const size_t nx = static_cast<size_t>(grid_.nodes_x());
   for (int32_t e0 = 0; e0 < ny; e0 += band_rows_) {
     const int32_t e1 = std::min(ny, e0 + band_rows_);
-    band->ResetBand(e0, e1 - e0 + 1);
+    band->ResizeBand(e0, e1 - e0 + 1);  // every node copied in
     std::copy_n(grid_.jets.begin() + grid_.Index(0, e0), band->jets.size(),
                 band->jets.begin());
     std::copy_n(grid_.owners.begin() + grid_.Index(0, e0), band->owners.size(),
@@ -73,7 +73,7 @@ absl::Status InMemoryBands::ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
   if (absl::Status st = CheckNodeRows(grid_.spec, j0, j1); !st.ok()) {
     return st;
   }
-  band->ResetBand(j0, j1 - j0 + 1);
+  band->ResizeBand(j0, j1 - j0 + 1);  // every node copied in
   std::copy_n(grid_.jets.begin() + grid_.Index(0, j0), band->jets.size(),
               band->jets.begin());
   std::copy_n(grid_.owners.begin() + grid_.Index(0, j0), band->owners.size(),
@@ -84,7 +84,11 @@ absl::Status InMemoryBands::ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
 absl::Status TileRowBands::ReadRows(int32_t j0, int32_t j1, SurfaceGrid* band,
                                     bool heights_only) {
   if (absl::Status st = CheckNodeRows(spec_, j0, j1); !st.ok()) return st;
-  band->ResetBand(j0, j1 - j0 + 1);
+  if (fill_writes_every_node_) {
+    band->ResizeBand(j0, j1 - j0 + 1);
+  } else {
+    band->ResetBand(j0, j1 - j0 + 1);
+  }
   return fill_(band, j0 / kTileSize, j1 / kTileSize + 1, heights_only);
 }
 
@@ -132,7 +136,12 @@ absl::Status TileRowBands::ForEach(const BandVisitor& visit) {
     // tile rows fetched.
     const int32_t first = t0 == 0 ? 0 : t0 * kTileSize - 1;
     const int32_t last = std::min(ny, t1 * kTileSize - 1);
-    band.ResetBand(first, last - first + 1);
+    // The previous band's last row is copied in, the rest filled.
+    if (fill_writes_every_node_) {
+      band.ResizeBand(first, last - first + 1);
+    } else {
+      band.ResetBand(first, last - first + 1);
+    }
     if (t0 > 0) {
       std::copy(carry_jets.begin(), carry_jets.end(), band.jets.begin());
       std::copy(carry_owners.begin(), carry_owners.end(), band.owners.begin());

@@ -101,6 +101,10 @@ class TileRowBands : public GridBands {
   using HeightsFill =
       std::function<absl::Status(int32_t j0, int32_t j1, double* z)>;
   void SetHeightsFill(HeightsFill heights) { heights_ = std::move(heights); }
+  // Says that the fill writes every node of the tile rows it is given that
+  // the band holds (as SurfaceGrid::SetTileRows does): the bands are then
+  // resized for it (ResizeBand), not filled with untouched stock first.
+  void SetFillWritesEveryNode() { fill_writes_every_node_ = true; }
   absl::Status ReadHeights(int32_t j0, int32_t j1, SurfaceGrid* scratch,
                            double* z) override;
 
@@ -112,6 +116,7 @@ class TileRowBands : public GridBands {
   std::shared_ptr<const MoveSweeps> sweeps_;  // null: the band indexes them
   int64_t max_band_nodes_;
   HeightsFill heights_;
+  bool fill_writes_every_node_ = false;
 };
 
 }  // namespace swarf::cli

@@ -40,17 +40,22 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::Band(const StockSpec& spec,
   return g;
 }
 
-void SurfaceGrid::ResetBand(int32_t first, int32_t rows) {
+void SurfaceGrid::ResizeBand(int32_t first, int32_t rows) {
   row0 = first;
   rows = std::max(0, std::min(rows, nodes_y() - first));
   const size_t n = static_cast<size_t>(nodes_x()) * rows;
+  // Not copied when it grows: the caller writes every node.
+  ResizeForWriting(&jets, n);
+  ResizeForWriting(&owners, n);
+}
+
+void SurfaceGrid::ResetBand(int32_t first, int32_t rows) {
+  ResizeBand(first, rows);
+  const size_t n = jets.size();
   SurfaceJet top;
   top.w = spec.z_top;
   // A tile row of a wide grid is tens of MB (52 bytes a node): filled (and
-  // faulted in) on every thread, as the rows read into it are, and not
-  // copied when it grows.
-  ResizeForWriting(&jets, n);
-  ResizeForWriting(&owners, n);
+  // faulted in) on every thread, as the rows read into it are.
   constexpr size_t kPiece = size_t{1} << 16;
   ThreadPool::Default().ParallelFor(
       static_cast<int64_t>((n + kPiece - 1) / kPiece), [&](int64_t p) {
@@ -79,12 +84,34 @@ absl::StatusOr<SurfaceGrid> SurfaceGrid::FromWorkpiece(const Workpiece& wp) {
 
 absl::Status SurfaceGrid::SetTileRows(const Workpiece& wp, int32_t t0,
                                       int32_t t1, bool heights_only) {
-  // Unallocated tiles are untouched stock, which the grid already holds.
-  std::vector<int32_t> tiles;
+  // Unallocated tiles are untouched stock: their held nodes are set to the
+  // top here, on the workpiece's threads (a band need not be filled first).
+  if (wp.grid().nodes_x() != nodes_x() || wp.grid().nodes_y() != nodes_y()) {
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "the workpiece's %d x %d nodes are not this grid's %d x %d",
+        wp.grid().nodes_x(), wp.grid().nodes_y(), nodes_x(), nodes_y()));
+  }
+  std::vector<int32_t> tiles, untouched;
   t0 = std::max(t0, 0);
   t1 = std::min(t1, wp.tiles_y());
   for (int32_t t = t0 * wp.tiles_x(); t < t1 * wp.tiles_x(); ++t) {
-    if (wp.TileAllocated(t)) tiles.push_back(t);
+    (wp.TileAllocated(t) ? tiles : untouched).push_back(t);
+  }
+  if (!untouched.empty()) {
+    SurfaceJet top;
+    top.w = spec.z_top;
+    wp.pool().ParallelFor(
+        static_cast<int64_t>(untouched.size()), [&](int64_t k) {
+          const Workpiece::TileExtent e = wp.Extent(untouched[k]);
+          // Only the rows this band holds, as SetNodes.
+          const int32_t ja = std::max(e.j0, row0);
+          const int32_t jb = std::min(e.j0 + e.ny, row0 + held_rows());
+          for (int32_t j = ja; j < jb; ++j) {
+            const int64_t at = Index(e.i0, j);
+            std::fill_n(jets.begin() + at, e.nx, top);
+            std::fill_n(owners.begin() + at, e.nx, -1);
+          }
+        });
   }
   // A chunk's derivatives on the workpiece's threads, then its reads, also
   // on its threads: a buffer a tile of the chunk (a row of a wide grid

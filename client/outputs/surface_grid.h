@@ -69,6 +69,10 @@ struct SurfaceGrid {
   // Makes this band hold node rows [row0, row0 + rows) (clamped to the
   // grid), untouched stock, keeping the moves and the storage's capacity.
   void ResetBand(int32_t row0, int32_t rows);
+  // The same rows with their nodes unset (whatever the storage held): for a
+  // caller that then writes every node, as SetTileRows does for its tile
+  // rows, without a pass over 52 bytes a node first.
+  void ResizeBand(int32_t row0, int32_t rows);
   // Room for `rows` node rows (clamped to the grid), so that ResetBand up
   // to that many allocates nothing; the rows held are unchanged.
   void ReserveRows(int32_t rows);
@@ -78,9 +82,10 @@ struct SurfaceGrid {
   static absl::StatusOr<SurfaceGrid> FromWorkpiece(const Workpiece& wp);
   // Copies the nodes of wp's tile rows [t0, t1) that this grid or band
   // holds, as FromWorkpiece does (heights only, zero derivatives and owner
-  // -1, with `heights_only`); unallocated tiles are left as they are
-  // (untouched stock after Uncut, Band or ResetBand). wp must have this
-  // grid's stock. Uses wp's threads and jet cache.
+  // -1, with `heights_only`), and sets those of unallocated tiles to
+  // untouched stock: every node of those rows that it holds is written
+  // (after ResizeBand too). wp must have this grid's stock. Uses wp's
+  // threads and jet cache.
   absl::Status SetTileRows(const Workpiece& wp, int32_t t0, int32_t t1,
                            bool heights_only = false);
 
