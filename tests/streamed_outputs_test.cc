@@ -109,6 +109,32 @@ void ExpectSame(const Written& a, const Written& b, const std::string& what) {
   EXPECT_EQ(a.summary.mesh_deviation, b.summary.mesh_deviation) << what;
 }
 
+// Stock() cut by Moves() with `scheme`, and its grid copied whole
+// (SurfaceGrid::FromWorkpiece).
+struct CutJob {
+  std::unique_ptr<Workpiece> wp;
+  SurfaceGrid grid;
+};
+absl::StatusOr<CutJob> CutStock(SchemeKind scheme) {
+  auto wp = Workpiece::Create(Stock(), scheme);
+  if (!wp.ok()) return wp.status();
+  if (auto applied = (*wp)->Apply(Moves()); !applied.ok()) {
+    return applied.status();
+  }
+  auto grid = SurfaceGrid::FromWorkpiece(**wp);
+  if (!grid.ok()) return grid.status();
+  return CutJob{*std::move(wp), *std::move(grid)};
+}
+
+// The tiles of wp that no move cut.
+int UntouchedTiles(const Workpiece& wp) {
+  int untouched = 0;
+  for (int32_t t = 0; t < wp.tiles_x() * wp.tiles_y(); ++t) {
+    untouched += !wp.TileAllocated(t);
+  }
+  return untouched;
+}
+
 // Tile rows of the workpiece, as the session's GetTiles gives them
 // (Workpiece::ReadTile of every tile of those rows).
 TileRowBands::Fill FillFrom(const Workpiece& wp) {
@@ -229,17 +255,11 @@ TEST(StreamedOutputsTest, BandsWriteTheWholeGridsFilesByteForByte) {
 // without the derivatives.
 TEST(StreamedOutputsTest, SetTileRowsWritesEveryNodeOfAResizedBand) {
   for (SchemeKind scheme : {SchemeKind::kTaylor, SchemeKind::kGuarded}) {
-    auto wp = Workpiece::Create(Stock(), scheme);
-    ASSERT_TRUE(wp.ok());
-    ASSERT_TRUE((*wp)->Apply(Moves()).ok());
-    const Workpiece& own = **wp;
-    auto grid = SurfaceGrid::FromWorkpiece(own);
-    ASSERT_TRUE(grid.ok());
-    int untouched = 0;
-    for (int32_t t = 0; t < own.tiles_x() * own.tiles_y(); ++t) {
-      untouched += !own.TileAllocated(t);
-    }
-    EXPECT_GT(untouched, 0) << "the test wants untouched tiles too";
+    auto job = CutStock(scheme);
+    ASSERT_TRUE(job.ok()) << job.status();
+    const Workpiece& own = *job->wp;
+    const SurfaceGrid* const grid = &job->grid;
+    EXPECT_GT(UntouchedTiles(own), 0) << "the test wants untouched tiles too";
     auto band = SurfaceGrid::Band(Stock(), scheme, 0, 1);
     ASSERT_TRUE(band.ok());
     const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -289,21 +309,15 @@ TEST(StreamedOutputsTest, SetTileRowsWritesEveryNodeOfAResizedBand) {
 // within a tile, across tiles and of the whole grid, untouched tiles too.
 TEST(StreamedOutputsTest, NodeHeightsAreTheBandsHeights) {
   for (SchemeKind scheme : {SchemeKind::kTaylor, SchemeKind::kGuarded}) {
-    auto wp = Workpiece::Create(Stock(), scheme);
-    ASSERT_TRUE(wp.ok());
-    ASSERT_TRUE((*wp)->Apply(Moves()).ok());
-    const Workpiece& own = **wp;
-    auto grid = SurfaceGrid::FromWorkpiece(own);
-    ASSERT_TRUE(grid.ok());
+    auto job = CutStock(scheme);
+    ASSERT_TRUE(job.ok()) << job.status();
+    const Workpiece& own = *job->wp;
+    const SurfaceGrid* const grid = &job->grid;
     InMemoryBands whole(*grid);
     auto scratch = SurfaceGrid::Band(Stock(), scheme, 0, 1);
     ASSERT_TRUE(scratch.ok());
     const int32_t nx = grid->nodes_x(), ny = Stock().ny;
     ASSERT_GT(ny, 2 * kTileSize);
-    int untouched = 0;
-    for (int32_t t = 0; t < own.tiles_x() * own.tiles_y(); ++t) {
-      untouched += !own.TileAllocated(t);
-    }
     for (const auto& [j0, j1] : std::vector<std::pair<int32_t, int32_t>>{
              {0, ny}, {3, 70}, {64, 64}, {63, 128}, {ny - 1, ny}}) {
       const size_t n = static_cast<size_t>(j1 - j0 + 1) * nx;
@@ -312,7 +326,7 @@ TEST(StreamedOutputsTest, NodeHeightsAreTheBandsHeights) {
       ReadNodeHeights(own, j0, j1, got.data());
       EXPECT_TRUE(got == want) << "rows " << j0 << ".." << j1;
     }
-    EXPECT_GT(untouched, 0) << "the test wants untouched tiles too";
+    EXPECT_GT(UntouchedTiles(own), 0) << "the test wants untouched tiles too";
   }
 }
 
