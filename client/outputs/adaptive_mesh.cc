@@ -373,22 +373,29 @@ void ForChunks(ThreadPool& pool, int64_t n,
 // n copies of v, written on every thread: a std::vector's value
 // initialisation wrote (and page-faulted in) every byte on one thread, a
 // serial step of the mesh (millions of leaves on large jobs).
+// n elements, unwritten, with room for `capacity` (reserved, not touched:
+// pages never written take no memory).
 template <typename T>
-UnfilledVector<T> Filled(ThreadPool& pool, int64_t n, T v,
-                         int64_t capacity = 0) {
+UnfilledVector<T> Unfilled(int64_t n, int64_t capacity = 0) {
   UnfilledVector<T> out;
   out.reserve(std::max(n, capacity));
   out.resize(n);
+  return out;
+}
+
+template <typename T>
+UnfilledVector<T> Filled(ThreadPool& pool, int64_t n, T v,
+                         int64_t capacity = 0) {
+  UnfilledVector<T> out = Unfilled<T>(n, capacity);
   FillOnEvery(pool, out.data(), n, v);
   return out;
 }
 
-// Capacity for the conforming passes' leaves beyond the first n: they
-// split a few percent of the leaves (cameo at 0.05 mm: 7,908 more than
-// its 995,012), and an array grown for the first pass's halves was copied
-// whole, on a machine whose page faults are slow the first pass's largest
-// serial step (83 of its 105 ms on 2 threads). Reserved, not touched:
-// pages that are never written take no memory.
+// Room in the per-leaf arrays of n leaves for the conforming passes'
+// halves: they split a few percent (cameo at 0.05 mm: 7,908 leaves more
+// than its 995,012). Made exactly n long, the arrays were copied whole to
+// grow for the first pass's halves: 83 of that pass's 105 ms serial step
+// on 2 threads, where page faults are slow.
 int64_t LeafCapacity(int64_t n) { return n + n / 16 + 4096; }
 
 // Room for at least n elements in *v, its elements copied on every thread
@@ -558,8 +565,7 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
         first[lv * n_trees + b + 1] = count[lv];
     });
     for (size_t k = 1; k < first.size(); ++k) first[k] += first[k - 1];
-    leaves.reserve(LeafCapacity(first.back()));
-    leaves.resize(first.back());
+    leaves = Unfilled<Leaf>(first.back(), LeafCapacity(first.back()));
     fit_dev.resize(first.back());
     pool.ParallelFor(n_trees, [&](int64_t b) {
       std::vector<TreeNode>& t = trees[b];
@@ -592,9 +598,8 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   // as a byte (shape); the rest are listed in ears, owned here (null
   // elsewhere) and freed when the leaf is split or listed. A vector a leaf
   // was 72 bytes and a malloc, zeroed on one thread.
-  UnfilledVector<uint8_t> shape;  // written by the first pass
-  shape.reserve(LeafCapacity(roots));
-  shape.resize(roots);
+  UnfilledVector<uint8_t> shape =  // written by the first pass
+      Unfilled<uint8_t>(roots, LeafCapacity(roots));
   struct EarLists {
     UnfilledVector<std::vector<P>*> at;
     ~EarLists() {
@@ -603,9 +608,8 @@ absl::StatusOr<TriangleMesh> SimplifyLatticeRows(
   } ears{Filled<std::vector<P>*>(pool, roots, nullptr, LeafCapacity(roots))};
   // Written by each pass for its work leaves before it is read (the first
   // pass's work is every leaf).
-  UnfilledVector<double> leaf_dev;
-  leaf_dev.reserve(LeafCapacity(roots));
-  leaf_dev.resize(roots);
+  UnfilledVector<double> leaf_dev =
+      Unfilled<double>(roots, LeafCapacity(roots));
   // Which lattice vertices are leaf corners (splits only add corners: a
   // leaf's corners are its halves').
   // Which lattice vertices the mesh keeps, a bit each (the plate's 400 M
