@@ -1115,6 +1115,21 @@ Workpiece::TileExtent Workpiece::Extent(int32_t t) const {
   return e;
 }
 
+void Workpiece::ReadTileHeights(int32_t t, int32_t j0, int32_t j1,
+                                double* out, int64_t stride) const {
+  const TileExtent e = Extent(t);
+  const Tile* tile = tiles_[t].get();
+  for (int32_t j = j0; j <= j1; ++j) {
+    double* const row = out + int64_t{j - j0} * stride;
+    if (tile == nullptr) {
+      std::fill_n(row, e.nx, spec().z_top);
+    } else {
+      std::memcpy(row, tile->w + (j - e.j0) * kTileSize,
+                  e.nx * sizeof(double));
+    }
+  }
+}
+
 void Workpiece::ReadTile(int32_t t, double* w, float* const d[5],
                          int32_t* owner) const {
   const TileExtent e = Extent(t);

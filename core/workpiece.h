@@ -343,6 +343,13 @@ class Workpiece {
   // (not cached). Thread-safe: a reader of many tiles (GetTiles) reads
   // them on the pool's threads at once.
   void ReadTile(int32_t t, double* w, float* const d[5], int32_t* owner) const;
+  // Copies the heights of grid rows [j0, j1] (inclusive, within tile t's
+  // extent) of tile t, its nx = Extent(t).nx nodes a row, to out + (j - j0)
+  // * stride: the same values as ReadTile's, straight into a caller's rows
+  // (a reader of a few rows of many tiles needs no tile-sized copy first).
+  // Thread-safe as ReadTile.
+  void ReadTileHeights(int32_t t, int32_t j0, int32_t j1, double* out,
+                       int64_t stride) const;
   // Computes the derivatives of the listed tiles (any order; unallocated
   // tiles and those already cached are skipped) in parallel on the pool,
   // and caches them for the reads that follow (ReadTile copies them, Node

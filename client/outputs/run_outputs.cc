@@ -61,6 +61,32 @@ class GridRows : public LatticeWindows {
       : grid_(grid), band_(std::move(band)) {}
   absl::StatusOr<const double*> Rows(int64_t j0, int64_t j1) override {
     const int32_t nx = band_.nodes_x();
+    // A window from a tile row's first row to at most kExtraRows rows into
+    // the next (the meshes' windows: 64 to 66 rows) is served from the held
+    // tile row, the next one's first rows put after its own: not copied
+    // (the full plate's adaptive mesh read its 400 M heights about five
+    // times).
+    const int64_t tr = j0 / kTileSize;
+    const int64_t extra = j1 - (j0 + kTileSize - 1);
+    if (j0 == tr * kTileSize && j1 >= j0 && extra <= kExtraRows &&
+        j1 < band_.nodes_y()) {
+      const UnfilledVector<double>* next = nullptr;
+      if (extra > 0) {
+        absl::StatusOr<UnfilledVector<double>*> n = TileRow(tr + 1);
+        if (!n.ok()) return n.status();
+        next = *n;
+      }
+      // Held after the next one: the ring of three keeps both.
+      absl::StatusOr<UnfilledVector<double>*> tile_row = TileRow(tr);
+      if (!tile_row.ok()) return tile_row.status();
+      UnfilledVector<double>& z = **tile_row;
+      if (extra > 0) {
+        const size_t own = static_cast<size_t>(kTileSize) * nx;
+        z.resize(own + extra * nx);  // within its capacity (TileRow)
+        std::copy_n(next->data(), extra * nx, z.data() + own);
+      }
+      return z.data();
+    }
     z_.resize(static_cast<size_t>(j1 - j0 + 1) * nx);
     // Each tile row's part copied on every thread (on one, the copy was a
     // serial step of the mesh), before the next tile row is read.
@@ -78,8 +104,13 @@ class GridRows : public LatticeWindows {
   }
 
  private:
-  absl::StatusOr<const UnfilledVector<double>*> TileRow(int64_t t) {
-    for (const auto& [held, z] : held_) {
+  // Rows of the next tile row a window may take (Rows).
+  static constexpr int64_t kExtraRows = 2;
+
+  // Tile row t's node rows (held: the last three read), with room for
+  // kExtraRows rows more (Rows).
+  absl::StatusOr<UnfilledVector<double>*> TileRow(int64_t t) {
+    for (auto& [held, z] : held_) {
       if (held == t) return &z;
     }
     const int32_t nx = band_.nodes_x();
@@ -88,6 +119,7 @@ class GridRows : public LatticeWindows {
     auto& [held, z] = held_[next_];
     next_ = (next_ + 1) % held_.size();
     held = -1;
+    z.reserve(static_cast<size_t>(kTileSize + kExtraRows) * nx);
     z.resize(static_cast<size_t>(j1 - j0 + 1) * nx);
     if (absl::Status st = grid_.ReadHeights(j0, j1, &band_, z.data());
         !st.ok()) {

@@ -170,12 +170,14 @@ void ReadNodeHeights(const Workpiece& wp, int32_t j0, int32_t j1, double* z) {
       }
       return;
     }
-    double w[kTileNodes];
-    wp.ReadTile(t, w, nullptr, nullptr);
+    // The rows wanted alone, straight into z (no tile-sized copy first, for
+    // the rows of a band that start or end inside a tile), then held to the
+    // top in place.
+    double* const first = z + int64_t{ja - j0} * nx + e.i0;
+    wp.ReadTileHeights(t, ja, jb, first, nx);
     for (int32_t j = ja; j <= jb; ++j) {
-      double* row = z + int64_t{j - j0} * nx + e.i0;
-      const double* in = w + int64_t{j - e.j0} * e.nx;
-      for (int32_t i = 0; i < e.nx; ++i) row[i] = std::min(in[i], z_top);
+      double* const row = first + int64_t{j - ja} * nx;
+      for (int32_t i = 0; i < e.nx; ++i) row[i] = std::min(row[i], z_top);
     }
   });
 }
