@@ -436,6 +436,45 @@ TEST(WorkpieceTilesTest, SmallCornerCutAllocatesOnlyItsTile) {
   }
 }
 
+// ReadTileHeights gives ReadTile's heights of the rows asked for, bit for
+// bit, at the caller's stride, and writes nothing between the rows; an
+// unallocated tile's rows are the top.
+TEST(WorkpieceTilesTest, TileRowHeightsAreReadTilesRows) {
+  auto wp = MakeWorkpiece(UnitStock(), SchemeKind::kGuarded);
+  // Inside tile 5 (nodes 64..127 both ways): rows offset from the tile's.
+  ASSERT_TRUE(
+      wp->Apply(std::vector<Move>{{{70, 80, 1}, {100, 90, -1}, 2}}).ok());
+  ASSERT_TRUE(wp->TileAllocated(5));
+  ASSERT_FALSE(wp->TileAllocated(wp->tile_count() - 1));
+  for (int32_t t : {5, wp->tile_count() - 1}) {
+    SCOPED_TRACE(t);
+    const Workpiece::TileExtent e = wp->Extent(t);
+    std::vector<double> whole(static_cast<size_t>(e.nx) * e.ny);
+    wp->ReadTile(t, whole.data(), nullptr, nullptr);
+    const int32_t j0 = e.j0 + 3, j1 = e.j0 + std::min(e.ny - 1, 40);
+    const int64_t stride = e.nx + 5;
+    const double kUnwritten = 12345.5;
+    std::vector<double> rows(static_cast<size_t>(j1 - j0 + 1) * stride,
+                             kUnwritten);
+    wp->ReadTileHeights(t, j0, j1, rows.data(), stride);
+    bool cut = false;
+    for (int32_t j = j0; j <= j1; ++j) {
+      for (int32_t i = 0; i < stride; ++i) {
+        const double got = rows[(j - j0) * stride + i];
+        if (i >= e.nx) {
+          EXPECT_EQ(got, kUnwritten) << i << " " << j;
+          continue;
+        }
+        const double want = whole[(j - e.j0) * e.nx + i];
+        EXPECT_EQ(std::bit_cast<uint64_t>(got), std::bit_cast<uint64_t>(want))
+            << i << " " << j;
+        cut = cut || want < UnitStock().z_top;
+      }
+    }
+    EXPECT_EQ(cut, t == 5);  // the cut tile's rows are not all the top
+  }
+}
+
 // A ball near a tile corner whose footprint's bounding box reaches nodes of
 // the next tile but whose disc does not: only the tile really cut is kept.
 TEST(WorkpieceTilesTest, BoundingBoxOverlapDoesNotAllocate) {
