@@ -205,8 +205,11 @@ bool WritePngFile(int width, int height, int channels,
       std::vector<uint8_t>& fb = filtered[k];
       fb.resize(static_cast<size_t>(r1 - r0) * (stride + 1));
       for (int r = r0; r < r1; ++r) {
+        // The row above: before `rows` for r = 0 (the last row of the
+        // group before), so a signed offset (a size_t one wraps).
         const uint8_t* prev =
-            y0 + r > 0 ? rows + (static_cast<ptrdiff_t>(r) - 1) * stride
+            y0 + r > 0 ? rows + (static_cast<ptrdiff_t>(r) - 1) *
+                                    static_cast<ptrdiff_t>(stride)
                        : nullptr;
         PaethRow(rows + r * stride, prev, stride, channels,
                  fb.data() + (r - r0) * (stride + 1));
