@@ -199,7 +199,8 @@ class LoopProfile {
   }
 
   // "swarf::Workpiece::Apply::{lambda(long)#3}": the function a lambda is
-  // in, and its number there.
+  // in, and its number there (GCC's spelling; clang's is "$_N", numbered in
+  // the file).
   static std::string BodyName(const std::function<void(int64_t)>& fn) {
     int status = 0;
     std::unique_ptr<char, void (*)(void*)> demangled(
@@ -214,8 +215,12 @@ class LoopProfile {
     }
     std::string name = full.substr(0, full.find('('));
     const size_t lambda = full.rfind("{lambda");
+    const size_t clang_lambda = full.rfind("::$");
     if (lambda != std::string::npos) {
       name += "::" + full.substr(lambda, full.find('}', lambda) - lambda + 1);
+    } else if (clang_lambda != std::string::npos) {
+      name += full.substr(clang_lambda, full.find(':', clang_lambda + 2) -
+                                            clang_lambda);
     }
     return name;
   }

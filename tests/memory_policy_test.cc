@@ -8,6 +8,7 @@
 #include <cstring>
 
 #include "gtest/gtest.h"
+#include "tests/sanitizers.h"
 
 #ifdef __GLIBC__
 #include <malloc.h>
@@ -17,7 +18,7 @@ namespace swarf {
 namespace {
 
 // glibc's allocator only: ASan brings its own.
-#if defined(__GLIBC__) && !defined(__SANITIZE_ADDRESS__)
+#if defined(__GLIBC__) && !defined(SWARF_TESTS_SANITIZED)
 // Bytes held in mapped chunks while a buffer of `bytes` is held, after one
 // of the same size was allocated and freed.
 size_t MappedWhileHeldAgain(size_t bytes) {
