@@ -33,11 +33,11 @@ demo: deps build
 	@echo "  surface.wrl (meshes), stats.json. The paper's tables: build/bin/swarf table"
 
 # Also a short run of each fuzzer (20 s, the ctest label "fuzz" of the
-# clang build), the three at once whatever JOBS is (each runs for a fixed
+# clang build), the four at once whatever JOBS is (each runs for a fixed
 # time); the corpus replays are part of the main ctest.
 test: deps build fuzz-build
 	cd $(BUILD) && ctest --output-on-failure --timeout 900 -j $(JOBS)
-	cd $(FUZZ_BUILD) && ctest --output-on-failure -j 3 -L '^fuzz$$'
+	cd $(FUZZ_BUILD) && ctest --output-on-failure -j 4 -L '^fuzz$$'
 
 # What a new user gets: `make test` in a fresh clone of the committed HEAD in
 # an empty temporary folder, nothing beside it (scripts/test-fresh). Long (a
