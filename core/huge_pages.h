@@ -14,14 +14,12 @@
 
 #include <cstddef>
 
+#include "core/sanitizers.h"
+
 // Defined in sanitizer (ASan) builds, which keep the sanitizer's operator
 // new and delete: core/huge_new.cc then replaces nothing.
-#if defined(__SANITIZE_ADDRESS__)
+#if defined(SWARF_ASAN)
 #define SWARF_SANITIZER_ALLOCATOR 1
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-#define SWARF_SANITIZER_ALLOCATOR 1
-#endif
 #endif
 
 namespace swarf {

@@ -8,7 +8,7 @@
 #include <cstring>
 
 #include "gtest/gtest.h"
-#include "tests/sanitizers.h"
+#include "core/sanitizers.h"
 
 #ifdef __GLIBC__
 #include <malloc.h>
@@ -18,7 +18,7 @@ namespace swarf {
 namespace {
 
 // glibc's allocator only: ASan brings its own.
-#if defined(__GLIBC__) && !defined(SWARF_TESTS_SANITIZED)
+#if defined(__GLIBC__) && !defined(SWARF_SANITIZED)
 // Bytes held in mapped chunks while a buffer of `bytes` is held, after one
 // of the same size was allocated and freed.
 size_t MappedWhileHeldAgain(size_t bytes) {

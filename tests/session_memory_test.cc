@@ -10,7 +10,7 @@
 
 #include "gtest/gtest.h"
 #include "server/session.h"
-#include "tests/sanitizers.h"
+#include "core/sanitizers.h"
 
 namespace swarf::server {
 namespace {
@@ -74,7 +74,7 @@ TEST(SessionMemoryTest, EstimateCoversTheSessionWithEveryTileCut) {
   // least their bytes), and no more than the estimate and the moves plus
   // what the process allocates once (the thread pool's stacks and
   // scratch, the move index): 4 MiB here.
-#if defined(SWARF_TESTS_SANITIZED)
+#if defined(SWARF_SANITIZED)
   GTEST_SKIP() << "resident memory is not measured under the sanitizers "
                   "(their shadow memory and allocator are not the program's)";
 #endif

@@ -38,7 +38,7 @@
 #include "core/valuation.h"
 #include "core/workpiece.h"
 #include "gtest/gtest.h"
-#include "tests/sanitizers.h"
+#include "core/sanitizers.h"
 
 namespace swarf::cli {
 namespace {
@@ -760,7 +760,7 @@ TEST(StreamedMarksTest, ErrorsNameTheFileAndLeaveNoSpool) {
 // 16 M-node default cap), every output: within 16 bytes a node + 1 GiB.
 // Skipped under the sanitizers (their shadow memory is not the program's).
 TEST(StreamedOutputsTest, LargeGridRunStaysWithinTheMemoryBound) {
-#if defined(SWARF_TESTS_SANITIZED)
+#if defined(SWARF_SANITIZED)
   GTEST_SKIP() << "peak memory is not measured under the sanitizers";
 #endif
   TempDir dir;
