@@ -3,7 +3,10 @@
 // XYZ files. Run: build/bin/swarf_parser_bench
 #include <benchmark/benchmark.h>
 
+#include <unistd.h>
+
 #include <cstdio>
+#include <cstdlib>
 #include <string>
 
 #include "gcode/toolpath.h"
@@ -175,6 +178,54 @@ void BM_SyntheticXyz(benchmark::State& state) {
 BENCHMARK(BM_SyntheticXyz)
     ->Name("Synthetic/xyz_1M_lines")
     ->Unit(benchmark::kMillisecond);
+
+// A program as `swarf run` takes it: read from a file, then parsed
+// (ReadToolpathFile). 4M straight lines (about 100 MB, as a tenth of the
+// 1000 mm plate's), written once to a temporary file; the file stays in the
+// page cache, as a program just written by a CAM post does.
+// SWARF_PARSER_BENCH_FILE=path reads that program instead (the plate's
+// plate.nc, a corpus job).
+void BM_StraightGcodeFile(benchmark::State& state) {
+  static const std::string path = [] {
+    if (const char* given = std::getenv("SWARF_PARSER_BENCH_FILE")) {
+      return std::string(given);
+    }
+    char name[] = "/tmp/swarf_parser_bench_XXXXXX";
+    const int fd = mkstemp(name);
+    if (fd < 0) return std::string();
+    const std::string text = StraightGcode(4'000'000);
+    const bool ok =
+        write(fd, text.data(), text.size()) == static_cast<ssize_t>(text.size());
+    close(fd);
+    if (!ok) return std::string();
+    static const std::string kept = name;
+    std::atexit([] { std::remove(kept.c_str()); });
+    return kept;
+  }();
+  if (path.empty()) {
+    state.SkipWithError("cannot write the temporary program");
+    return;
+  }
+  int64_t points = 0;
+  for (auto _ : state) {
+    absl::StatusOr<Toolpath> tp = ReadToolpathFile(path);
+    if (!tp.ok()) {
+      state.SkipWithError(std::string(tp.status().message()).c_str());
+      return;
+    }
+    points = tp->point_count();
+    benchmark::DoNotOptimize(tp);
+  }
+  state.counters["points/s"] = benchmark::Counter(
+      static_cast<double>(points) * static_cast<double>(state.iterations()),
+      benchmark::Counter::kIsRate);
+  state.counters["points"] = static_cast<double>(points);
+}
+BENCHMARK(BM_StraightGcodeFile)
+    ->Name("File/gcode_straight_4M_lines")
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime();
 
 }  // namespace
 }  // namespace swarf::gcode
