@@ -6,6 +6,7 @@
 #include <charconv>
 #include <cstdio>
 #include <cstring>
+#include <iterator>
 #include <limits>
 #include <system_error>
 
@@ -35,6 +36,21 @@ std::string GName(int32_t code10) {
                           : absl::StrCat("G", code10 / 10, ".", code10 % 10);
 }
 
+namespace {
+
+// Digits (leading zeros too) that an integer mantissa takes exactly
+// (10^19 < 2^64): past this many, from_chars.
+constexpr int kMaxMantissaDigits = 19;
+
+// 10^k for k in [0, kMaxMantissaDigits]: each exact in a double (up to
+// 10^22: 5^22 < 2^53).
+constexpr double kExactPow10[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,
+                                  1e7,  1e8,  1e9,  1e10, 1e11, 1e12, 1e13,
+                                  1e14, 1e15, 1e16, 1e17, 1e18, 1e19};
+static_assert(std::size(kExactPow10) == kMaxMantissaDigits + 1);
+
+}  // namespace
+
 // A G-code number: [+-] digits [. digits] with at least one digit; blanks
 // may separate it from its letter. No exponent: E is a word in G-code.
 // Returns the end of the number, or null when there is none.
@@ -45,15 +61,40 @@ const char* ScanNumber(const char* p, const char* end, double* out) {
     negative = *p == '-';
     ++p;
   }
+  // The digits as an integer m as they are scanned (modulo 2^64: exact
+  // while there are at most kMaxMantissaDigits of them).
+  uint64_t m = 0;
+  const auto digits = [&m](const char* d, const char* end) {
+    for (; d < end; ++d) {
+      const auto v =
+          static_cast<uint64_t>(static_cast<unsigned char>(*d)) - uint64_t{'0'};
+      if (v > 9) break;
+      m = m * 10 + v;
+    }
+    return d;
+  };
   const char* first = p;
-  while (p < end && IsDigit(*p)) ++p;
-  bool digits = p != first;
+  p = digits(p, end);
+  const char* int_end = p;
+  const char* frac = p;
   if (p < end && *p == '.') {
-    const char* frac = ++p;
-    while (p < end && IsDigit(*p)) ++p;
-    digits = digits || p != frac;
+    frac = ++p;
+    p = digits(p, end);
   }
-  if (!digits) return nullptr;
+  const int64_t int_digits = int_end - first, frac_digits = p - frac;
+  if (int_digits + frac_digits == 0) return nullptr;
+  // Clinger's fast path: with at most kMaxMantissaDigits digits, m is the
+  // digits' integer exactly; when it is an exact double (at most 2^53), as
+  // 10^frac_digits is, one IEEE division rounds their quotient correctly:
+  // the double from_chars gives, bit for bit, at a fraction of its cost
+  // (from_chars was 11-17% of the 1000 mm plate's parse). Nearly every
+  // number a CAM post writes takes this path.
+  if (int_digits + frac_digits <= kMaxMantissaDigits &&
+      m <= (uint64_t{1} << 53)) {
+    *out = static_cast<double>(m) / kExactPow10[frac_digits];
+    if (negative) *out = -*out;
+    return p;
+  }
   // from_chars: no locale, no allocation, correctly rounded (fast_float in
   // libstdc++ 12); it rejects a leading '+', hence the sign is ours.
   const auto r = std::from_chars(first, p, *out, std::chars_format::fixed);
