@@ -825,11 +825,11 @@ const char* ScanNumberByFromChars(const char* p, const char* end, double* out) {
   bool negative = false;
   if (p < end && (*p == '+' || *p == '-')) negative = *p++ == '-';
   const char* first = p;
-  while (p < end && *p >= '0' && *p <= '9') ++p;
+  while (p < end && gcode::IsDigit(*p)) ++p;
   bool digits = p != first;
   if (p < end && *p == '.') {
     const char* frac = ++p;
-    while (p < end && *p >= '0' && *p <= '9') ++p;
+    while (p < end && gcode::IsDigit(*p)) ++p;
     digits = digits || p != frac;
   }
   if (!digits) return nullptr;
