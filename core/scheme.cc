@@ -644,8 +644,8 @@ void LiftTerms(ElementCorners* e, int k) {
 
 }  // namespace
 
-void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4],
-                    const bool* sure) {
+void ClassifyGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4],
+                     const bool* sure) {
   const CornerXY c = CornersOf(*e);
   ElementCorners::Guard& g = e->guard;
   const double hx = e->x1 - e->x0, hy = e->y1 - e->y0;
@@ -703,9 +703,16 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4],
     }
   }
   g.smooth = smooth;
+}
+
+void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4],
+                    const bool* sure) {
+  ClassifyGuarded(e, trust, sure);
   // Elsewhere the exact surface: every move that can be the lowest in the
   // element (an uncut one too: a cut may pass between its nodes).
-  if (!smooth && e->surfaces != nullptr) e->surfaces->FillCandidates(e);
+  if (!e->guard.smooth && e->surfaces != nullptr) {
+    e->surfaces->FillCandidates(e);
+  }
 }
 
 void SetElementFrame(const GridGeometry& grid, double z_top, int32_t ei,

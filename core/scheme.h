@@ -200,6 +200,12 @@ struct PatchTrustRegion;
 void PrepareGuarded(ElementCorners* e,
                     const PatchTrustRegion* const trust[4] = nullptr,
                     const bool* sure = nullptr);
+// PrepareGuarded less the candidates: sets e->guard alone, for a caller
+// that does not reconstruct an element that is not smooth (the valuation:
+// there the reconstruction is the exact surface, its error 0).
+void ClassifyGuarded(ElementCorners* e,
+                     const PatchTrustRegion* const trust[4] = nullptr,
+                     const bool* sure = nullptr);
 // Patches that disagree with a corner in their reach by more than this
 // fraction of the element's size mark the element as not smooth.
 inline constexpr double kGuardConsistency = 0.05;

@@ -855,7 +855,19 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             const bool sure[4] = {sure_trust[at] != 0, sure_trust[at + 1] != 0,
                                   sure_trust[at + region_w + 1] != 0,
                                   sure_trust[at + region_w] != 0};
-            PrepareGuarded(&el.e, trust, sure);
+            ClassifyGuarded(&el.e, trust, sure);
+            // Not smooth: there the guarded reconstruction is the exact
+            // surface (the minimum over the element's candidates, every
+            // move that can be the lowest in it, by the same heights as
+            // the exact surface below), so every sample's error is exactly
+            // 0: counted, not sampled, as in untouched stock (no sum,
+            // maximum or map cell changes for a 0). Its neighbours take
+            // none of its points (it is not among the row's elements).
+            if (!el.e.guard.smooth && el.e.surfaces != nullptr) {
+              p.n += count;
+              --row_elements;
+              continue;
+            }
           } else {
             el.e = wp.CornersOf(ei, ej, corner);
           }

@@ -11,6 +11,7 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
+#include "core/cutter/sweep.h"
 #include "core/instances.h"
 #include "core/thread_pool.h"
 #include "core/workpiece.h"
@@ -174,6 +175,9 @@ void ForEachSample(const Workpiece& wp, const std::vector<Move>& moves,
                    int32_t ei, int32_t ej, F f, int n = 5,
                    const Rect* region = nullptr) {
   const ElementCorners e = wp.Corners(ei, ej);
+  std::vector<Sweep> sweeps;
+  sweeps.reserve(moves.size());
+  for (const Move& m : moves) sweeps.emplace_back(m.from, m.to, m.cutter);
   for (int sj = 0; sj < n; ++sj) {
     for (int si = 0; si < n; ++si) {
       if ((si == 0 || si == n - 1) && (sj == 0 || sj == n - 1)) continue;
@@ -181,9 +185,8 @@ void ForEachSample(const Workpiece& wp, const std::vector<Move>& moves,
       const double y = e.y0 + (e.y1 - e.y0) * sj / (n - 1);
       if (region != nullptr && !region->Contains(x, y)) continue;
       double exact = wp.spec().z_top;
-      for (const Move& m : moves) {
-        exact = std::min(exact,
-                         BallSweep(m.from, m.to, m.cutter.radius).Height(x, y));
+      for (const Sweep& sweep : sweeps) {
+        exact = std::min(exact, sweep.Height(x, y));
       }
       f(x, y, std::fabs(wp.scheme().Reconstruct(e, x, y) - exact));
     }
@@ -501,6 +504,58 @@ TEST(MeasureErrorTest, UntouchedBinsCountedNotSampledSameBits) {
       }
     }
     EXPECT_EQ(MeasureError(*wp, in_region)->samples, want);
+  }
+}
+
+// Short moves of `cutter` at random over [-2, 32] x [-2, 22], their tips
+// from 1 mm above the top to 1.5 mm below it: plunges, walls and rims that
+// leave many elements not smooth for the guarded scheme.
+std::vector<Move> ShapeMoves(uint64_t seed, const Cutter& cutter) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> ux(-2, 32), uy(-2, 22), uz(-1.5, 1),
+      ud(-3, 3);
+  std::vector<Move> moves;
+  for (int k = 0; k < 60; ++k) {
+    const Vec3 a{ux(rng), uy(rng), uz(rng)};
+    moves.push_back({a, {a.x + ud(rng), a.y + ud(rng), uz(rng)}, cutter});
+  }
+  return moves;
+}
+
+// Where an element is not smooth, the guarded reconstruction is the exact
+// surface (its candidates' minimum): every sample's error there is exactly
+// 0 against the exact surface taken plainly over every move, for every
+// cutter shape. The valuation counts those samples without evaluating
+// them, and its figures and map are still the serial reference's, bit for
+// bit.
+TEST(MeasureErrorTest, GuardedExactElementsCountedNotSampledSameBits) {
+  const StockSpec spec{0, 0, 30, 20, 0, 120, 80};
+  const Cutter cutters[] = {Cutter::Ball(1.2), Cutter::Flat(1.5),
+                            Cutter::BullNose(2, 0.5), Cutter::Cone(2, 30, 0.1),
+                            Cutter::TaperedBall(2, 0.4, 10)};
+  for (const Cutter& cutter : cutters) {
+    SCOPED_TRACE(absl::StrCat("cutter kind ", static_cast<int>(cutter.kind)));
+    const std::vector<Move> moves = ShapeMoves(11, cutter);
+    auto wp = Cut(spec, SchemeKind::kGuarded, moves);
+    int64_t exact_elements = 0;
+    for (int32_t ej = 0; ej < spec.ny; ++ej) {
+      for (int32_t ei = 0; ei < spec.nx; ++ei) {
+        if (wp->Corners(ei, ej).guard.smooth) continue;
+        ++exact_elements;
+        ForEachSample(*wp, moves, ei, ej, [&](double x, double y, double err) {
+          EXPECT_EQ(err, 0) << "at (" << x << ", " << y << ")";
+        });
+      }
+    }
+    // Enough of them to matter, and not all.
+    EXPECT_GT(exact_elements, spec.nx * spec.ny / 20);
+    EXPECT_LT(exact_elements, spec.nx * spec.ny);
+    ValuationOptions opt;
+    opt.map_cols = 37;
+    opt.map_rows = 23;
+    const ErrorStats got = *MeasureError(*wp, opt);
+    ExpectSameStats(got, SerialReference(*wp, moves, spec, opt));
+    EXPECT_GT(got.max_error, 1e-3);
   }
 }
 
