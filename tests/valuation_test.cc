@@ -336,6 +336,20 @@ void ExpectSameStats(const ErrorStats& got, const ErrorStats& want,
   }
 }
 
+// MeasureError's figures with a cols x rows map, checked against the serial
+// reference's, bit for bit.
+ErrorStats MeasuredAsTheReference(const Workpiece& wp,
+                                  const std::vector<Move>& moves,
+                                  const StockSpec& spec, int32_t cols,
+                                  int32_t rows) {
+  ValuationOptions opt;
+  opt.map_cols = cols;
+  opt.map_rows = rows;
+  const ErrorStats got = *MeasureError(wp, opt);
+  ExpectSameStats(got, SerialReference(wp, moves, spec, opt));
+  return got;
+}
+
 // Any pool gives the same bits: statistics, place of the max and map. And
 // they equal a plain serial loop that takes the exact surface over every
 // move (no corner-owner bound, no skipped moves, scalar Height) and sums
@@ -453,12 +467,7 @@ TEST(MeasureErrorTest, SlopedFinishingIsTheSerialReferences) {
   for (SchemeKind scheme : {SchemeKind::kZmap, SchemeKind::kGuarded}) {
     SCOPED_TRACE(GetScheme(scheme).name());
     auto wp = Cut(spec, scheme, moves);
-    ValuationOptions opt;
-    opt.map_cols = 7;
-    opt.map_rows = 5;
-    const ErrorStats got = *MeasureError(*wp, opt);
-    ExpectSameStats(got, SerialReference(*wp, moves, spec, opt));
-    EXPECT_GT(got.max_error, 1e-4);
+    EXPECT_GT(MeasuredAsTheReference(*wp, moves, spec, 7, 5).max_error, 1e-4);
   }
 }
 
@@ -550,12 +559,7 @@ TEST(MeasureErrorTest, GuardedExactElementsCountedNotSampledSameBits) {
     // Enough of them to matter, and not all.
     EXPECT_GT(exact_elements, spec.nx * spec.ny / 20);
     EXPECT_LT(exact_elements, spec.nx * spec.ny);
-    ValuationOptions opt;
-    opt.map_cols = 37;
-    opt.map_rows = 23;
-    const ErrorStats got = *MeasureError(*wp, opt);
-    ExpectSameStats(got, SerialReference(*wp, moves, spec, opt));
-    EXPECT_GT(got.max_error, 1e-3);
+    EXPECT_GT(MeasuredAsTheReference(*wp, moves, spec, 37, 23).max_error, 1e-3);
   }
 }
 
