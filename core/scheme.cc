@@ -399,7 +399,7 @@ GuardedValue Guarded(const ElementCorners& e, double x, double y) {
   const CornerXY c = CornersOf(e);
   GuardedValue v;
   v.w = e.z_top;
-  if (e.guard.smooth || e.surfaces == nullptr) {
+  if (!GuardedIsExact(e)) {
     bool any = false;
     bool in[4];
     for (int k = 0; k < 4; ++k) {
@@ -710,9 +710,7 @@ void PrepareGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4],
   ClassifyGuarded(e, trust, sure);
   // Elsewhere the exact surface: every move that can be the lowest in the
   // element (an uncut one too: a cut may pass between its nodes).
-  if (!e->guard.smooth && e->surfaces != nullptr) {
-    e->surfaces->FillCandidates(e);
-  }
+  if (GuardedIsExact(*e)) e->surfaces->FillCandidates(e);
 }
 
 void SetElementFrame(const GridGeometry& grid, double z_top, int32_t ei,

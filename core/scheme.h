@@ -200,6 +200,12 @@ struct PatchTrustRegion;
 void PrepareGuarded(ElementCorners* e,
                     const PatchTrustRegion* const trust[4] = nullptr,
                     const bool* sure = nullptr);
+// Whether the guarded reconstruction of e (prepared, or classified below)
+// is the exact surface: the minimum of the top and of e's candidates'
+// heights, where e is not smooth and has surfaces.
+inline bool GuardedIsExact(const ElementCorners& e) {
+  return !e.guard.smooth && e.surfaces != nullptr;
+}
 // PrepareGuarded less the candidates: sets e->guard alone, for a caller
 // that does not reconstruct an element that is not smooth (the valuation:
 // there the reconstruction is the exact surface, its error 0).

@@ -863,7 +863,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             // 0: counted, not sampled, as in untouched stock (no sum,
             // maximum or map cell changes for a 0). Its neighbours take
             // none of its points (it is not among the row's elements).
-            if (!el.e.guard.smooth && el.e.surfaces != nullptr) {
+            if (GuardedIsExact(el.e)) {
               p.n += count;
               --row_elements;
               continue;
