@@ -1383,40 +1383,37 @@ bool TriplePoint(const Workpiece& wp, int32_t a_id, int32_t b_id, int32_t c_id,
 
 }  // namespace
 
-void ProjectOntoExactCrease(const Workpiece& wp,
-                            const std::array<int32_t, 2>& owners,
-                            double max_step, double t1, Vec3* v,
-                            double* angle_deg) {
-  // Newton on d = S_a - S_b along its gradient (the nearest point of the
-  // crease, to first order); each step at most max_step, so a vertex never
-  // jumps to another crease of the same two surfaces.
-  double x = v->x, y = v->y;
+namespace {
+
+// A vertex's Newton steps onto the crease (ProjectOntoExactCrease): where
+// they converge, the point and both surfaces' jets there.
+struct CreasePoint {
+  double x = 0, y = 0;
+  SurfaceJet a, b;
+};
+
+// Newton on d = S_a - S_b along its gradient (the nearest point of the
+// crease, to first order) from v; each step at most max_step, so a vertex
+// never jumps to another crease of the same two surfaces. False where it
+// fails (the vertex stays where the patches put it).
+bool NewtonOntoCrease(const Workpiece& wp, const std::array<int32_t, 2>& owners,
+                      double max_step, double t1, const Vec3& v,
+                      CreasePoint* out) {
+  double x = v.x, y = v.y;
   SurfaceJet a, b;
   for (int it = 0; it < 16; ++it) {
     if (!ExactSurface(wp, owners[0], x, y, &a) ||
         !ExactSurface(wp, owners[1], x, y, &b)) {
-      return;
+      return false;
     }
     const double d = a.w - b.w;
     if (std::fabs(d) <= t1) {
-      // On the crease of a and b; where a third surface lies below it, the
-      // vertex is a junction: where the three meet.
-      double w;
-      const int32_t c = LowestMove(wp, x, y, std::min(a.w, b.w) - t1, &w);
-      if (w < std::min(a.w, b.w) - t1 && c != owners[0] && c != owners[1] &&
-          !TriplePoint(wp, owners[0], owners[1], c, max_step, t1, &x, &y, &a,
-                       &b)) {
-        return;
-      }
-      v->x = x;
-      v->y = y;
-      v->z = std::min(a.w, wp.spec().z_top);
-      *angle_deg = NormalAngle(a.wx, a.wy, b.wx, b.wy) * 180 / std::numbers::pi;
-      return;
+      *out = {x, y, a, b};
+      return true;
     }
     const double gx = a.wx - b.wx, gy = a.wy - b.wy;
     const double g2 = gx * gx + gy * gy;
-    if (!(g2 > 0)) return;
+    if (!(g2 > 0)) return false;
     double sx = -d * gx / g2, sy = -d * gy / g2;
     const double len = std::hypot(sx, sy);
     if (len > max_step) {
@@ -1425,9 +1422,117 @@ void ProjectOntoExactCrease(const Workpiece& wp,
     }
     x += sx;
     y += sy;
-    if (std::hypot(x - v->x, y - v->y) > 2 * max_step) return;  // diverged
+    if (std::hypot(x - v.x, y - v.y) > 2 * max_step) return false;  // diverged
   }
-  // Not converged: the vertex stays where the patches put it.
+  return false;  // not converged
+}
+
+// The cap of the junction test at a crease point: a third surface below it
+// makes the point a junction.
+double JunctionCap(const CreasePoint& p, double t1) {
+  return std::min(p.a.w, p.b.w) - t1;
+}
+
+// Puts the vertex on crease point p, given the move lowest there below
+// JunctionCap (c, at height w: LowestMove's): where a third surface lies
+// below the crease, at the junction (where the three meet), else left
+// unchanged where that fails.
+void SettleOnCrease(const Workpiece& wp, const std::array<int32_t, 2>& owners,
+                    double max_step, double t1, CreasePoint p, int32_t c,
+                    double w, Vec3* v, double* angle_deg) {
+  if (w < JunctionCap(p, t1) && c != owners[0] && c != owners[1] &&
+      !TriplePoint(wp, owners[0], owners[1], c, max_step, t1, &p.x, &p.y, &p.a,
+                   &p.b)) {
+    return;
+  }
+  v->x = p.x;
+  v->y = p.y;
+  v->z = std::min(p.a.w, wp.spec().z_top);
+  *angle_deg =
+      NormalAngle(p.a.wx, p.a.wy, p.b.wx, p.b.wy) * 180 / std::numbers::pi;
+}
+
+}  // namespace
+
+void ProjectOntoExactCrease(const Workpiece& wp,
+                            const std::array<int32_t, 2>& owners,
+                            double max_step, double t1, Vec3* v,
+                            double* angle_deg) {
+  CreasePoint p;
+  if (!NewtonOntoCrease(wp, owners, max_step, t1, *v, &p)) return;
+  double w;
+  const int32_t c = LowestMove(wp, p.x, p.y, JunctionCap(p, t1), &w);
+  SettleOnCrease(wp, owners, max_step, t1, p, c, w, v, angle_deg);
+}
+
+void ProjectOntoExactCreases(const Workpiece& wp, MarkPolyline* poly,
+                             uint32_t first, uint32_t end, double max_step,
+                             double t1) {
+  constexpr uint32_t kMost = 8;
+  CreasePoint points[kMost];
+  int32_t bins[kMost];
+  const GridGeometry& grid = wp.grid();
+  const MoveIndex& index = wp.index();
+  for (uint32_t k0 = first; k0 < end; k0 += kMost) {
+    const uint32_t n = std::min(kMost, end - k0);
+    // Each vertex's Newton steps, and the bin of the point they reach
+    // (-1: none, or off the grid: LowestMove answers alone).
+    int32_t bin = -1, in_bin = 0;
+    Rect box;
+    double cap = 0;
+    for (uint32_t q = 0; q < n; ++q) {
+      const uint32_t k = k0 + q;
+      bins[q] = -1;
+      if (!NewtonOntoCrease(wp, poly->vertex_owners[k], max_step, t1,
+                            poly->vertices[k], &points[q])) {
+        continue;
+      }
+      const CreasePoint& p = points[q];
+      if (!grid.bounds().Contains(p.x, p.y)) {
+        bins[q] = -2;
+        continue;
+      }
+      bins[q] = index.BinOfElement(grid.ElementX(p.x), grid.ElementY(p.y));
+      // The first bin's points share one junction test (mostly all: runs
+      // of a crease's vertices in one bin; the Newton steps move them by
+      // up to two elements).
+      if (bin < 0) bin = bins[q];
+      if (bins[q] != bin) continue;
+      const double c = JunctionCap(p, t1);
+      if (in_bin++ == 0) {
+        box = Rect{p.x, p.y, p.x, p.y};
+        cap = c;
+      } else {
+        box.x0 = std::min(box.x0, p.x);
+        box.x1 = std::max(box.x1, p.x);
+        box.y0 = std::min(box.y0, p.y);
+        box.y1 = std::max(box.y1, p.y);
+        cap = std::max(cap, c);
+      }
+    }
+    // A vertex's own test costs as much as the box's: taken together
+    // for two or more.
+    thread_local NearMoves near;
+    const bool shared = in_bin >= 2;
+    if (shared) wp.sweeps().MovesNear(bin, box, cap, &near);
+    for (uint32_t q = 0; q < n; ++q) {
+      if (bins[q] == -1) continue;
+      const uint32_t k = k0 + q;
+      const CreasePoint& p = points[q];
+      double w;
+      int32_t c;
+      if (shared && bins[q] == bin) {
+        // LowestMove's answer, as LowestAt's (MoveSweeps::LowestNear).
+        int32_t id = -1;
+        w = wp.sweeps().LowestNear(near, p.x, p.y, JunctionCap(p, t1), &id);
+        c = id >= 0 ? id : kStockTopOwner;
+      } else {
+        c = LowestMove(wp, p.x, p.y, JunctionCap(p, t1), &w);
+      }
+      SettleOnCrease(wp, poly->vertex_owners[k], max_step, t1, p, c, w,
+                     &poly->vertices[k], &poly->angle_deg[k]);
+    }
+  }
 }
 
 absl::Status FindCuttingMarks(
@@ -1579,28 +1684,30 @@ absl::Status FindCuttingMarks(
   // not the crease's shape; next to a junction, up to the half element by
   // which a junction may leave its element.
   const double h = std::fmin(grid.dx(), grid.dy());
-  // A vertex of a polyline chained: lifted and projected as its scheme's
-  // marks are. Vertices are independent, so a window's polylines are
-  // finished a run of vertices at a time: a few long creases (a plate's
-  // passes, thousands of vertices each) kept as many threads busy as
-  // there were polylines.
-  auto finish_vertex = [&](MarkPolyline& p, size_t k) {
+  // Vertices [first, end) of a polyline chained: lifted and projected as
+  // its scheme's marks are. Vertices are independent, so a window's
+  // polylines are finished a run of vertices at a time: a few long creases
+  // (a plate's passes, thousands of vertices each) kept as many threads
+  // busy as there were polylines.
+  auto finish_run = [&](MarkPolyline& p, uint32_t first, uint32_t end) {
     if (wp.scheme().kind() == SchemeKind::kGuarded) {
       // A crease lies on both owners' surfaces: never below either's lowest
       // point (patches met far from their nodes can cross lower): the
       // owner's lowest tip, ReachOf(...).z_low, without building its reach.
-      for (int32_t id : p.vertex_owners[k]) {
-        if (id < 0 || id >= wp.move_count()) continue;
-        const Move m = wp.move(id);
-        p.vertices[k].z = std::max(p.vertices[k].z, std::min(m.from.z, m.to.z));
+      for (uint32_t k = first; k < end; ++k) {
+        for (int32_t id : p.vertex_owners[k]) {
+          if (id < 0 || id >= wp.move_count()) continue;
+          const Move m = wp.move(id);
+          p.vertices[k].z =
+              std::max(p.vertices[k].z, std::min(m.from.z, m.to.z));
+        }
       }
     }
     // Sessions whose reconstruction uses the exact surfaces have their
     // marks on the exact creases too.
     if (wp.scheme().kind() == SchemeKind::kExact ||
         wp.scheme().kind() == SchemeKind::kGuarded) {
-      ProjectOntoExactCrease(wp, p.vertex_owners[k], h, s.t1, &p.vertices[k],
-                             &p.angle_deg[k]);
+      ProjectOntoExactCreases(wp, &p, first, end, h, s.t1);
     }
   };
   // A chained polyline waiting to be handed on, finished or not yet.
@@ -1659,9 +1766,7 @@ absl::Status FindCuttingMarks(
         static_cast<int64_t>(items.size()) - 1, [&](int64_t i) {
           for (size_t r = items[i]; r < items[i + 1]; ++r) {
             MarkPolyline& p = chained[runs[r].polyline]->p;
-            for (uint32_t k = runs[r].first; k < runs[r].end; ++k) {
-              finish_vertex(p, k);
-            }
+            finish_run(p, runs[r].first, runs[r].end);
           }
         });
     for (Ready* r : chained) r->finished = true;

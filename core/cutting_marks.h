@@ -184,6 +184,13 @@ void ProjectOntoExactCrease(const Workpiece& wp,
                             const std::array<int32_t, 2>& owners,
                             double max_step, double t1, Vec3* v,
                             double* angle_deg);
+// ProjectOntoExactCrease for vertices [first, end) of *p (their
+// vertex_owners, vertices and angle_deg), bit for bit, with the junction
+// tests of the vertices that reach one move bin taken together
+// (MoveSweeps::MovesNear): for a run of a crease's vertices.
+void ProjectOntoExactCreases(const Workpiece& wp, MarkPolyline* p,
+                             uint32_t first, uint32_t end, double max_step,
+                             double t1);
 
 // Distance (mm, in XY) from (x, y) to the exact crease between the surfaces
 // of moves a and b (-1: the stock top), to first order:

@@ -1337,14 +1337,19 @@ constexpr size_t kReachBlock = 16;
 // it (FootprintGap::Misses). The point is widened by FootprintGap's slack
 // (and Misses takes each gap less it again), against the rounding of these
 // float values. So no move this rejects is below cap at the point, nor
-// below any w <= cap: the exact tests would find none of them lower (ExactSchemeTest.LowestAtAtTheEdgeOfTheFootprint). A block's
-// union passes where any of its moves does: its box holds theirs, its z_r
-// is no larger and its r2 no smaller, so its reach no smaller.
+// below any w <= cap: the exact tests would find none of them lower
+// (ExactSchemeTest.LowestAtAtTheEdgeOfTheFootprint). A block's union passes
+// where any of its moves does: its box holds theirs, its z_r is no larger and
+// its r2 no smaller, so its reach no smaller.
+// `area` is the point so widened (SlackAbout), or for MovesNear a box. Each
+// comparison only passes more lanes for a larger area or a higher cap (the
+// gaps shrink, the reach grows), so a lane that passes at a point of a box
+// below a cap no higher passes over the box.
 SWARF_TARGET_CLONES
-void MayBeBelow(const ReachLanes& b, size_t q0, size_t n, double x, double y,
-                double cap, uint8_t* __restrict pass) {
-  constexpr double kSlack = FootprintGap::kSlack;
-  const Rect point{x - kSlack, y - kSlack, x + kSlack, y + kSlack};
+void MayBeBelowIn(const ReachLanes& b, size_t q0, size_t n, const Rect& area,
+                  double cap, uint8_t* __restrict pass) {
+  // A copy: read through the reference, the loop did not vectorize.
+  const Rect point = area;
   const float* __restrict x0 = b.x0.data() + q0;
   const float* __restrict x1 = b.x1.data() + q0;
   const float* __restrict y0 = b.y0.data() + q0;
@@ -1362,6 +1367,13 @@ void MayBeBelow(const ReachLanes& b, size_t q0, size_t n, double x, double y,
     // && (not &): GCC 12 vectorizes this form, not the other.
     pass[q] = (beyond == 0 && double{low[q]} < cap) ? 1 : 0;
   }
+}
+
+// The rectangle MayBeBelowIn tests for (x, y): the point widened by
+// FootprintGap's slack.
+Rect SlackAbout(double x, double y) {
+  constexpr double kSlack = FootprintGap::kSlack;
+  return Rect{x - kSlack, y - kSlack, x + kSlack, y + kSlack};
 }
 
 // Moves' tips, radii and whether each is swept as a ball (1 or 0), a chunk
@@ -1499,41 +1511,47 @@ const MoveBinReach* MoveSweeps::BinReachOf(int32_t bin) const {
   return &b;
 }
 
+// Inlined: a call a move passed cost about 4% of LowestAt on
+// BM_PlateMarks.
+[[gnu::always_inline]] inline void MoveSweeps::TryLower(uint32_t k, double x,
+                                                        double y, double* w,
+                                                        int32_t* lowest,
+                                                        Move* scratch) const {
+  const MoveView m = ViewAt(k, scratch);
+  if (!(std::min(m.from->z, m.to->z) < *w)) return;
+  // A ball's height is at least this bound (a projection and two roots,
+  // from the move alone): on the 30 mm plate it rules out 5 in 6 of the
+  // moves the reach passes, for less than half of what their footprints
+  // and heights cost. Not below w, the height is not either.
+  if (SweptAsBall(*m.cutter) &&
+      !(BallHeightLowerBound(*m.from, *m.to, m.cutter->radius, x, y) < *w)) {
+    return;
+  }
+  // Beyond its footprint below w a move is not below w.
+  if (FootprintSurelyMisses(*m.from, *m.to, *m.cutter, {x, y, x, y}, *w)) {
+    return;
+  }
+  const std::optional<Rect> b = FootprintBounds(*m.from, *m.to, *m.cutter, *w);
+  if (!b.has_value() || !b->Contains(x, y)) return;
+  const double h = Height(static_cast<int32_t>(k), x, y);
+  if (h < *w) {
+    *w = h;
+    *lowest = static_cast<int32_t>(k);
+  }
+}
+
 double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
                             double cap, int32_t* id) const {
   double w = cap;
   int32_t lowest = -1;
   Move scratch;
-  // The exact tests, in the bin's order. Inlined: a call a move passed
-  // cost about 4% of LowestAt on BM_PlateMarks.
-  auto try_move = [&](uint32_t k) __attribute__((always_inline)) {
-    const MoveView m = ViewAt(k, &scratch);
-    if (!(std::min(m.from->z, m.to->z) < w)) return;
-    // A ball's height is at least this bound (a projection and two roots,
-    // from the move alone): on the 30 mm plate it rules out 5 in 6 of the
-    // moves the reach passes, for less than half of what their footprints
-    // and heights cost. Not below w, the height is not either.
-    if (SweptAsBall(*m.cutter) &&
-        !(BallHeightLowerBound(*m.from, *m.to, m.cutter->radius, x, y) < w)) {
-      return;
-    }
-    // Beyond its footprint below w a move is not below w.
-    if (FootprintSurelyMisses(*m.from, *m.to, *m.cutter, {x, y, x, y}, w)) {
-      return;
-    }
-    const std::optional<Rect> b =
-        FootprintBounds(*m.from, *m.to, *m.cutter, w);
-    if (!b.has_value() || !b->Contains(x, y)) return;
-    const double h = Height(static_cast<int32_t>(k), x, y);
-    if (h < w) {
-      w = h;
-      lowest = static_cast<int32_t>(k);
-    }
-  };
+  // The exact tests, in the bin's order.
   const int32_t bin = index_->BinOfElement(ei, ej);
   const MoveBinReach* reach = BinReachOf(bin);
   if (reach == nullptr) {
-    for (const uint32_t k : index_->Bin(bin)) try_move(k);
+    for (const uint32_t k : index_->Bin(bin)) {
+      TryLower(k, x, y, &w, &lowest, &scratch);
+    }
   } else {
     // Only the moves the widened boxes pass (w <= cap: no other is below
     // it here), in the same order: the same result. Blocks first,
@@ -1541,10 +1559,11 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
     // of the path near the point; a call a block cost more than its lanes).
     constexpr size_t kChunk = 256;
     uint8_t block_pass[kChunk], pass[kChunk * kReachBlock];
+    const Rect point = SlackAbout(x, y);
     const size_t blocks = reach->block.size();
     for (size_t b0 = 0; b0 < blocks; b0 += kChunk) {
       const size_t c = std::min(kChunk, blocks - b0);
-      MayBeBelow(reach->block, b0, c, x, y, cap, block_pass);
+      MayBeBelowIn(reach->block, b0, c, point, cap, block_pass);
       for (size_t b = 0, e; b < c; b = e) {
         e = b + 1;
         if (block_pass[b] == 0) continue;
@@ -1552,9 +1571,94 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
         const size_t q0 = (b0 + b) * kReachBlock;
         const size_t n =
             std::min((e - b) * kReachBlock, reach->ids.size() - q0);
-        MayBeBelow(reach->move, q0, n, x, y, cap, pass);
+        MayBeBelowIn(reach->move, q0, n, point, cap, pass);
         for (size_t q = 0; q < n; ++q) {
-          if (pass[q] != 0) try_move(reach->ids[q0 + q]);
+          if (pass[q] != 0) {
+            TryLower(reach->ids[q0 + q], x, y, &w, &lowest, &scratch);
+          }
+        }
+      }
+    }
+  }
+  if (id != nullptr) *id = lowest;
+  return w;
+}
+
+NearMoves::NearMoves() : lanes_(std::make_unique<ReachLanes>()) {}
+NearMoves::~NearMoves() = default;
+
+void MoveSweeps::MovesNear(int32_t bin, const Rect& box, double cap,
+                           NearMoves* near) const {
+  near->bin_ = bin;
+  near->box_ = box;
+  near->cap_ = cap;
+  near->ids_.clear();
+  const MoveBinReach* reach = BinReachOf(bin);
+  near->whole_bin_ = reach == nullptr;
+  if (reach == nullptr) return;
+  // LowestAt's blocks and lanes over the box widened as it widens a point:
+  // a lane that passes at a point of the box below a cap <= this one
+  // passes here (MayBeBelowIn), so these hold every move LowestAt tries
+  // there, in the bin's order.
+  constexpr size_t kChunk = 256;
+  uint8_t block_pass[kChunk], pass[kChunk * kReachBlock];
+  const Rect area{box.x0 - FootprintGap::kSlack, box.y0 - FootprintGap::kSlack,
+                  box.x1 + FootprintGap::kSlack, box.y1 + FootprintGap::kSlack};
+  ReachLanes& lanes = *near->lanes_;
+  const size_t blocks = reach->block.size();
+  size_t kept = 0;
+  for (size_t b0 = 0; b0 < blocks; b0 += kChunk) {
+    const size_t c = std::min(kChunk, blocks - b0);
+    MayBeBelowIn(reach->block, b0, c, area, cap, block_pass);
+    for (size_t b = 0, e; b < c; b = e) {
+      e = b + 1;
+      if (block_pass[b] == 0) continue;
+      while (e < c && block_pass[e] != 0) ++e;
+      const size_t q0 = (b0 + b) * kReachBlock;
+      const size_t n = std::min((e - b) * kReachBlock, reach->ids.size() - q0);
+      MayBeBelowIn(reach->move, q0, n, area, cap, pass);
+      lanes.Resize(kept + n);  // keeps the lanes before kept
+      for (size_t q = 0; q < n; ++q) {
+        if (pass[q] == 0) continue;
+        const ReachLanes& from = reach->move;
+        const size_t at = q0 + q;
+        lanes.x0[kept] = from.x0[at];
+        lanes.x1[kept] = from.x1[at];
+        lanes.y0[kept] = from.y0[at];
+        lanes.y1[kept] = from.y1[at];
+        lanes.low[kept] = from.low[at];
+        lanes.z_r[kept] = from.z_r[at];
+        lanes.r2[kept] = from.r2[at];
+        near->ids_.push_back(reach->ids[at]);
+        ++kept;
+      }
+    }
+  }
+  lanes.Resize(kept);
+}
+
+double MoveSweeps::LowestNear(const NearMoves& near, double x, double y,
+                              double cap, int32_t* id) const {
+  double w = cap;
+  int32_t lowest = -1;
+  Move scratch;
+  if (near.whole_bin_) {
+    for (const uint32_t k : index_->Bin(near.bin_)) {
+      TryLower(k, x, y, &w, &lowest, &scratch);
+    }
+  } else {
+    // The lanes LowestAt's test passes at the point, among those it passed
+    // over the box: the same moves, in the same order.
+    constexpr size_t kChunk = 256;
+    uint8_t pass[kChunk];
+    const Rect point = SlackAbout(x, y);
+    const size_t n = near.ids_.size();
+    for (size_t q0 = 0; q0 < n; q0 += kChunk) {
+      const size_t c = std::min(kChunk, n - q0);
+      MayBeBelowIn(*near.lanes_, q0, c, point, cap, pass);
+      for (size_t q = 0; q < c; ++q) {
+        if (pass[q] != 0) {
+          TryLower(near.ids_[q0 + q], x, y, &w, &lowest, &scratch);
         }
       }
     }

@@ -52,6 +52,32 @@ inline constexpr int32_t kTileNodes = kTileSize * kTileSize;
 CornerReach ReachOf(const Move& move, double z_top);
 
 struct MoveBinReach;  // a bin's moves as LowestAt first tests them
+struct ReachLanes;    // their lanes
+
+// The moves of one bin that may be below a cap somewhere in a box, as
+// LowestAt first tests them (MoveSweeps::MovesNear): for the points of a
+// short stretch of a crease, that test taken once instead of at every
+// point. Reused from box to box by one thread (its arrays only grow).
+class NearMoves {
+ public:
+  NearMoves();
+  ~NearMoves();
+  NearMoves(const NearMoves&) = delete;
+  NearMoves& operator=(const NearMoves&) = delete;
+  // The bin, box and cap given to MovesNear (bin -1: none yet).
+  int32_t bin() const { return bin_; }
+  const Rect& box() const { return box_; }
+  double cap() const { return cap_; }
+
+ private:
+  friend class MoveSweeps;
+  int32_t bin_ = -1;
+  Rect box_;
+  double cap_ = 0;
+  bool whole_bin_ = false;  // a bin too large to keep: every move is tried
+  std::unique_ptr<ReachLanes> lanes_;
+  std::vector<uint32_t> ids_;
+};
 
 // The exact swept surfaces of a list of moves, by index, and where each
 // can reach: the exact scheme's MoveSurfaces. Thread-safe (each thread keeps
@@ -75,6 +101,15 @@ class MoveSweeps final : public MoveSurfaces {
   SurfaceJet Jet(int32_t id, double x, double y) const override;
   double LowestAt(int32_t ei, int32_t ej, double x, double y, double cap,
                   int32_t* id = nullptr) const override;
+  // The moves of `bin` that LowestAt's first test passes anywhere in `box`
+  // below `cap`, into *near (for the box's points: LowestNear).
+  void MovesNear(int32_t bin, const Rect& box, double cap,
+                 NearMoves* near) const;
+  // LowestAt(ei, ej, x, y, cap, id), bit for bit (the same moves tried in
+  // the same order), for an element (ei, ej) of near.bin(), (x, y) in
+  // near.box() and cap <= near.cap(), the moves unchanged since MovesNear.
+  double LowestNear(const NearMoves& near, double x, double y, double cap,
+                    int32_t* id = nullptr) const;
   // ReachOf(move id, z_top), kept per thread for the owners met last (a
   // node is a corner of four elements, an owner of many nodes).
   CornerReach Reach(int32_t id, double z_top) const;
@@ -96,6 +131,10 @@ class MoveSweeps final : public MoveSurfaces {
   // This thread's MoveBinReach of `bin`, filled on first use; null for a
   // bin too large to keep.
   const MoveBinReach* BinReachOf(int32_t bin) const;
+  // LowestAt's exact tests of move k at (x, y): where it is below *w,
+  // *w becomes its height and *lowest k.
+  void TryLower(uint32_t k, double x, double y, double* w, int32_t* lowest,
+                Move* scratch) const;
   // Move `id`: through MoveList's inline Get where the source is one (the
   // workpiece's own), without a virtual call per candidate.
   Move MoveAt(int64_t id) const {

@@ -404,6 +404,78 @@ TEST(CuttingMarksTest, ThreeBallsMeetAtOneJunction) {
   EXPECT_EQ(marks.size(), 6u);
 }
 
+// ProjectOntoExactCreases, which the marks finish runs of a crease's
+// vertices with (their junction tests taken together for each move bin),
+// moves every vertex as ProjectOntoExactCrease alone does, bit for bit:
+// the patches' vertices of junctions (three and five creases meeting),
+// creases of cylinders, and random plunges and slots, in runs of a whole
+// polyline, of seven vertices and of one.
+TEST(CuttingMarksTest, CreaseRunsProjectAsEachVertexAlone) {
+  struct Scene {
+    StockSpec stock;
+    std::vector<Move> moves;
+  };
+  std::vector<Scene> scenes;
+  for (const char* name : {"five-balls", "five-cylinders"}) {
+    auto inst = PaperInstance(name, 100);
+    ASSERT_TRUE(inst.ok());
+    scenes.push_back({inst->stock, inst->moves});
+  }
+  {
+    std::vector<Move> moves;
+    for (int k = 0; k < 3; ++k) {
+      const double a = 0.3 + k * 2 * std::numbers::pi / 3;
+      const double x = 20.03 + 6 * std::cos(a), y = 15.07 + 6 * std::sin(a);
+      moves.push_back({{x, y, 5}, {x, y, -5}, 10});
+    }
+    scenes.push_back({{0, 0, 40, 30, 0, 200, 150}, moves});
+  }
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(0, 1);
+  for (int scene = 0; scene < 6; ++scene) {
+    std::vector<Move> moves;
+    for (int k = 0; k < 10; ++k) {
+      const Vec3 a{30 * u(rng), 20 * u(rng), -3 * u(rng)};
+      const Vec3 b = k % 2 ? Vec3{30 * u(rng), 20 * u(rng), -3 * u(rng)}
+                           : Vec3{a.x, a.y, a.z + 3};
+      moves.push_back({a, b, 1 + 4 * u(rng)});
+    }
+    scenes.push_back({{0, 0, 30, 20, 0, 90, 60}, moves});
+  }
+  const double t1 = MarkOptions{}.t1;
+  int64_t moved = 0, vertices = 0;
+  for (size_t q = 0; q < scenes.size(); ++q) {
+    SCOPED_TRACE(q);
+    // The patches' vertices (the taylor scheme's marks are not projected).
+    auto wp = Cut(scenes[q].stock, scenes[q].moves);
+    const double h = Spacing(*wp);
+    for (const MarkPolyline& patches : Marks(*wp)) {
+      MarkPolyline alone = patches;
+      for (size_t k = 0; k < alone.vertices.size(); ++k) {
+        ProjectOntoExactCrease(*wp, alone.vertex_owners[k], h, t1,
+                               &alone.vertices[k], &alone.angle_deg[k]);
+        moved += alone.vertices[k].x != patches.vertices[k].x;
+      }
+      vertices += static_cast<int64_t>(alone.vertices.size());
+      const uint32_t n = static_cast<uint32_t>(patches.vertices.size());
+      for (const uint32_t run : {n, 7u, 1u}) {
+        MarkPolyline runs = patches;
+        for (uint32_t k = 0; k < n; k += run) {
+          ProjectOntoExactCreases(*wp, &runs, k, std::min(n, k + run), h, t1);
+        }
+        for (uint32_t k = 0; k < n; ++k) {
+          ASSERT_EQ(runs.vertices[k].x, alone.vertices[k].x) << k;
+          ASSERT_EQ(runs.vertices[k].y, alone.vertices[k].y) << k;
+          ASSERT_EQ(runs.vertices[k].z, alone.vertices[k].z) << k;
+          ASSERT_EQ(runs.angle_deg[k], alone.angle_deg[k]) << k;
+        }
+      }
+    }
+  }
+  // The projection moves most vertices.
+  EXPECT_GT(moved, vertices / 2);
+}
+
 // The centre of the circle through three points.
 void Circumcentre(const double p[2], const double q[2], const double r[2],
                   double* x, double* y) {

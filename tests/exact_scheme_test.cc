@@ -202,8 +202,9 @@ TEST(ExactSchemeTest, LowestAtAtTheEdgeOfTheFootprint) {
     auto wp = Workpiece::Create(spec, SchemeKind::kTaylor);
     ASSERT_TRUE(wp.ok());
     ASSERT_TRUE((*wp)->Apply(moves).ok());
-    const MoveSurfaces& s = (*wp)->surfaces();
+    const MoveSweeps& s = (*wp)->sweeps();
     const GridGeometry& grid = (*wp)->grid();
+    NearMoves near;
     int32_t asked = 0;
     for (size_t m = 0; m < moves.size(); ++m) {
       const Move& mv = moves[m];
@@ -238,6 +239,18 @@ TEST(ExactSchemeTest, LowestAtAtTheEdgeOfTheFootprint) {
                 const double w = s.LowestAt(grid.ElementX(x), grid.ElementY(y),
                                             x, y, cap, &id);
                 ASSERT_EQ(w, want) << x << "," << y << " cap " << cap;
+                ASSERT_EQ(id, want_id) << x << "," << y << " cap " << cap;
+                // The same from the moves near a box that has the point at
+                // a corner (each corner in turn) and this cap.
+                const double c = 1e-3;
+                const double bx = (asked & 1) ? x - c : x;
+                const double by = (asked & 2) ? y - c : y;
+                s.MovesNear((*wp)->index().BinOfElement(grid.ElementX(x),
+                                                        grid.ElementY(y)),
+                            Rect{bx, by, bx + c, by + c}, cap, &near);
+                id = -2;
+                ASSERT_EQ(s.LowestNear(near, x, y, cap, &id), want)
+                    << x << "," << y << " cap " << cap;
                 ASSERT_EQ(id, want_id) << x << "," << y << " cap " << cap;
                 ++asked;
               }
@@ -277,6 +290,79 @@ TEST(ExactSchemeTest, LowestAtInABinOfManyMoves) {
               want);
     EXPECT_EQ(id, want_id);
     EXPECT_GE(want_id, 0);
+    // LowestNear scans the same bin move by move: the same answers.
+    const MoveSweeps& sweeps = (*wp)->sweeps();
+    NearMoves near;
+    sweeps.MovesNear((*wp)->index().BinOfElement((*wp)->grid().ElementX(x),
+                                                 (*wp)->grid().ElementY(y)),
+                     Rect{x - 0.1, y - 0.1, x + 0.1, y + 0.1}, c, &near);
+    id = -2;
+    EXPECT_EQ(sweeps.LowestNear(near, x, y, c, &id), want);
+    EXPECT_EQ(id, want_id);
+  }
+}
+
+// MovesNear takes LowestAt's first test once for a box: LowestNear then
+// gives LowestAt's answer, bit for bit and the same id, at every point of
+// the box (its corners included) below every cap up to the box's, for
+// boxes from a point to most of a bin, for every shape. With the box's
+// lanes tested 0.05 mm below its cap this fails (and so does the edge
+// test's box with a corner at each point).
+TEST(ExactSchemeTest, LowestNearIsLowestAtOverItsBox) {
+  const StockSpec spec{0, 0, 20, 20, 0, 80, 80};  // bins of 4 x 4 mm
+  const double bin_size = MoveIndex::kBinElements * 0.25;
+  for (uint64_t seed = 1; seed <= 4; ++seed) {
+    SCOPED_TRACE(seed);
+    const std::vector<Move> moves = RandomMoves(seed, 120);
+    auto wp = Workpiece::Create(spec, SchemeKind::kTaylor);
+    ASSERT_TRUE(wp.ok());
+    ASSERT_TRUE((*wp)->Apply(moves).ok());
+    const MoveSweeps& s = (*wp)->sweeps();
+    const GridGeometry& grid = (*wp)->grid();
+    std::mt19937_64 rng(seed + 300);
+    std::uniform_real_distribution<double> unit(0, 1), top(-3.5, 0);
+    NearMoves near;
+    int32_t asked = 0, lowered = 0;
+    for (int b = 0; b < 300; ++b) {
+      // A box in the bin (bx, by), kept off its edges.
+      const int bx = static_cast<int>(rng() % 5),
+                by = static_cast<int>(rng() % 5);
+      const double size =
+          b % 5 == 0 ? 0 : (bin_size - 0.01) * unit(rng) * unit(rng);
+      const double x0 =
+          bx * bin_size + 0.005 + (bin_size - 0.01 - size) * unit(rng);
+      const double y0 =
+          by * bin_size + 0.005 + (bin_size - 0.01 - size) * unit(rng);
+      const Rect box{x0, y0, x0 + size, y0 + size};
+      const int32_t bin =
+          (*wp)->index().BinOfElement(grid.ElementX(x0), grid.ElementY(y0));
+      const double cap = top(rng);
+      s.MovesNear(bin, box, cap, &near);
+      EXPECT_EQ(near.bin(), bin);
+      EXPECT_EQ(near.cap(), cap);
+      for (int q = 0; q < 12; ++q) {
+        const double x =
+            q < 4 ? ((q & 1) ? box.x1 : box.x0) : box.x0 + size * unit(rng);
+        const double y =
+            q < 4 ? ((q & 2) ? box.y1 : box.y0) : box.y0 + size * unit(rng);
+        ASSERT_EQ(
+            (*wp)->index().BinOfElement(grid.ElementX(x), grid.ElementY(y)),
+            bin);
+        for (const double c :
+             {cap, cap - 0.3 * unit(rng), cap - 2 * unit(rng)}) {
+          int32_t want_id = -2, id = -2;
+          const double want =
+              s.LowestAt(grid.ElementX(x), grid.ElementY(y), x, y, c, &want_id);
+          ASSERT_EQ(s.LowestNear(near, x, y, c, &id), want)
+              << x << "," << y << " cap " << c;
+          ASSERT_EQ(id, want_id) << x << "," << y << " cap " << c;
+          ++asked;
+          lowered += id >= 0;
+        }
+      }
+    }
+    // Many of the points lie under a move below their cap.
+    EXPECT_GT(lowered, asked / 10);
   }
 }
 
