@@ -164,10 +164,18 @@ struct Settings {
 
 // Eq. (5): the printed slope difference must exceed t2 (it bounds the
 // normal angle from above), and so must the angle between the normals.
+// *angle is the normals' angle where the slope difference passes, else 0:
+// a crossing that is no mark is never drawn, and its angle never read (on
+// a plate, most crossings are between the moves of a pass, and their
+// angles were a third of the edges' cost).
 bool IsMark(double ax, double ay, double bx, double by, double t2,
             double* angle) {
+  if (!(SlopeDifference(ax, ay, bx, by) > t2)) {
+    *angle = 0;
+    return false;
+  }
   *angle = NormalAngle(ax, ay, bx, by);
-  return SlopeDifference(ax, ay, bx, by) > t2 && *angle > t2;
+  return *angle > t2;
 }
 
 // The canonical crossings of the grid edge from node i (t = 0) to node j
