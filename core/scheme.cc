@@ -240,24 +240,29 @@ alignas(64) constexpr std::array<double, kGuardedChunk> kNoneInside =
 // take the true surface one by one (TakeLowest), as Guarded does.
 SWARF_TARGET_CLONES
 void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
-                 const double* __restrict y_in, int32_t n_in,
+                 const double* __restrict y_in, int32_t n_in, bool padded,
                  double* __restrict out) {
   // The points padded to a multiple of 8 with copies of the last: the
   // vector loops then have no scalar remainder (the valuation gives 21
   // points an element: each loop ended with one point alone). A copy's
   // values are the last point's and are not written out; it does not widen
-  // the points' box.
-  double x[kGuardedChunk], y[kGuardedChunk];
+  // the points' box. `padded`: the caller's arrays are so padded (and out
+  // has room for them): read in place.
+  double x_copy[kGuardedChunk], y_copy[kGuardedChunk];
   const int32_t n = (n_in + 7) & ~7;
+  if (!padded) {
 #pragma omp simd
-  for (int32_t q = 0; q < n_in; ++q) {
-    x[q] = x_in[q];
-    y[q] = y_in[q];
+    for (int32_t q = 0; q < n_in; ++q) {
+      x_copy[q] = x_in[q];
+      y_copy[q] = y_in[q];
+    }
+    for (int32_t q = n_in; q < n; ++q) {
+      x_copy[q] = x_in[n_in - 1];
+      y_copy[q] = y_in[n_in - 1];
+    }
   }
-  for (int32_t q = n_in; q < n; ++q) {
-    x[q] = x_in[n_in - 1];
-    y[q] = y_in[n_in - 1];
-  }
+  const double* __restrict x = padded ? x_in : x_copy;
+  const double* __restrict y = padded ? y_in : y_copy;
   // Every corner's reach holding every point (the usual smooth interior):
   // the four lifted patches' running minimum in registers, the same
   // operations in the same order as the corner passes below, and no point
@@ -270,7 +275,9 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
     const double z0 = e.reach[0].z_low, z1 = e.reach[1].z_low,
                  z2 = e.reach[2].z_low, z3 = e.reach[3].z_low;
     const double top = e.z_top;
-    double w[kGuardedChunk];
+    double w_copy[kGuardedChunk];
+    // Padded, out has room for the copies' values too.
+    double* const w = padded ? out : w_copy;
 #pragma omp simd
     for (int32_t q = 0; q < n; ++q) {
       double v = top;
@@ -280,8 +287,10 @@ void SmoothChunk(const ElementCorners& e, const double* __restrict x_in,
       v = LowerByPatch(v, EvaluatePatch(j3, c.x[3], c.y[3], x[q], y[q]), z3);
       w[q] = v;
     }
+    if (!padded) {
 #pragma omp simd
-    for (int32_t q = 0; q < n_in; ++q) out[q] = w[q];
+      for (int32_t q = 0; q < n_in; ++q) out[q] = w[q];
+    }
     return;
   }
   // Flags as doubles (0 or 1) beside the doubles, and loop-invariant tests
@@ -801,7 +810,21 @@ class GuardedScheme final : public Scheme {
     }
     for (int32_t q0 = 0; q0 < n; q0 += kGuardedChunk) {
       SmoothChunk(e, x + q0, y + q0, std::min(kGuardedChunk, n - q0),
-                  out + q0);
+                  /*padded=*/false, out + q0);
+    }
+  }
+  void ReconstructManyPadded(const ElementCorners& e, const double* x,
+                             const double* y, int32_t n,
+                             double* out) const override {
+    if (!e.guard.smooth || e.surfaces == nullptr) {
+      Scheme::ReconstructMany(e, x, y, n, out);
+      return;
+    }
+    // Every chunk but the last is a multiple of 8 points: the padding is
+    // the last's.
+    for (int32_t q0 = 0; q0 < n; q0 += kGuardedChunk) {
+      SmoothChunk(e, x + q0, y + q0, std::min(kGuardedChunk, n - q0),
+                  /*padded=*/true, out + q0);
     }
   }
   void Gradient(const ElementCorners& e, double x, double y, double* gx,

@@ -140,6 +140,15 @@ class Scheme {
                                const double* y, int32_t n, double* out) const {
     for (int32_t q = 0; q < n; ++q) out[q] = Reconstruct(e, x[q], y[q]);
   }
+  // The same where x and y hold n rounded up to a multiple of 8 entries,
+  // those past n copies of the last point, and out has room for as many
+  // (past n, left unspecified): a scheme that evaluates points 8 at a time
+  // then reads and writes them in place instead of copying them.
+  virtual void ReconstructManyPadded(const ElementCorners& e, const double* x,
+                                     const double* y, int32_t n,
+                                     double* out) const {
+    ReconstructMany(e, x, y, n, out);
+  }
   // Both at once: returns Reconstruct(e, x, y) and sets the Gradient, bit
   // for bit (schemes that find both together override it).
   virtual double HeightAndGradient(const ElementCorners& e, double x,

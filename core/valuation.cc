@@ -667,6 +667,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const double* const line = &lattice_line[static_cast<size_t>(e) * n];
         double* const points = out + static_cast<size_t>(e - e0) * line_size;
         for (size_t q = 0; q < lattice; ++q) points[q] = line[point_index[q]];
+        // Padded with copies of the last (Scheme::ReconstructManyPadded).
+        std::fill(points + lattice, points + padded, points[lattice - 1]);
         for (size_t c = 0; c < std::size(own_lists); ++c) {
           const std::vector<int32_t>& list = own_lists[c];
           double* const own = points + (1 + c) * padded;
@@ -1055,7 +1057,9 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
               &top_est[static_cast<size_t>(el.ei - ei0) * edge];
           if (el.from_below) std::copy_n(top_of, edge, est);
           if (el.all_in) std::copy_n(est + top, edge, top_of);
-          scheme.ReconstructMany(e, xs, ys, count, rec.data());
+          // xs and ys are padded: an all-in element's lines
+          // (lay_out_lines), another's own points.
+          scheme.ReconstructManyPadded(e, xs, ys, count, rec.data());
           const double element_max =
               ErrorsOf(rec.data(), est, count, err.data());
           const int64_t* const col_cell =

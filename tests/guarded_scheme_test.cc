@@ -364,7 +364,8 @@ TEST(GuardedSchemeTest, SurelyTrustedImpliesTrustAtEveryCorner) {
 // rasters of short moves (smooth elements whose corners' reaches all hold
 // them, and some whose do not: ReconstructMany's two paths), at the
 // valuation's 5 x 5 lattice, random points, the edges and corners, and just
-// outside the element, and a few points at a time. Preparing an element
+// outside the element, and a few points at a time (and from padded
+// arrays, ReconstructManyPadded). Preparing an element
 // from its nodes' trust regions (and their SurelyTrusted, or none) gives
 // the same element.
 TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
@@ -474,6 +475,22 @@ TEST(GuardedSchemeTest, BatchedCallsAreThePointwiseOnesBitForBit) {
           guarded.ReconstructMany(e, xs.data(), ys.data(), m, few.data());
           for (int32_t q = 0; q < m; ++q) {
             ASSERT_EQ(std::memcmp(&few[q], &many[q], 8), 0) << m << ": " << q;
+          }
+        }
+        // The caller's arrays padded (ReconstructManyPadded, read and
+        // written in place): the same values, for a chunk and past one.
+        for (int32_t m : {1, 5, 21, 61, 67, static_cast<int32_t>(xs.size())}) {
+          const int32_t m8 = (m + 7) & ~7;
+          std::vector<double> px(xs.begin(), xs.begin() + m),
+              py(ys.begin(), ys.begin() + m);
+          px.resize(m8, px.back());
+          py.resize(m8, py.back());
+          std::vector<double> padded(m8);
+          guarded.ReconstructManyPadded(e, px.data(), py.data(), m,
+                                        padded.data());
+          for (int32_t q = 0; q < m; ++q) {
+            ASSERT_EQ(std::memcmp(&padded[q], &many[q], 8), 0)
+                << m << ": " << q;
           }
         }
         for (size_t q = 0; q < xs.size(); ++q) {
