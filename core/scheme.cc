@@ -804,28 +804,12 @@ class GuardedScheme final : public Scheme {
   void ReconstructMany(const ElementCorners& e, const double* x,
                        const double* y, int32_t n,
                        double* out) const override {
-    if (!e.guard.smooth || e.surfaces == nullptr) {
-      Scheme::ReconstructMany(e, x, y, n, out);
-      return;
-    }
-    for (int32_t q0 = 0; q0 < n; q0 += kGuardedChunk) {
-      SmoothChunk(e, x + q0, y + q0, std::min(kGuardedChunk, n - q0),
-                  /*padded=*/false, out + q0);
-    }
+    Many(e, x, y, n, /*padded=*/false, out);
   }
   void ReconstructManyPadded(const ElementCorners& e, const double* x,
                              const double* y, int32_t n,
                              double* out) const override {
-    if (!e.guard.smooth || e.surfaces == nullptr) {
-      Scheme::ReconstructMany(e, x, y, n, out);
-      return;
-    }
-    // Every chunk but the last is a multiple of 8 points: the padding is
-    // the last's.
-    for (int32_t q0 = 0; q0 < n; q0 += kGuardedChunk) {
-      SmoothChunk(e, x + q0, y + q0, std::min(kGuardedChunk, n - q0),
-                  /*padded=*/true, out + q0);
-    }
+    Many(e, x, y, n, /*padded=*/true, out);
   }
   void Gradient(const ElementCorners& e, double x, double y, double* gx,
                 double* gy) const override {
@@ -847,6 +831,22 @@ class GuardedScheme final : public Scheme {
       PatchGradient(LiftedJet(e, k), c.x[k], c.y[k], x, y, gx, gy);
     }
     return v.w;
+  }
+
+ private:
+  // Both ReconstructMany forms: a smooth element's points a chunk at a
+  // time (every chunk but the last a multiple of 8 points: a padded
+  // array's padding is the last chunk's).
+  static void Many(const ElementCorners& e, const double* x, const double* y,
+                   int32_t n, bool padded, double* out) {
+    if (!e.guard.smooth || e.surfaces == nullptr) {
+      for (int32_t q = 0; q < n; ++q) out[q] = GuardedHeight(e, x[q], y[q]);
+      return;
+    }
+    for (int32_t q0 = 0; q0 < n; q0 += kGuardedChunk) {
+      SmoothChunk(e, x + q0, y + q0, std::min(kGuardedChunk, n - q0), padded,
+                  out + q0);
+    }
   }
 };
 

@@ -1376,6 +1376,35 @@ Rect SlackAbout(double x, double y) {
   return Rect{x - kSlack, y - kSlack, x + kSlack, y + kSlack};
 }
 
+// at(q) for each of reach's moves whose lane MayBeBelowIn passes in `area`
+// below cap, in the bin's order: blocks first, then the moves of each run
+// of passing blocks in one call (a stretch of the path near the area; a
+// call a block cost more than its lanes). A move passes only where its
+// block does (the block's union).
+template <typename At>
+[[gnu::always_inline]] inline void ForEachLaneBelow(const MoveBinReach& reach,
+                                                    const Rect& area,
+                                                    double cap, At&& at) {
+  constexpr size_t kChunk = 256;
+  uint8_t block_pass[kChunk], pass[kChunk * kReachBlock];
+  const size_t blocks = reach.block.size();
+  for (size_t b0 = 0; b0 < blocks; b0 += kChunk) {
+    const size_t c = std::min(kChunk, blocks - b0);
+    MayBeBelowIn(reach.block, b0, c, area, cap, block_pass);
+    for (size_t b = 0, e; b < c; b = e) {
+      e = b + 1;
+      if (block_pass[b] == 0) continue;
+      while (e < c && block_pass[e] != 0) ++e;
+      const size_t q0 = (b0 + b) * kReachBlock;
+      const size_t n = std::min((e - b) * kReachBlock, reach.ids.size() - q0);
+      MayBeBelowIn(reach.move, q0, n, area, cap, pass);
+      for (size_t q = 0; q < n; ++q) {
+        if (pass[q] != 0) at(q0 + q);
+      }
+    }
+  }
+}
+
 // Moves' tips, radii and whether each is swept as a ball (1 or 0), a chunk
 // of a bin's at a time.
 struct MoveChunk {
@@ -1554,31 +1583,10 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
     }
   } else {
     // Only the moves the widened boxes pass (w <= cap: no other is below
-    // it here), in the same order: the same result. Blocks first,
-    // then the moves of each run of passing blocks in one call (a stretch
-    // of the path near the point; a call a block cost more than its lanes).
-    constexpr size_t kChunk = 256;
-    uint8_t block_pass[kChunk], pass[kChunk * kReachBlock];
-    const Rect point = SlackAbout(x, y);
-    const size_t blocks = reach->block.size();
-    for (size_t b0 = 0; b0 < blocks; b0 += kChunk) {
-      const size_t c = std::min(kChunk, blocks - b0);
-      MayBeBelowIn(reach->block, b0, c, point, cap, block_pass);
-      for (size_t b = 0, e; b < c; b = e) {
-        e = b + 1;
-        if (block_pass[b] == 0) continue;
-        while (e < c && block_pass[e] != 0) ++e;
-        const size_t q0 = (b0 + b) * kReachBlock;
-        const size_t n =
-            std::min((e - b) * kReachBlock, reach->ids.size() - q0);
-        MayBeBelowIn(reach->move, q0, n, point, cap, pass);
-        for (size_t q = 0; q < n; ++q) {
-          if (pass[q] != 0) {
-            TryLower(reach->ids[q0 + q], x, y, &w, &lowest, &scratch);
-          }
-        }
-      }
-    }
+    // it here), in the same order: the same result.
+    ForEachLaneBelow(*reach, SlackAbout(x, y), cap, [&](size_t q) {
+      TryLower(reach->ids[q], x, y, &w, &lowest, &scratch);
+    });
   }
   if (id != nullptr) *id = lowest;
   return w;
@@ -1600,40 +1608,23 @@ void MoveSweeps::MovesNear(int32_t bin, const Rect& box, double cap,
   // a lane that passes at a point of the box below a cap <= this one
   // passes here (MayBeBelowIn), so these hold every move LowestAt tries
   // there, in the bin's order.
-  constexpr size_t kChunk = 256;
-  uint8_t block_pass[kChunk], pass[kChunk * kReachBlock];
   const Rect area{box.x0 - FootprintGap::kSlack, box.y0 - FootprintGap::kSlack,
                   box.x1 + FootprintGap::kSlack, box.y1 + FootprintGap::kSlack};
   ReachLanes& lanes = *near->lanes_;
-  const size_t blocks = reach->block.size();
+  const ReachLanes& from = reach->move;
+  lanes.Resize(reach->ids.size());  // room for all; trimmed below
   size_t kept = 0;
-  for (size_t b0 = 0; b0 < blocks; b0 += kChunk) {
-    const size_t c = std::min(kChunk, blocks - b0);
-    MayBeBelowIn(reach->block, b0, c, area, cap, block_pass);
-    for (size_t b = 0, e; b < c; b = e) {
-      e = b + 1;
-      if (block_pass[b] == 0) continue;
-      while (e < c && block_pass[e] != 0) ++e;
-      const size_t q0 = (b0 + b) * kReachBlock;
-      const size_t n = std::min((e - b) * kReachBlock, reach->ids.size() - q0);
-      MayBeBelowIn(reach->move, q0, n, area, cap, pass);
-      lanes.Resize(kept + n);  // keeps the lanes before kept
-      for (size_t q = 0; q < n; ++q) {
-        if (pass[q] == 0) continue;
-        const ReachLanes& from = reach->move;
-        const size_t at = q0 + q;
-        lanes.x0[kept] = from.x0[at];
-        lanes.x1[kept] = from.x1[at];
-        lanes.y0[kept] = from.y0[at];
-        lanes.y1[kept] = from.y1[at];
-        lanes.low[kept] = from.low[at];
-        lanes.z_r[kept] = from.z_r[at];
-        lanes.r2[kept] = from.r2[at];
-        near->ids_.push_back(reach->ids[at]);
-        ++kept;
-      }
-    }
-  }
+  ForEachLaneBelow(*reach, area, cap, [&](size_t at) {
+    lanes.x0[kept] = from.x0[at];
+    lanes.x1[kept] = from.x1[at];
+    lanes.y0[kept] = from.y0[at];
+    lanes.y1[kept] = from.y1[at];
+    lanes.low[kept] = from.low[at];
+    lanes.z_r[kept] = from.z_r[at];
+    lanes.r2[kept] = from.r2[at];
+    near->ids_.push_back(reach->ids[at]);
+    ++kept;
+  });
   lanes.Resize(kept);
 }
 
