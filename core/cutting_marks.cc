@@ -166,8 +166,8 @@ struct Settings {
 // normal angle from above), and so must the angle between the normals.
 // *angle is the normals' angle where the slope difference passes, else 0:
 // a crossing that is no mark is never drawn, and its angle never read (on
-// a plate, most crossings are between the moves of a pass, and their
-// angles were a third of the edges' cost).
+// a plate most crossings are between the moves of a pass, and their
+// atan2 was a twelfth of the bands' search).
 bool IsMark(double ax, double ay, double bx, double by, double t2,
             double* angle) {
   if (!(SlopeDifference(ax, ay, bx, by) > t2)) {
@@ -1484,7 +1484,7 @@ void ProjectOntoExactCreases(const Workpiece& wp, MarkPolyline* poly,
   for (uint32_t k0 = first; k0 < end; k0 += kMost) {
     const uint32_t n = std::min(kMost, end - k0);
     // Each vertex's Newton steps, and the bin of the point they reach
-    // (-1: none, or off the grid: LowestMove answers alone).
+    // (-1: the steps failed; -2: off the grid, where LowestMove answers).
     int32_t bin = -1, in_bin = 0;
     Rect box;
     double cap = 0;
