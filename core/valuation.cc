@@ -676,8 +676,11 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const double* const line = &lattice_line[static_cast<size_t>(e) * n];
         double* const points = out + static_cast<size_t>(e - e0) * line_size;
         for (size_t q = 0; q < lattice; ++q) points[q] = line[point_index[q]];
-        // Padded with copies of the last (Scheme::ReconstructManyPadded).
-        std::fill(points + lattice, points + padded, points[lattice - 1]);
+        // Padded with copies of the last (Scheme::ReconstructManyPadded;
+        // 2 samples an edge give no points).
+        if (lattice > 0) {
+          std::fill(points + lattice, points + padded, points[lattice - 1]);
+        }
         for (size_t c = 0; c < std::size(own_lists); ++c) {
           const std::vector<int32_t>& list = own_lists[c];
           double* const own = points + (1 + c) * padded;
