@@ -1346,14 +1346,18 @@ bool ExactSurface(const Workpiece& wp, int32_t id, double x, double y,
 }
 
 // The move lowest at (x, y) where one is below `cap` (else kStockTopOwner,
-// *w = cap), over the moves indexed at that point.
+// *w = cap), over the moves indexed at that point. `near`, if given, holds
+// the point's bin's moves for a box about it and a cap no lower
+// (MoveSweeps::LowestNear: the same answer).
 int32_t LowestMove(const Workpiece& wp, double x, double y, double cap,
-                   double* w) {
+                   double* w, const NearMoves* near = nullptr) {
   *w = cap;
   if (!wp.grid().bounds().Contains(x, y)) return kStockTopOwner;
   int32_t id = -1;
-  *w = wp.surfaces().LowestAt(wp.grid().ElementX(x), wp.grid().ElementY(y), x,
-                              y, cap, &id);
+  *w = near != nullptr
+           ? wp.sweeps().LowestNear(*near, x, y, cap, &id)
+           : wp.surfaces().LowestAt(wp.grid().ElementX(x),
+                                    wp.grid().ElementY(y), x, y, cap, &id);
   return id >= 0 ? id : kStockTopOwner;
 }
 
@@ -1528,15 +1532,8 @@ void ProjectOntoExactCreases(const Workpiece& wp, MarkPolyline* poly,
       const uint32_t k = k0 + q;
       const CreasePoint& p = points[q];
       double w;
-      int32_t c;
-      if (shared && bins[q] == bin) {
-        // LowestMove's answer, as LowestAt's (MoveSweeps::LowestNear).
-        int32_t id = -1;
-        w = wp.sweeps().LowestNear(near, p.x, p.y, JunctionCap(p, t1), &id);
-        c = id >= 0 ? id : kStockTopOwner;
-      } else {
-        c = LowestMove(wp, p.x, p.y, JunctionCap(p, t1), &w);
-      }
+      const int32_t c = LowestMove(wp, p.x, p.y, JunctionCap(p, t1), &w,
+                                   shared && bins[q] == bin ? &near : nullptr);
       SettleOnCrease(wp, poly->vertex_owners[k], max_step, t1, p, c, w,
                      &poly->vertices[k], &poly->angle_deg[k]);
     }

@@ -1341,7 +1341,7 @@ constexpr size_t kReachBlock = 16;
 // (ExactSchemeTest.LowestAtAtTheEdgeOfTheFootprint). A block's union passes
 // where any of its moves does: its box holds theirs, its z_r is no larger and
 // its r2 no smaller, so its reach no smaller.
-// `area` is the point so widened (SlackAbout), or for MovesNear a box. Each
+// `area` is the point so widened (SlackAbout), or for MovesNear its box. Each
 // comparison only passes more lanes for a larger area or a higher cap (the
 // gaps shrink, the reach grows), so a lane that passes at a point of a box
 // below a cap no higher passes over the box.
@@ -1369,11 +1369,11 @@ void MayBeBelowIn(const ReachLanes& b, size_t q0, size_t n, const Rect& area,
   }
 }
 
-// The rectangle MayBeBelowIn tests for (x, y): the point widened by
+// The area MayBeBelowIn tests for the points of r: r widened by
 // FootprintGap's slack.
-Rect SlackAbout(double x, double y) {
+Rect SlackAbout(const Rect& r) {
   constexpr double kSlack = FootprintGap::kSlack;
-  return Rect{x - kSlack, y - kSlack, x + kSlack, y + kSlack};
+  return Rect{r.x0 - kSlack, r.y0 - kSlack, r.x1 + kSlack, r.y1 + kSlack};
 }
 
 // at(q) for each of reach's moves whose lane MayBeBelowIn passes in `area`
@@ -1584,7 +1584,7 @@ double MoveSweeps::LowestAt(int32_t ei, int32_t ej, double x, double y,
   } else {
     // Only the moves the widened boxes pass (w <= cap: no other is below
     // it here), in the same order: the same result.
-    ForEachLaneBelow(*reach, SlackAbout(x, y), cap, [&](size_t q) {
+    ForEachLaneBelow(*reach, SlackAbout({x, y, x, y}), cap, [&](size_t q) {
       TryLower(reach->ids[q], x, y, &w, &lowest, &scratch);
     });
   }
@@ -1608,8 +1608,7 @@ void MoveSweeps::MovesNear(int32_t bin, const Rect& box, double cap,
   // a lane that passes at a point of the box below a cap <= this one
   // passes here (MayBeBelowIn), so these hold every move LowestAt tries
   // there, in the bin's order.
-  const Rect area{box.x0 - FootprintGap::kSlack, box.y0 - FootprintGap::kSlack,
-                  box.x1 + FootprintGap::kSlack, box.y1 + FootprintGap::kSlack};
+  const Rect area = SlackAbout(box);
   ReachLanes& lanes = *near->lanes_;
   const ReachLanes& from = reach->move;
   lanes.Resize(reach->ids.size());  // room for all; trimmed below
@@ -1642,7 +1641,7 @@ double MoveSweeps::LowestNear(const NearMoves& near, double x, double y,
     // over the box: the same moves, in the same order.
     constexpr size_t kChunk = 256;
     uint8_t pass[kChunk];
-    const Rect point = SlackAbout(x, y);
+    const Rect point = SlackAbout({x, y, x, y});
     const size_t n = near.ids_.size();
     for (size_t q0 = 0; q0 < n; q0 += kChunk) {
       const size_t c = std::min(kChunk, n - q0);
