@@ -661,12 +661,16 @@ void ClassifyGuarded(ElementCorners* e, const PatchTrustRegion* const trust[4],
   const double tau = kGuardConsistency * std::max(hx, hy);
   // Whether corner k's reach holds corner q: for the lifts and for the
   // whole element, tested once, and once for corners with one reach
-  // (neighbouring nodes mostly share an owner, and with it the reach).
+  // (neighbouring nodes mostly share an owner, and with it the reach: one
+  // owner is one reach without comparing the capsules, a tenth of this).
   double holds[4][4];
   for (int k = 0; k < 4; ++k) {
     int same = k;
     for (int p = 0; p < k && same == k; ++p) {
-      if (SameReach(e->reach[p], e->reach[k])) same = p;
+      if (e->owner[p] == e->owner[k] ||
+          SameReach(e->reach[p], e->reach[k])) {
+        same = p;
+      }
     }
     // A capsule is convex: holding the element's corners, it holds it all.
     if (same != k) {

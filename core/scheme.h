@@ -205,6 +205,8 @@ double GuardedHeight(const ElementCorners& e, double x, double y);
 // SurelyTrusted(*trust[k], hx, hy) for some hx and hy at least the
 // element's width and height (a node's serves the elements of a region);
 // false only means that the corner's trust is tested one offset at a time.
+// Corners with one owner have one reach (a reach is its owner's, as every
+// filler of ElementCorners gives it).
 struct PatchTrustRegion;
 void PrepareGuarded(ElementCorners* e,
                     const PatchTrustRegion* const trust[4] = nullptr,
