@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "absl/container/flat_hash_map.h"
+#include "absl/container/inlined_vector.h"
 #include "absl/strings/str_cat.h"
 #include "core/bucket_starts.h"
 #include "core/unfilled_vector.h"
@@ -342,6 +343,10 @@ struct BoundaryCrossing {
   End end;
 };
 
+// An element's (or a part's) boundary crossings: mostly two to four, held in
+// place (a vector's allocation each was about 2% of the marks' instructions).
+using Crossings = absl::InlinedVector<BoundaryCrossing, 8>;
+
 struct Cell {
   double x0, y0, x1, y1;
 };
@@ -357,7 +362,7 @@ class ElementResolver {
         key_base_(kInteriorKey | (element_index << 16)),
         out_(out) {}
 
-  void Resolve(const Cell& cell, std::vector<BoundaryCrossing> x, int depth) {
+  void Resolve(const Cell& cell, Crossings x, int depth) {
     const int n = static_cast<int>(x.size());
     if (n == 0) return;
     bool consistent = n >= 2;
@@ -480,7 +485,7 @@ class ElementResolver {
 
   // Three crossings: the three creases meet at a junction; at the crossings'
   // centroid if Newton's method fails.
-  void Junction(const Cell& cell, const std::vector<BoundaryCrossing>& x) {
+  void Junction(const Cell& cell, const Crossings& x) {
     const int g[3] = {x[0].right, x[1].right, x[2].right};
     double px = (x[0].end.x + x[1].end.x + x[2].end.x) / 3;
     double py = (x[0].end.y + x[1].end.y + x[2].end.y) / 3;
@@ -501,7 +506,7 @@ class ElementResolver {
   // junction joins crossings t+1 and t+2 and the other t+3 and t. Tries both
   // t and keeps the one whose junctions have the fourth group above them;
   // false if neither converges.
-  bool TwoJunctions(const Cell& cell, const std::vector<BoundaryCrossing>& x) {
+  bool TwoJunctions(const Cell& cell, const Crossings& x) {
     const int g[4] = {x[0].right, x[1].right, x[2].right, x[3].right};
     int best_t = -1;
     double best_margin = -kInf, jx[2][2] = {}, jy[2][2] = {};
@@ -548,7 +553,7 @@ class ElementResolver {
   }
 
   // Last resort: every crossing to the crossings' centroid.
-  void Star(const std::vector<BoundaryCrossing>& x) {
+  void Star(const Crossings& x) {
     if (x.size() < 2) return;
     double px = 0, py = 0;
     for (const auto& c : x) {
@@ -563,7 +568,7 @@ class ElementResolver {
   }
 
   // Group of the boundary arc containing boundary parameter s.
-  static int GroupAt(const std::vector<BoundaryCrossing>& x, double s) {
+  static int GroupAt(const Crossings& x, double s) {
     for (const auto& c : x) {
       if (c.s > s) return c.left;
     }
@@ -635,7 +640,7 @@ class ElementResolver {
 
   // Splits the cell in four and resolves each quarter; the cuts are
   // evaluated with the element's own reconstruction.
-  void Subdivide(const Cell& cell, const std::vector<BoundaryCrossing>& x,
+  void Subdivide(const Cell& cell, const Crossings& x,
                  int depth) {
     const double w = cell.x1 - cell.x0, h = cell.y1 - cell.y0;
     // Split fractions, moved off any crossing lying on a split point.
@@ -667,7 +672,7 @@ class ElementResolver {
                          {xm, cell.y0, cell.x1, ym},
                          {xm, ym, cell.x1, cell.y1},
                          {cell.x0, ym, xm, cell.y1}};
-    std::vector<BoundaryCrossing> parts[4];
+    Crossings parts[4];
     // Parent boundary crossings go to the quarters that hold them.
     for (const auto& c : x) {
       const int side = std::min(3, static_cast<int>(c.s));
@@ -794,7 +799,7 @@ void ProcessElement(const NodeRef* const c[4], int32_t ei, int32_t ej,
       }
     }
   }
-  std::vector<BoundaryCrossing> bx;
+  Crossings bx;
   for (int k = 0; k < 4; ++k) {
     for (int m = 0; m < ncr[k]; ++m) {
       const int mm = edges[k].backwards ? ncr[k] - 1 - m : m;
