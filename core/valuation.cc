@@ -151,6 +151,14 @@ void OffsetsFrom(const double* __restrict x, const double* __restrict y,
   *sum_sq = s2;
 }
 
+// The first s in [1, n) with cells[s] != cells[0], n if none: where a
+// column's or a row's lattice points enter their second map cell.
+int32_t SecondCell(const int64_t* cells, int32_t n) {
+  int32_t s = 1;
+  while (s < n && cells[s] == cells[0]) ++s;
+  return s;
+}
+
 // The first q < n with err[q] == top, -1 if none (top NaN, or not among
 // them).
 int32_t FirstOf(const double* err, int32_t n, double top) {
@@ -695,6 +703,16 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     };
     lay_out_lines(lattice_x, ei0, ei1, point_i, line_xs.data());
     lay_out_lines(lattice_y, ej0, ej1, point_j, line_ys.data());
+    // Each column's SecondCell, once a bin (taken an element, it was a
+    // sixth of the map's instructions); each row's is its BandRow's.
+    thread_local std::vector<int32_t> second_x;
+    if (mapped) {
+      Grow(&second_x, ei1 - ei0);
+      for (int32_t ei = ei0; ei < ei1; ++ei) {
+        second_x[ei - ei0] =
+            SecondCell(&cell_of_x[static_cast<size_t>(ei) * n], n);
+      }
+    }
     // The top edges' exact heights of the last row evaluated, per element
     // of the bin's row; top_ok where the elements of the last row set up
     // (row `top_row`, evaluated before the next row) were all in.
@@ -752,6 +770,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       const int64_t* cell = nullptr;
       int32_t elements = 0;
       Rect box;
+      int32_t second_cell = 1;  // SecondCell of the row's cells (mapped)
     };
     BandRow band_row[kBandRows];
     for (int32_t band_j0 = ej0; band_j0 < ej1; band_j0 += kBandRows) {
@@ -928,7 +947,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             row_cell,
             row_elements,
             Rect{elements[base].box.x0, ey0,
-                 elements[base + row_elements - 1].box.x1, ey1}};
+                 elements[base + row_elements - 1].box.x1, ey1},
+            mapped ? SecondCell(row_cell, n) : 1};
         // The next row's elements take their bottom edges' points from
         // this row's that are all in.
         std::fill_n(top_ok.begin(), ei1 - ei0, 0);
@@ -1079,8 +1099,8 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
           // The first column and row in the second cell (n: none).
           int32_t sx = 1, sy = 1;
           if (el.quarters) {
-            while (sx < n && col_cell[sx] == col_cell[0]) ++sx;
-            while (sy < n && row_cell[sy] == row_cell[0]) ++sy;
+            sx = second_x[el.ei - ei0];
+            sy = row.second_cell;
           }
           if (el.quarters && sx == n && sy == n) {
             // One cell (the usual case: cells larger than elements), mostly
