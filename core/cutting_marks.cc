@@ -640,8 +640,7 @@ class ElementResolver {
 
   // Splits the cell in four and resolves each quarter; the cuts are
   // evaluated with the element's own reconstruction.
-  void Subdivide(const Cell& cell, const Crossings& x,
-                 int depth) {
+  void Subdivide(const Cell& cell, const Crossings& x, int depth) {
     const double w = cell.x1 - cell.x0, h = cell.y1 - cell.y0;
     // Split fractions, moved off any crossing lying on a split point.
     double fx = 0.5, fy = 0.5;
