@@ -742,11 +742,14 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     // The indices of those that pass (Passing).
     thread_local std::vector<int32_t> passing;
     Grow(&passing, bin_moves.size());
-    // The tangent plane last taken for each of a row's near moves (by index
-    // in the bin), and the point it touches. A plane is below the whole
-    // sweep (SupportingPlane's contract), so it serves the row's next
-    // elements too, moved to their centres, until it fails to show the move
-    // above one: about a third of the planes are taken on the plate job.
+    // The tangent plane last taken for each of the bin's moves (by index in
+    // the bin), and the point it touches. A plane is below the whole sweep
+    // (SupportingPlane's contract), so it serves the next elements too, moved
+    // to their centres, until it fails to show the move above one: about a
+    // third of the planes are taken on the plate job. Held from row to row
+    // (a row's first elements then start from the last row's planes, not
+    // from new ones: the bins 0.3% fewer instructions on the 30 mm plate);
+    // none is held from another bin's moves.
     struct HeldPlane {
       double x = 0, y = 0;
       BallSweep::SupportPlane plane{};
@@ -754,6 +757,7 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     };
     thread_local std::vector<HeldPlane> held;
     Grow(&held, bin_moves.size());
+    for (int32_t k = 0; k < bin_size; ++k) held[k].held = false;
     // The bin's sums in locals (registers), stored once at the end.
     Partial p = partials[b];
     // The rows are taken in bands of kBandRows: each row's elements are
@@ -977,7 +981,6 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
         const size_t base = static_cast<size_t>(r) * MoveIndex::kBinElements;
         KeepMovesThatMayCut(band, row.box, row.cap, pass.data(), passing.data(),
                             &near);
-        for (int32_t q = 0; q < near.size(); ++q) held[near.k[q]].held = false;
         // The cell of the row's last one-cell elements and their max (-1:
         // none), put in the map when the cell changes and at the row's end.
         int64_t one_cell = -1;
