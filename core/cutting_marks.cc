@@ -763,9 +763,21 @@ struct Labels {
 };
 
 // The segments of element (ei, ej) with corners c (paper order i, j, k, m).
+// An edge's crossings (EdgeCrossings'), kept for the other element beside
+// it: a function of the edge's two nodes and its key alone.
+struct EdgeCrossed {
+  Crossing c[2];
+  int n = 0;
+};
+
+// `bottom` and `left`, where given, are those edges' crossings as an
+// element beside them found them; `top` and `right`, where given, receive
+// this element's (after the known ones are read: `top` may be `bottom`).
 void ProcessElement(const NodeRef* const c[4], int32_t ei, int32_t ej,
                     int32_t nodes_x, const GridGeometry& grid,
-                    const Settings& s, std::vector<Segment>* out) {
+                    const Settings& s, const EdgeCrossed* bottom,
+                    const EdgeCrossed* left, EdgeCrossed* top,
+                    EdgeCrossed* right, std::vector<Segment>* out) {
   // Canonical edges: bottom c0->c1, right c1->c2, top c3->c2, left c0->c3;
   // the top and left ones are walked backwards counter-clockwise.
   const uint64_t row0 = uint64_t(ej) * nodes_x, row1 = row0 + nodes_x;
@@ -779,9 +791,21 @@ void ProcessElement(const NodeRef* const c[4], int32_t ei, int32_t ej,
                 {0, 3, 2 * (row0 + ei) + 1, true}};
   Crossing cr[4][2];
   int ncr[4];
+  const EdgeCrossed* const known[4] = {bottom, nullptr, nullptr, left};
   for (int k = 0; k < 4; ++k) {
-    ncr[k] = EdgeCrossings(*c[edges[k].from], *c[edges[k].to], edges[k].key, s,
-                           cr[k]);
+    if (known[k] != nullptr) {
+      ncr[k] = known[k]->n;
+      std::copy_n(known[k]->c, ncr[k], cr[k]);
+    } else {
+      ncr[k] = EdgeCrossings(*c[edges[k].from], *c[edges[k].to], edges[k].key,
+                             s, cr[k]);
+    }
+  }
+  EdgeCrossed* const keep[4] = {nullptr, right, top, nullptr};
+  for (int k = 0; k < 4; ++k) {
+    if (keep[k] == nullptr) continue;
+    keep[k]->n = ncr[k];
+    std::copy_n(cr[k], ncr[k], keep[k]->c);
   }
   // Owners meeting without a crease on any edge of this element (eq. 5
   // fails) are one surface here: consecutive moves of a pass, or the facets
@@ -1669,7 +1693,15 @@ absl::Status FindCuttingMarks(
     };
     fill_row(r0, lo);
     flag_row(lo, h_lo);
+    // The crossings of each element's top edge in the last row (where
+    // top_known) and of the last processed element's right edge (the left
+    // edge of element right_of).
+    std::vector<EdgeCrossed> top_edges(cols);
+    std::vector<uint8_t> top_known(cols, 0);
+    EdgeCrossed right_edge;
+    int32_t right_of = -1;
     for (int32_t j = r0; j < r1; ++j) {
+      right_of = -1;  // a row's first element has no left edge kept
       fill_row(j + 1, hi);
       flag_row(hi, h_hi);
       for (int32_t i = ei0; i <= ei1 + 1; ++i) {
@@ -1678,9 +1710,21 @@ absl::Status FindCuttingMarks(
       }
       for (int32_t i = ei0; i <= ei1; ++i) {
         const int32_t k = i - ei0;
-        if (!h_lo[k] && !h_hi[k] && !flag_v[k] && !flag_v[k + 1]) continue;
+        if (!h_lo[k] && !h_hi[k] && !flag_v[k] && !flag_v[k + 1]) {
+          top_known[k] = 0;
+          continue;
+        }
         const NodeRef* const c[4] = {&lo[k], &lo[k + 1], &hi[k + 1], &hi[k]};
-        ProcessElement(c, i, j, grid.nodes_x(), grid, s, out);
+        // The bottom edge is the top edge of the element below, the left
+        // edge the right edge of the one before, where those were
+        // processed: each edge's crossings found once, not twice.
+        // ProcessElement reads the known edges before it writes its own.
+        ProcessElement(c, i, j, grid.nodes_x(), grid, s,
+                       top_known[k] ? &top_edges[k] : nullptr,
+                       right_of == i ? &right_edge : nullptr, &top_edges[k],
+                       &right_edge, out);
+        top_known[k] = 1;
+        right_of = i + 1;
       }
       std::swap(lo, hi);
       std::swap(h_lo, h_hi);
