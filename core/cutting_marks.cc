@@ -762,7 +762,6 @@ struct Labels {
   }
 };
 
-// The segments of element (ei, ej) with corners c (paper order i, j, k, m).
 // An edge's crossings (EdgeCrossings'), kept for the other element beside
 // it: a function of the edge's two nodes and its key alone.
 struct EdgeCrossed {
@@ -770,9 +769,11 @@ struct EdgeCrossed {
   int n = 0;
 };
 
+// The segments of element (ei, ej) with corners c (paper order i, j, k, m).
 // `bottom` and `left`, where given, are those edges' crossings as an
 // element beside them found them; `top` and `right`, where given, receive
-// this element's (after the known ones are read: `top` may be `bottom`).
+// this element's, written after the known ones are read (`top` may be
+// `bottom`, `right` may be `left`).
 void ProcessElement(const NodeRef* const c[4], int32_t ei, int32_t ej,
                     int32_t nodes_x, const GridGeometry& grid,
                     const Settings& s, const EdgeCrossed* bottom,
