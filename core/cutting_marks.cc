@@ -1695,14 +1695,13 @@ absl::Status FindCuttingMarks(
     fill_row(r0, lo);
     flag_row(lo, h_lo);
     // The crossings of each element's top edge in the last row (where
-    // top_known) and of the last processed element's right edge (the left
-    // edge of element right_of).
+    // top_known) and, in a row, of the last processed element's right edge
+    // (the left edge of element right_of).
     std::vector<EdgeCrossed> top_edges(cols);
     std::vector<uint8_t> top_known(cols, 0);
     EdgeCrossed right_edge;
-    int32_t right_of = -1;
     for (int32_t j = r0; j < r1; ++j) {
-      right_of = -1;  // a row's first element has no left edge kept
+      int32_t right_of = -1;
       fill_row(j + 1, hi);
       flag_row(hi, h_hi);
       for (int32_t i = ei0; i <= ei1 + 1; ++i) {
