@@ -168,14 +168,17 @@ int32_t FirstOf(const double* err, int32_t n, double top) {
   return -1;
 }
 
-// Moves of a bin, in bin order, as arrays: their footprint boxes, lowest
-// points, and FootprintGap parts; `k` their index in the bin. Holds at most
-// `capacity` moves (Reset: arrays of at least that size rounded up to 8,
-// written in place: no push_back on thirteen arrays a move). The entries
-// from size() to padded() hold stale values: vector loops run over them
-// (no scalar remainder) and their results are ignored.
+// Moves of a bin, in bin order, as arrays: where each reaches below a cap
+// (a box and FootprintGap's reach: for a ball the tips' box, z_r and r2;
+// for another shape its footprint's box below the top, z_r -inf and r2 0,
+// so that the reach is the box itself) and its lowest point; `k` its index
+// in the bin. Holds at most `capacity` moves (Reset: arrays of at least
+// that size rounded up to 8, written in place: no push_back on eight
+// arrays a move). The entries from size() to padded() hold stale values:
+// vector loops run over them (no scalar remainder) and their results are
+// ignored.
 struct RowMoves {
-  std::vector<double> x0, x1, y0, y1, lowest, ball, gx0, gx1, gy0, gy1, z_r, r2;
+  std::vector<double> x0, x1, y0, y1, z_r, r2, lowest;
   std::vector<int32_t> k;
   int32_t n = 0;
   // Empty, with room for `capacity` moves. The arrays only grow: a thread
@@ -184,8 +187,7 @@ struct RowMoves {
     n = 0;
     const int32_t size = Padded(capacity);
     if (static_cast<int32_t>(k.size()) >= size) return;
-    for (std::vector<double>* v : {&x0, &x1, &y0, &y1, &lowest, &ball, &gx0,
-                                   &gx1, &gy0, &gy1, &z_r, &r2}) {
+    for (std::vector<double>* v : {&x0, &x1, &y0, &y1, &z_r, &r2, &lowest}) {
       v->resize(size);
     }
     k.resize(size);
@@ -196,28 +198,20 @@ struct RowMoves {
     if (static_cast<int32_t>(k.size()) > keep) *this = RowMoves();
   }
   void Clear() { n = 0; }
-  [[gnu::always_inline]] void Add(const Rect& box, double low,
-                                  const FootprintGap& g, int32_t at) {
+  [[gnu::always_inline]] void Add(const Rect& box, double reach_z_r,
+                                  double reach_r2, double low, int32_t at) {
     x0[n] = box.x0;
     x1[n] = box.x1;
     y0[n] = box.y0;
     y1[n] = box.y1;
+    z_r[n] = reach_z_r;
+    r2[n] = reach_r2;
     lowest[n] = low;
-    ball[n] = g.ball;
-    gx0[n] = g.x0;
-    gx1[n] = g.x1;
-    gy0[n] = g.y0;
-    gy1[n] = g.y1;
-    z_r[n] = g.z_r;
-    r2[n] = g.r2;
     k[n++] = at;
   }
   // Appends move q to *to. Inlined: the calls cost more than the copies.
   [[gnu::always_inline]] void CopyFrom(int32_t q, RowMoves* to) const {
-    to->Add(
-        Rect{x0[q], y0[q], x1[q], y1[q]}, lowest[q],
-        FootprintGap{ball[q], gx0[q], gx1[q], gy0[q], gy1[q], z_r[q], r2[q]},
-        k[q]);
+    to->Add(Rect{x0[q], y0[q], x1[q], y1[q]}, z_r[q], r2[q], lowest[q], k[q]);
   }
   int32_t size() const { return n; }
   int32_t padded() const { return Padded(n); }
@@ -243,11 +237,11 @@ bool PlaneAtOrAbove(const BallSweep::SupportPlane& plane,
   return LanesMax(below) == 0;
 }
 
-// pass[q] = 1 where move q may cut into `box` below `cap`: its box meets it,
-// its lowest point is below cap, and FootprintGap does not rule it out;
-// else 0. Each test only passes more moves for a larger box or a higher
-// cap. Selects only: one vectorized loop, over row.padded() entries (those
-// past size() to be ignored).
+// pass[q] = 1 where move q may cut into `box` below `cap`: its reach below
+// cap (FootprintGap::Misses over its box, z_r and r2) meets it and its
+// lowest point is below cap; else 0. Each test only passes more moves for
+// a larger box or a higher cap. Selects only: one vectorized loop, over
+// row.padded() entries (those past size() to be ignored).
 SWARF_TARGET_CLONES
 void MovesThatMayCut(const RowMoves& row, const Rect& element, double cap,
                      double* __restrict pass) {
@@ -258,24 +252,14 @@ void MovesThatMayCut(const RowMoves& row, const Rect& element, double cap,
   const double* __restrict x1 = row.x1.data();
   const double* __restrict y0 = row.y0.data();
   const double* __restrict y1 = row.y1.data();
-  const double* __restrict lowest = row.lowest.data();
-  const double* __restrict ball = row.ball.data();
-  const double* __restrict gx0 = row.gx0.data();
-  const double* __restrict gx1 = row.gx1.data();
-  const double* __restrict gy0 = row.gy0.data();
-  const double* __restrict gy1 = row.gy1.data();
   const double* __restrict z_r = row.z_r.data();
   const double* __restrict r2 = row.r2.data();
+  const double* __restrict lowest = row.lowest.data();
 #pragma omp simd
   for (int32_t q = 0; q < n; ++q) {
-    const double misses = FootprintGap::Misses(ball[q], gx0[q], gx1[q], gy0[q],
-                                               gy1[q], z_r[q], r2[q], box, cap);
-    double p = x0[q] <= box.x1 ? 1.0 : 0.0;
-    p = box.x0 <= x1[q] ? p : 0.0;
-    p = y0[q] <= box.y1 ? p : 0.0;
-    p = box.y0 <= y1[q] ? p : 0.0;
-    p = lowest[q] < cap ? p : 0.0;
-    pass[q] = misses != 0 ? 0.0 : p;
+    const double misses = FootprintGap::Misses(1.0, x0[q], x1[q], y0[q], y1[q],
+                                               z_r[q], r2[q], box, cap);
+    pass[q] = misses == 0 && lowest[q] < cap ? 1.0 : 0.0;
   }
 }
 
@@ -506,18 +490,20 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
     for (int32_t k = 0; k < bin_size; ++k) {
       const Move m = wp.move(static_cast<int32_t>(ids[k]));
       const FootprintGap gap = FootprintGap::Of(m.from, m.to, m.cutter);
-      // A ball's footprint lies within its radius of the tips' XY box
-      // (widened by the slack against rounding): the same test, beside its
-      // reach below each cap (FootprintGap), rules out what its footprint
-      // below the top did, at a fraction of its cost (a sixth of the bin's
-      // setup); a move it lets pass lowers no sample. Another shape's
-      // footprint below the top.
-      const double r = m.cutter.radius + FootprintGap::kSlack;
-      bin_moves.Add(
-          gap.ball != 0
-              ? Rect{gap.x0 - r, gap.y0 - r, gap.x1 + r, gap.y1 + r}
-              : FootprintCapsuleEnds(m.from, m.to, m.cutter, z_top).Bounds(),
-          SweepLowest(m.from, m.to, m.cutter), gap, k);
+      // A ball's footprint below a cap lies within its reach there (at most
+      // its radius) of the tips' box (FootprintGap): the tips' box widened
+      // by the radius, once tested beside the reach, ruled out no move the
+      // reach passes. Another shape: its footprint's box below the top,
+      // with a reach of 0 (z_r -inf: ReachSquared gives r2, 0).
+      if (gap.ball != 0) {
+        bin_moves.Add(Rect{gap.x0, gap.y0, gap.x1, gap.y1}, gap.z_r, gap.r2,
+                      SweepLowest(m.from, m.to, m.cutter), k);
+      } else {
+        bin_moves.Add(
+            FootprintCapsuleEnds(m.from, m.to, m.cutter, z_top).Bounds(),
+            -std::numeric_limits<double>::infinity(), 0.0,
+            SweepLowest(m.from, m.to, m.cutter), k);
+      }
     }
     // A bin move's sweep, built when an element first needs its heights
     // (on the plate job about 1 in 8 of the bin's moves is).
