@@ -638,9 +638,9 @@ bool CornerLifts(const double (&shortfall)[4][4], const double (&holds)[4][4],
 // over the element's fractions s and t, 0 at corner k (d[k] = 0). About that
 // corner it is a u + b v + c u v: a and b its slopes along s and t there
 // over the element's width and height, c its twist over their product. The
-// four corners' divisions in vector lanes (twelve in a row were a fifth of
-// the classification's cycles); a corner without a lift (every d 0, +0 or
-// above) gets +0 terms, as the sums and quotients of +0 give.
+// four corners' twelve divisions in vector lanes, three a corner, without a
+// test for a corner without lifts: its d are +0 (lifts are +0 or above), and
+// the differences and quotients of +0 are the +0 terms it needs.
 SWARF_TARGET_CLONES
 void LiftTerms(ElementCorners* e) {
   const double (&d)[4][4] = e->guard.lift;
