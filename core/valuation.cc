@@ -495,15 +495,12 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
       // by the radius, once tested beside the reach, ruled out no move the
       // reach passes. Another shape: its footprint's box below the top,
       // with a reach of 0 (z_r -inf: ReachSquared gives r2, 0).
-      if (gap.ball != 0) {
-        bin_moves.Add(Rect{gap.x0, gap.y0, gap.x1, gap.y1}, gap.z_r, gap.r2,
-                      SweepLowest(m.from, m.to, m.cutter), k);
-      } else {
-        bin_moves.Add(
-            FootprintCapsuleEnds(m.from, m.to, m.cutter, z_top).Bounds(),
-            -std::numeric_limits<double>::infinity(), 0.0,
-            SweepLowest(m.from, m.to, m.cutter), k);
-      }
+      const bool ball = gap.ball != 0;
+      bin_moves.Add(
+          ball ? Rect{gap.x0, gap.y0, gap.x1, gap.y1}
+               : FootprintCapsuleEnds(m.from, m.to, m.cutter, z_top).Bounds(),
+          ball ? gap.z_r : -std::numeric_limits<double>::infinity(),
+          ball ? gap.r2 : 0.0, SweepLowest(m.from, m.to, m.cutter), k);
     }
     // A bin move's sweep, built when an element first needs its heights
     // (on the plate job about 1 in 8 of the bin's moves is).
