@@ -181,6 +181,14 @@ void BM_PlateFinishing(benchmark::State& state) {
 }
 BENCHMARK(BM_PlateFinishing)->Unit(benchmark::kMillisecond)->UseRealTime();
 
+// The same with what each move cut (ApplyOptions::cuts), as swarf run asks
+// for its volumes and checks.
+void BM_PlateFinishingCuts(benchmark::State& state) {
+  ApplyInBatches(state, PlateFinishingRaster(), kPlateStock,
+                 SchemeKind::kGuarded, 10000, /*cuts=*/true);
+}
+BENCHMARK(BM_PlateFinishingCuts)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // Cutter shapes (issue 16): the same paths for the ball and each new shape,
 // applied to a 100 mm stock at 1000x1000 (0.1 mm) in batches of 10000.
 // - finishing: the zig-zag raster above (0.2 mm moves on a gentle wave,
