@@ -1044,16 +1044,19 @@ absl::StatusOr<ErrorStats> MeasureError(const Workpiece& wp,
             // plate job, 8 of 10 on cameo; a point and a plane take a third
             // of the heights' instructions, but two roots and two divisions
             // in a row: fewer of their cycles).
+            // A held plane is a ball's: tested before the sweep is looked
+            // up (most moves end here, and the sweep's lookup is a chain of
+            // loads).
+            HeldPlane& hp = held[ck];
+            if (hp.held) {
+              // Its height at this element's centre (rounding far inside
+              // the slack).
+              BallSweep::SupportPlane moved = hp.plane;
+              moved.w += moved.wx * (xc - hp.x) + moved.wy * (yc - hp.y);
+              if (plane_above(moved)) continue;
+            }
             const Sweep& sweep = bin_sweep(ck);
             if (const BallSweep* ball = sweep.ball()) {
-              HeldPlane& hp = held[ck];
-              if (hp.held) {
-                // Its height at this element's centre (rounding far inside
-                // the slack).
-                BallSweep::SupportPlane moved = hp.plane;
-                moved.w += moved.wx * (xc - hp.x) + moved.wy * (yc - hp.y);
-                if (plane_above(moved)) continue;
-              }
               const std::optional<BallSweep::SupportPlane> plane =
                   ball->SupportingPlane(xc, yc);
               if (plane.has_value()) {
