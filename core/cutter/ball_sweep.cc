@@ -474,7 +474,7 @@ void JetsOfFramesAnyCpu(const BallSweep::FrameTable& table,
 // GCC's vector extensions (variable shuffles) on x86-64: the permuting
 // kernel for AVX-512 CPUs.
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && \
-    !defined(SWARF_NO_TARGET_CLONES)
+    !defined(SWARF_NO_TARGET_CLONES) && !defined(SWARF_NO_AVX512_CLONES)
 #define SWARF_PERMUTED_FRAMES 1
 __attribute__((target("arch=x86-64-v4"))) void JetsOfFramesAvx512(
     const BallSweep::FrameTable& table, const int32_t* frame_of,
